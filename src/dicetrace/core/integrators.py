@@ -27,6 +27,9 @@ VERLET = 2
 RK4 = 3
 CONTACT_SUBSTEP = 4
 
+#: Integrator ids compiled into `step` (the Python layer refuses others).
+IMPLEMENTED = {SEMI_IMPLICIT_EULER, FORWARD_EULER}
+
 
 @jit
 def eval_forces(X, U, W, off, kp, F, uk, z, P):

@@ -21,6 +21,7 @@ import numpy as np
 from numba import prange
 
 from dicetrace.core._jit import jit, jit_parallel
+from dicetrace.core.contacts import record_set
 from dicetrace.core.integrators import step
 from dicetrace.core.model import (
     BLOW_UP,
@@ -116,7 +117,6 @@ def run_roll(ic, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
     contact, mask0 = node_heights(X[2], off, z)
     contact = False  # forces are zero before the first step (program)
 
-    cap = sets.shape[0]
     sets[0] = 0
     set_steps[0] = 0
     nsets = 1
@@ -147,14 +147,10 @@ def run_roll(ic, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
         ):
             status = NON_FINITE
             break
-        if n >= 2 and mask != last_mask:
-            if nsets >= cap:
-                status = BUFFER_FULL
-                break
-            sets[nsets] = mask
-            set_steps[nsets] = n
-            nsets += 1
-            last_mask = mask
+        nsets, last_mask, ok = record_set(n, mask, last_mask, sets, set_steps, nsets)
+        if not ok:
+            status = BUFFER_FULL
+            break
         if contact:
             if energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest > e_blow:
                 status = BLOW_UP

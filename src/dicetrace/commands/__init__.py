@@ -1,0 +1,1 @@
+"""Sub-commands of the ``dicetrace`` CLI (one module each, ``register(app)``)."""
