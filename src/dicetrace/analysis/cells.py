@@ -1,0 +1,219 @@
+"""Cells: connected regions of equal label on 2-D and 3-D label grids.
+
+A *cell* (writeup section 4.1) is a connected compartment of initial-condition
+space with one outcome. On a sampled grid it is a connected component of grid
+nodes that carry the same label, with face (4/6-neighbour) or full
+(8/26-neighbour) connectivity. Labels may be integers (outcomes, -1, 0) or any
+hashable (contact-sequence strings): they are factorised to integer codes first.
+
+The 3-D functions answer the writeup's question of section 5.1 ("are these
+repeating regions different cells, or slices of the same cell?") within a
+sampled 3-D stack: two 2-D cells of a slice are the same 3-D cell when they lie
+in one 3-D component.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Hashable, Iterable, Sequence
+
+import numpy as np
+import pandas as pd
+from scipy import ndimage
+
+from ._grid import as_label_grid, encode_labels, structure
+
+__all__ = ["label_cells", "cells_table", "same_cell", "slice_cell_components"]
+
+
+def label_cells(
+    grid, *, connectivity: str = "face", exclude: Iterable[Hashable] = ()
+) -> tuple[np.ndarray, int]:
+    """Connected components of equal label.
+
+    Parameters
+    ----------
+    grid : array_like, shape (nx, ny) or (nx, ny, nz)
+        Label grid (any hashable labels; 0 and -1 are labels of their own).
+    connectivity : {"face", "full"}, optional
+        ``"face"`` (default): nodes sharing a face (4 neighbours in 2-D, 6 in
+        3-D). ``"full"``: also edges and corners (8 / 26 neighbours).
+    exclude : iterable, optional
+        Labels whose nodes get no cell (cell id 0), e.g. ``(-1,)``.
+
+    Returns
+    -------
+    cell_ids : numpy.ndarray of int64, same shape as ``grid``
+        Cell id of every node, 1..ncells (0 for excluded labels). Ids are
+        assigned label by label (sorted labels), in raster order within a label.
+    ncells : int
+    """
+    arr = as_label_grid(grid)
+    codes, uniques = encode_labels(arr)
+    excl = set(exclude)
+    integer = arr.dtype.kind in "iub"
+    st = structure(arr.ndim, connectivity)
+    cell_ids = np.zeros(arr.shape, dtype=np.int64)
+    n = 0
+    for i, lab in enumerate(uniques):
+        if lab in excl:
+            continue
+        code = lab if integer else i
+        lab_arr, k = ndimage.label(codes == code, structure=st)
+        sel = lab_arr > 0
+        cell_ids[sel] = lab_arr[sel] + n
+        n += int(k)
+    return cell_ids, n
+
+
+def _to_slice_units(centroid: np.ndarray, shape, extent) -> np.ndarray:
+    ext = np.asarray(extent, dtype=float)
+    if ext.shape != (len(shape), 2):
+        raise ValueError(f"extent must be {len(shape)} (lo, hi) pairs, got {extent!r}")
+    n = np.asarray(shape, dtype=float)
+    scale = np.where(n > 1, (ext[:, 1] - ext[:, 0]) / np.maximum(n - 1, 1), 0.0)
+    return ext[:, 0] + centroid * scale
+
+
+def cells_table(
+    grid,
+    *,
+    connectivity: str = "face",
+    extent: Sequence[tuple[float, float]] | None = None,
+    exclude: Iterable[Hashable] = (),
+) -> pd.DataFrame:
+    """One row per cell of a 2-D or 3-D label grid.
+
+    Parameters
+    ----------
+    grid : array_like, shape (nx, ny) or (nx, ny, nz)
+        Label grid.
+    connectivity : {"face", "full"}, optional
+        See :func:`label_cells`.
+    extent : sequence of (lo, hi), optional
+        Slice coordinates of the first and last node along each axis, e.g.
+        ``[(x0, x1), (y0, y1)]``; adds a ``centroid_slice`` column.
+    exclude : iterable, optional
+        Labels that form no cells.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``cell_id`` (int64, as in :func:`label_cells`), ``label``,
+        ``size`` (number of nodes), ``bbox`` (tuple of inclusive
+        ``(lo, hi)`` index pairs per axis), ``centroid`` (tuple of mean grid
+        indices), ``touches_edge`` (bool: the cell reaches the grid's border,
+        so it may continue outside the window) and, with ``extent``,
+        ``centroid_slice`` (tuple, slice units).
+    """
+    arr = as_label_grid(grid)
+    cell_ids, n = label_cells(arr, connectivity=connectivity, exclude=exclude)
+    flat = cell_ids.ravel()
+    sizes = np.bincount(flat, minlength=n + 1)[1:]
+    ids_present, first = np.unique(flat, return_index=True)
+    first_of = dict(zip(ids_present.tolist(), first.tolist()))
+    labels_flat = arr.ravel()
+    labels = [labels_flat[first_of[c]] for c in range(1, n + 1)]
+    labels = [v.item() if isinstance(v, np.generic) else v for v in labels]
+    idx = np.indices(arr.shape).reshape(arr.ndim, -1)
+    cent = np.stack(
+        [np.bincount(flat, weights=idx[a], minlength=n + 1)[1:] for a in range(arr.ndim)], axis=1
+    ) / np.maximum(sizes, 1)[:, None]
+    objs = ndimage.find_objects(cell_ids, max_label=n)
+    bboxes, touches = [], []
+    for sl in objs:
+        bb = tuple((s.start, s.stop - 1) for s in sl)
+        bboxes.append(bb)
+        touches.append(any(lo == 0 or hi == m - 1 for (lo, hi), m in zip(bb, arr.shape)))
+    all_int = all(isinstance(v, (int, np.integer)) for v in labels)
+    out = pd.DataFrame(
+        {
+            "cell_id": np.arange(1, n + 1, dtype=np.int64),
+            "label": pd.Series(labels, dtype=np.int64 if (all_int and n) else object),
+            "size": sizes.astype(np.int64),
+            "bbox": pd.Series(bboxes, dtype=object),
+            "centroid": pd.Series([tuple(c) for c in cent], dtype=object),
+            "touches_edge": np.array(touches, dtype=bool),
+        }
+    )
+    if extent is not None:
+        cs = _to_slice_units(cent, arr.shape, extent) if n else np.zeros((0, arr.ndim))
+        out["centroid_slice"] = pd.Series([tuple(c) for c in cs], dtype=object)
+    return out
+
+
+def same_cell(
+    grid3d,
+    a: Sequence[int],
+    b: Sequence[int],
+    *,
+    connectivity: str = "face",
+    cell_ids: np.ndarray | None = None,
+) -> bool:
+    """Whether two grid nodes lie in one connected cell of the 3-D grid.
+
+    Parameters
+    ----------
+    grid3d : array_like, shape (nx, ny, nz)
+        Label grid of a 3-D slice stack (2-D grids work as well).
+    a, b : sequence of int
+        Node indices ``(i, j, k)``.
+    connectivity : {"face", "full"}, optional
+        See :func:`label_cells`.
+    cell_ids : numpy.ndarray, optional
+        Output of ``label_cells(grid3d, connectivity=...)[0]``, to reuse across
+        many queries.
+
+    Returns
+    -------
+    bool
+        ``True`` when the nodes carry the same label and are connected through
+        nodes of that label inside the sampled stack. ``False`` can still mean
+        "connected outside the sampled window or between its samples".
+    """
+    arr = as_label_grid(grid3d)
+    if cell_ids is None:
+        cell_ids, _ = label_cells(arr, connectivity=connectivity)
+    a, b = tuple(int(v) for v in a), tuple(int(v) for v in b)
+    if len(a) != arr.ndim or len(b) != arr.ndim:
+        raise ValueError(f"indices must have {arr.ndim} components")
+    ca, cb = cell_ids[a], cell_ids[b]
+    return bool(ca != 0 and ca == cb)
+
+
+def slice_cell_components(
+    grid3d, k: int, *, axis: int = 2, connectivity: str = "face"
+) -> pd.DataFrame:
+    """3-D component of every 2-D cell of one slice of a 3-D stack.
+
+    Parameters
+    ----------
+    grid3d : array_like, shape (nx, ny, nz)
+        Label grid.
+    k : int
+        Slice index along ``axis``.
+    axis : int, optional
+        The stacking axis, default 2 (the slice's third coordinate z).
+    connectivity : {"face", "full"}, optional
+        Used in 2-D (4/8 neighbours) and in 3-D (6/26 neighbours) alike.
+
+    Returns
+    -------
+    pandas.DataFrame
+        The :func:`cells_table` of the slice (``cell_id`` are 2-D ids in the
+        slice) plus ``component_3d`` (3-D cell id, as in :func:`label_cells` on
+        the stack) and ``n_cells_in_component`` (how many 2-D cells of this
+        slice share that 3-D component: > 1 means "several regions in the
+        picture, one cell in the stack").
+    """
+    arr = as_label_grid(grid3d, ndim=(3,))
+    ids3, _ = label_cells(arr, connectivity=connectivity)
+    sl2 = np.take(arr, k, axis=axis)
+    ids3_sl = np.take(ids3, k, axis=axis)
+    table = cells_table(sl2, connectivity=connectivity)
+    ids2, _ = label_cells(sl2, connectivity=connectivity)
+    flat2 = ids2.ravel()
+    _, first = np.unique(flat2, return_index=True)
+    comp = ids3_sl.ravel()[first]  # ids2 has no zeros (nothing excluded)
+    table["component_3d"] = comp.astype(np.int64)
+    table["n_cells_in_component"] = table.groupby("component_3d")["cell_id"].transform("size")
+    return table

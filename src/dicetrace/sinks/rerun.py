@@ -1,0 +1,428 @@
+"""Rerun sink: one throw as a ``.rrd`` recording with a default blueprint.
+
+Everything per step is logged as columns (``send_columns``) on two timelines,
+``step`` (sequence: step n is the state after n steps, 0 the IC) and
+``sim_time`` (duration, s), and everything constant once, as static data, in
+the manner of rerun's ``imu_signals`` and ``clock`` examples.  There is no
+per-step Python loop: a 3000-step throw is written in milliseconds.
+
+Entities (world frame: z up, cm):
+
+``world/ground``            static thin box whose top face is the plane z = 0
+``world/die/body``          the die, a solid box (centre + quaternion per step)
+``world/die/faces``         six thin coloured plates on the faces, labelled 1..6
+                            (1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black)
+``world/die/nodes``         the eight corner nodes, labelled 1..8; red while at
+                            or below the ground (z ≤ 0), grey otherwise
+``world/cm``                the centre of mass
+``world/cm_path``           the centre-of-mass path so far (a growing line strip,
+                            updated every ``trail_every`` steps)
+``world/contact_events``    the node(s) that entered (red) or left (blue) contact
+                            at the latest event step, at their positions then
+``energy/<name>``           energies, node-mass·cm²/s² (translational and
+                            rotational kinetic, gravitational, elastic, total)
+``stop_test/energy``        the program's stop-test energy, with its threshold
+``contacts``                text log: one row per event, "step 176: node 6 enters"
+``summary``                 text document: IC, configuration, outcome, status,
+                            contact sequence
+
+The recording's metadata (``rr.RecordingStream`` properties) holds the same
+summary.  Read a file back with ``rerun.chunk.RrdReader`` (needs only
+pyarrow) or open it with the ``rerun`` viewer.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+#: Face colours of the writeup: 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black (RGB).
+FACE_COLORS = np.array(
+    [[30, 90, 230], [20, 170, 60], [220, 30, 30], [210, 40, 210], [245, 215, 20], [15, 15, 15]],
+    dtype=np.uint8,
+)
+#: Outward unit normal of each face in the body frame (face value 1..6 → row 0..5).
+FACE_NORMALS = np.array(
+    [[-1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0], [0, 0, 1.0], [0, 1.0, 0], [1.0, 0, 0]]
+)
+#: Corner nodes (0-based) of each face, rows in face order 1..6 (DESIGN.md section 1).
+FACE_NODES = np.array([[0, 1, 2, 3], [0, 1, 4, 5], [0, 2, 4, 6], [1, 3, 5, 7], [2, 3, 6, 7], [4, 5, 6, 7]])
+
+BODY_COLOR = (236, 230, 214)  # ivory
+NODE_CONTACT_COLOR = (230, 20, 20)
+NODE_FREE_COLOR = (150, 150, 150)
+EVENT_ENTER_COLOR = (255, 40, 40)
+EVENT_LEAVE_COLOR = (40, 110, 255)
+GROUND_COLOR = (120, 150, 120)
+CM_COLOR = (255, 140, 0)
+
+ENERGY_SERIES = (
+    ("kinetic_translational", "kinetic (translational)", (31, 119, 180)),
+    ("kinetic_rotational", "kinetic (rotational)", (255, 127, 14)),
+    ("gravitational", "gravitational", (44, 160, 44)),
+    ("elastic", "elastic (ground)", (214, 39, 40)),
+    ("total", "total", (30, 30, 30)),
+)
+
+#: Largest number of updates of the growing centre-of-mass line strip.
+MAX_TRAIL_UPDATES = 300
+
+
+def write_rrd(
+    roll,
+    path,
+    *,
+    name: str | None = None,
+    ic_label: str | None = None,
+    trail_every: int | None = None,
+    application_id: str = "dicetrace",
+) -> Path:
+    """Write one throw as a Rerun recording with a default blueprint.
+
+    Parameters
+    ----------
+    roll
+        A :class:`dicetrace.simulate.Roll` whose trace holds states (node
+        offsets, centre of mass, L) and energies:
+        ``simulate(ic, record=Record(states=True, energy=True))``.
+    path
+        Output ``.rrd`` file.  Written under a temporary name beside it and
+        renamed when complete: an existing file is replaced only by a whole
+        new one, and nothing is left behind on error.
+    name
+        Recording name shown by the viewer (default: the file's stem).
+    ic_label
+        How the IC was given, e.g. ``"seed slice x=1.65, y=3.9"`` (shown in
+        the summary document).
+    trail_every
+        Steps between updates of the growing centre-of-mass line strip
+        (default: the throw's steps / 300, at least 1).  Its cost grows as
+        steps² / trail_every².
+    application_id
+        Rerun application id.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    import rerun as rr
+
+    tr = roll.trace
+    if tr is None or tr.node_offsets is None or tr.energy is None:
+        raise ValueError("write_rrd needs a roll with states and energy: simulate(..., record=Record(states=True, energy=True))")
+    path = Path(path)
+    name = name or path.stem
+
+    rec = rr.RecordingStream(application_id, recording_id=_recording_id(roll))
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
+    os.close(fd)
+    tmp = Path(tmp)
+    try:
+        rec.save(tmp, default_blueprint=default_blueprint(roll))
+        rec.send_recording_name(name)
+        log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every)
+        rec.flush()
+        rec.disconnect()
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def _recording_id(roll) -> str:
+    import uuid
+
+    key = json.dumps({"ic": roll.ic.tolist(), "config": roll.config.as_dict()}, sort_keys=True)
+    return str(uuid.uuid5(uuid.NAMESPACE_URL, "dicetrace:" + key))
+
+
+def summary_markdown(roll, ic_label: str | None = None) -> str:
+    """The summary document: IC, configuration, outcome, status, contact sequence."""
+    import dicetrace
+    from dicetrace.ics import IC_FIELDS
+
+    cfg = roll.config
+    lines = ["# dicetrace throw", ""]
+    if ic_label:
+        lines += [f"**IC**: {ic_label}", ""]
+    lines += [
+        "| " + " | ".join(IC_FIELDS) + " |",
+        "|" + "---|" * 6,
+        "| " + " | ".join(f"{v:.10g}" for v in roll.ic) + " |",
+        "",
+        "U in cm/s, L in node-mass·cm²/s "
+        + ("(the 2019 program's sign convention)" if cfg.preset.l_convention == "program" else "(physical)"),
+        "",
+        f"- **outcome**: {roll.outcome} ({_outcome_text(roll.outcome)})",
+        f"- **status**: {roll.status}",
+        f"- **steps**: {roll.steps}, t_settle_s = {roll.t_settle_s:.6g}",
+        f"- **contact sequence**: `{roll.contact_sequence}` ({roll.n_contact_changes} changes)",
+        f"- **preset**: {cfg.preset.name}, integrator {cfg.numerics.integrator}, dt = {cfg.numerics.dt_s:g} s, "
+        f"t_max = {cfg.numerics.t_max_s:g} s",
+        f"- **dicetrace** {dicetrace.__version__}",
+        "",
+        "Configuration:",
+        "",
+        "```json",
+        json.dumps(cfg.as_dict(), indent=1, sort_keys=True),
+        "```",
+    ]
+    return "\n".join(lines)
+
+
+def _outcome_text(outcome: int) -> str:
+    if outcome > 0:
+        return f"face {outcome} up"
+    if outcome == 0:
+        return "undefined: the top four nodes are no face"
+    return "not settled"
+
+
+def event_texts(steps, nodes, entered) -> list[str]:
+    """Text-log lines of contact events, e.g. ``"step 176: node 6 enters"``."""
+    return [f"step {int(s)}: node {int(n)} {'enters' if e else 'leaves'}" for s, n, e in zip(steps, nodes, entered)]
+
+
+def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None = None) -> None:
+    """Log one throw into an open recording stream (see the module docstring)."""
+    import rerun as rr
+
+    from dicetrace.simulate import contact_events
+
+    tr = roll.trace
+    cfg = roll.config
+    half = float(cfg.preset.half_side_cm)
+    nrow = len(tr.step)
+    steps = tr.step.astype(np.int64)
+    t_s = tr.t_s.astype(np.float64)
+
+    def idx(st, t):
+        return [rr.TimeColumn("step", sequence=st), rr.TimeColumn("sim_time", duration=t)]
+
+    index = idx(steps, t_s)
+    cm = tr.cm_pos
+    off = tr.node_offsets  # (nrow, 8, 3)
+    nodes = cm[:, None, :] + off
+    quat = _unit_quaternions(tr.quat_xyzw)
+
+    # -- static: frame, ground, summary ------------------------------------------------------
+    rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    lo = np.minimum(nodes[..., :2].min(axis=(0, 1)), -3 * half)
+    hi = np.maximum(nodes[..., :2].max(axis=(0, 1)), 3 * half)
+    centre = 0.5 * (lo + hi)
+    extent = 0.5 * (hi - lo) + 3.0 * half
+    thick = 0.05 * half
+    rec.log(
+        "world/ground",
+        rr.Boxes3D(
+            centers=[[centre[0], centre[1], -thick]],
+            half_sizes=[[extent[0], extent[1], thick]],
+            colors=[GROUND_COLOR],
+            fill_mode="solid",
+        ),
+        static=True,
+    )
+    rec.log("summary", rr.TextDocument(summary_markdown(roll, ic_label), media_type=rr.MediaType.MARKDOWN), static=True)
+
+    # -- the die: body box and face plates ---------------------------------------------------------
+    rec.log(
+        "world/die/body",
+        rr.Boxes3D.from_fields(half_sizes=[[half, half, half]], colors=[BODY_COLOR], fill_mode="solid"),
+        static=True,
+    )
+    rec.send_columns("world/die/body", indexes=index, columns=rr.Boxes3D.columns(centers=cm, quaternions=quat))
+
+    plate_half = np.empty((6, 3))
+    plate_t = 0.02 * half
+    for f in range(6):
+        plate_half[f] = np.where(FACE_NORMALS[f] != 0, plate_t, 0.62 * half)
+    rec.log(
+        "world/die/faces",
+        rr.Boxes3D.from_fields(
+            half_sizes=plate_half,
+            colors=FACE_COLORS,
+            fill_mode="solid",
+            labels=[str(v) for v in range(1, 7)],
+            show_labels=False,
+        ),
+        static=True,
+    )
+    # face centre offsets straight from the traced nodes: the mean of each face's four offsets
+    face_off = off[:, FACE_NODES, :].mean(axis=2)  # (nrow, 6, 3), length = half
+    plate_centres = cm[:, None, :] + face_off * ((half + plate_t) / half)
+    rec.send_columns(
+        "world/die/faces",
+        indexes=index,
+        columns=rr.Boxes3D.columns(
+            centers=plate_centres.reshape(-1, 3), quaternions=np.repeat(quat, 6, axis=0)
+        ).partition(np.full(nrow, 6)),
+    )
+
+    # -- nodes: red while in contact -------------------------------------------------------------
+    rec.log(
+        "world/die/nodes",
+        rr.Points3D.from_fields(radii=[0.09 * half], labels=[str(k) for k in range(1, 9)], show_labels=True),
+        static=True,
+    )
+    in_contact = nodes[..., 2] <= 0.0
+    node_colors = np.where(in_contact[..., None], NODE_CONTACT_COLOR, NODE_FREE_COLOR).astype(np.uint8)
+    rec.send_columns(
+        "world/die/nodes",
+        indexes=index,
+        columns=rr.Points3D.columns(positions=nodes.reshape(-1, 3), colors=node_colors.reshape(-1, 3)).partition(
+            np.full(nrow, 8)
+        ),
+    )
+
+    # -- centre of mass and its path -----------------------------------------------------------
+    rec.log("world/cm", rr.Points3D.from_fields(radii=[0.08 * half], colors=[CM_COLOR]), static=True)
+    rec.send_columns("world/cm", indexes=index, columns=rr.Points3D.columns(positions=cm))
+    _log_trail(rec, rr, cm, steps, t_s, trail_every)
+
+    # -- energies ------------------------------------------------------------------------
+    for key, label, color in ENERGY_SERIES:
+        rec.log(f"energy/{key}", rr.SeriesLines(names=[label], colors=[color]), static=True)
+        rec.send_columns(f"energy/{key}", indexes=index, columns=rr.Scalars.columns(scalars=tr.energy[key]))
+    rec.log("stop_test/energy", rr.SeriesLines(names=["stop-test energy"], colors=[(31, 119, 180)]), static=True)
+    rec.send_columns("stop_test/energy", indexes=index, columns=rr.Scalars.columns(scalars=tr.energy["stop_test"]))
+    e_stop = float(cfg.preset.e_stop)
+    rec.log(
+        "stop_test/threshold",
+        rr.SeriesLines(names=[f"threshold {e_stop:.1f}"], colors=[(214, 39, 40)], widths=[1.0]),
+        static=True,
+    )
+    ends = np.array([steps[0], steps[-1]], dtype=np.int64)
+    rec.send_columns(
+        "stop_test/threshold", indexes=idx(ends, t_s[[0, -1]]), columns=rr.Scalars.columns(scalars=[e_stop, e_stop])
+    )
+
+    # -- contact events: text log and markers --------------------------------------------------
+    ev_steps, ev_nodes, ev_enter = contact_events(roll.contact_sets, roll.contact_steps)
+    if len(ev_steps):
+        ev_t = ev_steps * roll.dt_s
+        texts = event_texts(ev_steps, ev_nodes, ev_enter)
+        rec.send_columns(
+            "contacts",
+            indexes=idx(ev_steps, ev_t),
+            columns=rr.TextLog.columns(
+                text=texts,
+                level=np.where(ev_enter, "INFO", "DEBUG").tolist(),
+                color=np.where(ev_enter[:, None], EVENT_ENTER_COLOR, EVENT_LEAVE_COLOR).astype(np.uint8),
+            ),
+        )
+        # markers: one row per event step holding every node that changed then
+        ok = ev_steps < nrow  # always true for a full trace; guards a truncated one
+        es, en, ee = ev_steps[ok], ev_nodes[ok].astype(np.int64), ev_enter[ok]
+        uniq, counts = np.unique(es, return_counts=True)
+        rec.log(
+            "world/contact_events",
+            rr.Points3D.from_fields(radii=[0.16 * half], show_labels=False),
+            static=True,
+        )
+        rec.send_columns(
+            "world/contact_events",
+            indexes=idx(uniq, uniq * roll.dt_s),
+            columns=rr.Points3D.columns(
+                positions=nodes[es, en - 1, :],
+                colors=np.where(ee[:, None], EVENT_ENTER_COLOR, EVENT_LEAVE_COLOR).astype(np.uint8),
+                labels=[f"{n} {'in' if e else 'out'}" for n, e in zip(en, ee)],
+            ).partition(counts),
+        )
+    else:
+        rec.log("contacts", rr.TextLog("no contact events", level="DEBUG"), static=True)
+
+
+def _unit_quaternions(q: np.ndarray) -> np.ndarray:
+    """(n, 4) xyzw quaternions normalised, with a non-negative w (no sign flips between rows)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    return np.where(q[:, 3:4] < 0, -q, q)
+
+
+def _log_trail(rec, rr, cm, steps, t_s, trail_every) -> None:
+    """The growing centre-of-mass line strip, updated every ``trail_every`` steps.
+
+    Update u (at row r_u) holds the path sampled every ``trail_every`` rows up
+    to r_u, and the exact point at r_u; its size grows as (rows / every)², so
+    ``every`` defaults to rows / MAX_TRAIL_UPDATES.
+    """
+    nrow = len(steps)
+    every = int(trail_every) if trail_every else max(1, -(-nrow // MAX_TRAIL_UPDATES))
+    if every < 1:
+        raise ValueError(f"trail_every must be >= 1, got {trail_every}")
+    rows = np.arange(1, nrow, every)
+    if rows.size == 0 or rows[-1] != nrow - 1:
+        rows = np.append(rows, nrow - 1)
+    rows = rows[rows >= 1]
+    if rows.size == 0:
+        return
+    sampled = cm[::every]  # sampled[i] = cm[i*every]
+    strips = []
+    for r in rows:  # one strip per update (≤ MAX_TRAIL_UPDATES by default), not per step
+        nfull = r // every + 1
+        pts = sampled[:nfull]
+        if (nfull - 1) * every != r:
+            pts = np.concatenate([pts, cm[r : r + 1]])
+        strips.append(pts)
+    rec.log("world/cm_path", rr.LineStrips3D.from_fields(radii=[0.03], colors=[CM_COLOR]), static=True)
+    rec.send_columns(
+        "world/cm_path",
+        indexes=[rr.TimeColumn("step", sequence=steps[rows]), rr.TimeColumn("sim_time", duration=t_s[rows])],
+        columns=rr.LineStrips3D.columns(strips=strips),
+    )
+
+
+def default_blueprint(roll=None):
+    """3-D view of the world, energy plots, the contact log and the summary.
+
+    With a ``roll``, the 3-D camera frames its path.
+    """
+    import rerun.blueprint as rrb
+
+    eye = None
+    if roll is not None and roll.trace is not None and roll.trace.cm_pos is not None:
+        cm = roll.trace.cm_pos
+        half = float(roll.config.preset.half_side_cm)
+        lo = cm.min(axis=0)
+        hi = cm.max(axis=0)
+        target = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), max(half, 0.35 * hi[2])])
+        span = float(max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 8 * half))
+        position = target + span * np.array([-0.9, -1.1, 0.55])
+        eye = rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
+
+    view3d = rrb.Spatial3DView(
+        origin="/world",
+        name="die",
+        eye_controls=eye,
+        background=(250, 250, 250),
+        line_grid=rrb.LineGrid3D(visible=False),
+    )
+    energy = rrb.TimeSeriesView(
+        origin="/energy",
+        name="energy (node-mass·cm²/s²)",
+        axis_x=rrb.TimeAxis(link="LinkToGlobal"),
+        plot_legend=rrb.PlotLegend(corner="RightTop"),
+    )
+    stop = rrb.TimeSeriesView(origin="/stop_test", name="stop-test energy", plot_legend=rrb.PlotLegend(corner="RightTop"))
+    right = rrb.Vertical(
+        energy,
+        stop,
+        rrb.Tabs(
+            rrb.TextLogView(origin="/contacts", name="contact events"),
+            rrb.TextDocumentView(origin="/summary", name="summary"),
+        ),
+        row_shares=[3, 2, 3],
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(view3d, right, column_shares=[3, 2]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed", timeline="step"),
+        auto_views=False,
+    )

@@ -1,0 +1,90 @@
+"""Synthetic basins with known answers, shared by the analysis tests.
+
+Nothing here imports the simulator: these are analytic stand-ins for the
+``classify(points) -> labels`` callables that the lead wires to the scanner.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+NEWTON_ROOTS = np.exp(2j * np.pi * np.arange(3) / 3)
+
+
+def grid_points(extent, shape):
+    """Slice coordinates (n, d) of a grid, C order, first index fastest-varying last."""
+    axes = [np.linspace(lo, hi, n) for (lo, hi), n in zip(extent, shape)]
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.stack([m.ravel() for m in mesh], axis=1)
+
+
+def sample_grid(classify, extent, shape):
+    """Label grid of ``classify`` on the grid nodes (indexed [i, j(, k)])."""
+    return np.asarray(classify(grid_points(extent, shape))).reshape(shape)
+
+
+def newton_classify(points, *, iterations=60):
+    """Basin (1, 2, 3) of Newton's method for z**3 - 1 from z = x + iy.
+
+    Points where the iteration is not finite get label 0.
+    """
+    p = np.asarray(points, dtype=float)
+    z = p[:, 0] + 1j * p[:, 1]
+    with np.errstate(all="ignore"):
+        for _ in range(iterations):
+            z = z - (z**3 - 1) / (3 * z**2)
+        d = np.abs(z[:, None] - NEWTON_ROOTS[None, :])
+        lab = np.argmin(d, axis=1) + 1
+    lab[~np.isfinite(z)] = 0
+    return lab
+
+
+def weierstrass(x, *, s=1.5, lam=3.0, nterms=None, xmax_res=1e-6):
+    """Weierstrass function W(x) = sum_k lam**((s-2)k) sin(lam**k x).
+
+    Its graph has box-counting dimension ``s`` (1 < s < 2, lam > 1):
+    Kaplan, Mallet-Paret & Yorke (1984), Ergod. Th. Dynam. Sys. 4:261;
+    Falconer, *Fractal Geometry*, ch. 11. Terms are kept down to wavelength
+    ``xmax_res``.
+    """
+    x = np.asarray(x, dtype=float)
+    if nterms is None:
+        nterms = int(np.ceil(np.log(2 * np.pi / xmax_res) / np.log(lam))) + 2
+    out = np.zeros_like(x)
+    for k in range(nterms):
+        out += lam ** ((s - 2) * k) * np.sin(lam**k * x)
+    return out
+
+
+def weierstrass_classify(points, *, s=1.5, lam=3.0):
+    """Label 1 below the graph y = W(x), 2 above."""
+    p = np.asarray(points, dtype=float)
+    return np.where(p[:, 1] > weierstrass(p[:, 0], s=s, lam=lam), 2, 1)
+
+
+def line_classify(points, *, normal=(np.cos(0.3), np.sin(0.3)), offset=0.6):
+    """Half-plane labels 1 / 2 across the line normal . p = offset."""
+    p = np.asarray(points, dtype=float)
+    return np.where(p[:, :2] @ np.asarray(normal) > offset, 2, 1)
+
+
+def sector_classify(points, *, centre=(0.3141592653589793, 0.2718281828459045),
+                    angles=(0.2, 2.3, 4.1), labels=(1, 2, 3)):
+    """Three sectors around ``centre``: one triple point, three straight rays.
+
+    Sector q covers polar angles [angles[q], angles[q+1]) (mod 2 pi).
+    """
+    p = np.asarray(points, dtype=float)
+    phi = np.mod(np.arctan2(p[:, 1] - centre[1], p[:, 0] - centre[0]) - angles[0], 2 * np.pi)
+    edges = np.mod(np.asarray(angles) - angles[0], 2 * np.pi)
+    q = np.searchsorted(edges, phi, side="right") - 1
+    return np.asarray(labels)[q]
+
+
+def stripes3_classify(points, *, x_a=0.5, delta=1e-6):
+    """Labels 1 | 2 | 3 in vertical stripes: x < x_a, x_a <= x < x_a + delta, beyond.
+
+    Two double lines ``delta`` apart and no triple point.
+    """
+    p = np.asarray(points, dtype=float)
+    return np.where(p[:, 0] < x_a, 1, np.where(p[:, 0] < x_a + delta, 2, 3))

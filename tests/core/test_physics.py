@@ -1,0 +1,186 @@
+"""Physics that does not depend on the 2019 program: closed forms and invariants."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from dicetrace.params import make_config
+from dicetrace.simulate import (
+    Record,
+    contact_events,
+    contact_sequence_from_heights,
+    sets_to_text,
+    simulate,
+    text_to_sets,
+)
+
+G = -980.0
+DT = 1e-3
+IC_SPIN = np.array([30.0, -20.0, 150.0, 40.0, -75.0, 120.0])
+
+
+def _first_contact(roll):
+    z = roll.trace.node_pos[:, :, 2]
+    return int(np.argmax((z <= 0).any(axis=1)))
+
+
+def test_free_fall_parabola():
+    """Until contact the centre of mass follows the parabola.
+
+    Semi-implicit Euler (the program's step: velocity first, then position
+    with the new velocity) gives exactly X_n = X_0 + n·dt·U_0 + g·dt²·n(n+1)/2,
+    which differs from X_0 + U_0·t + ½·g·t² by ½·g·dt·t (first order).
+    """
+    roll = simulate(IC_SPIN, record=Record(states=True, energy=False))
+    n_c = _first_contact(roll)
+    assert n_c > 100
+    n = np.arange(n_c)
+    t = n * DT
+    x0 = np.array([0.0, 0.0, 15.0])
+    u0 = IC_SPIN[:3]
+    discrete = x0 + np.outer(n * DT, u0)
+    discrete[:, 2] += G * DT**2 * n * (n + 1) / 2
+    np.testing.assert_allclose(roll.trace.cm_pos[:n_c], discrete, rtol=0, atol=1e-11)
+    parabola = x0 + np.outer(t, u0)
+    parabola[:, 2] += 0.5 * G * t**2
+    err = np.abs(roll.trace.cm_pos[:n_c, 2] - parabola[:, 2])
+    np.testing.assert_allclose(err, 0.5 * abs(G) * DT * t, rtol=1e-9, atol=1e-11)
+    # velocity: U_n = U_0 + n·g·dt exactly in x, y and to rounding in z
+    np.testing.assert_allclose(roll.trace.cm_vel[:n_c, 2], u0[2] + n * G * DT, atol=1e-11)
+    # angular momentum is constant in flight (no torque): bit for bit
+    assert (roll.trace.L[:n_c] == IC_SPIN[3:]).all()
+
+
+def test_free_fall_parabola_converges_first_order():
+    """Halving dt halves the deviation from the parabola at a fixed time."""
+    errs = []
+    for dt in (4e-3, 2e-3, 1e-3, 5e-4):
+        cfg = make_config("seed", dt_s=dt)
+        roll = simulate(IC_SPIN, config=cfg, record=Record(states=True, energy=False))
+        n = int(round(0.1 / dt))
+        t = n * dt
+        errs.append(abs(roll.trace.cm_pos[n, 2] - (15.0 + IC_SPIN[2] * t + 0.5 * G * t * t)))
+    ratios = np.array(errs[:-1]) / np.array(errs[1:])
+    np.testing.assert_allclose(ratios, 2.0, rtol=1e-6)
+
+
+def test_free_flight_energy_closed_form():
+    """In flight the program's stop-test energy falls by exactly ½·M·(g·dt)² a step.
+
+    With U_{n+1} = U_n + g·dt and Z_{n+1} = Z_n + U_{n+1}·dt:
+    ½M(U_{n+1}² − U_n²) + M|g|(Z_{n+1} − Z_n) = −½M(g·dt)², M = 8.
+    Rotational energy is constant (ω constant, the offsets rigid).
+    """
+    roll = simulate(IC_SPIN, record=Record(states=True, energy=True))
+    n_c = _first_contact(roll)
+    e = roll.trace.energy["stop_test"][: n_c]
+    np.testing.assert_allclose(np.diff(e), -0.5 * 8 * (G * DT) ** 2, rtol=0, atol=1e-8)
+    rot = roll.trace.energy["kinetic_rotational"][:n_c]
+    assert np.ptp(rot) == 0.0
+
+
+def _pairwise(off):
+    i, j = np.triu_indices(8, 1)
+    return np.linalg.norm(off[:, i, :] - off[:, j, :], axis=-1)
+
+
+def test_rigidity_over_1e5_free_flight_steps():
+    """All 28 pairwise node distances hold to 1e-9 after 10⁵ exact rotations."""
+    cfg = make_config("seed", t_max_s=100.0, z0_cm=1e7)  # falls 4.9e6 cm in 100 s: no contact
+    ic = np.array([1.0, 2.0, 3.0, 2500.0, -1700.0, 900.0])  # |ω| ≈ 600 rad/s
+    roll = simulate(ic, config=cfg, record=Record(states=True, energy=False))
+    assert roll.status == "time_cap" and roll.steps == 100_000 and roll.outcome == -1
+    d = _pairwise(roll.trace.node_offsets[[0, -1]])
+    np.testing.assert_allclose(d[1], d[0], rtol=0, atol=1e-9)
+    # and the orientation stays a rotation: |q| = 1
+    q = roll.trace.quat_xyzw[-1]
+    assert abs(np.linalg.norm(q) - 1) < 1e-12
+    rot = roll.trace.rotation[-1]
+    np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-9)
+
+
+def test_flat_drop_without_spin_lands_on_face_3():
+    """Dropped flat (identity orientation: face 3 down, 4 up) with no spin: shows 4.
+
+    All four bottom nodes touch at the same step, as one contact set {1,3,5,7}.
+    """
+    roll = simulate(np.zeros(6))
+    assert roll.status == "settled"
+    assert roll.outcome == 4
+    assert roll.contact_sequence.startswith("0-1357")
+    # no horizontal motion ever: friction sees σ = 0 (program: no friction)
+    roll = simulate(np.zeros(6), record=Record(states=True, energy=False))
+    assert np.abs(roll.trace.cm_pos[:, :2]).max() == 0.0
+
+
+# --- contact-set extraction on hand-built height series -------------------------
+
+
+def _heights(rows):
+    """Height series from lists of nodes (1..8) in contact at each step."""
+    z = np.ones((len(rows), 8))
+    for n, nodes in enumerate(rows):
+        for node in nodes:
+            z[n, node - 1] = -0.01 if node % 2 else 0.0  # z = 0 counts as contact
+    return z
+
+
+@pytest.mark.parametrize(
+    "rows, text, steps",
+    [
+        # nothing ever touches: only the initial empty set
+        ([[], [], [], []], "0", [0]),
+        # one node enters at step 2, leaves at step 4
+        ([[], [], [6], [6], [], []], "0-6-0", [0, 2, 4]),
+        # simultaneous changes: {6} → {6,8} → {8} → {} → {1,3,5,7} at once
+        ([[], [], [6], [6, 8], [8], [], [1, 3, 5, 7]], "0-6-68-8-0-1357", [0, 2, 3, 4, 5, 6]),
+        # step 1 is never compared (the program starts at step 2): {6} seen only
+        # at step 1 is lost, and the set of step 2 is recorded at step 2
+        ([[], [6], [6, 8], [8], [], [1, 3, 5, 7], [1, 3, 5, 7]], "0-68-8-0-1357", [0, 2, 3, 4, 5]),
+        # no duplicates: a set held over many steps is recorded once
+        ([[]] + [[2, 4]] * 5 + [[2]] * 3, "0-24-2", [0, 2, 6]),
+        # swap in one step: {3} → {5} (one enters, one leaves together)
+        ([[], [], [3], [5], [5]], "0-3-5", [0, 2, 3]),
+    ],
+)
+def test_contact_sets_from_heights(rows, text, steps):
+    sets, set_steps = contact_sequence_from_heights(_heights(rows))
+    assert sets_to_text(sets) == text
+    assert list(set_steps) == steps
+    # never two equal neighbours
+    assert all(a != b for a, b in zip(sets[:-1], sets[1:]))
+
+
+def test_contact_events_enter_leave():
+    sets = text_to_sets("0-6-68-8-0-1357")
+    steps = np.array([0, 10, 12, 15, 20, 30])
+    st, node, entered = contact_events(sets, steps)
+    got = list(zip(st.tolist(), node.tolist(), entered.tolist()))
+    assert got == [
+        (10, 6, True),
+        (12, 8, True),
+        (15, 6, False),
+        (20, 8, False),
+        (30, 1, True),
+        (30, 3, True),
+        (30, 5, True),
+        (30, 7, True),
+    ]
+
+
+def test_text_round_trip():
+    for combo in itertools.combinations(range(256), 2):
+        arr = np.array((0,) + combo, dtype=np.uint8)
+        assert (text_to_sets(sets_to_text(arr)) == arr).all()
+    assert sets_to_text(np.arange(256, dtype=np.uint8)).split("-")[255] == "12345678"
+
+
+def test_sequence_in_roll_matches_heights():
+    """The simulator's sequence equals the extraction applied to its own trace."""
+    roll = simulate(IC_SPIN, record=Record(states=True, energy=False))
+    sets, set_steps = contact_sequence_from_heights(roll.trace.node_pos[:, :, 2])
+    assert (sets == roll.contact_sets).all()
+    assert (set_steps == roll.contact_steps).all()
