@@ -219,6 +219,23 @@ def _to_kernel_ic(ic: np.ndarray, config: Config) -> np.ndarray:
     return ic
 
 
+def initial_offsets(config: Config, orientation=None) -> np.ndarray:
+    """Initial node offsets (8, 3), cm: ±half on each axis, turned by ``orientation``.
+
+    ``orientation`` is a world-from-body rotation matrix (3, 3) or None for
+    the program's start (face 3 down, face 4 up).
+    """
+    off = NODE_SIGNS * config.preset.half_side_cm
+    if orientation is None:
+        return np.ascontiguousarray(off)
+    rot = np.asarray(orientation, dtype=np.float64)
+    if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+        raise ValueError("orientation must be a finite 3×3 rotation matrix")
+    if np.abs(rot @ rot.T - np.eye(3)).max() > 1e-9 or np.linalg.det(rot) < 0:
+        raise ValueError("orientation is not a rotation matrix (RᵀR ≠ I or det < 0)")
+    return np.ascontiguousarray(off @ rot.T)
+
+
 def _check_integrator(config: Config) -> None:
     from dicetrace.core import integrators
 
@@ -235,6 +252,7 @@ def simulate(
     dt_s: float | None = None,
     t_max_s: float | None = None,
     record: Record | None = None,
+    orientation=None,
 ) -> Roll:
     """Throw the die once.
 
@@ -249,6 +267,9 @@ def simulate(
         ``preset``, ``integrator``, ``dt_s`` (s) and ``t_max_s`` (s).
     record
         Per-step channels to compute (None: summary only, nothing per step).
+    orientation
+        Initial world-from-body rotation matrix (3, 3); None: the program's
+        start (identity: face 3 down).
 
     Returns
     -------
@@ -259,13 +280,14 @@ def simulate(
     ic = validate_ic(ic)
     kic = _to_kernel_ic(ic, cfg)
     kp = cfg.kernel_params()
+    off0 = initial_offsets(cfg, orientation)
     integ = cfg.numerics.integrator_id
     empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     cap = _INITIAL_CAP
     while True:
         sets = np.zeros(cap, dtype=np.uint8)
         set_steps = np.zeros(cap, dtype=np.int32)
-        status, n, outcome, nsets = run_roll(kic, kp, integ, sets, set_steps, *empty)
+        status, n, outcome, nsets = run_roll(kic, off0, kp, integ, sets, set_steps, *empty)
         if status != BUFFER_FULL:
             break
         cap *= 4
@@ -275,7 +297,7 @@ def simulate(
         tr_state = np.zeros((rows if record.states else 0, STATE_COLS))
         tr_force = np.zeros((rows if record.forces else 0, FORCE_COLS))
         tr_energy = np.zeros((rows if record.energy else 0, ENERGY_COLS))
-        run_roll(kic, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
+        run_roll(kic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
         trace = _make_trace(n, cfg, tr_state, tr_force, tr_energy, record)
     dt = cfg.numerics.dt_s
     return Roll(
@@ -366,7 +388,7 @@ def simulate_batch(
     sets = np.zeros(m * cap, dtype=np.uint8)
     set_steps = np.zeros(m * cap, dtype=np.int32)
     if m:
-        run_batch(kics, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps)
+        run_batch(kics, initial_offsets(cfg), kp, integ, cap, status, steps, outcome, nsets, sets, set_steps)
     sets2 = sets.reshape(m, cap)
     steps2 = set_steps.reshape(m, cap)
     seq_sets, seq_steps = [], []

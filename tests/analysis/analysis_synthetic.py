@@ -88,3 +88,28 @@ def stripes3_classify(points, *, x_a=0.5, delta=1e-6):
     """
     p = np.asarray(points, dtype=float)
     return np.where(p[:, 0] < x_a, 1, np.where(p[:, 0] < x_a + delta, 2, 3))
+
+
+def triadic_classify(points, *, max_iter=40):
+    """Basins of the escape parity of x -> 3x mod 1 through the middle third.
+
+    Label ``1 + (n mod 2)`` where ``n`` is the first iteration at which
+    ``x_n`` lies in [1/3, 2/3); ``y`` is ignored. The basin boundary is
+    C x R with C the middle-third Cantor set, so its box-counting dimension
+    is 1 + ln 2 / ln 3 = 1.6309 and the uncertainty exponent is
+    1 - ln 2 / ln 3 = 0.3691 (McDonald, Grebogi, Ott & Yorke 1985, Physica D
+    17:125, section 2). Points that never escape get label 0.
+    """
+    x = np.mod(np.asarray(points, dtype=float)[:, 0], 1.0)
+    lab = np.zeros(len(x), dtype=np.int64)
+    for n in range(max_iter):
+        esc = (lab == 0) & (x >= 1 / 3) & (x < 2 / 3)
+        lab[esc] = 1 + n % 2
+        x = np.mod(3 * x, 1.0)
+    return lab
+
+
+def triadic_extent(k):
+    """Cell-centred x-extent of a 3**k-node grid: x_i = (i + 1/2) / 3**k."""
+    h = 0.5 / 3**k
+    return (h, 1 - h)

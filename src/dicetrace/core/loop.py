@@ -33,7 +33,6 @@ from dicetrace.core.model import (
     energy_parts,
     energy_stop,
     face_up,
-    init_offsets,
     node_heights,
     node_velocities,
 )
@@ -72,13 +71,16 @@ def _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_ene
 
 
 @jit
-def run_roll(ic, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
+def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
     """Integrate one throw from ``ic`` until it settles (or fails).
 
     Parameters
     ----------
     ic : (6,) float64
         U (cm/s) and L (program convention, node-mass·cm²/s).
+    off0 : (8, 3) float64
+        Initial node offsets from the centre of mass, cm (the program: ±half
+        on each axis, ``model.init_offsets``); a rotated cube starts tilted.
     kp : KernelParams
     integ : int
         Integrator id.
@@ -113,7 +115,9 @@ def run_roll(ic, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
         U[j] = ic[j]
         L[j] = ic[3 + j]
         W[j] = L[j] / kp.inertia
-    init_offsets(kp.half, off)
+    for k in range(8):
+        for j in range(3):
+            off[k, j] = off0[k, j]
     contact, mask0 = node_heights(X[2], off, z)
     contact = False  # forces are zero before the first step (program)
 
@@ -191,7 +195,7 @@ def run_roll(ic, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
 
 
 @jit_parallel
-def run_batch(ics, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
+def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
     """``run_roll`` over many ICs in parallel (prange), summary path only.
 
     ``sets``/``set_steps`` are (m·cap,) with IC i owning [i·cap, (i+1)·cap).
@@ -204,7 +208,7 @@ def run_batch(ics, kp, integ, cap, status, steps, outcome, nsets, sets, set_step
     e2 = np.zeros((0, ENERGY_COLS))
     for i in prange(m):
         s, n, o, ns = run_roll(
-            ics[i], kp, integ, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], e0, e1, e2
+            ics[i], off0, kp, integ, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], e0, e1, e2
         )
         status[i] = s
         steps[i] = n

@@ -65,7 +65,7 @@ ENERGY_SERIES = (
     ("kinetic_rotational", "kinetic (rotational)", (255, 127, 14)),
     ("gravitational", "gravitational", (44, 160, 44)),
     ("elastic", "elastic (ground)", (214, 39, 40)),
-    ("total", "total", (30, 30, 30)),
+    ("total", "total", (200, 200, 200)),
 )
 
 #: Largest number of updates of the growing centre-of-mass line strip.
@@ -393,7 +393,7 @@ def default_blueprint(roll=None):
         hi = cm.max(axis=0)
         target = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), max(half, 0.35 * hi[2])])
         span = float(max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 8 * half))
-        position = target + span * np.array([-0.9, -1.1, 0.55])
+        position = target + span * np.array([-1.3, -1.6, 0.8])
         eye = rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
 
     view3d = rrb.Spatial3DView(
@@ -414,7 +414,14 @@ def default_blueprint(roll=None):
         energy,
         stop,
         rrb.Tabs(
-            rrb.TextLogView(origin="/contacts", name="contact events"),
+            rrb.TextLogView(
+                origin="/contacts",
+                name="contact events",
+                columns=rrb.TextLogColumns(
+                    timeline_columns=[rrb.encodings.TimelineColumn("sim_time")],
+                    text_log_columns=[rrb.encodings.TextLogColumn("Body")],
+                ),
+            ),
             rrb.TextDocumentView(origin="/summary", name="summary"),
         ),
         row_shares=[3, 2, 3],
@@ -423,6 +430,6 @@ def default_blueprint(roll=None):
         rrb.Horizontal(view3d, right, column_shares=[3, 2]),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline="step"),
+        rrb.TimePanel(state="collapsed", timeline="step", play_state="following"),
         auto_views=False,
     )
