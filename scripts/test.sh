@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Install dicetrace with its test extras into .venv and run the whole test suite.
+# As root on Debian it also installs Xvfb and Mesa's software Vulkan, so the
+# test that renders a recording with the real Rerun viewer runs (it is skipped
+# where xvfb-run is missing).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+if ! command -v xvfb-run >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq \
+        xvfb xauth mesa-vulkan-drivers libgl1-mesa-dri libegl1 libxkbcommon-x11-0 >/dev/null) \
+        || echo "note: could not install xvfb/mesa; the viewer test will be skipped"
+fi
+python3 -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q -e ".[test]"
+.venv/bin/lint-imports
+.venv/bin/python -m pytest -n 2 "$@"
