@@ -81,13 +81,18 @@ def sector_classify(points, *, centre=(0.3141592653589793, 0.2718281828459045),
     return np.asarray(labels)[q]
 
 
-def stripes3_classify(points, *, x_a=0.5, delta=1e-6):
-    """Labels 1 | 2 | 3 in vertical stripes: x < x_a, x_a <= x < x_a + delta, beyond.
+def near_miss_classify(points, *, centre=(0.5, 0.5), delta=1e-6, kappa=1000.0):
+    """Two double points ``delta`` apart and no triple point.
 
-    Two double lines ``delta`` apart and no triple point.
+    Label 1 for ``x < xc``; label 3 beyond the parabola
+    ``x > xc + delta + kappa (y - yc)**2``; label 2 in between. The 1|2 line
+    and the 2|3 parabola come within ``delta`` of each other at
+    ``(xc, yc)`` but never meet: at scales above ``delta`` it looks like a
+    triple point.
     """
     p = np.asarray(points, dtype=float)
-    return np.where(p[:, 0] < x_a, 1, np.where(p[:, 0] < x_a + delta, 2, 3))
+    x, y = p[:, 0] - centre[0], p[:, 1] - centre[1]
+    return np.where(x < 0, 1, np.where(x > delta + kappa * y**2, 3, 2))
 
 
 def triadic_classify(points, *, max_iter=40):
@@ -113,3 +118,22 @@ def triadic_extent(k):
     """Cell-centred x-extent of a 3**k-node grid: x_i = (i + 1/2) / 3**k."""
     h = 0.5 / 3**k
     return (h, 1 - h)
+
+
+def lattice_grid(shape, a, b, *, radius=0.3, labels=(1, 2, 5)):
+    """Label grid periodic under the integer lattice spanned by a and b.
+
+    In fractional coordinates (u, v) of the node index in the basis (a, b):
+    label labels[1] inside a disc of ``radius`` (fractional units) around the
+    cell centre, labels[2] in the band 0.75 <= v mod 1 < 0.9, labels[0] elsewhere.
+    """
+    nx, ny = shape
+    ii, jj = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+    M = np.column_stack([a, b]).astype(float)
+    uv = np.linalg.solve(M, np.stack([ii.ravel(), jj.ravel()]).astype(float))
+    u = np.mod(uv[0], 1.0).reshape(shape)
+    v = np.mod(uv[1], 1.0).reshape(shape)
+    out = np.full(shape, labels[0], dtype=np.int64)
+    out[(u - 0.5) ** 2 + (v - 0.4) ** 2 < radius**2] = labels[1]
+    out[(v >= 0.75) & (v < 0.9)] = labels[2]
+    return out

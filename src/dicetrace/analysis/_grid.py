@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Hashable, Iterable
-
 import numpy as np
 import pandas as pd
 from scipy import ndimage
@@ -34,32 +32,6 @@ def encode_labels(grid) -> tuple[np.ndarray, list]:
     flat = pd.Series(arr.ravel(), dtype=object)
     codes, uniques = pd.factorize(flat, sort=True)
     return codes.astype(np.int64).reshape(arr.shape), list(uniques)
-
-
-def code_of(uniques: list, label: Hashable) -> int | None:
-    """Code of ``label`` for grids encoded by :func:`encode_labels`."""
-    for i, u in enumerate(uniques):
-        if u == label:
-            return i
-    return None
-
-
-def codes_and_labels(grid, exclude: Iterable[Hashable] = ()):
-    """Codes, uniques, and the codes of the labels kept (not excluded).
-
-    For integer grids the codes are the labels themselves.
-    """
-    codes, uniques = encode_labels(grid)
-    excl = set(exclude)
-    if np.asarray(grid).dtype.kind in "iub":
-        kept = [u for u in uniques if u not in excl]
-    else:
-        kept = [i for i, u in enumerate(uniques) if u not in excl]
-    return codes, uniques, kept
-
-
-def code_to_label(uniques: list, integer: bool, code: int):
-    return int(code) if integer else uniques[int(code)]
 
 
 def structure(ndim: int, connectivity: str) -> np.ndarray:

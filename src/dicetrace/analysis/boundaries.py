@@ -44,6 +44,7 @@ __all__ = [
     "boundary_box_fraction",
     "uncertainty_exponent",
     "uncertainty_exponent_perturbation",
+    "uncertainty_exponent_resolution",
     "box_counting_dimension",
     "boundary_dimension",
     "basin_entropy",
@@ -69,13 +70,18 @@ class PowerLawFit:
     n: int
 
 
-def fit_power_law(x, y) -> PowerLawFit:
-    """Fit ``y ~ x**slope`` by ordinary least squares in log-log.
+def fit_power_law(x, y, *, weights=None) -> PowerLawFit:
+    """Fit ``y ~ x**slope`` by least squares in log-log.
 
     Parameters
     ----------
     x, y : array_like
         Positive values; pairs with ``y <= 0`` or non-finite values are dropped.
+    weights : array_like, optional
+        Weights of the points (inverse variances of ``log y``); weighted least
+        squares with the standard error scaled by the weighted residuals
+        (as statsmodels ``WLS``). Default: ordinary least squares
+        (``scipy.stats.linregress``).
 
     Returns
     -------
@@ -85,7 +91,10 @@ def fit_power_law(x, y) -> PowerLawFit:
     """
     x = np.asarray(x, dtype=float).ravel()
     y = np.asarray(y, dtype=float).ravel()
+    w = None if weights is None else np.asarray(weights, dtype=float).ravel()
     ok = (x > 0) & (y > 0) & np.isfinite(x) & np.isfinite(y)
+    if w is not None:
+        ok &= np.isfinite(w) & (w > 0)
     x, y = x[ok], y[ok]
     if len(x) < 2:
         raise ValueError("need at least two positive points to fit a power law")
@@ -93,10 +102,20 @@ def fit_power_law(x, y) -> PowerLawFit:
     if len(x) == 2:
         slope = (ly[1] - ly[0]) / (lx[1] - lx[0])
         return PowerLawFit(float(slope), math.nan, float(ly[0] - slope * lx[0]), 1.0, 2)
-    res = stats.linregress(lx, ly)
-    return PowerLawFit(
-        float(res.slope), float(res.stderr), float(res.intercept), float(res.rvalue), len(x)
-    )
+    if w is None:
+        res = stats.linregress(lx, ly)
+        return PowerLawFit(
+            float(res.slope), float(res.stderr), float(res.intercept), float(res.rvalue), len(x)
+        )
+    w = w[ok]
+    X = np.column_stack([np.ones_like(lx), lx])
+    xtwx = X.T @ (w[:, None] * X)
+    beta = np.linalg.solve(xtwx, X.T @ (w * ly))
+    resid = ly - X @ beta
+    s2 = float(np.sum(w * resid**2) / (len(x) - 2))
+    cov = s2 * np.linalg.inv(xtwx)
+    r = float(np.corrcoef(lx, ly)[0, 1])
+    return PowerLawFit(float(beta[1]), float(np.sqrt(cov[1, 1])), float(beta[0]), r, len(x))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -243,8 +262,10 @@ def boundary_box_fraction(grid, box_size: int) -> float:
     grid : array_like, 2-D or 3-D
         Label grid.
     box_size : int
-        Box side in grid nodes; the grid is tiled from index 0 and the
-        incomplete boxes at the far edges are dropped.
+        Box side in grid intervals. Boxes are closed: box ``k`` spans nodes
+        ``k b .. (k + 1) b`` along each axis, so neighbouring boxes share a
+        face and no label change between two nodes is missed. Boxes reaching
+        past the grid are dropped.
 
     Returns
     -------
@@ -282,8 +303,11 @@ def uncertainty_exponent(
         Grid spacing in slice units, only to express ``eps`` in slice units.
     method : {"boxes", "subsample"}, optional
         ``"boxes"`` (default): ``f(eps)`` is the fraction of boxes of side
-        ``eps`` that hold two labels or more (Attractors.jl
-        ``uncertainty_exponent``; ``alpha = d - D`` by box counting).
+        ``eps`` that hold two labels or more (:func:`boundary_box_fraction`;
+        as Attractors.jl ``uncertainty_exponent``, ``alpha = d - D`` by box
+        counting). The boxes are closed, sharing their faces; Attractors.jl
+        tiles disjoint boxes, which misses the changes between boxes
+        (a factor ``(b - 1) / b``) and biases ``alpha`` up at small ``b``.
         ``"subsample"``: ``f(eps)`` is the boundary-node fraction of the grid
         subsampled every ``eps`` nodes, i.e. the fraction of initial
         conditions whose nearest neighbour at distance ``eps`` differs.
@@ -291,6 +315,11 @@ def uncertainty_exponent(
     Returns
     -------
     UncertaintyExponent
+
+    Notes
+    -----
+    Grebogi, McDonald, Ott & Yorke (1983), Phys. Lett. A 99:415; a straight
+    boundary gives ``alpha = 1``, a fractal one ``alpha = d - D < 1``.
     """
     arr = as_label_grid(grid)
     codes, _ = encode_labels(arr)
@@ -320,6 +349,45 @@ def uncertainty_exponent(
         method=method,
         intercept=fit.intercept,
         n=n,
+    )
+
+
+def uncertainty_exponent_resolution(
+    grids: Sequence, spacings: Sequence[float], *, connectivity: str = "face"
+) -> UncertaintyExponent:
+    """Uncertainty exponent from grids of one window at several resolutions.
+
+    Parameters
+    ----------
+    grids : sequence of array_like
+        Label grids of the same window (e.g. scans at 100^2, 200^2, 400^2).
+    spacings : sequence of float
+        Grid spacing of each, slice units.
+    connectivity : {"face", "full"}, optional
+        For :func:`boundary_fraction`.
+
+    Returns
+    -------
+    UncertaintyExponent
+        ``f(eps)`` is the boundary-node fraction of the grid with spacing
+        ``eps``: the fraction of initial conditions whose neighbour at
+        distance ``eps`` ends elsewhere.
+    """
+    if len(grids) != len(spacings):
+        raise ValueError("grids and spacings must have the same length")
+    arrs = [as_label_grid(g) for g in grids]
+    f = np.array([boundary_fraction(a, connectivity=connectivity) for a in arrs])
+    eps = np.asarray(spacings, dtype=float)
+    fit = fit_power_law(eps, f)
+    return UncertaintyExponent(
+        alpha=fit.slope,
+        alpha_stderr=fit.slope_stderr,
+        eps=eps,
+        f=f,
+        ndim=arrs[0].ndim,
+        method="resolution",
+        intercept=fit.intercept,
+        n=np.array([a.size for a in arrs], dtype=np.int64),
     )
 
 
@@ -358,8 +426,15 @@ def uncertainty_exponent_perturbation(
     Returns
     -------
     UncertaintyExponent
-        ``n`` holds the number of point pairs per ``eps``; zero fractions are
-        left out of the fit.
+        ``n`` holds the number of point pairs per ``eps``. The fit is weighted
+        by the binomial variance of ``log f``; zero fractions are left out.
+
+    Notes
+    -----
+    Grebogi, McDonald, Ott & Yorke (1983), Phys. Lett. A 99:415 (pairs
+    ``p, p + eps``). For a boundary that is the graph of a Hölder-``H``
+    function, isotropic directions give ``alpha = H`` (the component along
+    the graph dominates), axis directions normal to it give 1.
     """
     pts = np.atleast_2d(np.asarray(points, dtype=float))
     npts, d = pts.shape
@@ -378,7 +453,10 @@ def uncertainty_exponent_perturbation(
     moved = (pts[None] + eps_arr[:, None, None] * u).reshape(-1, d)
     new = np.asarray(classify(moved)).reshape(len(eps_arr), npts)
     f = (new != base[None]).mean(axis=1)
-    fit = fit_power_law(eps_arr, f)
+    # binomial variance of log f: (1 - f) / (n f)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where((f > 0) & (f < 1), npts * f / (1 - f), 0.0)
+    fit = fit_power_law(eps_arr, f, weights=w)
     return UncertaintyExponent(
         alpha=fit.slope,
         alpha_stderr=fit.slope_stderr,
@@ -409,12 +487,16 @@ def box_counting_dimension(mask, *, box_sizes: Sequence[int] | None = None) -> B
     Returns
     -------
     BoxCountingDimension
-        ``D`` from a least-squares fit of ``log N(b)`` against ``log(1/b)``.
+        ``D`` from a least-squares fit of ``log N(b)`` against ``log(1/b)``,
+        with ``N(b)`` scaled by the fraction of the grid the whole boxes cover
+        (``counts`` holds the raw numbers).
     """
     m = np.asarray(mask, dtype=bool)
     sizes = np.asarray(_default_box_sizes(m.shape) if box_sizes is None else list(box_sizes))
     counts = np.array([int(boxes(m, int(b)).any(axis=1).sum()) for b in sizes])
-    fit = fit_power_law(sizes, counts)
+    # the boxes cover (n // b) * b nodes per axis: scale to the whole grid
+    cover = np.array([np.prod([(n // int(b)) * int(b) / n for n in m.shape]) for b in sizes])
+    fit = fit_power_law(sizes, counts / cover)
     return BoxCountingDimension(-fit.slope, fit.slope_stderr, sizes, counts)
 
 
@@ -452,7 +534,11 @@ def boundary_dimension(
     codes, _ = encode_labels(arr)
     sizes = np.asarray(_default_box_sizes(arr.shape) if box_sizes is None else list(box_sizes))
     counts = np.array([_box_label_stats(codes, int(b))[0] for b in sizes])
-    fit = fit_power_law(sizes, counts)
+    # closed boxes cover ((n - 1) // b) * b of the n - 1 intervals per axis
+    cover = np.array(
+        [np.prod([((n - 1) // int(b)) * int(b) / (n - 1) for n in arr.shape]) for b in sizes]
+    )
+    fit = fit_power_law(sizes, counts / cover)
     return BoxCountingDimension(-fit.slope, fit.slope_stderr, sizes, counts)
 
 
@@ -672,7 +758,7 @@ def wada_grid_test(
     grid,
     extent: Sequence[tuple[float, float]],
     *,
-    max_level: int = 10,
+    max_level: int = 24,
     max_segments: int | None = 2000,
     threshold: float = 0.95,
     exclude: Iterable[Hashable] = (),

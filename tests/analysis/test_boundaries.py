@@ -1,0 +1,232 @@
+"""Boundaries: uncertainty exponent, dimension, basin entropy, Wada tests.
+
+Known answers:
+- straight boundary: alpha = 1, D = 1 (Grebogi, McDonald, Ott & Yorke 1983);
+- triadic escape basins (x -> 3x mod 1): boundary C x R, D = 1 + ln2/ln3,
+  alpha = 1 - ln2/ln3 (McDonald et al. 1985, Physica D 17:125);
+- Weierstrass graph: D = s (Kaplan, Mallet-Paret & Yorke 1984);
+- Newton z**3 - 1 on [-1, 1]**2: D = 1.42, alpha ~ 0.6 (Attractors.jl test
+  suite, test/basins/uncertainty_tests.jl, band 0.55 <= alpha <= 0.65), and
+  Wada (every boundary point of the Julia set borders all three basins).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from analysis_synthetic import (
+    line_classify,
+    newton_classify,
+    sample_grid,
+    sector_classify,
+    triadic_classify,
+    weierstrass,
+    weierstrass_classify,
+)
+from dicetrace.analysis import (
+    basin_entropy,
+    boundary_box_fraction,
+    boundary_dimension,
+    boundary_fraction,
+    boundary_mask,
+    box_counting_dimension,
+    fit_power_law,
+    uncertainty_exponent,
+    uncertainty_exponent_perturbation,
+    uncertainty_exponent_resolution,
+    wada_grid_test,
+    wada_merge_test,
+)
+
+UNIT = [(0.0, 1.0), (0.0, 1.0)]
+LN2_LN3 = math.log(2) / math.log(3)
+
+
+@pytest.fixture(scope="module")
+def line_grid():
+    return sample_grid(line_classify, UNIT, (512, 512))
+
+
+def _weierstrass_grid(s, n=512):
+    w = weierstrass(np.linspace(0, 2 * np.pi, 20001), s=s)
+    ext = [(0.0, 2 * np.pi), (w.min() - 0.01, w.max() + 0.01)]
+    return sample_grid(lambda p: weierstrass_classify(p, s=s), ext, (n, n))
+
+
+def test_boundary_mask_exact():
+    g = np.array([[1, 1, 2], [1, 1, 2], [3, 1, 2]])
+    expected = np.array([[0, 1, 1], [1, 1, 1], [1, 1, 1]], dtype=bool)
+    np.testing.assert_array_equal(boundary_mask(g), expected)
+    # a change across a diagonal only: boundary for "full", not for "face"
+    d = np.array([[1, 1, 1], [1, 1, 1], [1, 1, 2]])
+    assert not boundary_mask(d)[1, 1] and boundary_mask(d, connectivity="full")[1, 1]
+    assert boundary_fraction(np.ones((4, 4))) == 0.0
+    assert boundary_box_fraction(np.ones((9, 9)), 2) == 0.0
+
+
+def test_fit_power_law_exact():
+    x = np.geomspace(1e-3, 1, 7)
+    fit = fit_power_law(x, 3.0 * x**0.7)
+    assert fit.slope == pytest.approx(0.7, abs=1e-12)
+    assert fit.intercept == pytest.approx(math.log(3.0), abs=1e-12)
+
+
+def test_straight_boundary_alpha_one(line_grid):
+    # alpha = 1 exactly for a smooth boundary; tolerance 0.02 ~ 5x the
+    # regression stderr (0.004) of the fit over box sizes 2..25.
+    ue = uncertainty_exponent(line_grid, spacing=1 / 511)
+    assert ue.alpha == pytest.approx(1.0, abs=0.02)
+    assert ue.alpha_stderr < 0.01
+    assert ue.dimension == pytest.approx(1.0, abs=0.02)
+    assert boundary_dimension(line_grid).dimension == pytest.approx(1.0, abs=0.02)
+    sub = uncertainty_exponent(line_grid, box_sizes=range(1, 9), method="subsample")
+    assert sub.alpha == pytest.approx(1.0, abs=0.02)
+
+
+def test_resolution_series_and_3d_plane():
+    # f(h) = boundary-node fraction of scans at spacing h: a straight line gives
+    # f ~ h^1; tolerance 0.03 (the node count across the line fluctuates by
+    # +-1 per column at the coarsest grid, ~1%).
+    ns = [64, 128, 256, 512]
+    grids = [sample_grid(line_classify, UNIT, (n, n)) for n in ns]
+    ue = uncertainty_exponent_resolution(grids, [1 / (n - 1) for n in ns])
+    assert ue.alpha == pytest.approx(1.0, abs=0.03)
+    # a tilted plane in a 3-D stack: alpha = 1, boundary dimension d - alpha = 2
+    n3 = sample_grid(
+        lambda p: np.where(p @ np.array([0.3, 0.5, 0.81]) > 0.8, 2, 1), [(0, 1)] * 3, (64, 64, 64)
+    )
+    ue3 = uncertainty_exponent(n3, box_sizes=range(2, 9))
+    assert ue3.ndim == 3
+    assert ue3.alpha == pytest.approx(1.0, abs=0.03)
+    assert boundary_dimension(n3, box_sizes=range(2, 9)).dimension == pytest.approx(2.0, abs=0.03)
+    be = basin_entropy(n3, 4)
+    assert 0 < be.Sbb < math.log(2)
+
+
+def test_straight_boundary_perturbation_alpha_one():
+    # weighted fit over 3 decades; tolerance = 3 x stderr, about 0.06, covers
+    # the binomial noise of 20000 pairs at the smallest eps (~13 changes).
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(0, 1, (20000, 2))
+    ue = uncertainty_exponent_perturbation(line_classify, pts, np.geomspace(1e-4, 1e-1, 10), rng)
+    assert abs(ue.alpha - 1.0) < max(3 * ue.alpha_stderr, 0.03)
+    # f(eps) = (2/pi) eps L / A for random directions (E|n.u| = 2/pi), with
+    # L = 1/cos(0.3) the length of the line across the unit square;
+    # rel. tolerance 0.08 = 3 binomial sigma at f = 0.074, n = 20000.
+    L = 1 / math.cos(0.3)
+    assert ue.f[-1] == pytest.approx(2 / math.pi * 0.1 * L, rel=0.08)
+
+
+def test_triadic_basins_perturbation_alpha():
+    # exact alpha = 1 - ln2/ln3 = 0.3691; tolerance 0.03: the Cantor set's
+    # log-periodic oscillation of f(eps) (lacunarity) moves fitted slopes over
+    # 3 decades by ~0.01, plus 3 stderr (~0.005 each).
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(0, 1, (20000, 2))
+    ue = uncertainty_exponent_perturbation(triadic_classify, pts, np.geomspace(1e-5, 1e-2, 10), rng)
+    assert ue.alpha == pytest.approx(1 - LN2_LN3, abs=0.03)
+    assert ue.dimension == pytest.approx(1 + LN2_LN3, abs=0.03)
+
+
+def test_newton_basins_alpha_and_dimension(newton_grid):
+    # Attractors.jl band for this very grid (300 x 300 on [-1, 1]^2, box sizes 5..30)
+    ue = uncertainty_exponent(newton_grid, box_sizes=range(5, 31))
+    assert 0.55 <= ue.alpha <= 0.65
+    # box counting of the boundary nodes vs the published D = 1.42: same
+    # half-width (0.05) as the Attractors.jl alpha band.
+    D = boundary_dimension(newton_grid, box_sizes=range(2, 16), method="mask").dimension
+    assert D == pytest.approx(1.42, abs=0.05)
+
+
+def test_weierstrass_boundary_dimension():
+    # D = s for the Weierstrass graph. At 512^2 box counting is biased low
+    # (the graph spans only a few of the largest boxes vertically; measured
+    # +0.02, -0.06, -0.13 for s = 1.3, 1.5, 1.7, growing with s): tolerance
+    # 0.1 at s = 1.5, 0.15 for all, and D must rise with s.
+    dims = {}
+    for s in (1.3, 1.5, 1.7):
+        g = _weierstrass_grid(s)
+        dims[s] = box_counting_dimension(boundary_mask(g), box_sizes=range(2, 17)).dimension
+    assert dims[1.5] == pytest.approx(1.5, abs=0.1)
+    assert dims[1.3] < dims[1.5] < dims[1.7]
+    assert all(abs(d - s) < 0.15 for s, d in dims.items())
+
+
+def test_weierstrass_perturbation_alpha():
+    # random-direction perturbation of a Holder-H graph: alpha = H = 2 - s
+    # (the horizontal component dominates); tolerance 0.06 = 3 x stderr + the
+    # spread of 0.49..0.54 seen over seeds.
+    rng = np.random.default_rng(2)
+    pts = np.column_stack([rng.uniform(0, 2 * np.pi, 20000), rng.uniform(-1.7, 1.7, 20000)])
+    ue = uncertainty_exponent_perturbation(weierstrass_classify, pts, np.geomspace(1e-5, 1e-2, 10), rng)
+    assert ue.alpha == pytest.approx(0.5, abs=0.06)
+
+
+def test_basin_entropy_straight_boundaries_exact():
+    # Vertical boundaries crossing the boxes of side b at every offset k = 1..b-1:
+    # each boundary box has p = k/b, so Sbb = mean_k H(k/b) exactly
+    # (-> 1/2 as b -> infinity, Daza et al. 2016) and Sbb < ln 2.
+    b = 10
+    rows = []
+    for k in range(1, b):
+        block = np.ones((3 * b, b), dtype=np.int64)
+        block[b + k :, :] = 2
+        rows.append(block)
+    g = np.concatenate(rows, axis=1)
+    be = basin_entropy(g, b)
+    H = [-(k / b) * math.log(k / b) - (1 - k / b) * math.log(1 - k / b) for k in range(1, b)]
+    assert be.Sbb == pytest.approx(np.mean(H), abs=1e-12)
+    assert be.n_boundary_boxes == b - 1
+    assert be.Sb == pytest.approx(np.mean(H) * (b - 1) / be.n_boxes, abs=1e-12)
+    assert not be.fractal_boundary
+    assert basin_entropy(np.ones((20, 20)), 5).Sb == 0.0
+
+
+def test_basin_entropy_newton_is_fractal():
+    # Daza et al. (2016) log-2 criterion: Sbb > ln 2 proves a fractal boundary.
+    # Newton z^3 - 1 on [-0.5, 0.5]^2 (three basins meet densely), boxes of 5:
+    # measured Sbb = 0.725; bound above by ln 3 (three labels).
+    g = sample_grid(newton_classify, [(-0.5, 0.5), (-0.5, 0.5)], (300, 300))
+    be = basin_entropy(g, 5)
+    assert be.fractal_boundary
+    assert math.log(2) < be.Sbb < math.log(3)
+    # the straight line never passes the criterion
+    line = sample_grid(line_classify, UNIT, (300, 300))
+    assert basin_entropy(line, 5).Sbb < math.log(2)
+
+
+def test_wada_merge_newton_vs_pie(newton_grid):
+    w = wada_merge_test(newton_grid, r_max=5)
+    assert w.wada and w.r_wada <= 3
+    pie = sample_grid(sector_classify, UNIT, (300, 300))
+    wp = wada_merge_test(pie, r_max=5)
+    assert not wp.wada
+    assert wp.far_fraction[-1] > 0.5  # most of each ray borders two sectors only
+
+
+def test_wada_merge_stripes_as_attractors_jl():
+    # Attractors.jl test/basins/wada_tests.jl: stripes 1111 2222 3333 are not
+    # Wada; 123123... are (every boundary node borders all three labels).
+    wide = np.repeat(np.array([1] * 4 + [2] * 4 + [3] * 4)[:, None], 12, axis=1)
+    assert not wada_merge_test(wide, r_max=2).wada
+    thin = np.repeat(np.array([1, 2, 3] * 4)[:, None], 12, axis=1)
+    w = wada_merge_test(thin, r_max=2, tol=0.0)
+    assert w.r_wada == 1  # as Attractors.jl's test_wada_merge(M, 1) == 0
+    with pytest.raises(ValueError):
+        wada_merge_test(np.array([[1, 2], [2, 1]]))
+
+
+def test_wada_grid_method_newton_vs_pie(newton_grid):
+    # Newton: the fraction of refined boundary segments showing all three
+    # basins grows to 1 (0.996 at 24 levels); threshold 0.95 as Daza et al.
+    # (2015) use W -> 1. The pie's rays never show a third label.
+    rng = np.random.default_rng(0)
+    w = wada_grid_test(newton_classify, newton_grid, [(-1, 1), (-1, 1)], max_segments=1000, rng=rng)
+    assert w.wada and w.wada_fraction[-1] > 0.95
+    assert np.all(np.diff(w.wada_fraction) >= 0)
+    pie = sample_grid(sector_classify, UNIT, (200, 200))
+    wp = wada_grid_test(sector_classify, pie, UNIT, max_segments=500, rng=rng)
+    assert not wp.wada and wp.wada_fraction[-1] < 0.05

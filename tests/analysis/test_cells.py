@@ -1,0 +1,91 @@
+"""Cells: connected components of equal label in 2-D and 3-D grids."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dicetrace.analysis import cells_table, label_cells, same_cell, slice_cell_components
+
+
+def _checkerboard(nblocks=8, b=4, labels=(1, 2)):
+    i, j = np.indices((nblocks * b, nblocks * b)) // b
+    return np.where((i + j) % 2 == 0, labels[0], labels[1])
+
+
+def test_checkerboard_face_vs_full_connectivity():
+    # Exact: 8x8 blocks of 4x4 nodes. Face connectivity: every block is a cell
+    # (64 cells of 16 nodes). Full connectivity joins blocks of one colour
+    # through their corners: 2 cells of 512 nodes.
+    g = _checkerboard()
+    ids, n = label_cells(g)
+    assert n == 64
+    assert np.bincount(ids.ravel())[1:].tolist() == [16] * 64
+    ids_full, n_full = label_cells(g, connectivity="full")
+    assert n_full == 2
+    tab = cells_table(g, connectivity="full")
+    assert tab["size"].tolist() == [512, 512]
+    assert tab["label"].tolist() == [1, 2]
+
+
+def test_cells_table_geometry():
+    g = np.ones((10, 6), dtype=np.int64)
+    g[2:5, 1:3] = 4  # a 3 x 2 block
+    g[9, 5] = -1  # a one-node cell of "did not settle"
+    tab = cells_table(g, extent=[(0.0, 0.9), (1.0, 1.5)])
+    assert len(tab) == 3
+    block = tab[tab.label == 4].iloc[0]
+    assert block["size"] == 6
+    assert block["bbox"] == ((2, 4), (1, 2))
+    assert block["centroid"] == pytest.approx((3.0, 1.5))
+    # slice units: x = 0.1 i, y = 1 + 0.1 j
+    assert block["centroid_slice"] == pytest.approx((0.3, 1.15))
+    assert not block["touches_edge"]
+    lone = tab[tab.label == -1].iloc[0]
+    assert lone["size"] == 1 and lone["touches_edge"]
+    # excluding -1 leaves the node without a cell
+    ids, n = label_cells(g, exclude=(-1,))
+    assert n == 2 and ids[9, 5] == 0
+
+
+def test_cells_on_contact_sequence_labels():
+    g = np.array(
+        [["0-3", "0-3", "0-1-3"], ["0-3", "0-5", "0-1-3"], ["0-5", "0-5", "0-3"]], dtype=object
+    )
+    tab = cells_table(g)
+    assert sorted(zip(tab.label, tab["size"])) == [("0-1-3", 2), ("0-3", 1), ("0-3", 3), ("0-5", 3)]
+
+
+def _u_tube_stack():
+    """Background 1; label 2 in three columns along k; columns A and B joined
+    by a bridge in the top slice (a U-tube), column C isolated."""
+    g = np.ones((16, 8, 6), dtype=np.int64)
+    g[2:5, 2:5, :] = 2  # A
+    g[10:13, 2:5, :] = 2  # B
+    g[2:13, 2:5, 5] = 2  # bridge A-B at k = 5
+    g[6:8, 6:8, :4] = 2  # C, never touching
+    return g
+
+
+def test_same_cell_through_third_dimension():
+    g = _u_tube_stack()
+    assert same_cell(g, (3, 3, 0), (11, 3, 0))  # A and B meet at k = 5
+    assert not same_cell(g, (3, 3, 0), (6, 6, 0))  # C is its own cell
+    assert not same_cell(g, (3, 3, 0), (0, 0, 0))  # different labels
+    ids, _ = label_cells(g)
+    assert same_cell(g, (11, 3, 2), (2, 2, 4), cell_ids=ids)
+
+
+def test_slice_cell_components_groups_repeated_regions():
+    g = _u_tube_stack()
+    tab = slice_cell_components(g, 0)
+    twos = tab[tab.label == 2].sort_values("centroid")
+    # slice 0 shows three separate 2-cells; A and B are one 3-D cell, C another
+    assert len(twos) == 3
+    comp = dict(zip([c[0] for c in twos.centroid], twos.component_3d))
+    assert comp[3.0] == comp[11.0] != comp[6.5]
+    assert twos.set_index(twos.centroid.map(lambda c: c[0])).n_cells_in_component.to_dict() == {
+        3.0: 2,
+        6.5: 1,
+        11.0: 2,
+    }

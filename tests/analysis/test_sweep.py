@@ -1,0 +1,41 @@
+"""Chaos-measure table across a parameter sweep."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from analysis_synthetic import line_classify, newton_classify, sample_grid
+from dicetrace.analysis import chaos_sweep
+
+
+def test_chaos_sweep_orders_smooth_and_fractal():
+    # stand-ins for "high damping" (a straight border) and "low damping"
+    # (a fractal Wada border): the table must rank them, with finite error bars.
+    smooth = sample_grid(line_classify, [(0, 1), (0, 1)], (200, 200))
+    fractal = sample_grid(newton_classify, [(-0.5, 0.5), (-0.5, 0.5)], (200, 200))
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(0, 1, (5000, 2))
+    table = chaos_sweep(
+        {0.01: smooth, 0.005: fractal},
+        classifiers={0.01: line_classify},
+        points=pts,
+        eps_list=np.geomspace(1e-3, 1e-1, 6),
+        rng=rng,
+        param_name="gamma_s_cm",
+        n_boot=50,
+    )
+    assert table["gamma_s_cm"].tolist() == [0.005, 0.01]
+    fr, sm = table.iloc[0], table.iloc[1]
+    assert fr.boundary_fraction > sm.boundary_fraction
+    assert fr.alpha < sm.alpha
+    assert fr.Sbb > sm.Sbb and not sm.fractal_boundary
+    assert table.fractal_boundary.tolist() == (table.Sbb > math.log(2)).tolist()
+    # the straight border: alpha = 1 (tolerance 0.05, ~ 5 x its stderr at 200^2)
+    assert sm.alpha == pytest.approx(1.0, abs=0.05)
+    assert sm.alpha_perturbation == pytest.approx(1.0, abs=0.1)
+    assert math.isnan(fr.alpha_perturbation)
+    for col in ("boundary_fraction_block_stderr", "alpha_stderr", "alpha_block_stderr", "Sb_stderr", "Sbb_stderr"):
+        assert np.isfinite(table[col]).all() and (table[col] >= 0).all()

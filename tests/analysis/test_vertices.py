@@ -1,0 +1,52 @@
+"""Vertex hunt: triple points found to 1e-9, split candidates reported."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from analysis_synthetic import near_miss_classify, sector_classify
+from dicetrace.analysis import find_vertices
+
+CENTRE = np.array([0.3141592653589793, 0.2718281828459045])
+
+
+def test_three_sectors_triple_point_to_1e9():
+    # one exact triple point at CENTRE (sector_classify); tol = 1e-9 as asked
+    v = find_vertices(sector_classify, (0.0, 1.0), (0.0, 1.0), 32, tol=1e-9)
+    assert len(v) == 1
+    row = v.iloc[0]
+    assert row.status == "vertex"
+    assert row.labels == (1, 2, 3)
+    assert np.hypot(row.x - CENTRE[0], row.y - CENTRE[1]) < 1e-9
+    assert max(row.size_x, row.size_y) < 5e-9  # a small cluster of squares < tol
+    assert v.attrs["n_evals"] < 20000
+
+
+def test_two_triple_points_are_two_vertices():
+    c2 = np.array([0.71, 0.63])
+
+    def two(points):
+        p = np.asarray(points, dtype=float)
+        left = sector_classify(p)
+        right = sector_classify(p, centre=tuple(c2), labels=(4, 5, 6))
+        return np.where(p[:, 0] < 0.55, left, right)
+
+    v = find_vertices(two, (0.0, 1.0), (0.0, 1.0), 40, tol=1e-9)
+    vert = v[v.status == "vertex"]
+    found = {tuple(np.round(r, 6)) for r in vert[["x", "y"]].to_numpy()}
+    assert (round(CENTRE[0], 6), round(CENTRE[1], 6)) in found
+    assert (0.71, 0.63) in found
+
+
+def test_near_miss_is_reported_split_at_its_gap():
+    # 1|2 line and 2|3 parabola pass within delta = 1e-6 without meeting: the
+    # candidate must be reported "split" once squares are ~delta (within 4x).
+    delta = 1e-6
+    v = find_vertices(near_miss_classify, (0.0, 1.0), (0.0, 1.0), 32, tol=1e-9)
+    assert (v.status != "vertex").all()
+    row = v.iloc[0]
+    assert row.status == "split"
+    assert row.labels == (1, 2, 3)
+    side = 1.0 / 31 / 2**row.depth
+    assert delta / 4 < side < 4 * delta
+    assert abs(row.x - 0.5) < 1e-5 and abs(row.y - 0.5) < 1e-3
