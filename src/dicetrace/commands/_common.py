@@ -23,35 +23,48 @@ def fail(message: str) -> None:
     raise BadInput(message)
 
 
+def _click_exceptions():
+    """(UsageError, ClickException, Exit) classes of both click and typer's vendored click."""
+    import click
+
+    usage, cexc, exits = [click.exceptions.UsageError], [click.exceptions.ClickException], [click.exceptions.Exit]
+    try:  # typer >= 0.20 vendors its own click
+        from typer._click import exceptions as tce
+
+        usage.append(tce.UsageError)
+        cexc.append(tce.ClickException)
+    except ImportError:  # pragma: no cover - older typer uses click itself
+        pass
+    exits.append(typer.Exit)
+    return tuple(usage), tuple(cexc), tuple(exits)
+
+
 def run_app(app: typer.Typer) -> None:
     """Run the typer app; bad input → ``dicetrace: error: ...`` and exit 2."""
+    usage, cexc, exits = _click_exceptions()
     try:
-        app(standalone_mode=False)
-    except BadInput as e:
+        rc = app(standalone_mode=False)
+    except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate
         print(f"dicetrace: error: {e}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)
-    except ValueError as e:  # validation errors from params/ics/simulate
-        print(f"dicetrace: error: {e}", file=sys.stderr)
+    except usage as e:
+        if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed
+            sys.exit(0)
+        print(f"dicetrace: error: {e.format_message()}", file=sys.stderr)
         sys.exit(EXIT_BAD_INPUT)
-    except typer.Abort:
-        print("dicetrace: aborted", file=sys.stderr)
-        sys.exit(130)
-    except KeyboardInterrupt:
+    except exits as e:
+        sys.exit(getattr(e, "exit_code", 0))
+    except cexc as e:
+        print(f"dicetrace: error: {e.format_message()}", file=sys.stderr)
+        sys.exit(getattr(e, "exit_code", 1) or 1)
+    except (typer.Abort, KeyboardInterrupt):
         print("dicetrace: interrupted", file=sys.stderr)
         sys.exit(130)
-    except Exception as e:  # click usage errors and the like
-        import click
-
-        if isinstance(e, click.exceptions.UsageError):
-            msg = e.format_message()
-            print(f"dicetrace: error: {msg}", file=sys.stderr)
-            sys.exit(EXIT_BAD_INPUT)
-        if isinstance(e, click.exceptions.Exit):
-            sys.exit(e.exit_code)
-        if isinstance(e, OSError):
-            print(f"dicetrace: error: {e.strerror or e}: {e.filename or ''}".rstrip(": "), file=sys.stderr)
-            sys.exit(EXIT_BAD_INPUT)
-        raise
+    except OSError as e:
+        where = f": {e.filename}" if e.filename else ""
+        print(f"dicetrace: error: {e.strerror or e}{where}", file=sys.stderr)
+        sys.exit(EXIT_BAD_INPUT)
+    sys.exit(rc if isinstance(rc, int) else 0)
 
 
 def parse_floats(text: str, n: int | None, what: str) -> list[float]:
@@ -95,6 +108,9 @@ def atomic_path(path: Path):
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp = Path(tmp)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual mode
     try:
         yield tmp
         os.replace(tmp, path)

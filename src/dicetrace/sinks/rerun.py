@@ -26,8 +26,9 @@ Entities (world frame: z up, cm):
 ``summary``                 text document: IC, configuration, outcome, status,
                             contact sequence
 
-The recording's metadata (``rr.RecordingStream`` properties) holds the same
-summary.  Read a file back with ``rerun.chunk.RrdReader`` (needs only
+The recording property ``dicetrace`` (``rec.send_property``) holds the
+version, the full configuration (JSON), the IC and the summary:
+:func:`read_rrd_metadata`.  Read a file back with ``rerun.chunk.RrdReader`` (needs only
 pyarrow) or open it with the ``rerun`` viewer.
 """
 
@@ -35,10 +36,11 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from dicetrace.sinks._common import quaternions_xyzw, remove_quietly, temp_path_beside, written_rows
 
 #: Face colours of the writeup: 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black (RGB).
 FACE_COLORS = np.array(
@@ -118,28 +120,59 @@ def write_rrd(
     path = Path(path)
     name = name or path.stem
 
-    rec = rr.RecordingStream(application_id, recording_id=_recording_id(roll))
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent if str(path.parent) else ".")
-    os.close(fd)
-    tmp = Path(tmp)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(application_id)
+    tmp = temp_path_beside(path)
     try:
+        with open(tmp, "xb"):  # an unwritable folder raises OSError here, before any work
+            pass
         rec.save(tmp, default_blueprint=default_blueprint(roll))
         rec.send_recording_name(name)
+        rec.send_property("dicetrace", rr.AnyValues(**metadata_values(roll, ic_label)))
         log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every)
         rec.flush()
         rec.disconnect()
         os.replace(tmp, path)
+    except BaseException:
+        try:
+            rec.disconnect()
+        except Exception:  # pragma: no cover - already failing; keep the first error
+            pass
+        raise
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        remove_quietly(tmp)
     return path
 
 
-def _recording_id(roll) -> str:
-    import uuid
+def metadata_values(roll, ic_label: str | None = None) -> dict:
+    """The recording property ``dicetrace``: version, configuration, IC and summary (cf. the Parquet metadata)."""
+    import dicetrace
 
-    key = json.dumps({"ic": roll.ic.tolist(), "config": roll.config.as_dict()}, sort_keys=True)
-    return str(uuid.uuid5(uuid.NAMESPACE_URL, "dicetrace:" + key))
+    return {
+        "dicetrace_version": dicetrace.__version__,
+        "config_json": json.dumps(roll.config.as_dict(), sort_keys=True),
+        "ic": [float(v) for v in roll.ic],
+        "ic_label": ic_label or "",
+        "l_convention": roll.config.preset.l_convention,
+        "outcome": int(roll.outcome),
+        "status": roll.status,
+        "steps": int(roll.steps),
+        "t_settle_s": float(roll.t_settle_s),
+        "contact_sequence": roll.contact_sequence,
+    }
+
+
+def read_rrd_metadata(path) -> dict:
+    """The ``dicetrace`` recording property of a file written by :func:`write_rrd` (config parsed from JSON)."""
+    from rerun.chunk import RrdReader
+
+    for ch in RrdReader(str(path)).stream():
+        if ch.entity_path == "/__properties/dicetrace":
+            row = {k: v[0] for k, v in ch.to_record_batch().to_pydict().items() if k != "rerun.controls.RowId"}
+            out = {k: (v[0] if isinstance(v, list) and len(v) == 1 and k != "ic" else v) for k, v in row.items()}
+            out["config"] = json.loads(out.pop("config_json"))
+            return out
+    raise ValueError(f"{path}: no dicetrace metadata")
 
 
 def summary_markdown(roll, ic_label: str | None = None) -> str:
@@ -198,18 +231,23 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     tr = roll.trace
     cfg = roll.config
     half = float(cfg.preset.half_side_cm)
-    nrow = len(tr.step)
-    steps = tr.step.astype(np.int64)
-    t_s = tr.t_s.astype(np.float64)
+    # rows with a finite, written state (a numerical failure may end in NaN or unwritten rows)
+    rows = written_rows(tr) & np.isfinite(tr.cm_pos).all(axis=1) & np.isfinite(tr.node_offsets).all(axis=(1, 2))
+    steps = tr.step[rows].astype(np.int64)
+    t_s = tr.t_s[rows].astype(np.float64)
+    nrow = len(steps)
+    if nrow == 0:
+        raise ValueError("the trace holds no finite state to record")
 
     def idx(st, t):
         return [rr.TimeColumn("step", sequence=st), rr.TimeColumn("sim_time", duration=t)]
 
     index = idx(steps, t_s)
-    cm = tr.cm_pos
-    off = tr.node_offsets  # (nrow, 8, 3)
+    cm = tr.cm_pos[rows]
+    off = tr.node_offsets[rows]  # (nrow, 8, 3)
     nodes = cm[:, None, :] + off
-    quat = _unit_quaternions(tr.quat_xyzw)
+    quat = quaternions_xyzw(tr)[rows]
+    energy = {key: np.asarray(v)[rows] for key, v in tr.energy.items()}
 
     # -- static: frame, ground, summary ------------------------------------------------------
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -288,9 +326,9 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     # -- energies ------------------------------------------------------------------------
     for key, label, color in ENERGY_SERIES:
         rec.log(f"energy/{key}", rr.SeriesLines(names=[label], colors=[color]), static=True)
-        rec.send_columns(f"energy/{key}", indexes=index, columns=rr.Scalars.columns(scalars=tr.energy[key]))
+        rec.send_columns(f"energy/{key}", indexes=index, columns=rr.Scalars.columns(scalars=energy[key]))
     rec.log("stop_test/energy", rr.SeriesLines(names=["stop-test energy"], colors=[(31, 119, 180)]), static=True)
-    rec.send_columns("stop_test/energy", indexes=index, columns=rr.Scalars.columns(scalars=tr.energy["stop_test"]))
+    rec.send_columns("stop_test/energy", indexes=index, columns=rr.Scalars.columns(scalars=energy["stop_test"]))
     e_stop = float(cfg.preset.e_stop)
     rec.log(
         "stop_test/threshold",
@@ -317,7 +355,9 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
             ),
         )
         # markers: one row per event step holding every node that changed then
-        ok = ev_steps < nrow  # always true for a full trace; guards a truncated one
+        row_of_step = np.full(int(tr.step[-1]) + 1, -1, dtype=np.int64)
+        row_of_step[steps] = np.arange(nrow)
+        ok = (ev_steps <= tr.step[-1]) & (row_of_step[np.minimum(ev_steps, tr.step[-1])] >= 0)
         es, en, ee = ev_steps[ok], ev_nodes[ok].astype(np.int64), ev_enter[ok]
         uniq, counts = np.unique(es, return_counts=True)
         rec.log(
@@ -329,20 +369,13 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
             "world/contact_events",
             indexes=idx(uniq, uniq * roll.dt_s),
             columns=rr.Points3D.columns(
-                positions=nodes[es, en - 1, :],
+                positions=nodes[row_of_step[es], en - 1, :],
                 colors=np.where(ee[:, None], EVENT_ENTER_COLOR, EVENT_LEAVE_COLOR).astype(np.uint8),
                 labels=[f"{n} {'in' if e else 'out'}" for n, e in zip(en, ee)],
             ).partition(counts),
         )
     else:
         rec.log("contacts", rr.TextLog("no contact events", level="DEBUG"), static=True)
-
-
-def _unit_quaternions(q: np.ndarray) -> np.ndarray:
-    """(n, 4) xyzw quaternions normalised, with a non-negative w (no sign flips between rows)."""
-    q = np.asarray(q, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    return np.where(q[:, 3:4] < 0, -q, q)
 
 
 def _log_trail(rec, rr, cm, steps, t_s, trail_every) -> None:
@@ -378,6 +411,30 @@ def _log_trail(rec, rr, cm, steps, t_s, trail_every) -> None:
     )
 
 
+def _eye_for(cm: np.ndarray, half: float):
+    """A camera that sees the whole centre-of-mass path from the side of its horizontal travel.
+
+    It looks across the travel direction (so the path spreads left to right),
+    25° from above, from a distance proportional to the path's extent.
+    """
+    import rerun.blueprint as rrb
+
+    cm = cm[np.isfinite(cm).all(axis=1)]
+    if len(cm) == 0:
+        return None
+    lo, hi = cm.min(axis=0), cm.max(axis=0)
+    target = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.4 * max(hi[2], 2 * half)])
+    travel = cm[-1, :2] - cm[0, :2]
+    norm = float(np.hypot(*travel))
+    d = travel / norm if norm > half else np.array([0.0, 1.0])
+    side = np.array([d[1], -d[0]])  # travel runs left to right as seen from here
+    span = float(max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 8 * half))
+    elev = np.radians(25.0)
+    dist = 1.3 * span + 4 * half
+    position = target + dist * np.array([side[0] * np.cos(elev), side[1] * np.cos(elev), np.sin(elev)])
+    return rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
+
+
 def default_blueprint(roll=None):
     """3-D view of the world, energy plots, the contact log and the summary.
 
@@ -387,14 +444,7 @@ def default_blueprint(roll=None):
 
     eye = None
     if roll is not None and roll.trace is not None and roll.trace.cm_pos is not None:
-        cm = roll.trace.cm_pos
-        half = float(roll.config.preset.half_side_cm)
-        lo = cm.min(axis=0)
-        hi = cm.max(axis=0)
-        target = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), max(half, 0.35 * hi[2])])
-        span = float(max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 8 * half))
-        position = target + span * np.array([-1.3, -1.6, 0.8])
-        eye = rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
+        eye = _eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm))
 
     view3d = rrb.Spatial3DView(
         origin="/world",
@@ -433,3 +483,40 @@ def default_blueprint(roll=None):
         rrb.TimePanel(state="collapsed", timeline="step", play_state="following"),
         auto_views=False,
     )
+
+
+def read_rrd(path, *, static: bool = False) -> dict:
+    """Read a recording's chunks back as one Arrow table per entity (needs only pyarrow).
+
+    Parameters
+    ----------
+    path
+        A ``.rrd`` file (its first recording store is read).
+    static
+        Return the static data instead of the temporal data.
+
+    Returns
+    -------
+    dict
+        Entity path (e.g. ``"/world/die/nodes"``) → ``pyarrow.Table``;
+        temporal tables are sorted by the ``step`` timeline.  Component
+        columns are named ``Archetype:field`` (``"Points3D:positions"``) and
+        hold one list of instances per row.
+    """
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    parts: dict[str, list] = {}
+    for ch in RrdReader(str(path)).stream():
+        if ch.entity_path.startswith("/__properties") or bool(ch.is_static) != static:
+            continue
+        rb = ch.to_record_batch()
+        keep = [n for n in rb.schema.names if n != "rerun.controls.RowId"]
+        parts.setdefault(ch.entity_path, []).append(pa.Table.from_batches([rb]).select(keep))
+    out = {}
+    for entity, tables in parts.items():
+        t = pa.concat_tables(tables, promote_options="default") if len(tables) > 1 else tables[0]
+        if not static and "step" in t.column_names:
+            t = t.sort_by("step")
+        out[entity] = t
+    return out

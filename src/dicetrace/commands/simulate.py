@@ -1,0 +1,425 @@
+"""``dicetrace simulate``: throw the die from one IC or many and print one row per IC.
+
+ICs come from ``--ic VX,VY,VZ,LX,LY,LZ``, from ``--slice seed --at X,Y[,Z]``,
+or from ``--ics FILE.csv`` (columns ``vx,vy,vz,Lx,Ly,Lz``, or ``x,y[,z]``
+with ``--slice seed``).  All ICs run in one parallel batch
+(``simulate_batch``).  Output: ``--format table`` (default), ``csv`` or
+``json``, on stdout or atomically into ``--out FILE``.
+
+Exit codes: 0 done; 1 some IC ended in a numerical failure (status
+``non_finite`` or ``blow_up``: the rows are still printed); 2 bad input.
+
+The helpers here (``build_config``, ``ic_from_options``, ...) are shared with
+``dicetrace record``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from dicetrace.commands._common import atomic_path, check_writable_file, fail, parse_floats
+
+FORMATS = ("table", "csv", "json")
+FAILED_STATUSES = ("non_finite", "blow_up")
+EXIT_NUMERICAL_FAILURE = 1
+
+IC_HELP = (
+    "One IC: VX,VY,VZ,LX,LY,LZ: centre-of-mass velocity (cm/s) and angular momentum "
+    "(node-mass·cm²/s; for the seed preset in the 2019 program's sign convention)."
+)
+SLICE_HELP = (
+    "Slice of IC space that --at (or the x,y[,z] columns of --ics) refers to: seed (the writeup's; "
+    "with 3 coordinates its 3-D slice), seed3, seed-ortho or seed3-ortho."
+)
+AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
+PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
+INTEGRATOR_HELP = "Integrator (default: the preset's, semi-implicit-euler)."
+DT_HELP = "Time step, s (default 0.001)."
+T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
+
+
+# -- shared with `dicetrace record` ------------------------------------------------------------
+
+
+def parse_positive(text: str | None, option: str, what: str) -> float | None:
+    """A finite number > 0 from an option's text (None stays None)."""
+    if text is None:
+        return None
+    try:
+        v = float(text.strip())
+    except ValueError:
+        fail(f"{option} must be a number ({what}), got {text!r}")
+    if not (math.isfinite(v) and v > 0):
+        fail(f"{option} must be a finite number > 0 ({what}), got {text!r}")
+    return v
+
+
+def build_config(preset: str, integrator: str | None, dt: str | None, t_max: str | None):
+    """A validated Config from the options' text, or a one-line failure naming the bad option."""
+    from dicetrace.params import INTEGRATORS, PRESETS, make_config
+
+    if preset not in PRESETS:
+        fail(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
+    if integrator is not None and integrator not in INTEGRATORS:
+        fail(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+    dt = parse_positive(dt, "--dt", "the time step in s")
+    t_max = parse_positive(t_max, "--t-max", "the time cap in s")
+    try:
+        cfg = make_config(preset, integrator=integrator, dt_s=dt, t_max_s=t_max)
+    except ValueError as e:
+        fail(str(e))
+    if integrator is not None:  # (the default one always is; this check imports numba)
+        _check_integrator_available(cfg)
+    return cfg
+
+
+def _check_integrator_available(cfg) -> None:
+    from dicetrace.core import integrators
+
+    available = getattr(integrators, "IMPLEMENTED", None)
+    if available is not None and cfg.numerics.integrator_id not in available:
+        from dicetrace.params import INTEGRATORS
+
+        names = [n for n, i in INTEGRATORS.items() if i in available]
+        fail(f"integrator {cfg.numerics.integrator!r} is not available in this build (available: {', '.join(names)})")
+
+
+def check_output_file(path: Path) -> Path:
+    """Fail (exit 2) unless a file can really be created beside ``path`` (probed, then removed).
+
+    ``os.access`` says yes to root everywhere, even on read-only file systems;
+    creating the temporary file is the real test.  An existing ``path`` is untouched.
+    """
+    from dicetrace.sinks._common import remove_quietly, temp_path_beside
+
+    path = check_writable_file(Path(path))
+    probe = temp_path_beside(path)
+    try:
+        with open(probe, "xb"):
+            pass
+    except OSError as e:
+        fail(f"cannot write into folder {str(path.parent)!r}: {e.strerror}")
+    finally:
+        remove_quietly(probe)
+    return path
+
+
+def get_slice(name: str | None, ndim: int | None = None):
+    """The named slice (``dicetrace.ics.SLICES``) with ``ndim`` coordinates, or a one-line failure.
+
+    ``seed`` given 3 coordinates is the writeup's 3-D seed slice (``seed3``),
+    as :func:`dicetrace.ics.seed_slice` with z.
+    """
+    from dicetrace.ics import SLICES
+
+    if name not in SLICES:
+        fail(f"unknown slice {name!r} (choose from {', '.join(SLICES)})")
+    sl = SLICES[name]
+    if ndim is not None and sl.ndim != ndim:
+        if name == "seed" and ndim == 3 and "seed3" in SLICES:
+            return SLICES["seed3"]
+        fail(f"slice {name!r} is {sl.ndim}-D: give {sl.ndim} coordinates ({','.join('XYZ'[: sl.ndim])}), got {ndim}")
+    return sl
+
+
+def slice_ics(name: str, coords: np.ndarray, cfg) -> np.ndarray:
+    """ICs (m, 6) of slice ``name`` at coordinates (m, ndim), in the preset's L convention.
+
+    The seed slices give the 2019 program's L; a preset that takes the
+    physical L (``physical``) gets it negated, so the throw is the same.
+    """
+    from dicetrace.ics import to_preset_convention
+
+    coords = np.asarray(coords, dtype=np.float64)
+    sl = get_slice(name, coords.shape[1])
+    ics = np.asarray(sl.ics(coords), dtype=np.float64).reshape(-1, 6)
+    return to_preset_convention(ics, sl.l_convention, cfg.preset.l_convention)
+
+
+def ic_from_options(ic: str | None, slice_name: str | None, at: str | None, cfg):
+    """One IC from ``--ic`` or ``--slice NAME --at X,Y[,Z]`` (in ``cfg``'s L convention).
+
+    Returns (ic (6,), coords (k,) or None, description dict).
+    """
+    if ic is not None and (at is not None or slice_name is not None):
+        fail("give either --ic or --slice/--at, not both")
+    if ic is not None:
+        vals = parse_floats(ic, 6, "--ic (VX,VY,VZ,LX,LY,LZ)")
+        return np.array(vals, dtype=np.float64), None, {"kind": "ic"}
+    if at is None:
+        if slice_name is not None:
+            fail(f"--slice {slice_name} needs --at X,Y (or X,Y,Z)")
+        fail("no initial condition: give --ic VX,VY,VZ,LX,LY,LZ or --slice seed --at X,Y")
+    if slice_name is None:
+        fail("--at needs --slice (e.g. --slice seed --at 1.65,3.9)")
+    get_slice(slice_name)
+    coords = parse_floats(at, None, "--at")
+    if len(coords) not in (1, 2, 3):
+        fail(f"--at needs 2 (X,Y) or 3 (X,Y,Z) comma-separated numbers, got {len(coords)} in {at!r}")
+    c = np.array(coords, dtype=np.float64)
+    return slice_ics(slice_name, c[None, :], cfg)[0], c, {"kind": "slice", "slice": slice_name}
+
+
+def fmt_num(v: float) -> str:
+    """Compact number for names and tables (10 significant digits)."""
+    return f"{float(v):.10g}"
+
+
+# -- CSV input -----------------------------------------------------------------------------
+
+_IC_COLS = ("vx", "vy", "vz", "lx", "ly", "lz")
+_XYZ = ("x", "y", "z")
+
+
+def read_ics_csv(path: Path, slice_name: str | None, cfg):
+    """ICs from a CSV file: columns vx,vy,vz,Lx,Ly,Lz, or x,y[,z] with a slice.
+
+    Returns (ics (m, 6), coords (m, k) or None).  Columns are matched without
+    regard to case; other columns are ignored.  When both kinds are present
+    the IC columns are used and x, y, z are kept as the slice coordinates.
+    """
+    path = Path(path)
+    if not path.exists():
+        fail(f"IC file {str(path)!r} does not exist")
+    if path.is_dir():
+        fail(f"IC file {str(path)!r} is a folder")
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError:
+        fail(f"IC file {str(path)!r} is not a UTF-8 text (CSV) file")
+    except OSError as e:
+        fail(f"cannot read IC file {str(path)!r}: {e.strerror}")
+    rows = [r for r in csv.reader(io.StringIO(text)) if any(c.strip() for c in r)]
+    if not rows:
+        fail(f"IC file {str(path)!r} is empty (expected a header vx,vy,vz,Lx,Ly,Lz or x,y)")
+    header = [h.strip().lower() for h in rows[0]]
+    data = rows[1:]
+    if not data:
+        fail(f"IC file {str(path)!r} has a header but no rows")
+    dup = sorted({h for h in header if header.count(h) > 1 and h in _IC_COLS + _XYZ})
+    if dup:
+        fail(f"IC file {str(path)!r}: repeated column(s) {', '.join(dup)}")
+    has_ic = all(c in header for c in _IC_COLS)
+    has_xy = "x" in header and "y" in header
+    if not has_ic and not has_xy:
+        fail(
+            f"IC file {str(path)!r} needs columns vx,vy,vz,Lx,Ly,Lz or x,y (with --slice seed); "
+            f"found {', '.join(h or '?' for h in header)}"
+        )
+    if not has_ic and slice_name is None:
+        fail(f"IC file {str(path)!r} gives slice coordinates x,y: add --slice seed")
+    if slice_name is not None:
+        get_slice(slice_name)
+    want = list(_IC_COLS) if has_ic else []
+    coord_cols = [c for c in _XYZ if c in header] if has_xy else []
+    idx = {c: header.index(c) for c in want + coord_cols}
+    vals = np.empty((len(data), len(want) + len(coord_cols)))
+    for i, row in enumerate(data):
+        line = i + 2
+        if len(row) != len(header):
+            fail(f"IC file {str(path)!r}, line {line}: {len(row)} fields, the header has {len(header)}")
+        for j, c in enumerate(want + coord_cols):
+            cell = row[idx[c]].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                fail(f"IC file {str(path)!r}, line {line}, column {c}: not a number: {cell!r}")
+            if not math.isfinite(v):
+                fail(f"IC file {str(path)!r}, line {line}, column {c}: not finite: {cell!r}")
+            vals[i, j] = v
+    coords = vals[:, len(want) :] if coord_cols else None
+    if has_ic:
+        return vals[:, : len(want)], coords
+    return slice_ics(slice_name, coords, cfg), coords
+
+
+def run_ics(ics: np.ndarray, cfg):
+    """Summaries of every IC as a BatchResult: one parallel batch, or a plain ``simulate`` for a single IC.
+
+    (Both are bit-identical; the single throw skips the batch's thread start-up.)
+    """
+    from dicetrace.simulate import STATUS_NAMES, BatchResult, simulate, simulate_batch
+
+    if len(ics) != 1:
+        return simulate_batch(ics, config=cfg)
+    r = simulate(ics[0], config=cfg)
+    code = {v: k for k, v in STATUS_NAMES.items()}[r.status]
+    return BatchResult(
+        ics=ics.copy(),
+        outcome=np.array([r.outcome], dtype=np.int8),
+        status_code=np.array([code], dtype=np.int8),
+        steps=np.array([r.steps], dtype=np.int64),
+        t_settle_s=np.array([r.t_settle_s]),
+        set_offsets=np.array([0, len(r.contact_sets)], dtype=np.int64),
+        sets=r.contact_sets,
+        set_steps=r.contact_steps,
+        config=cfg,
+    )
+
+
+# -- output ---------------------------------------------------------------------------------
+
+
+def result_rows(batch, coords) -> tuple[list[str], list[list]]:
+    """Column names and rows (python values) of a batch's summaries."""
+    from dicetrace.simulate import STATUS_NAMES
+
+    names = ["ic_id"]
+    ncoord = 0 if coords is None else coords.shape[1]
+    names += list(_XYZ[:ncoord])
+    names += ["vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps", "t_settle_s", "status", "contact_sequence"]
+    seqs = batch.contact_sequences()
+    rows = []
+    for i in range(len(batch)):
+        row = [i]
+        if ncoord:
+            row += [float(v) for v in coords[i]]
+        row += [float(v) for v in batch.ics[i]]
+        row += [
+            int(batch.outcome[i]),
+            int(batch.steps[i]),
+            float(batch.t_settle_s[i]),
+            STATUS_NAMES[int(batch.status_code[i])],
+            seqs[i],
+        ]
+        rows.append(row)
+    return names, rows
+
+
+def render(names, rows, fmt: str, stream, *, meta: dict) -> None:
+    if fmt == "csv":
+        w = csv.writer(stream, lineterminator="\n")
+        w.writerow(names)
+        for r in rows:
+            w.writerow([repr(v) if isinstance(v, float) else v for v in r])
+    elif fmt == "json":
+        doc = {**meta, "columns": names, "rolls": [dict(zip(names, r)) for r in rows]}
+        json.dump(doc, stream, indent=1)
+        stream.write("\n")
+    else:
+        from rich.console import Console
+        from rich.table import Table
+
+        table = Table(box=None, header_style="bold", pad_edge=False)
+        numeric = {"ic_id", "x", "y", "z", "vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps", "t_settle_s"}
+        for n in names:
+            table.add_column(n, justify="right" if n in numeric else "left", overflow="fold")
+        for r in rows:
+            table.add_row(*[fmt_num(v) if isinstance(v, float) else str(v) for v in r])
+        tty = stream.isatty() if hasattr(stream, "isatty") else False
+        console = Console(file=stream, width=None if tty else 100000, no_color=not tty, highlight=False, soft_wrap=False)
+        console.print(table)
+
+
+def _strip_trailing(text: str) -> str:
+    return "\n".join(line.rstrip() for line in text.splitlines()) + "\n"
+
+
+def emit(names, rows, fmt: str, out: Path | None, *, meta: dict) -> None:
+    """Print the rows, or write them atomically to ``out``."""
+    buf = io.StringIO()
+    render(names, rows, fmt, buf, meta=meta)
+    text = buf.getvalue()
+    if fmt == "table":
+        text = _strip_trailing(text)
+    if out is None:
+        if fmt == "table" and sys.stdout.isatty():
+            render(names, rows, fmt, sys.stdout, meta=meta)  # rich fits the terminal
+        else:
+            sys.stdout.write(text)
+        return
+    with atomic_path(out) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    _fix_mode(out)
+
+
+def _fix_mode(path: Path) -> None:
+    """Give a file written through a temporary file the usual permissions (umask)."""
+    import os
+
+    mask = os.umask(0)
+    os.umask(mask)
+    try:
+        os.chmod(path, 0o666 & ~mask)
+    except OSError:
+        pass
+
+
+def report_failures(statuses, what: str = "IC") -> bool:
+    """One line on stderr if any run failed numerically; True if so."""
+    from dicetrace.simulate import STATUS_ADVICE
+
+    statuses = list(statuses)
+    bad = [s for s in statuses if s in FAILED_STATUSES]
+    if not bad:
+        return False
+    kinds = sorted(set(bad))
+    counts = ", ".join(f"{k}: {bad.count(k)}" for k in kinds)
+    advice = STATUS_ADVICE[kinds[0]]
+    print(
+        f"dicetrace: numerical failure: {len(bad)} of {len(statuses)} {what}(s) failed ({counts}): {advice}",
+        file=sys.stderr,
+    )
+    return True
+
+
+# -- the command ----------------------------------------------------------------------------
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("simulate")
+    def simulate_cmd(
+        ic: Optional[str] = typer.Option(None, "--ic", help=IC_HELP),
+        slice_name: Optional[str] = typer.Option(None, "--slice", help=SLICE_HELP),
+        at: Optional[str] = typer.Option(None, "--at", help=AT_HELP),
+        ics: Optional[Path] = typer.Option(
+            None, "--ics", help="CSV file of ICs: columns vx,vy,vz,Lx,Ly,Lz, or x,y[,z] with --slice seed."
+        ),
+        preset: str = typer.Option("seed", "--preset", help=PRESET_HELP),
+        integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
+        dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
+        t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
+        fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json."),
+        out: Optional[Path] = typer.Option(None, "--out", help="Write the output to this file (atomically) instead of stdout."),
+    ) -> None:
+        """Throw the die from one or many ICs; print outcome, steps, t_settle_s, status and contact sequence per IC.
+
+        Exit code 1 when an IC ends in a numerical failure (non_finite, blow_up), 2 on bad input.
+        """
+        if fmt not in FORMATS:
+            fail(f"unknown --format {fmt!r} (choose from {', '.join(FORMATS)})")
+        cfg = build_config(preset, integrator, dt, t_max)
+        if ics is not None:
+            if ic is not None or at is not None:
+                fail("give one source of ICs: --ics FILE, --ic, or --slice/--at")
+            ic_arr, coords = read_ics_csv(ics, slice_name, cfg)
+            source = {"ics_file": str(ics)}
+        else:
+            one, c, desc = ic_from_options(ic, slice_name, at, cfg)
+            ic_arr = one[None, :]
+            coords = None if c is None else c[None, :]
+            source = desc
+        if out is not None:
+            check_output_file(out)
+
+        batch = run_ics(ic_arr, cfg)
+        names, rows = result_rows(batch, coords)
+        import dicetrace
+
+        meta = {
+            "dicetrace_version": dicetrace.__version__,
+            "config": cfg.as_dict(),
+            "source": {**source, **({"slice": slice_name} if slice_name else {})},
+        }
+        emit(names, rows, fmt, out, meta=meta)
+        if report_failures(batch.status):
+            sys.exit(EXIT_NUMERICAL_FAILURE)  # (typer.Exit is swallowed outside standalone mode)

@@ -1,0 +1,168 @@
+"""``dicetrace record``: real runs through the command line, files read back."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("rerun")
+
+from dicetrace.ics import seed_slice  # noqa: E402
+from dicetrace.simulate import sets_to_text  # noqa: E402
+from dicetrace.sinks.rerun import read_rrd  # noqa: E402
+
+SEQ_1_65_3_9 = "0-6-68-8-0-3-0-1-0-8-48-4-24-2-0-2-4-0-6-0-48-0-6"
+
+
+def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "dicetrace.cli", *args], cwd=cwd, capture_output=True, text=True, timeout=300
+    )
+
+
+def sequence_from_log(rrd: Path) -> str:
+    """The contact-set sequence rebuilt from the recording's contact text log alone."""
+    log = read_rrd(rrd)["/contacts"]
+    sets, mask, last_step = [0], 0, None
+    for step, row in zip(log.column("step").to_pylist(), log.column("TextLog:text").to_pylist()):
+        head, tail = row[0].split(": node ")
+        assert head == f"step {step}"
+        node, verb = tail.split()
+        bit = 1 << (int(node) - 1)
+        mask = mask | bit if verb == "enters" else mask & ~bit
+        if step == last_step:
+            sets[-1] = mask
+        else:
+            sets.append(mask)
+        last_step = step
+    return sets_to_text(sets)
+
+
+def test_record_seed_slice_writes_rrd_and_parquet(tmp_path):
+    out = tmp_path / "throw.rrd"
+    res = run_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.strip().splitlines()
+    assert len(lines) == 1
+    line = lines[0]
+    assert "outcome 3 " in line and "status settled" in line and "steps 540" in line and "t_settle_s 0.54" in line
+    assert SEQ_1_65_3_9 in line and str(out) in line
+    assert sequence_from_log(out) == SEQ_1_65_3_9
+    rolls = pd.read_parquet(tmp_path / "pq" / "rolls.parquet")
+    assert rolls["contact_sequence"][0] == SEQ_1_65_3_9
+    assert (rolls["x"][0], rolls["y"][0]) == (1.65, 3.9)
+    np.testing.assert_array_equal(rolls[["vx", "vy", "vz", "Lx", "Ly", "Lz"]].to_numpy()[0], seed_slice(1.65, 3.9))
+    traj = pd.read_parquet(tmp_path / "pq" / "trajectory.parquet")
+    assert len(traj) == 541
+    assert sorted(p.name for p in (tmp_path / "pq").iterdir()) == [
+        "contacts.parquet",
+        "rolls.parquet",
+        "trajectory.parquet",
+    ]
+
+
+def test_default_output_name_encodes_the_ic(tmp_path):
+    res = run_cli("record", "--slice", "seed", "--at", "1.5,4,0.25", "--t-max", "0.2", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    rrd = tmp_path / "recordings" / "seed_x1.5_y4_z0.25.rrd"
+    assert rrd.exists()
+    assert "status time_cap" in res.stdout and "outcome -1" in res.stdout
+    nodes = read_rrd(rrd)["/world/die/nodes"]
+    assert nodes.column("step").to_pylist()[-1] == 200
+
+
+
+def test_default_name_of_a_direct_ic_and_non_default_numerics():
+    from dicetrace.commands.record import default_name
+    from dicetrace.params import make_config
+
+    cfg = make_config("physical", integrator="forward-euler", dt_s=0.0005)
+    name = default_name(np.array([10, 0, 5, 0, 100, 0.25]), None, {"kind": "ic"}, cfg)
+    assert name == "ic_10_0_5_0_100_0.25_physical_forward-euler_dt0.0005"
+    assert default_name(seed_slice(1.65, 3.9), np.array([1.65, 3.9]), {"kind": "slice", "slice": "seed"}, make_config()) == (
+        "seed_x1.65_y3.9"
+    )
+
+
+def test_numerical_failure_exits_1_and_keeps_the_recording(tmp_path):
+    out = tmp_path / "fail.rrd"
+    res = run_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--out", str(out), cwd=tmp_path)
+    assert res.returncode == 1
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1 and "blow_up" in err[0] and "inspection" in err[0]
+    assert "Traceback" not in res.stderr
+    assert "status blow_up" in res.stdout
+    assert out.exists() and "/world/die/nodes" in read_rrd(out)
+
+
+BAD = [
+    (["--ic", "1,2,3,4,5"], "6 comma-separated"),
+    (["--ic", "1,2,3,nan,5,6"], "non-finite"),
+    (["--ic", "1,2,x,4,5,6"], "numbers"),
+    (["--slice", "seed", "--at", "1"], "X,Y"),
+    (["--slice", "mars", "--at", "1,2"], "unknown slice"),
+    (["--at", "1,2"], "--slice"),
+    ([], "no initial condition"),
+    (["--slice", "seed", "--at", "1,2", "--preset", "moon"], "unknown preset"),
+    (["--slice", "seed", "--at", "1,2", "--integrator", "magic"], "unknown integrator"),
+    (["--slice", "seed", "--at", "1,2", "--dt", "0"], "--dt"),
+    (["--slice", "seed", "--at", "1,2", "--dt", "nan"], "--dt"),
+    (["--slice", "seed", "--at", "1,2", "--t-max", "-1"], "--t-max"),
+    (["--slice", "seed", "--at", "1,2", "--out", "x.txt"], ".rrd"),
+    (["--slice", "seed", "--at", "1,2", "--out", "afile/x.rrd"], "afile"),
+    (["--slice", "seed", "--at", "1,2", "--out", "adir.rrd"], "folder"),
+    (["--slice", "seed", "--at", "1,2", "--out", "/proc/x.rrd"], "/proc"),
+    (["--slice", "seed", "--at", "1,2", "--out", "ok.rrd", "--parquet", "afile"], "afile"),
+]
+
+
+@pytest.mark.parametrize("args,needle", BAD, ids=[" ".join(a) or "no-ic" for a, _ in BAD])
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, needle):
+    (tmp_path / "afile").write_text("not a folder")
+    (tmp_path / "adir.rrd").mkdir()
+    (tmp_path / "existing.rrd").write_bytes(b"keep me")
+    before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    res = run_cli("record", *args, cwd=tmp_path)
+    assert res.returncode == 2, (res.stdout, res.stderr)
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1, res.stderr
+    assert err[0].startswith("dicetrace: error: ") and needle in err[0]
+    assert "Traceback" not in res.stderr
+    after = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert after == before  # nothing created (no recordings/ folder, no temporary)
+    assert (tmp_path / "existing.rrd").read_bytes() == b"keep me"
+
+
+def test_bad_input_leaves_an_existing_output_untouched(tmp_path):
+    out = tmp_path / "existing.rrd"
+    out.write_bytes(b"keep me")
+    res = run_cli("record", "--ic", "1,2,3,4,5,nan", "--out", str(out), cwd=tmp_path)
+    assert res.returncode == 2
+    assert out.read_bytes() == b"keep me"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["existing.rrd"]
+
+
+def test_record_a_scanned_point_reproduces_its_row(tmp_path):
+    scan_mod = pytest.importorskip("dicetrace.scan")
+    from dicetrace.ics import Grid
+
+    folder = tmp_path / "redsea"
+    scan_mod.scan(Grid("seed", "red-sea", 5), folder)  # x, y in {1, 1.25, ..., 2} x {3.5, 3.75, ..., 4.5}
+    df = scan_mod.read_scan(folder)
+    row = df[(df["x"] == 1.75) & (df["y"] == 4.0)].iloc[0]
+    out = tmp_path / "pt.rrd"
+    res = run_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert f"steps {row['steps']} " in res.stdout and row["contact_sequence"] in res.stdout
+    assert sequence_from_log(out) == row["contact_sequence"]
+    rolls = pd.read_parquet(tmp_path / "pq" / "rolls.parquet")
+    assert rolls["ic_id"][0] == row["ic_id"] and (rolls["x"][0], rolls["y"][0]) == (1.75, 4.0)
+    assert rolls["outcome"][0] == row["outcome"]
+
+    res = run_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--dt", "0.002", cwd=tmp_path)
+    assert res.returncode == 2 and "--dt" in res.stderr and "Traceback" not in res.stderr

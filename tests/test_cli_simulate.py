@@ -1,0 +1,165 @@
+"""``dicetrace simulate``: one IC or many through the command line, every output format read back."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dicetrace.ics import seed_slice
+from dicetrace.simulate import simulate, simulate_batch
+
+SEQ_1_65_3_9 = "0-6-68-8-0-3-0-1-0-8-48-4-24-2-0-2-4-0-6-0-48-0-6"
+TOPOLOGY_XY = [(1.65, 3.9), (1.5, 4.0), (1.2, 4.4)]  # the writeup's three topology ICs
+
+
+def run_cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "dicetrace.cli", "simulate", *args], cwd=cwd, capture_output=True, text=True, timeout=300
+    )
+
+
+def read_csv(text: str) -> list[dict]:
+    return list(csv.DictReader(io.StringIO(text)))
+
+
+def test_one_slice_ic_as_csv(tmp_path):
+    res = run_cli("--slice", "seed", "--at", "1.65,3.9", "--format", "csv", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    rows = read_csv(res.stdout)
+    assert len(rows) == 1
+    row = rows[0]
+    assert list(row) == [
+        "ic_id", "x", "y", "vx", "vy", "vz", "Lx", "Ly", "Lz",
+        "outcome", "steps", "t_settle_s", "status", "contact_sequence",
+    ]  # fmt: skip
+    ic = seed_slice(1.65, 3.9)
+    np.testing.assert_array_equal([float(row[k]) for k in ("vx", "vy", "vz", "Lx", "Ly", "Lz")], ic)
+    assert (row["outcome"], row["steps"], row["t_settle_s"], row["status"]) == ("3", "540", "0.54", "settled")
+    assert row["contact_sequence"] == SEQ_1_65_3_9
+
+
+def test_table_format_is_the_default(tmp_path):
+    res = run_cli("--ic", "14.082195,11.464215,9.868485,13.80303,122.82757,15.51864", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    header, row = res.stdout.strip().splitlines()
+    assert header.split() == [
+        "ic_id", "vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps", "t_settle_s", "status", "contact_sequence",
+    ]  # fmt: skip
+    fields = row.split()
+    assert fields[7:] == ["3", "540", "0.54", "settled", SEQ_1_65_3_9]
+
+
+def test_csv_file_of_slice_coordinates_to_json_file(tmp_path):
+    ics_csv = tmp_path / "ics.csv"
+    ics_csv.write_text("x,y,comment\n" + "".join(f"{x},{y},topology\n" for x, y in TOPOLOGY_XY))
+    out = tmp_path / "out.json"
+    res = run_cli("--ics", str(ics_csv), "--slice", "seed", "--format", "json", "--out", str(out), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout == ""
+    doc = json.loads(out.read_text())
+    assert doc["config"]["preset"]["name"] == "seed" and "dicetrace_version" in doc
+    assert [r["ic_id"] for r in doc["rolls"]] == [0, 1, 2]
+    for r, (x, y) in zip(doc["rolls"], TOPOLOGY_XY):
+        ref = simulate(seed_slice(x, y))
+        assert (r["x"], r["y"]) == (x, y)
+        assert [r[k] for k in ("vx", "vy", "vz", "Lx", "Ly", "Lz")] == ref.ic.tolist()
+        assert (r["outcome"], r["steps"], r["status"]) == (ref.outcome, ref.steps, ref.status)
+        assert r["t_settle_s"] == ref.t_settle_s
+        assert r["contact_sequence"] == ref.contact_sequence
+    assert doc["rolls"][0]["contact_sequence"] == SEQ_1_65_3_9
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ics.csv", "out.json"]  # no temporary left
+
+
+def test_csv_of_ic_components_round_trips_our_own_csv(tmp_path):
+    """The CSV that `simulate --format csv` writes is a valid --ics input (its vx..Lz columns are used)."""
+    first = tmp_path / "first.csv"
+    ics_csv = tmp_path / "ics.csv"
+    ics_csv.write_text("x,y\n" + "".join(f"{x},{y}\n" for x, y in TOPOLOGY_XY))
+    res = run_cli("--ics", str(ics_csv), "--slice", "seed", "--format", "csv", "--out", str(first), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    res2 = run_cli("--ics", str(first), "--format", "csv", cwd=tmp_path)
+    assert res2.returncode == 0, res2.stderr
+    assert read_csv(res2.stdout) == read_csv(first.read_text())
+
+
+def test_thousands_of_ics_in_one_process(tmp_path):
+    x, y = np.meshgrid(np.linspace(1.0, 2.0, 50), np.linspace(3.5, 4.5, 40))
+    xy = np.column_stack([x.ravel(), y.ravel()])
+    ics_csv = tmp_path / "grid.csv"
+    ics_csv.write_text("x,y\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in xy))
+    t0 = time.perf_counter()
+    res = run_cli("--ics", str(ics_csv), "--slice", "seed", "--format", "csv", cwd=tmp_path)
+    wall = time.perf_counter() - t0
+    assert res.returncode == 0, res.stderr
+    rows = read_csv(res.stdout)
+    assert len(rows) == 2000
+    ref = simulate_batch(seed_slice(xy[:, 0], xy[:, 1]))
+    np.testing.assert_array_equal([int(r["outcome"]) for r in rows], ref.outcome)
+    assert [r["contact_sequence"] for r in rows] == ref.contact_sequences()
+    assert wall < 30, f"2000 ICs took {wall:.1f} s"
+
+
+def test_numerical_failure_exits_1_with_rows_printed(tmp_path):
+    res = run_cli("--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--format", "csv", cwd=tmp_path)
+    assert res.returncode == 1
+    assert read_csv(res.stdout)[0]["status"] == "blow_up"
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1 and "blow_up" in err[0] and "Traceback" not in res.stderr
+
+
+def _write(path: Path, text: str) -> str:
+    path.write_text(text)
+    return str(path)
+
+
+BAD = [
+    (["--ic", "1,2,3,4,5"], "6 comma-separated"),
+    (["--ic", "1,2,3,4,5,nan"], "non-finite"),
+    (["--slice", "seed", "--at", "1,2,3,4"], "X,Y"),
+    (["--at", "1,2"], "--slice"),
+    (["--ic", "1,2,3,4,5,6", "--preset", "moon"], "unknown preset"),
+    (["--ic", "1,2,3,4,5,6", "--integrator", "magic"], "unknown integrator"),
+    (["--ic", "1,2,3,4,5,6", "--dt", "0"], "--dt"),
+    (["--ic", "1,2,3,4,5,6", "--dt", "inf"], "--dt"),
+    (["--ic", "1,2,3,4,5,6", "--format", "xml"], "--format"),
+    (["--ic", "1,2,3,4,5,6", "--out", "afile/out.csv"], "afile"),
+    (["--ic", "1,2,3,4,5,6", "--out", "adir"], "folder"),
+    (["--ics", "missing.csv"], "does not exist"),
+    (["--ics", "CSV:"], "empty"),
+    (["--ics", "CSV:x,y\n"], "no rows"),
+    (["--ics", "CSV:a,b\n1,2\n"], "needs columns"),
+    (["--ics", "CSV:x,y\n1,2\n"], "--slice seed"),
+    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5\n"], "line 2"),
+    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,six\n"], "not a number"),
+    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n1,2,3,4,5,nan\n"], "line 3"),
+    (["--ics", "CSV:x,y\n1,\n", "--slice", "seed"], "not a number"),
+    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n", "--ic", "1,2,3,4,5,6"], "one source"),
+]
+
+
+@pytest.mark.parametrize("args,needle", BAD, ids=[" ".join(a).replace("\n", "|") for a, _ in BAD])
+def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, needle):
+    (tmp_path / "afile").write_text("not a folder")
+    (tmp_path / "adir").mkdir()
+    args = [_write(tmp_path / "bad.csv", a[4:]) if a.startswith("CSV:") else a for a in args]
+    existing = tmp_path / "existing.csv"
+    existing.write_text("keep me")
+    before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    res = run_cli(*args, "--out", str(existing), cwd=tmp_path) if "--out" not in args else run_cli(*args, cwd=tmp_path)
+    assert res.returncode == 2, (res.stdout, res.stderr)
+    err = res.stderr.strip().splitlines()
+    assert len(err) == 1, res.stderr
+    assert err[0].startswith("dicetrace: error: ") and needle in err[0], err[0]
+    assert "Traceback" not in res.stderr
+    assert res.stdout == ""
+    after = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert after == before
+    assert existing.read_text() == "keep me"

@@ -1,0 +1,267 @@
+"""The Rerun sink: write a throw as .rrd, read it back (pyarrow only) and compare with the simulation."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+rr = pytest.importorskip("rerun")
+
+from dicetrace.ics import seed_slice  # noqa: E402
+from dicetrace.simulate import Record, contact_events, sets_to_text, simulate  # noqa: E402
+from dicetrace.sinks.rerun import FACE_COLORS, default_blueprint, read_rrd, read_rrd_metadata, write_rrd  # noqa: E402
+
+# Writeup's first topology IC (seed slice x = 1.65, y = 3.9) and its contact sequence in the program's text form.
+SEQ_1_65_3_9 = "0-6-68-8-0-3-0-1-0-8-48-4-24-2-0-2-4-0-6-0-48-0-6"
+RERUN_CLI = Path(sys.executable).parent / "rerun"
+
+
+def values(table: pa.Table, column: str, width: int | None = None) -> np.ndarray:
+    """A list<...> component column flattened to numpy: (rows, instances[, width])."""
+    col = table.column(column).combine_chunks()
+    lengths = col.value_lengths().to_numpy()
+    flat = col.flatten()
+    while pa.types.is_fixed_size_list(flat.type) or pa.types.is_list(flat.type):
+        flat = flat.flatten()
+    arr = flat.to_numpy(zero_copy_only=False)
+    if width:
+        arr = arr.reshape(-1, width)
+    if (lengths == lengths[0]).all():
+        return arr.reshape(len(lengths), lengths[0], *arr.shape[1:])
+    return arr
+
+
+def texts(table: pa.Table, column: str) -> list[str]:
+    return [x for row in table.column(column).to_pylist() for x in row]
+
+
+def sequence_from_events(steps, nodes, kinds) -> str:
+    """Rebuild the contact-set sequence from per-node events: one new set per step with events."""
+    sets, mask = [0], 0
+    order = np.argsort(np.asarray(steps), kind="stable")
+    steps = np.asarray(steps)[order]
+    nodes = np.asarray(nodes)[order]
+    kinds = np.asarray(kinds)[order]
+    for s in np.unique(steps):
+        for n, k in zip(nodes[steps == s], kinds[steps == s]):
+            bit = 1 << (int(n) - 1)
+            mask = mask | bit if k == "enter" else mask & ~bit
+        sets.append(mask)
+    return sets_to_text(sets)
+
+
+def logged_events(temporal: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(step, node, kind) parsed from the contact text log, e.g. "step 176: node 6 enters"."""
+    log = temporal["/contacts"]
+    steps, nodes, kinds = [], [], []
+    for step, line in zip(log.column("step").to_pylist(), texts(log, "TextLog:text")):
+        head, tail = line.split(": node ")
+        node, verb = tail.split()
+        assert head == f"step {step}"
+        steps.append(step)
+        nodes.append(int(node))
+        kinds.append({"enters": "enter", "leaves": "leave"}[verb])
+    return np.array(steps), np.array(nodes), np.array(kinds)
+
+
+@pytest.fixture(scope="module")
+def roll():
+    return simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True))
+
+
+@pytest.fixture(scope="module")
+def rrd(roll, tmp_path_factory):
+    path = tmp_path_factory.mktemp("rrd") / "throw.rrd"
+    rr.set_strict_mode(True)  # a bad logging call raises instead of warning
+    try:
+        write_rrd(roll, path, ic_label="seed slice at x = 1.65, y = 3.9")
+    finally:
+        rr.set_strict_mode(False)
+    return path
+
+
+@pytest.fixture(scope="module")
+def temporal(rrd):
+    return read_rrd(rrd)
+
+
+@pytest.fixture(scope="module")
+def static(rrd):
+    return read_rrd(rrd, static=True)
+
+
+def test_timelines_are_steps_and_sim_time(roll, temporal):
+    nodes = temporal["/world/die/nodes"]
+    np.testing.assert_array_equal(nodes.column("step").to_numpy(), np.arange(roll.steps + 1))
+    sim_ns = nodes.column("sim_time").cast(pa.int64()).to_numpy()
+    np.testing.assert_allclose(sim_ns * 1e-9, roll.trace.t_s, atol=1e-9)
+
+
+def test_node_positions_equal_the_trace(roll, temporal):
+    pos = values(temporal["/world/die/nodes"], "Points3D:positions", 3)
+    assert pos.shape == (roll.steps + 1, 8, 3)
+    # Rerun stores positions as float32: equal to the trace rounded to float32
+    np.testing.assert_array_equal(pos, roll.trace.node_pos.astype(np.float32))
+
+
+def test_nodes_red_exactly_while_in_contact(roll, temporal):
+    colors = values(temporal["/world/die/nodes"], "Points3D:colors")  # 0xRRGGBBAA
+    red = (colors >> 24) & 0xFF
+    green = (colors >> 16) & 0xFF
+    in_contact = roll.trace.node_pos[..., 2] <= 0.0
+    assert in_contact.any() and (~in_contact).any()
+    np.testing.assert_array_equal(red > 2 * green + 50, in_contact)
+
+
+def test_box_pose_matches_the_centre_of_mass_and_has_unit_quaternions(roll, temporal):
+    body = temporal["/world/die/body"]
+    centers = values(body, "Boxes3D:centers", 3)[:, 0]
+    np.testing.assert_array_equal(centers, roll.trace.cm_pos.astype(np.float32))
+    q = values(body, "Boxes3D:quaternions", 4)[:, 0].astype(np.float64)
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
+    # the quaternion turns the body's node offsets into the traced ones
+    from scipy.spatial.transform import Rotation
+
+    body_offsets = roll.trace.node_offsets[0]
+    rotated = np.einsum("nij,kj->nki", Rotation.from_quat(q).as_matrix(), body_offsets)
+    np.testing.assert_allclose(rotated, roll.trace.node_offsets, atol=2e-6)
+
+
+def test_face_plates_sit_on_their_faces_in_the_writeup_colours(roll, temporal, static):
+    faces = static["/world/die/faces"]
+    colors = np.array(faces.column("Boxes3D:colors").to_pylist()[0], dtype=np.uint64)
+    rgb = np.stack([(colors >> 24) & 0xFF, (colors >> 16) & 0xFF, (colors >> 8) & 0xFF], axis=1)
+    np.testing.assert_array_equal(rgb, FACE_COLORS)
+    assert faces.column("Boxes3D:labels").to_pylist()[0] == ["1", "2", "3", "4", "5", "6"]
+    centres = values(temporal["/world/die/faces"], "Boxes3D:centers", 3)
+    # at the end the plate of the outcome face is the highest one
+    assert int(np.argmax(centres[-1, :, 2])) + 1 == roll.outcome
+
+
+def test_energies_equal_the_trace(roll, temporal):
+    for key in ("kinetic_translational", "kinetic_rotational", "gravitational", "elastic", "total"):
+        got = values(temporal[f"/energy/{key}"], "Scalars:scalars")[:, 0]
+        np.testing.assert_array_equal(got, roll.trace.energy[key])
+    got = values(temporal["/stop_test/energy"], "Scalars:scalars")[:, 0]
+    np.testing.assert_array_equal(got, roll.trace.energy["stop_test"])
+
+
+def test_contact_log_has_exactly_the_roll_events(roll, temporal):
+    steps, nodes, kinds = logged_events(temporal)
+    ev = roll.contact_events()
+    np.testing.assert_array_equal(steps, ev["step"].to_numpy())
+    np.testing.assert_array_equal(nodes, ev["node"].to_numpy())
+    np.testing.assert_array_equal(kinds, ev["kind"].to_numpy())
+    assert sequence_from_events(steps, nodes, kinds) == roll.contact_sequence == SEQ_1_65_3_9
+
+
+def test_event_markers_sit_at_the_nodes_on_the_event_steps(roll, temporal):
+    markers = temporal["/world/contact_events"]
+    ev_steps, ev_nodes, entered = contact_events(roll.contact_sets, roll.contact_steps)
+    np.testing.assert_array_equal(markers.column("step").to_numpy(), np.unique(ev_steps))
+    pos = values(markers, "Points3D:positions", 3)
+    expected = roll.trace.node_pos[ev_steps, ev_nodes.astype(int) - 1].astype(np.float32)
+    np.testing.assert_array_equal(pos.reshape(-1, 3), expected)
+    # an entering node is at or below the ground at its event step, a leaving one above it
+    np.testing.assert_array_equal(roll.trace.node_pos[ev_steps, ev_nodes.astype(int) - 1, 2] <= 0.0, entered)
+
+
+def test_cm_path_grows_to_the_final_position(roll, temporal):
+    path = temporal["/world/cm_path"]
+    strips = path.column("LineStrips3D:strips").to_pylist()
+    lengths = [len(s[0]) for s in strips]
+    assert lengths == sorted(lengths) and lengths[0] >= 2
+    assert path.column("step").to_pylist()[-1] == roll.steps
+    np.testing.assert_allclose(strips[-1][0][-1], roll.trace.cm_pos[-1], atol=1e-5)
+    np.testing.assert_allclose(strips[-1][0][0], roll.trace.cm_pos[0], atol=1e-5)
+
+
+def test_static_scene_summary_and_z_up(roll, static):
+    doc = static["/summary"].column("TextDocument:text").to_pylist()[0][0]
+    assert SEQ_1_65_3_9 in doc and "settled" in doc and f"outcome**: {roll.outcome}" in doc
+    assert json.dumps(roll.config.as_dict()["preset"]["k"]) in doc
+    assert "/world" in static and "ViewCoordinates:xyz" in static["/world"].column_names
+    ground = static["/world/ground"]
+    centre = np.array(ground.column("Boxes3D:centers").to_pylist()[0][0])
+    half = np.array(ground.column("Boxes3D:half_sizes").to_pylist()[0][0])
+    assert centre[2] + half[2] == pytest.approx(0.0, abs=1e-6)  # top face is the plane z = 0
+
+
+def test_recording_metadata_has_config_ic_and_version(roll, rrd):
+    import dicetrace
+
+    meta = read_rrd_metadata(rrd)
+    assert meta["dicetrace_version"] == dicetrace.__version__
+    assert meta["config"] == json.loads(json.dumps(roll.config.as_dict()))
+    assert meta["ic"] == roll.ic.tolist()
+    assert (meta["outcome"], meta["status"], meta["steps"]) == (3, "settled", roll.steps)
+    assert meta["contact_sequence"] == SEQ_1_65_3_9
+    assert meta["ic_label"] == "seed slice at x = 1.65, y = 3.9"
+
+
+def test_blueprint_has_3d_timeseries_and_textlog_views(rrd):
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(str(rrd))
+    assert len(reader.recordings()) == 1
+    bps = reader.blueprints()
+    assert len(bps) == 1
+    classes = set()
+    for ch in reader.stream(store=bps[0]):
+        rb = ch.to_record_batch()
+        if "ViewBlueprint:class_identifier" in rb.schema.names:
+            classes.update(x for row in rb.column("ViewBlueprint:class_identifier").to_pylist() for x in row)
+    assert {"3D", "TimeSeries", "TextLog", "TextDocument"} <= classes
+
+
+@pytest.mark.skipif(not RERUN_CLI.exists() and shutil.which("rerun") is None, reason="rerun CLI not installed")
+def test_rerun_rrd_verify_accepts_the_file(rrd):
+    exe = str(RERUN_CLI) if RERUN_CLI.exists() else shutil.which("rerun")
+    res = subprocess.run([exe, "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+
+
+def test_write_is_atomic_on_error(roll, tmp_path, monkeypatch):
+    import dicetrace.sinks.rerun as sink
+
+    target = tmp_path / "keep.rrd"
+    target.write_bytes(b"old contents")
+
+    def boom(*a, **k):
+        raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr(sink, "log_roll", boom)
+    with pytest.raises(RuntimeError, match="disk on fire"):
+        write_rrd(roll, target)
+    assert target.read_bytes() == b"old contents"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.rrd"]  # no temporary left
+
+
+def test_needs_states_and_energy(tmp_path):
+    r = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=False))
+    with pytest.raises(ValueError, match="states and energy"):
+        write_rrd(r, tmp_path / "x.rrd")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_failed_run_is_still_recorded(tmp_path):
+    # dt = 10 ms is far too coarse for k = 5e5: the energy blows up at the first contact
+    r = simulate(seed_slice(1.65, 3.9), dt_s=0.01, record=Record(states=True, energy=True))
+    assert r.status == "blow_up"
+    path = write_rrd(r, tmp_path / "fail.rrd")
+    t = read_rrd(path)
+    pos = values(t["/world/die/nodes"], "Points3D:positions", 3)
+    assert np.isfinite(pos).all() and 1 <= len(pos) <= r.steps + 1
+
+
+def test_default_blueprint_without_roll():
+    import rerun.blueprint as rrb
+
+    assert isinstance(default_blueprint(), rrb.Blueprint)

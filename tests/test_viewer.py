@@ -1,0 +1,65 @@
+"""The real Rerun viewer renders a recording: screenshot under Xvfb (software Vulkan), ~15-20 s.
+
+Skipped where ``xvfb-run`` or the ``rerun`` CLI is missing.  The recording's
+blueprint puts the viewer at the last step ("following"), so the die lies on
+the ground with its outcome face up: for the seed slice at (1.65, 3.9) that
+is face 3, red in the writeup's colours.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.viewer
+
+RERUN_CLI = Path(sys.executable).parent / "rerun"
+XVFB = shutil.which("xvfb-run")
+RERUN = str(RERUN_CLI) if RERUN_CLI.exists() else shutil.which("rerun")
+
+
+@pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
+@pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+def test_viewer_screenshot_shows_the_die_on_the_ground(tmp_path):
+    from PIL import Image
+
+    from dicetrace.ics import seed_slice
+    from dicetrace.simulate import Record, simulate
+    from dicetrace.sinks.rerun import GROUND_COLOR, write_rrd
+
+    roll = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True))
+    assert roll.outcome == 3
+    rrd = write_rrd(roll, tmp_path / "throw.rrd")
+    png = tmp_path / "shot.png"
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
+    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--screenshot-to", str(png), "--window-size", "1400x900"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert png.exists() and png.stat().st_size > 10_000
+
+    im = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    h, w, _ = im.shape
+    assert w >= 1400 and h >= 900
+    # not blank: contrast and many colours
+    assert im.std() > 30
+    assert len(np.unique(im.reshape(-1, 3) @ np.array([65536, 256, 1]))) > 500
+
+    # the 3-D view is the left ~58 % of the window (blueprint column shares 3:2)
+    view = im[int(0.05 * h) : int(0.95 * h), : int(0.55 * w)]
+    r, g, b = view[..., 0], view[..., 1], view[..., 2]
+    npx = r.size
+    ground = (np.abs(view - np.array(GROUND_COLOR)).sum(axis=-1) <= 12).sum()
+    assert ground > 0.05 * npx, "ground plane not visible"
+    red_face = ((r > 150) & (g < 80) & (b < 80)).sum()  # face 3 (red) is up at rest
+    assert red_face > 0.0005 * npx, "the die's red face is not visible"
+    trail = ((r > 200) & (g > 100) & (g < 190) & (b < 70)).sum()  # orange centre-of-mass path
+    assert trail > 0.0005 * npx, "centre-of-mass path not visible"
+    # the right column (plots, contact log) uses the viewer's dark theme
+    panels = im[int(0.1 * h) : int(0.9 * h), int(0.65 * w) :]
+    assert (panels.sum(axis=-1) < 150).mean() > 0.3
