@@ -50,3 +50,32 @@ def test_near_miss_is_reported_split_at_its_gap():
     side = 1.0 / 31 / 2**row.depth
     assert delta / 4 < side < 4 * delta
     assert abs(row.x - 0.5) < 1e-5 and abs(row.y - 0.5) < 1e-3
+
+
+def test_far_apart_vertices_in_one_root_cluster_sparsely():
+    # Regression: clustering drew each root's finest squares on a dense boolean
+    # image (extent / finest square size per axis). Two triple points 0.02 apart
+    # share one starting root; at tol = 1e-12 that image would be ~1e10 x 1e10.
+    import time
+
+    a = tuple(CENTRE)
+    b = (CENTRE[0] + 0.02, CENTRE[1] + 0.01)
+
+    def two_close(points):
+        p = np.asarray(points, dtype=float)
+        left = sector_classify(p, centre=a)
+        right = sector_classify(p, centre=b, labels=(4, 5, 6))
+        return np.where(p[:, 0] < 0.5 * (a[0] + b[0]), left, right)
+
+    t0 = time.perf_counter()
+    v = find_vertices(two_close, (0.0, 1.0), (0.0, 1.0), 32, tol=1e-12)
+    elapsed = time.perf_counter() - t0
+    assert (v.status == "vertex").all() and v.root.nunique() == 1
+    side = 1.0 / 31 / 2 ** v.depth.iloc[0]
+    assert side < 1e-12
+    assert (v.x.max() - v.x.min()) / side > 1e9  # the dense image the old code drew
+    for centre, labels in ((a, (1, 2, 3)), (b, (4, 5, 6))):
+        row = v[v.labels == labels]
+        assert len(row) == 1
+        assert np.hypot(row.x.iloc[0] - centre[0], row.y.iloc[0] - centre[1]) < 1e-11
+    assert elapsed < 5.0

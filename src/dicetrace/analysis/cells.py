@@ -18,9 +18,10 @@ from collections.abc import Hashable, Iterable, Sequence
 
 import numpy as np
 import pandas as pd
-from scipy import ndimage
+from scipy import ndimage, sparse
+from scipy.sparse import csgraph
 
-from ._grid import as_label_grid, encode_labels, structure
+from ._grid import as_label_grid, encode_labels, neighbour_offsets, shifted_pair, structure
 
 __all__ = ["label_cells", "cells_table", "same_cell", "slice_cell_components"]
 
@@ -51,18 +52,41 @@ def label_cells(
     codes, uniques = encode_labels(arr)
     excl = set(exclude)
     integer = arr.dtype.kind in "iub"
-    st = structure(arr.ndim, connectivity)
-    cell_ids = np.zeros(arr.shape, dtype=np.int64)
-    n = 0
-    for i, lab in enumerate(uniques):
-        if lab in excl:
-            continue
-        code = lab if integer else i
-        lab_arr, k = ndimage.label(codes == code, structure=st)
-        sel = lab_arr > 0
-        cell_ids[sel] = lab_arr[sel] + n
-        n += int(k)
-    return cell_ids, n
+    structure(arr.ndim, connectivity)  # validates ``connectivity``
+    # nodes that get a cell: a known code (factorize gives -1 to missing values)
+    # whose label is not excluded
+    excl_codes = [lab if integer else i for i, lab in enumerate(uniques) if lab in excl]
+    valid = np.ones(arr.shape, dtype=bool) if integer else codes >= 0
+    if excl_codes:
+        valid &= ~np.isin(codes, excl_codes)
+    N = codes.size
+    if not valid.any():
+        return np.zeros(arr.shape, dtype=np.int64), 0
+    # one graph for all labels: an edge joins neighbouring valid nodes of equal code
+    itype = np.int32 if N < 2**31 else np.int64
+    node = np.arange(N, dtype=itype).reshape(arr.shape)
+    src, dst = [], []
+    for off in neighbour_offsets(arr.ndim, connectivity):
+        sa, sb = shifted_pair(codes, off)
+        eq = (codes[sa] == codes[sb]) & valid[sa]
+        src.append(node[sa][eq])
+        dst.append(node[sb][eq])
+    src = np.concatenate(src) if src else np.zeros(0, dtype=itype)
+    dst = np.concatenate(dst) if dst else np.zeros(0, dtype=itype)
+    graph = sparse.csr_matrix((np.ones(len(src), dtype=np.int8), (src, dst)), shape=(N, N))
+    _, comp = csgraph.connected_components(graph, directed=False)
+    vflat = valid.ravel()
+    comp_v = comp[vflat]
+    # renumber as before: label by label (sorted codes = sorted labels), and
+    # within a label in raster order of each cell's first node
+    _, first, inverse = np.unique(comp_v, return_index=True, return_inverse=True)
+    first_node = np.flatnonzero(vflat)[first]
+    order = np.lexsort((first_node, codes.ravel()[first_node]))
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(1, len(order) + 1, dtype=np.int64)
+    flat_ids = np.zeros(N, dtype=np.int64)
+    flat_ids[vflat] = rank[inverse.ravel()]
+    return flat_ids.reshape(arr.shape), len(order)
 
 
 def _to_slice_units(centroid: np.ndarray, shape, extent) -> np.ndarray:

@@ -27,6 +27,39 @@ def _hashable(v):
     return v.item() if isinstance(v, np.generic) else v
 
 
+_NEIGHBOURS = [(a, b) for a in (-1, 0, 1) for b in (-1, 0, 1) if (a, b) != (0, 0)]
+
+
+def _clusters(squares) -> list[list[tuple[int, int]]]:
+    """8-connected clusters of integer lattice squares, without a dense image.
+
+    Union-find over the set of squares (memory O(number of squares), whatever
+    their spread). Clusters come in order of their smallest square, members
+    sorted, as ``ndimage.label`` on the bounding image would give them.
+    """
+    sq = sorted(squares)
+    index = {s: k for k, s in enumerate(sq)}
+    parent = list(range(len(sq)))
+
+    def find(k: int) -> int:
+        while parent[k] != k:
+            parent[k] = parent[parent[k]]
+            k = parent[k]
+        return k
+
+    for k, (ix, iy) in enumerate(sq):
+        for a, b in _NEIGHBOURS:
+            j = index.get((ix + a, iy + b))
+            if j is not None:
+                rk, rj = find(k), find(j)
+                if rk != rj:
+                    parent[max(rk, rj)] = min(rk, rj)
+    groups: dict[int, list[tuple[int, int]]] = {}
+    for k, s in enumerate(sq):
+        groups.setdefault(find(k), []).append(s)
+    return list(groups.values())
+
+
 def find_vertices(
     classify: Callable[[np.ndarray], np.ndarray],
     x_range: tuple[float, float],
@@ -172,31 +205,28 @@ def find_vertices(
     rows: list[dict] = []
 
     def cluster_rows(r: int, squares: set, level: int, status: str) -> None:
-        sq = np.array(sorted(squares), dtype=np.int64)
-        lo = sq.min(axis=0)
-        img = np.zeros(tuple(sq.max(axis=0) - lo + 1), dtype=bool)
-        img[tuple((sq - lo).T)] = True
-        lab_img, ncl = ndimage.label(img, structure=np.ones((3, 3), dtype=bool))
         hx, hy = hx0 / 2.0**level, hy0 / 2.0**level
-        for c in range(1, ncl + 1):
-            members = np.argwhere(lab_img == c) + lo
+        for members in _clusters(squares):
             labs = set()
-            for ix, iy in members.tolist():
+            for ix, iy in members:
                 labs |= labels_of(ix, iy, level)
-            cx = x0 + (members[:, 0].mean() + 0.5) * hx
-            cy = y0 + (members[:, 1].mean() + 0.5) * hy
-            ext = members.max(axis=0) - members.min(axis=0) + 1
+            n = len(members)
+            xs = [ix for ix, _ in members]
+            ys = [iy for _, iy in members]
+            # exact integer sums (lattice indices can exceed 2**53 at depth)
+            cx = x0 + (sum(xs) / n + 0.5) * hx
+            cy = y0 + (sum(ys) / n + 0.5) * hy
             rows.append(
                 {
                     "root": r,
                     "status": status,
                     "x": float(cx),
                     "y": float(cy),
-                    "size_x": float(ext[0] * hx),
-                    "size_y": float(ext[1] * hy),
+                    "size_x": float((max(xs) - min(xs) + 1) * hx),
+                    "size_y": float((max(ys) - min(ys) + 1) * hy),
                     "depth": level,
                     "labels": tuple(sorted(labs, key=lambda v: (isinstance(v, str), v))),
-                    "n_squares": len(members),
+                    "n_squares": n,
                 }
             )
 
