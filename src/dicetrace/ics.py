@@ -1,16 +1,40 @@
-"""Initial conditions: validation and the seed slices of IC space.
+"""Initial conditions: validation, slices of IC space, windows, grids and samples.
 
 An IC is 6 numbers: the centre-of-mass velocity U (cm/s) and the angular
-momentum L (node-mass·cm²/s).  For the ``seed`` preset L is in the 2019
-program's sign convention (the negative of the physical one); the
-``physical`` preset takes the physical L.  Slices map 2 or 3 coordinates to
-an IC with the program's arithmetic (left to right, no fused multiply-add),
-so grids reproduce the program bit for bit.
+momentum L (node-mass·cm²/s), in that order (``IC_FIELDS``).  For the
+``seed`` preset L is in the 2019 program's sign convention (the negative of
+the physical one); the ``physical`` preset takes the physical L.  Slices map
+1–3 coordinates to an IC with the program's arithmetic (left to right, no
+fused multiply-add), so grids reproduce the program bit for bit.
+
+IC spaces (DESIGN.md section 4), all plain frozen dataclasses that turn
+into JSON-able dicts and back (``to_dict`` / :func:`space_from_dict`):
+
+:class:`Slice`
+    An origin and 1–3 directions in the 6-D space: ``IC = c1·d1 + c2·d2
+    (+ c3·d3) + origin``.  ``SLICES`` holds the writeup's 2-D and 3-D seed
+    slices (``seed``, ``seed3``) and their Gram–Schmidt orthonormal versions
+    (``seed-ortho``, ``seed3-ortho``; the writeup's "future work" 6.2).
+:class:`Grid`
+    A window of a slice at a resolution, with the program's point formula
+    ``x = x0 + (p−1)/(n−1)·(x1−x0)``, p = 1..n (here 0-based: i = p−1).
+    ``WINDOWS`` names the writeup's windows (home, zoom-out, ..., green
+    island); any sub-window at any resolution is a zoom.
+:class:`Sample`
+    ``n`` random (uniform) or quasi-random (scrambled Sobol) points in a box
+    of a slice.
+:class:`Points`
+    Explicit slice coordinates (e.g. the writeup's named throws).
+
+Every space is enumerated by a linear ``ic_id`` 0..size−1 and produces any
+range of it on demand (:meth:`Grid.block`), so a scan never holds more than
+one chunk of ICs.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -68,3 +92,453 @@ def seed_slice(x, y, z=None) -> np.ndarray:
     L = L + SEED_L_ORIGIN
     out = np.concatenate([U, L], axis=1)
     return out[0] if scalar else out
+
+
+# -- slices ---------------------------------------------------------------------------------
+
+#: The seed directions as 6-D vectors (vx, vy, vz, Lx, Ly, Lz): row i is coordinate i's.
+SEED_DIRS_6D = np.concatenate([SEED_U_DIRS, SEED_L_DIRS], axis=1)
+#: The seed slices' origin (U = 0, L = (0, 100, 0)).
+SEED_ORIGIN_6D = np.concatenate([np.zeros(3), SEED_L_ORIGIN])
+
+L_CONVENTIONS = ("program", "physical")
+
+
+def _vec6(v, what: str) -> tuple[float, ...]:
+    a = np.asarray(v, dtype=np.float64).reshape(-1)
+    if a.shape != (6,):
+        raise ValueError(f"{what} must have 6 components (vx,vy,vz,Lx,Ly,Lz), got {a.size}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{what} is not finite")
+    return tuple(float(x) for x in a)
+
+
+@dataclass(frozen=True)
+class Slice:
+    """An affine slice of the 6-D IC space.
+
+    ``IC = c1·d1 + c2·d2 (+ c3·d3) + origin``, evaluated left to right
+    component by component (no fused multiply-add).  As in the program
+    (``U = [x y]·B``, ``L = [x y]·A + L0``) the origin's U block and L block
+    are each added only when they are not all zero, so a slice built from
+    the seed directions reproduces :func:`seed_slice` bit for bit.
+
+    Parameters
+    ----------
+    name
+        A label (stored with scans).
+    origin
+        6 numbers (vx, vy, vz in cm/s; Lx, Ly, Lz in node-mass·cm²/s).
+    directions
+        1 to 3 directions, 6 numbers each (units per unit coordinate).
+    l_convention
+        ``"program"`` (the seed's: L is the 2019 program's, the negative of
+        the physical one) or ``"physical"``: the convention of the L this
+        slice produces.  Scans convert it to the preset's.
+    """
+
+    name: str
+    origin: tuple[float, ...]
+    directions: tuple[tuple[float, ...], ...]
+    l_convention: str = "program"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "origin", _vec6(self.origin, f"slice {self.name!r}: origin"))
+        dirs = tuple(self.directions)
+        if not 1 <= len(dirs) <= 3:
+            raise ValueError(f"slice {self.name!r} needs 1 to 3 directions, got {len(dirs)}")
+        dirs = tuple(_vec6(d, f"slice {self.name!r}: direction {i + 1}") for i, d in enumerate(dirs))
+        if np.linalg.matrix_rank(np.array(dirs)) < len(dirs):
+            raise ValueError(f"slice {self.name!r}: the directions are linearly dependent")
+        object.__setattr__(self, "directions", dirs)
+        if self.l_convention not in L_CONVENTIONS:
+            raise ValueError(f"slice {self.name!r}: l_convention must be 'program' or 'physical'")
+
+    @property
+    def ndim(self) -> int:
+        return len(self.directions)
+
+    def ics(self, coords) -> np.ndarray:
+        """ICs (m, 6) at slice coordinates ``coords`` (m, ndim) (or one point (ndim,) → (6,))."""
+        c = np.asarray(coords, dtype=np.float64)
+        one = c.ndim == 1
+        c = np.atleast_2d(c)
+        if c.shape[1] != self.ndim:
+            raise ValueError(f"slice {self.name!r} is {self.ndim}-D: coordinates need {self.ndim} columns, got {c.shape[1]}")
+        d = np.array(self.directions)
+        acc = c[:, 0:1] * d[0]
+        for i in range(1, self.ndim):
+            acc = acc + c[:, i : i + 1] * d[i]
+        o = np.array(self.origin)
+        if np.any(o[:3] != 0.0):
+            acc[:, :3] = acc[:, :3] + o[:3]
+        if np.any(o[3:] != 0.0):
+            acc[:, 3:] = acc[:, 3:] + o[3:]
+        return acc[0] if one else acc
+
+    def orthonormal(self, name: str | None = None) -> "Slice":
+        """The same origin with Gram–Schmidt orthonormal directions (in the order given).
+
+        Lengths are Euclidean in the 6 raw components (cm/s and node-mass·cm²/s
+        mixed, as the writeup's section 6.2 proposes).
+        """
+        basis: list[np.ndarray] = []
+        for d in np.array(self.directions):
+            v = d.copy()
+            for e in basis:  # modified Gram–Schmidt
+                v = v - (v @ e) * e
+            basis.append(v / np.linalg.norm(v))
+        return Slice(name or f"{self.name}-ortho", self.origin, tuple(tuple(e) for e in basis), self.l_convention)
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name,
+            "origin": list(self.origin),
+            "directions": [list(d) for d in self.directions],
+            "l_convention": self.l_convention,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Slice":
+        return cls(d["name"], tuple(d["origin"]), tuple(tuple(x) for x in d["directions"]), d.get("l_convention", "program"))
+
+
+SEED_SLICE = Slice("seed", tuple(SEED_ORIGIN_6D), tuple(tuple(r) for r in SEED_DIRS_6D[:2]))
+SEED3_SLICE = Slice("seed3", tuple(SEED_ORIGIN_6D), tuple(tuple(r) for r in SEED_DIRS_6D))
+
+#: Named slices: the writeup's 2-D and 3-D seed slices and their orthonormal versions.
+SLICES: dict[str, Slice] = {
+    "seed": SEED_SLICE,
+    "seed3": SEED3_SLICE,
+    "seed-ortho": SEED_SLICE.orthonormal("seed-ortho"),
+    "seed3-ortho": SEED3_SLICE.orthonormal("seed3-ortho"),
+}
+
+
+def get_slice(name: str) -> Slice:
+    """A named slice (see ``SLICES``)."""
+    try:
+        return SLICES[name]
+    except KeyError:
+        raise ValueError(f"unknown slice {name!r} (choose from {', '.join(SLICES)})") from None
+
+
+# -- windows --------------------------------------------------------------------------------
+
+#: The writeup's windows on the seed slice, ((x0, x1), (y0, y1)).
+WINDOWS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
+    "home": ((0.0, 0.1), (0.0, 0.1)),
+    "zoom-out": ((0.0, 1.0), (0.0, 1.0)),
+    "more-out": ((0.0, 10.0), (0.0, 10.0)),
+    "most-out": ((0.0, 100.0), (0.0, 100.0)),
+    "red-sea": ((1.0, 2.0), (3.5, 4.5)),
+    "red-sea-2": ((1.4, 1.56), (3.95, 4.25)),
+    "party": ((0.02, 0.026), (0.01, 0.02)),
+    "green-island": ((0.055, 0.06), (0.035, 0.045)),
+}
+
+#: The writeup's three "red sea" topology throws on the seed slice (section 5.5).
+TOPOLOGY_POINTS = ((1.65, 3.9), (1.5, 4.0), (1.2, 4.4))
+
+
+def _ranges(r, ndim: int | None, what: str) -> tuple[tuple[float, float], ...]:
+    try:
+        pairs = tuple((float(a), float(b)) for a, b in r)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be (lo, hi) pairs, got {r!r}") from None
+    if ndim is not None and len(pairs) != ndim:
+        raise ValueError(f"{what} needs {ndim} (lo, hi) ranges for a {ndim}-D slice, got {len(pairs)}")
+    for lo, hi in pairs:
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            raise ValueError(f"{what} has a non-finite bound in {pairs}")
+    return pairs
+
+
+def get_window(window, ndim: int = 2, z_range=None) -> tuple[tuple[float, float], ...]:
+    """Window ranges from a name in ``WINDOWS``, ``"x0,x1,y0,y1[,z0,z1]"`` or pairs.
+
+    A named (2-D) window on a 3-D slice needs ``z_range`` = (z0, z1).
+    """
+    if isinstance(window, str):
+        key = window.strip().lower().replace("_", "-").replace(" ", "-")
+        if key in WINDOWS:
+            pairs = WINDOWS[key]
+        else:
+            try:
+                vals = [float(v) for v in window.split(",")]
+            except ValueError:
+                raise ValueError(
+                    f"unknown window {window!r}: a name ({', '.join(WINDOWS)}) or x0,x1,y0,y1[,z0,z1]"
+                ) from None
+            if len(vals) % 2 or not 2 <= len(vals) <= 6:
+                raise ValueError(f"window {window!r} needs 2, 4 or 6 numbers (lo,hi per axis)")
+            pairs = tuple((vals[i], vals[i + 1]) for i in range(0, len(vals), 2))
+    else:
+        pairs = _ranges(window, None, "window")
+    pairs = tuple(pairs)
+    if z_range is not None:
+        if len(pairs) != 2:
+            raise ValueError("a z range goes with a 2-D window (x and y ranges)")
+        pairs = pairs + (tuple(float(v) for v in z_range),)
+    if len(pairs) == 2 and ndim == 3:
+        raise ValueError("a 3-D slice needs a z range too (x0,x1,y0,y1,z0,z1, or a named window plus z0,z1)")
+    return _ranges(pairs, ndim, "window")
+
+
+def grid_axis(lo: float, hi: float, n: int) -> np.ndarray:
+    """The program's grid points ``lo + (p−1)/(n−1)·(hi−lo)``, p = 1..n (n = 1: ``lo``)."""
+    n = int(n)
+    if n < 1:
+        raise ValueError(f"a grid axis needs at least 1 point, got {n}")
+    if n == 1:
+        return np.array([float(lo)])
+    p1 = np.arange(n, dtype=np.float64)  # p − 1
+    return float(lo) + p1 / float(n - 1) * (float(hi) - float(lo))
+
+
+# -- IC spaces --------------------------------------------------------------------------------
+
+
+@dataclass
+class IcBlock:
+    """A contiguous range of a space's ICs.
+
+    ``ic_id`` (m,) int64; ``index`` (m, 3) int32 grid indices i, j, k
+    (k = 0 on a 2-D grid; -1 where the space is not a grid); ``coords``
+    (m, 3) float64 slice coordinates (NaN beyond the slice's dimension);
+    ``ics`` (m, 6) in the slice's L convention.
+    """
+
+    ic_id: np.ndarray
+    index: np.ndarray
+    coords: np.ndarray
+    ics: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ic_id)
+
+
+def _block(ids, index, coords_nd, sl: Slice) -> IcBlock:
+    m = len(ids)
+    coords = np.full((m, 3), np.nan)
+    coords[:, : sl.ndim] = coords_nd
+    return IcBlock(ids.astype(np.int64), index.astype(np.int32), coords, sl.ics(coords_nd).reshape(m, 6))
+
+
+def _check_range(start: int, stop: int, size: int) -> tuple[int, int]:
+    start, stop = int(start), int(stop)
+    if not 0 <= start <= stop <= size:
+        raise ValueError(f"IC range [{start}, {stop}) outside [0, {size})")
+    return start, stop
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A regular grid on a window of a slice.
+
+    Parameters
+    ----------
+    slice
+        The slice (a :class:`Slice` or the name of one in ``SLICES``).
+    window
+        ((x0, x1), (y0, y1)[, (z0, z1)]), slice coordinates, or a name.
+    res
+        Points per axis (nx, ny[, nz]); one int means the same on every axis.
+
+    ``ic_id = (i·ny + j)·nz + k`` (row-major, x slowest); the point is
+    ``(xs[i], ys[j], zs[k])`` with the axes of :meth:`axes`.
+    """
+
+    slice: Slice
+    window: tuple[tuple[float, float], ...]
+    res: tuple[int, ...]
+    kind: str = field(default="grid", init=False)
+
+    def __post_init__(self) -> None:
+        sl = get_slice(self.slice) if isinstance(self.slice, str) else self.slice
+        object.__setattr__(self, "slice", sl)
+        object.__setattr__(self, "window", get_window(self.window, sl.ndim))
+        res = self.res
+        if isinstance(res, (int, np.integer)):
+            res = (int(res),) * sl.ndim
+        res = tuple(int(r) for r in res)
+        if len(res) == 1 and sl.ndim > 1:
+            res = res * sl.ndim
+        if len(res) != sl.ndim:
+            raise ValueError(f"resolution {res} does not match the {sl.ndim}-D slice {sl.name!r}")
+        if any(r < 1 for r in res):
+            raise ValueError(f"resolution must be >= 1 on every axis, got {res}")
+        object.__setattr__(self, "res", res)
+
+    @property
+    def ndim(self) -> int:
+        return self.slice.ndim
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.res
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.res, dtype=np.int64))
+
+    def axes(self) -> list[np.ndarray]:
+        """The coordinate vector of each axis (the program's point formula)."""
+        return [grid_axis(lo, hi, n) for (lo, hi), n in zip(self.window, self.res)]
+
+    def block(self, start: int, stop: int) -> IcBlock:
+        start, stop = _check_range(start, stop, self.size)
+        ids = np.arange(start, stop, dtype=np.int64)
+        shape3 = tuple(self.res) + (1,) * (3 - self.ndim)
+        idx = np.stack(np.unravel_index(ids, shape3), axis=1)
+        axes = self.axes()
+        coords = np.stack([axes[a][idx[:, a]] for a in range(self.ndim)], axis=1)
+        return _block(ids, idx, coords, self.slice)
+
+    def to_dict(self) -> dict:
+        return {"kind": "grid", "slice": self.slice.to_dict(), "window": [list(w) for w in self.window], "res": list(self.res)}
+
+
+SAMPLE_METHODS = ("random", "sobol")
+_SAMPLE_BLOCK = 4096  # random points are drawn in fixed blocks: any range regenerates bit for bit
+
+
+@dataclass(frozen=True)
+class Sample:
+    """``n`` points in a box of a slice: uniform random or scrambled Sobol.
+
+    Random points come in fixed blocks of 4096 drawn with
+    ``np.random.default_rng([seed, block])``; Sobol points from
+    ``scipy.stats.qmc.Sobol(d, scramble=True, seed=seed)``, fast-forwarded.
+    Either way any range of ids regenerates the same points, whatever the
+    chunking.  Coordinates are ``lo + u·(hi − lo)``.
+    """
+
+    slice: Slice
+    box: tuple[tuple[float, float], ...]
+    n: int
+    method: str = "random"
+    seed: int = 0
+    kind: str = field(default="sample", init=False)
+
+    def __post_init__(self) -> None:
+        sl = get_slice(self.slice) if isinstance(self.slice, str) else self.slice
+        object.__setattr__(self, "slice", sl)
+        object.__setattr__(self, "box", get_window(self.box, sl.ndim))
+        if int(self.n) != self.n or self.n < 1:
+            raise ValueError(f"sample size must be an integer >= 1, got {self.n!r}")
+        object.__setattr__(self, "n", int(self.n))
+        if self.method not in SAMPLE_METHODS:
+            raise ValueError(f"unknown sample method {self.method!r} (choose from {', '.join(SAMPLE_METHODS)})")
+        object.__setattr__(self, "seed", int(self.seed))
+
+    @property
+    def ndim(self) -> int:
+        return self.slice.ndim
+
+    @property
+    def size(self) -> int:
+        return self.n
+
+    def unit_points(self, start: int, stop: int) -> np.ndarray:
+        """Points in the unit cube (stop − start, ndim)."""
+        start, stop = _check_range(start, stop, self.n)
+        d = self.ndim
+        if self.method == "sobol":
+            import warnings
+
+            from scipy.stats import qmc
+
+            eng = qmc.Sobol(d, scramble=True, seed=self.seed)
+            if start:
+                eng.fast_forward(start)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # balance warnings for n not a power of 2
+                return eng.random(stop - start)
+        out = np.empty((stop - start, d))
+        b0, b1 = start // _SAMPLE_BLOCK, (stop - 1) // _SAMPLE_BLOCK if stop > start else -1
+        for b in range(b0, b1 + 1):
+            u = np.random.default_rng([self.seed, b]).random((_SAMPLE_BLOCK, d))
+            lo, hi = max(start, b * _SAMPLE_BLOCK), min(stop, (b + 1) * _SAMPLE_BLOCK)
+            out[lo - start : hi - start] = u[lo - b * _SAMPLE_BLOCK : hi - b * _SAMPLE_BLOCK]
+        return out
+
+    def block(self, start: int, stop: int) -> IcBlock:
+        start, stop = _check_range(start, stop, self.n)
+        u = self.unit_points(start, stop)
+        lo = np.array([w[0] for w in self.box])
+        hi = np.array([w[1] for w in self.box])
+        coords = lo + u * (hi - lo)
+        ids = np.arange(start, stop, dtype=np.int64)
+        return _block(ids, np.full((len(ids), 3), -1), coords, self.slice)
+
+    def to_dict(self) -> dict:
+        return {
+            "kind": "sample",
+            "slice": self.slice.to_dict(),
+            "box": [list(w) for w in self.box],
+            "n": self.n,
+            "method": self.method,
+            "seed": self.seed,
+        }
+
+
+@dataclass(frozen=True)
+class Points:
+    """Explicit points on a slice: ``coords`` (m, ndim) slice coordinates."""
+
+    slice: Slice
+    coords: tuple[tuple[float, ...], ...]
+    kind: str = field(default="points", init=False)
+
+    def __post_init__(self) -> None:
+        sl = get_slice(self.slice) if isinstance(self.slice, str) else self.slice
+        object.__setattr__(self, "slice", sl)
+        c = np.atleast_2d(np.asarray(self.coords, dtype=np.float64))
+        if c.shape[1] != sl.ndim or len(c) < 1:
+            raise ValueError(f"points on the {sl.ndim}-D slice {sl.name!r} need {sl.ndim} coordinates each, got shape {c.shape}")
+        if not np.all(np.isfinite(c)):
+            raise ValueError("points have non-finite coordinates")
+        object.__setattr__(self, "coords", tuple(tuple(float(v) for v in row) for row in c))
+
+    @property
+    def ndim(self) -> int:
+        return self.slice.ndim
+
+    @property
+    def size(self) -> int:
+        return len(self.coords)
+
+    def block(self, start: int, stop: int) -> IcBlock:
+        start, stop = _check_range(start, stop, self.size)
+        ids = np.arange(start, stop, dtype=np.int64)
+        c = np.array(self.coords[start:stop], dtype=np.float64).reshape(-1, self.ndim)
+        return _block(ids, np.full((len(ids), 3), -1), c, self.slice)
+
+    def to_dict(self) -> dict:
+        return {"kind": "points", "slice": self.slice.to_dict(), "coords": [list(c) for c in self.coords]}
+
+
+IcSpace = Grid | Sample | Points
+
+
+def space_from_dict(d: dict) -> IcSpace:
+    """Inverse of ``Grid/Sample/Points.to_dict``."""
+    sl = Slice.from_dict(d["slice"])
+    kind = d.get("kind")
+    if kind == "grid":
+        return Grid(sl, tuple(tuple(w) for w in d["window"]), tuple(d["res"]))
+    if kind == "sample":
+        return Sample(sl, tuple(tuple(w) for w in d["box"]), d["n"], d.get("method", "random"), d.get("seed", 0))
+    if kind == "points":
+        return Points(sl, tuple(tuple(c) for c in d["coords"]))
+    raise ValueError(f"unknown IC space kind {kind!r}")
+
+
+def to_preset_convention(ics: np.ndarray, slice_convention: str, preset_convention: str) -> np.ndarray:
+    """ICs from a slice's L convention to a preset's (L negated when they differ)."""
+    if slice_convention == preset_convention:
+        return ics
+    out = np.array(ics, dtype=np.float64, copy=True)
+    out[..., 3:] = -out[..., 3:]
+    return out

@@ -1,17 +1,21 @@
-"""Regenerate tests/data/kernel_golden_2000.npz (ONLY with a kernel known to be right).
+"""How tests/data/kernel_golden_2000.npz was made (do not regenerate it casually).
 
 The golden file freezes the summary results of the simulator kernel as it was
-before the performance work (issue 3): 2000 ICs on the seed slice with x, y
-uniform in [0, 20] drawn by ``np.random.default_rng(1)``.  It was computed with
-the original general loop (``run_roll`` through ``simulate``, one IC at a time).
+before the performance work of issue 3: 2000 ICs on the seed slice with x, y
+uniform in [0, 20] drawn by ``np.random.default_rng(1)``, computed one IC at a
+time by the original loop (then ``run_roll``, today ``run_roll_general``).
+Its point is to catch a change of the kernel, so re-running this script with a
+changed kernel defeats it; this script now calls ``run_roll_general``.
 """
 
 from pathlib import Path
 
 import numpy as np
 
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_roll_general
 from dicetrace.ics import seed_slice
-from dicetrace.simulate import STATUS_NAMES, simulate
+from dicetrace.params import make_config
+from dicetrace.simulate import initial_offsets
 
 N = 2000
 
@@ -25,26 +29,28 @@ def golden_points():
 def main():
     x, y = golden_points()
     ics = seed_slice(x, y)
-    codes = {v: k for k, v in STATUS_NAMES.items()}
+    cfg = make_config("seed")
+    kp, off0 = cfg.kernel_params(), initial_offsets(cfg)
+    empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     status = np.zeros(N, np.int8)
     steps = np.zeros(N, np.int64)
     outcome = np.zeros(N, np.int8)
     offs = np.zeros(N + 1, np.int64)
     sets, set_steps = [], []
+    buf, buf_steps = np.zeros(4096, np.uint8), np.zeros(4096, np.int32)
     for i in range(N):
-        r = simulate(ics[i])
-        status[i] = codes[r.status]
-        steps[i] = r.steps
-        outcome[i] = r.outcome
-        sets.append(r.contact_sets)
-        set_steps.append(r.contact_steps)
-        offs[i + 1] = offs[i] + len(r.contact_sets)
-    out = Path(__file__).with_name("kernel_golden_2000.npz")
+        st, n, o, ns = run_roll_general(ics[i], off0, kp, 0, buf, buf_steps, *empty)
+        status[i], steps[i], outcome[i] = st, n, o
+        sets.append(buf[:ns].copy())
+        set_steps.append(buf_steps[:ns].copy())
+        offs[i + 1] = offs[i] + ns
+    out = Path(__file__).with_name("kernel_golden_2000.new.npz")
     np.savez_compressed(
         out, x=x, y=y, ics=ics, status=status, steps=steps, outcome=outcome,
         set_offsets=offs, sets=np.concatenate(sets), set_steps=np.concatenate(set_steps),
     )
-    print(f"wrote {out}: {int(steps.sum())} steps, statuses {np.bincount(status)}")
+    print(f"wrote {out} (compare it with the frozen file; rename only on purpose): "
+          f"{int(steps.sum())} steps, statuses {np.bincount(status)}")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,116 @@
+"""Throughput of the simulator kernel on the seed slice, x, y ∈ [0, 20].
+
+Prints throws/s and ns per simulated step for
+
+* the general loop (``run_roll_general``: what every throw ran before the
+  specialised kernel; serial, one core),
+* the batch kernel (``run_batch``: ``fast.roll_summary_sie`` over a prange)
+  with 1 and 2 threads (or ``--threads``),
+* ``simulate_batch`` (the Python API around it) with all threads.
+
+Usage: ``python benchmarks/bench_simulate.py [--n 20000] [--threads 1,2]``.
+Wall time and process CPU time are both printed: on a shared machine the
+CPU-time rate per thread is the steadier figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numba
+import numpy as np
+
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll_general
+from dicetrace.ics import seed_slice
+from dicetrace.params import make_config
+from dicetrace.simulate import initial_offsets, simulate_batch
+
+
+@numba.njit(cache=True)
+def _general_loop(ics, off0, kp, integ, steps):
+    e0 = np.zeros((0, STATE_COLS))
+    e1 = np.zeros((0, FORCE_COLS))
+    e2 = np.zeros((0, ENERGY_COLS))
+    sets = np.zeros(4096, np.uint8)
+    set_steps = np.zeros(4096, np.int32)
+    for i in range(ics.shape[0]):
+        s, n, o, ns = run_roll_general(ics[i], off0, kp, integ, sets, set_steps, e0, e1, e2)
+        steps[i] = n
+
+
+def _timed(fn, repeat):
+    best_wall, best_cpu = np.inf, np.inf
+    for _ in range(repeat):
+        w, c = time.perf_counter(), time.process_time()
+        fn()
+        best_wall = min(best_wall, time.perf_counter() - w)
+        best_cpu = min(best_cpu, time.process_time() - c)
+    return best_wall, best_cpu
+
+
+def _line(label, m, steps, wall, cpu, threads):
+    print(
+        f"{label:<34} {m / wall:>10,.0f} throws/s {wall * 1e9 / steps:>7.1f} ns/step"
+        f"   | {m / cpu:>9,.0f} throws per CPU-second"
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--n", type=int, default=20000, help="ICs (default 20000)")
+    ap.add_argument("--threads", default="1,2", help="thread counts for the batch kernel (default 1,2)")
+    ap.add_argument("--general", type=int, default=2000, help="ICs for the general-loop baseline (default 2000)")
+    ap.add_argument("--repeat", type=int, default=3, help="best of this many runs (default 3)")
+    args = ap.parse_args()
+
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(0.0, 20.0, size=(args.n, 2))
+    ics = np.ascontiguousarray(seed_slice(xy[:, 0], xy[:, 1]))
+    cfg = make_config("seed")
+    kp = cfg.kernel_params()
+    off0 = initial_offsets(cfg)
+    m = len(ics)
+    cap = 128
+    print(f"seed preset, {m:,} ICs on the seed slice, x, y uniform in [0, 20] (rng 1); "
+          f"{os.cpu_count()} CPUs, numba {numba.__version__}, load average {os.getloadavg()[0]:.2f}")
+
+    # the general loop (the pre-optimisation kernel), serial
+    g = ics[: args.general]
+    gsteps = np.zeros(len(g), np.int64)
+    _general_loop(g[:2], off0, kp, 0, gsteps[:2])
+    wall, cpu = _timed(lambda: _general_loop(g, off0, kp, 0, gsteps), 1)
+    _line(f"general loop (before), {len(g)} ICs", len(g), gsteps.sum(), wall, cpu, 1)
+
+    out = dict(
+        status=np.zeros(m, np.int8), steps=np.zeros(m, np.int64), outcome=np.zeros(m, np.int8),
+        nsets=np.zeros(m, np.int64), sets=np.zeros(m * cap, np.uint8), set_steps=np.zeros(m * cap, np.int32),
+    )
+
+    def batch():
+        with numba.parallel_chunksize(1):
+            run_batch(ics, off0, kp, 0, cap, *out.values())
+
+    numba.set_num_threads(1)
+    run_batch(ics[:16], off0, kp, 0, cap, *(a[: 16 * (cap if k in ("sets", "set_steps") else 1)] for k, a in out.items()))
+    rates = {}
+    for t in [int(v) for v in args.threads.split(",")]:
+        t = min(t, numba.config.NUMBA_NUM_THREADS)
+        numba.set_num_threads(t)
+        wall, cpu = _timed(batch, args.repeat)
+        rates[t] = m / wall
+        _line(f"run_batch (after), {t} thread(s)", m, out["steps"].sum(), wall, cpu, t)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    if len(rates) > 1:
+        t0, t1 = min(rates), max(rates)
+        print(f"scaling {t0}→{t1} threads: ×{rates[t1] / rates[t0]:.2f}")
+    assert np.array_equal(out["steps"][: len(g)], gsteps), "fast and general kernels disagree"
+    wall, cpu = _timed(lambda: simulate_batch(ics), args.repeat)
+    _line(f"simulate_batch, {numba.config.NUMBA_NUM_THREADS} threads", m, out["steps"].sum(), wall, cpu,
+          numba.config.NUMBA_NUM_THREADS)
+    print(f"mean steps per throw: {out['steps'].mean():.1f}; threading layer {numba.threading_layer()}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,62 @@
+"""Scans of IC space: many throws, summaries only, streamed to a Parquet dataset.
+
+>>> from dicetrace.ics import Grid
+>>> from dicetrace.scan import scan, read_scan, label_grid
+>>> report = scan(Grid("seed", "red-sea", 400), "scans/red-sea", progress=True)  # doctest: +SKIP
+>>> outcome = label_grid("scans/red-sea")                                        # doctest: +SKIP
+
+See :func:`scan` (run or resume; in memory, locally or on Dask),
+:func:`iter_scan` (stream chunk tables), :func:`read_scan`,
+:func:`label_grid`, :func:`grid_axes` and :func:`ic_at`.
+"""
+
+from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, config_from_dict
+from dicetrace.scan.read import (
+    MISSING,
+    grid_axes,
+    ic_at,
+    label_grid,
+    outcome_counts,
+    read_scan,
+    read_scan_table,
+    scan_definition,
+)
+from dicetrace.scan.runner import (
+    MANIFEST,
+    ScanMismatchError,
+    ScanReport,
+    compute_chunk,
+    iter_scan,
+    prepare_folder,
+    read_manifest,
+    scan,
+    write_chunk,
+)
+from dicetrace.scan.tables import ROLLS_SCHEMA, rolls_table, run_summaries, sequences_array
+
+__all__ = [
+    "DEFAULT_CHUNK",
+    "MANIFEST",
+    "MISSING",
+    "ROLLS_SCHEMA",
+    "ScanDefinition",
+    "ScanMismatchError",
+    "ScanReport",
+    "compute_chunk",
+    "config_from_dict",
+    "grid_axes",
+    "ic_at",
+    "iter_scan",
+    "label_grid",
+    "outcome_counts",
+    "prepare_folder",
+    "read_manifest",
+    "read_scan",
+    "read_scan_table",
+    "rolls_table",
+    "run_summaries",
+    "scan",
+    "scan_definition",
+    "sequences_array",
+    "write_chunk",
+]

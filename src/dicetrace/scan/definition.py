@@ -1,0 +1,84 @@
+"""What a scan is: an IC space, a configuration and a chunk size.
+
+A :class:`ScanDefinition` fully determines a scan's rows.  It is stored
+(as JSON) in the dataset's manifest and in every chunk file's metadata,
+compared on resume, and shipped to Dask workers as a plain dict.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+from dicetrace.ics import IcSpace, space_from_dict
+from dicetrace.params import Config, Numerics, Preset
+
+FORMAT = "dicetrace-scan/1"
+#: ICs per chunk (one Parquet file, one Dask task): ~0.3 s of work on one core.
+DEFAULT_CHUNK = 8192
+
+
+def config_from_dict(d: dict) -> Config:
+    """Inverse of ``Config.as_dict()``."""
+    return Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"]))
+
+
+@dataclass(frozen=True)
+class ScanDefinition:
+    """An IC space scanned with one configuration, in chunks of ``chunk`` ICs.
+
+    Chunk c holds the ICs with ``ic_id`` in ``[c·chunk, min((c+1)·chunk, size))``.
+    """
+
+    space: IcSpace
+    config: Config
+    chunk: int = DEFAULT_CHUNK
+
+    def __post_init__(self) -> None:
+        if int(self.chunk) != self.chunk or self.chunk < 1:
+            raise ValueError(f"chunk must be an integer >= 1, got {self.chunk!r}")
+        object.__setattr__(self, "chunk", int(self.chunk))
+
+    @property
+    def size(self) -> int:
+        return self.space.size
+
+    @property
+    def n_chunks(self) -> int:
+        return -(-self.size // self.chunk)
+
+    def chunk_range(self, c: int) -> tuple[int, int]:
+        if not 0 <= c < self.n_chunks:
+            raise ValueError(f"chunk {c} outside 0..{self.n_chunks - 1}")
+        return c * self.chunk, min(self.size, (c + 1) * self.chunk)
+
+    def to_dict(self) -> dict:
+        return {"format": FORMAT, "space": self.space.to_dict(), "config": self.config.as_dict(), "chunk": self.chunk}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ScanDefinition":
+        if d.get("format") != FORMAT:
+            raise ValueError(f"not a {FORMAT} scan definition (format {d.get('format')!r})")
+        return cls(space_from_dict(d["space"]), config_from_dict(d["config"]), d["chunk"])
+
+    def canonical(self) -> str:
+        """Canonical JSON (what resuming compares)."""
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def describe_differences(a: dict, b: dict, prefix: str = "") -> list[str]:
+    """Human-readable paths where two definition dicts differ (for refusals)."""
+    out: list[str] = []
+    if isinstance(a, dict) and isinstance(b, dict):
+        for k in sorted(set(a) | set(b)):
+            p = f"{prefix}.{k}" if prefix else str(k)
+            if k not in a or k not in b:
+                out.append(f"{p}: {a.get(k, '(absent)')!r} vs {b.get(k, '(absent)')!r}")
+            else:
+                out += describe_differences(a[k], b[k], p)
+    elif a != b:
+        sa, sb = json.dumps(a), json.dumps(b)
+        if len(sa) > 60:
+            sa, sb = sa[:57] + "...", sb[:57] + "..."
+        out.append(f"{prefix}: {sa} vs {sb}")
+    return out

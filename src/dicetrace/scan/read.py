@@ -1,0 +1,160 @@
+"""Reading scans back: tables, labelled grids, and single ICs.
+
+``read_scan(folder)`` gives the rolls table as a pandas DataFrame sorted by
+``ic_id``; ``label_grid`` turns a grid scan into a numpy array indexed
+``[i, j]`` or ``[i, j, k]`` (i along x), with ``grid_axes`` the coordinate
+vector of each axis; ``ic_at`` finds a scanned IC by its slice coordinates
+(to record it, reproduced exactly).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.dataset as pads
+
+from dicetrace.ics import Grid
+from dicetrace.scan.definition import ScanDefinition
+from dicetrace.scan.runner import METADATA_KEY, read_manifest
+
+#: Fill value of label_grid cells that the (partial) scan has not computed yet.
+MISSING = -2
+
+
+def scan_definition(source) -> ScanDefinition:
+    """The :class:`ScanDefinition` of a scan folder (or of a table/DataFrame read from one)."""
+    if isinstance(source, (str, Path)):
+        return ScanDefinition.from_dict(read_manifest(source)["definition"])
+    meta = None
+    if isinstance(source, pa.Table):
+        meta = (source.schema.metadata or {}).get(METADATA_KEY)
+    elif hasattr(source, "attrs"):
+        meta = source.attrs.get("dicetrace")
+    if meta is None:
+        raise ValueError("no scan definition: pass the scan folder, or a table read by read_scan")
+    d = json.loads(meta) if isinstance(meta, (bytes, str)) else meta
+    return ScanDefinition.from_dict(d["scan"])
+
+
+def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
+    """The rolls table of a scan folder as Arrow, sorted by ``ic_id`` (finished chunks only)."""
+    folder = Path(folder)
+    manifest = read_manifest(folder)
+    files = sorted(str(p) for p in folder.glob("part-*.parquet"))
+    cols = None if columns is None else list(dict.fromkeys(["ic_id", *columns]))
+    if not files:
+        from dicetrace.scan.tables import ROLLS_SCHEMA
+
+        table = ROLLS_SCHEMA.empty_table()
+        if cols is not None:
+            table = table.select(cols)
+    else:
+        table = pads.dataset(files, format="parquet").to_table(columns=cols, filter=filter).sort_by("ic_id")
+    meta = {"scan": manifest["definition"], "dicetrace_version": manifest.get("dicetrace_version")}
+    return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, sort_keys=True).encode()})
+
+
+def outcome_counts(folder) -> dict[int, int]:
+    """How many ICs of a scan folder ended on each outcome (streamed: constant memory)."""
+    files = sorted(str(p) for p in Path(folder).glob("part-*.parquet"))
+    counts: dict[int, int] = {}
+    if not files:
+        return counts
+    for batch in pads.dataset(files, format="parquet").to_batches(columns=["outcome"]):
+        vals, n = np.unique(batch.column(0).to_numpy(), return_counts=True)
+        for v, c in zip(vals.tolist(), n.tolist()):
+            counts[v] = counts.get(v, 0) + c
+    return dict(sorted(counts.items()))
+
+
+def read_scan(folder, columns=None):
+    """The rolls table of a scan folder as a pandas DataFrame, sorted by ``ic_id``.
+
+    ``df.attrs["dicetrace"]`` holds the scan definition (what
+    :func:`label_grid` and :func:`grid_axes` use when given the frame).
+    ``contact_sets`` come back as numpy uint8 arrays; group by the text
+    ``contact_sequence`` instead.
+    """
+    t = read_scan_table(folder, columns=columns)
+    df = t.to_pandas()
+    df.attrs["dicetrace"] = json.loads(t.schema.metadata[METADATA_KEY])
+    df.index = np.arange(len(df))
+    return df
+
+
+def _grid_of(source) -> Grid:
+    defn = scan_definition(source)
+    if not isinstance(defn.space, Grid):
+        raise ValueError(f"the scan is a {defn.space.kind}, not a grid: it has no label grid")
+    return defn.space
+
+
+def grid_axes(source) -> list[np.ndarray]:
+    """Coordinate vector of each grid axis (x, y[, z]), the program's point formula."""
+    return _grid_of(source).axes()
+
+
+def label_grid(source, column: str = "outcome", *, fill=MISSING) -> np.ndarray:
+    """A grid scan's ``column`` as an array indexed ``[i, j]`` (2-D) or ``[i, j, k]`` (3-D).
+
+    ``source`` is a scan folder, or a DataFrame/Arrow table read by
+    :func:`read_scan` (or any frame with ``i, j, k`` and ``column`` plus the
+    grid shape in ``attrs``).  ``outcome``: 1..6, 0 undefined, -1 did not
+    settle; cells not computed yet hold ``fill`` (-2).  Other columns give
+    arrays of their own dtype (object for strings, e.g. ``contact_sequence``).
+    """
+    grid = _grid_of(source)
+    if isinstance(source, (str, Path)):
+        t = read_scan_table(source, columns=["i", "j", "k", column])
+        i, j, k = (t.column(n).to_numpy() for n in ("i", "j", "k"))
+        vals = t.column(column).to_numpy(zero_copy_only=False)
+    elif isinstance(source, pa.Table):
+        i, j, k = (source.column(n).to_numpy() for n in ("i", "j", "k"))
+        vals = source.column(column).to_numpy(zero_copy_only=False)
+    else:
+        i, j, k = (np.asarray(source[n]) for n in ("i", "j", "k"))
+        vals = np.asarray(source[column])
+    shape3 = tuple(grid.shape) + (1,) * (3 - grid.ndim)
+    if vals.dtype.kind in "iub":
+        out = np.full(shape3, fill, dtype=np.result_type(vals.dtype, np.int8))
+    elif vals.dtype.kind == "f":
+        out = np.full(shape3, np.nan, dtype=vals.dtype)
+    else:
+        out = np.full(shape3, None, dtype=object)
+    out[i, j, k] = vals
+    return out.reshape(grid.shape)
+
+
+def ic_at(folder, coords, *, tol: float | None = None):
+    """The scanned IC nearest to slice coordinates ``coords`` (x, y[, z]).
+
+    Returns ``(ic, config, row)``: the IC exactly as stored (6 floats, the
+    preset's L convention), the scan's :class:`~dicetrace.params.Config`,
+    and the row as a dict.  ``simulate(ic, config=config)`` reproduces the
+    row's outcome, steps and contact sequence.  ``tol`` (slice units):
+    refuse a nearest point farther than that (default: half a grid cell on
+    grids, no limit otherwise).
+    """
+    defn = scan_definition(folder)
+    c = np.asarray(coords, dtype=np.float64).reshape(-1)
+    nd = defn.space.ndim
+    if c.size != nd:
+        raise ValueError(f"the scan's slice is {nd}-D: give {nd} coordinates, got {c.size}")
+    cols = ["x", "y", "z"][:nd]
+    t = read_scan_table(folder)
+    if t.num_rows == 0:
+        raise ValueError(f"{str(folder)!r} holds no finished chunk yet")
+    pts = np.stack([t.column(n).to_numpy(zero_copy_only=False) for n in cols], axis=1)
+    d = np.sqrt(((pts - c) ** 2).sum(axis=1))
+    r = int(np.argmin(d))
+    if tol is None and isinstance(defn.space, Grid):
+        steps = [(hi - lo) / max(n - 1, 1) for (lo, hi), n in zip(defn.space.window, defn.space.res)]
+        tol = 0.5 * float(np.sqrt(sum(s * s for s in steps))) + 1e-12
+    if tol is not None and d[r] > tol:
+        raise ValueError(f"no scanned IC near {tuple(c)} (nearest at distance {d[r]:.3g} > {tol:.3g})")
+    row = {name: t.column(name)[r].as_py() for name in t.column_names}
+    ic = np.array([row[n] for n in ("vx", "vy", "vz", "Lx", "Ly", "Lz")], dtype=np.float64)
+    return ic, defn.config, row

@@ -1,0 +1,178 @@
+"""IC spaces: seed slices bit for bit, general and orthonormal slices, windows, grids, samples."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dicetrace.ics import (
+    SEED_DIRS_6D,
+    SLICES,
+    TOPOLOGY_POINTS,
+    WINDOWS,
+    Grid,
+    Points,
+    Sample,
+    Slice,
+    get_slice,
+    get_window,
+    grid_axis,
+    seed_slice,
+    space_from_dict,
+    to_preset_convention,
+)
+
+
+def _bits(a):
+    return np.asarray(a, dtype=np.float64).view(np.int64)
+
+
+def test_seed_slice_by_hand():
+    # L = x·(3.2612, 3.1314, 0.0606) + y·(2.1595, 4.5284, 3.9535) + (0, 100, 0); U = x·(...) + y·(...)
+    x, y = 1.65, 3.9
+    want = [x * 2.7083 + y * 2.4650, x * 3.4373 + y * 1.4853, x * 4.4365 + y * 0.6534,
+            (x * 3.2612 + y * 2.1595) + 0.0, (x * 3.1314 + y * 4.5284) + 100.0, (x * 0.0606 + y * 3.9535) + 0.0]
+    np.testing.assert_array_equal(_bits(seed_slice(x, y)), _bits(want))
+
+
+def test_seed_slice_matches_the_program_points(reference_dir):
+    import pandas as pd
+
+    ref = pd.read_csv(reference_dir / "writeup_points.csv")
+    ics = seed_slice(ref["x"].to_numpy(), ref["y"].to_numpy())
+    np.testing.assert_array_equal(ics, ref[["vx", "vy", "vz", "Lx", "Ly", "Lz"]].to_numpy())
+
+
+@pytest.mark.parametrize("name, z", [("seed", None), ("seed3", 0.37)])
+def test_named_seed_slices_are_bit_identical_to_seed_slice(name, z):
+    rng = np.random.default_rng(5)
+    c = rng.uniform(-3, 30, size=(500, 2 if z is None else 3))
+    got = get_slice(name).ics(c)
+    want = seed_slice(c[:, 0], c[:, 1], None if z is None else c[:, 2])
+    np.testing.assert_array_equal(_bits(got), _bits(want))
+
+
+def test_general_slice_formula():
+    sl = Slice("s", (1, 2, 3, 4, 5, 6), ((1, 0, 0, 0, 0, 0), (0, 0, 0, 0, 0, 2)))
+    np.testing.assert_array_equal(sl.ics([0.5, 0.25]), [1.5, 2, 3, 4, 5, 6.5])
+    one = Slice("line", (0, 0, 0, 0, 100, 0), ((1, 1, 1, 1, 1, 1),))
+    assert one.ndim == 1
+    np.testing.assert_array_equal(one.ics([[2.0]]), [[2, 2, 2, 2, 102, 2]])
+    with pytest.raises(ValueError, match="linearly dependent"):
+        Slice("bad", (0,) * 6, ((1, 0, 0, 0, 0, 0), (2, 0, 0, 0, 0, 0)))
+    with pytest.raises(ValueError, match="1 to 3"):
+        Slice("bad", (0,) * 6, ())
+    with pytest.raises(ValueError, match="6 components"):
+        Slice("bad", (0,) * 5, ((1, 0, 0, 0, 0, 0),))
+
+
+@pytest.mark.parametrize("name, n", [("seed-ortho", 2), ("seed3-ortho", 3)])
+def test_orthonormal_slices(name, n):
+    sl = SLICES[name]
+    d = np.array(sl.directions)
+    np.testing.assert_allclose(d @ d.T, np.eye(n), atol=1e-14)
+    # the same span, in the same order (Gram–Schmidt): direction k lies in span(seed 1..k)
+    for k in range(n):
+        basis = SEED_DIRS_6D[: k + 1]
+        coef, res, *_ = np.linalg.lstsq(basis.T, d[k], rcond=None)
+        np.testing.assert_allclose(basis.T @ coef, d[k], atol=1e-12)
+    assert sl.origin == get_slice("seed").origin
+
+
+def test_grid_formula_by_hand():
+    # x = x0 + (p-1)/(n-1)·(x1-x0), p = 1..n, evaluated in that order
+    xs = grid_axis(0.0, 0.1, 21)
+    assert xs[0] == 0.0 and xs[20] == 0.1 and xs[10] == 0.05
+    assert xs[1] == 0.005000000000000001  # (1/20)·0.1 rounds up: not 0.005
+    # (7/20)·0.1 = 0.034999999999999996, where 7·0.1/20 or 0.1·7/20 would give 0.035
+    assert xs[7] == 0.034999999999999996
+    assert xs[16] == 0.08000000000000002
+    ys = grid_axis(3.5, 4.5, 21)
+    assert ys[8] == 3.9 and ys[10] == 4.0 and ys[18] == 4.4
+    np.testing.assert_array_equal(grid_axis(2.0, 5.0, 1), [2.0])
+    np.testing.assert_array_equal(grid_axis(-1.0, 1.0, 3), [-1.0, 0.0, 1.0])
+
+
+def test_writeup_topology_points_lie_on_the_red_sea_grid():
+    g = Grid("seed", "red-sea", 21)
+    xs, ys = g.axes()
+    for x, y in TOPOLOGY_POINTS:
+        assert x in xs and y in ys
+
+
+def test_grid_block_layout():
+    g = Grid("seed3", ((0, 1), (0, 2), (0, 3)), (3, 4, 5))
+    assert g.size == 60 and g.shape == (3, 4, 5)
+    b = g.block(0, 60)
+    i, j, k = b.index.T
+    np.testing.assert_array_equal(b.ic_id, (i * 4 + j) * 5 + k)
+    xs, ys, zs = g.axes()
+    np.testing.assert_array_equal(b.coords, np.stack([xs[i], ys[j], zs[k]], axis=1))
+    np.testing.assert_array_equal(b.ics, seed_slice(xs[i], ys[j], zs[k]))
+    part = g.block(17, 33)
+    np.testing.assert_array_equal(part.ics, b.ics[17:33])
+    g2 = Grid("seed", "home", 5)
+    b2 = g2.block(0, 25)
+    assert (b2.index[:, 2] == 0).all() and np.isnan(b2.coords[:, 2]).all()
+    with pytest.raises(ValueError):
+        g2.block(20, 26)
+
+
+def test_windows_by_name_and_by_numbers():
+    assert set(WINDOWS) == {"home", "zoom-out", "more-out", "most-out", "red-sea", "red-sea-2", "party", "green-island"}
+    assert get_window("red sea") == ((1.0, 2.0), (3.5, 4.5))
+    assert get_window("Green_Island") == ((0.055, 0.06), (0.035, 0.045))
+    assert get_window("0,0.1,0,0.2") == ((0.0, 0.1), (0.0, 0.2))
+    assert get_window("home", 3, (0, 0.5)) == ((0.0, 0.1), (0.0, 0.1), (0.0, 0.5))
+    with pytest.raises(ValueError, match="z range"):
+        get_window("home", 3)
+    with pytest.raises(ValueError, match="unknown window"):
+        get_window("atlantis")
+    with pytest.raises(ValueError):
+        get_window("0,1,2")
+
+
+def test_zoom_is_any_subwindow_at_any_resolution():
+    coarse = Grid("seed", "red-sea", 21)
+    fine = Grid("seed", ((1.4, 1.56), (3.95, 4.25)), (7, 13))
+    assert fine.size == 91
+    b = fine.block(0, fine.size)
+    assert b.coords[:, 0].min() == 1.4 and b.coords[:, 0].max() == 1.56
+    assert coarse.block(0, 1).coords[0, 0] == 1.0
+
+
+@pytest.mark.parametrize("method", ["random", "sobol"])
+def test_samples_do_not_depend_on_chunking(method):
+    s = Sample("seed", ((0, 20), (0, 20)), 10000, method, seed=3)
+    whole = s.block(0, s.size).coords
+    parts = np.concatenate([s.block(a, b).coords for a, b in ((0, 1), (1, 4097), (4097, 5000), (5000, 10000))])
+    np.testing.assert_array_equal(whole, parts)
+    xy = whole[:, :2]
+    assert (xy >= 0).all() and (xy <= 20).all()
+    assert abs(xy.mean() - 10) < 0.3
+    other = Sample("seed", ((0, 20), (0, 20)), 10000, method, seed=4).block(0, 10).coords
+    assert not np.array_equal(other, whole[:10])
+
+
+def test_sobol_is_more_uniform_than_random():
+    def disc(method):
+        c = Sample("seed", ((0, 1), (0, 1)), 4096, method, seed=1).block(0, 4096).coords[:, :2]
+        h, *_ = np.histogram2d(c[:, 0], c[:, 1], bins=16, range=((0, 1), (0, 1)))
+        return np.abs(h - 16).max()
+
+    assert disc("sobol") < disc("random")
+
+
+def test_points_and_dict_round_trip():
+    p = Points("seed", [[1.65, 3.9], [1.5, 4.0]])
+    np.testing.assert_array_equal(p.block(0, 2).ics, seed_slice([1.65, 1.5], [3.9, 4.0]))
+    for space in (p, Grid("seed3-ortho", ((0, 1), (0, 1), (0, 1)), 4), Sample("seed", "home", 10, "sobol", 2)):
+        assert space_from_dict(space.to_dict()) == space
+
+
+def test_conventions():
+    ics = seed_slice([1.0], [2.0])
+    phys = to_preset_convention(ics, "program", "physical")
+    np.testing.assert_array_equal(phys[:, :3], ics[:, :3])
+    np.testing.assert_array_equal(phys[:, 3:], -ics[:, 3:])
+    assert to_preset_convention(ics, "program", "program") is ics

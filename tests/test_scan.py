@@ -1,0 +1,338 @@
+"""Scans: acceptance against `simulate`, invariance, resume, refusal, Dask, reading back, CLI."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pytest
+
+from dicetrace.ics import Grid, Points, Sample, seed_slice
+from dicetrace.scan import (
+    MANIFEST,
+    MISSING,
+    ScanDefinition,
+    ScanMismatchError,
+    grid_axes,
+    ic_at,
+    label_grid,
+    read_scan,
+    scan,
+)
+from dicetrace.simulate import simulate
+
+HOME21 = Grid("seed", "home", 21)
+
+
+def cli(*args: str, cwd=None, timeout=300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "dicetrace.cli", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=timeout)
+
+
+def _data(table) -> pa.Table:
+    """Rows and columns only (no metadata, nullability flags or chunk layout), comparable with ``equals``."""
+    df = table.to_pandas() if isinstance(table, pa.Table) else table
+    return pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False).replace_schema_metadata(None)
+
+
+@pytest.fixture(scope="module")
+def home21() -> pa.Table:
+    return scan(HOME21, chunk=100)
+
+
+# -- acceptance -------------------------------------------------------------------------------
+
+
+def test_home_grid_matches_simulate_point_for_point(home21):
+    df = home21.to_pandas()
+    assert len(df) == 441 and (df["ic_id"] == np.arange(441)).all()
+    xs, ys = HOME21.axes()
+    for r in df.itertuples():
+        assert (r.x, r.y) == (xs[r.i], ys[r.j]) and r.k == 0 and np.isnan(r.z)
+        roll = simulate(seed_slice(r.x, r.y), preset="seed")
+        assert (r.outcome, r.steps, r.status, r.contact_sequence) == (
+            roll.outcome, roll.steps, roll.status, roll.contact_sequence)
+        np.testing.assert_array_equal(r.contact_sets, roll.contact_sets)
+        assert r.n_contact_changes == len(roll.contact_sets) - 1
+        assert r.t_settle_s == roll.t_settle_s
+        np.testing.assert_array_equal([r.vx, r.vy, r.vz, r.Lx, r.Ly, r.Lz], roll.ic)
+    assert set(df["preset"]) == {"seed"} and set(df["integrator"]) == {"semi-implicit-euler"}
+    assert set(df["dt_s"]) == {0.001}
+
+
+def test_cli_scan_matches_cli_simulate(tmp_path, home21):
+    """`dicetrace scan --slice seed --window home --res 21` = `dicetrace simulate` on the same ICs."""
+    res = cli("scan", "--slice", "seed", "--window", "home", "--res", "21", "--out", str(tmp_path / "home"), "-q")
+    assert res.returncode == 0, res.stderr
+    df = read_scan(tmp_path / "home")
+    assert _data(df).select(["ic_id", "outcome", "steps"]).equals(
+        _data(home21).select(["ic_id", "outcome", "steps"]))
+    pts = tmp_path / "pts.csv"
+    df[["x", "y"]].to_csv(pts, index=False, float_format="%.17g")
+    sim = cli("simulate", "--slice", "seed", "--ics", str(pts), "--format", "csv")
+    assert sim.returncode == 0, sim.stderr
+    rows = list(csv.DictReader(io.StringIO(sim.stdout)))
+    assert len(rows) == 441
+    for r, s in zip(df.itertuples(), rows):
+        assert (str(r.outcome), str(r.steps), r.status, r.contact_sequence) == (
+            s["outcome"], s["steps"], s["status"], s["contact_sequence"])
+
+
+def test_numeric_window_equals_named_window(tmp_path, home21):
+    res = cli("scan", "--window", "0,0.1,0,0.1", "--res", "21", "--out", str(tmp_path / "w"), "--chunk", "100", "-q")
+    assert res.returncode == 0, res.stderr
+    assert _data(read_scan(tmp_path / "w")).equals(
+        _data(home21))
+
+
+def test_writeup_points_through_a_scan(reference_dir):
+    ref = pd.read_csv(reference_dir / "writeup_points.csv")
+    t = scan(Points("seed", ref[["x", "y"]].to_numpy())).to_pandas()
+    assert t["outcome"].tolist() == ref["outcome"].tolist()
+    assert t["steps"].tolist() == ref["steps"].tolist()
+    assert t["contact_sequence"].tolist() == ref["contact_sequence"].tolist()
+    assert (t[["i", "j", "k"]] == -1).all().all()
+    # points 1-3 also lie on the red-sea grid at 21×21
+    g = scan(Grid("seed", "red-sea", 21), chunk=500).to_pandas().set_index(["x", "y"])
+    for r in ref.iloc[:3].itertuples():
+        row = g.loc[(r.x, r.y)]
+        assert (row.outcome, row.steps, row.contact_sequence) == (r.outcome, r.steps, r.contact_sequence)
+
+
+# -- invariance --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("threads, chunk", [(1, 441), (2, 441), (1, 7), (2, 64), (2, 1000)])
+def test_thread_count_and_chunk_size_invariance(home21, threads, chunk):
+    t = scan(HOME21, chunk=chunk, threads=threads)
+    assert _data(t).equals(_data(home21))
+
+
+# -- folders: resume, refusal ---------------------------------------------------------------------
+
+
+def test_resume_after_interruption(tmp_path, home21):
+    out = tmp_path / "scan"
+    r1 = scan(HOME21, out, chunk=50, max_chunks=3)
+    assert (r1.chunks_computed, r1.complete) == (3, False)
+    # a write killed half way leaves only a hidden temporary file
+    (out / ".part-000004.parquet.999-dead.tmp").write_bytes(b"PAR1 half a file")
+    partial = read_scan(out)
+    assert len(partial) == 150
+    assert (label_grid(out) == MISSING).sum() == 441 - 150
+    r2 = scan(HOME21, out, chunk=50)
+    assert (r2.chunks_skipped, r2.chunks_computed, r2.complete) == (3, 6, True)
+    assert not list(out.glob(".*.tmp"))
+    df = read_scan(out)
+    assert (df["ic_id"] == np.arange(441)).all()  # every IC exactly once
+    assert _data(df).equals(
+        _data(home21))
+    r3 = scan(HOME21, out, chunk=50)
+    assert (r3.chunks_skipped, r3.chunks_computed) == (9, 0)
+
+
+def test_resume_after_sigkill(tmp_path):
+    out = tmp_path / "killed"
+    args = ["scan", "--window", "0,1,0,1", "--res", "100", "--chunk", "250", "--threads", "1", "--out", str(out), "-q"]
+    proc = subprocess.Popen([sys.executable, "-m", "dicetrace.cli", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    t0 = time.time()
+    while len(list(out.glob("part-*.parquet"))) < 2 and proc.poll() is None and time.time() - t0 < 120:
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    n_before = len(list(out.glob("part-*.parquet")))
+    assert 0 < n_before < 40, "the kill should land mid-scan"
+    res = cli(*args)
+    assert res.returncode == 0, res.stderr
+    df = read_scan(out)
+    assert (df["ic_id"] == np.arange(100 * 100)).all()
+    want = scan(Grid("seed", ((0, 1), (0, 1)), 100), chunk=2500)
+    assert _data(df).equals(_data(want))
+
+
+def test_refuses_to_mix_definitions(tmp_path):
+    out = tmp_path / "s"
+    scan(Grid("seed", "home", 5), out, chunk=10)
+    with pytest.raises(ScanMismatchError, match="res"):
+        scan(Grid("seed", "home", 6), out, chunk=10)
+    with pytest.raises(ScanMismatchError, match="gamma"):
+        scan(Grid("seed", "home", 5), out, chunk=10, gamma=0.01)
+    with pytest.raises(ScanMismatchError, match="chunk"):
+        scan(Grid("seed", "home", 5), out, chunk=11)
+    with pytest.raises(ScanMismatchError, match="window"):
+        scan(Grid("seed", "zoom-out", 5), out, chunk=10)
+    assert len(read_scan(out)) == 25  # untouched
+    res = cli("scan", "--window", "party", "--res", "5", "--out", str(out))
+    assert res.returncode == 2
+    assert "holds a different scan" in res.stderr and "Traceback" not in res.stderr
+    other = tmp_path / "notascan"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(FileExistsError):
+        scan(Grid("seed", "home", 5), other)
+
+
+# -- Dask --------------------------------------------------------------------------------------------
+
+
+def test_dask_local_cluster_equals_local_run(tmp_path, home21):
+    pytest.importorskip("dask.distributed")
+    from dask.distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
+            Client(cluster) as client:
+        t = scan(HOME21, chunk=100, dask=client)
+        assert _data(t).equals(_data(home21))
+        r = scan(HOME21, tmp_path / "d", chunk=100, dask=client)
+        assert r.complete
+        by_address = scan(HOME21, chunk=150, dask=cluster.scheduler_address)  # --scheduler ADDRESS
+        assert _data(by_address).equals(_data(home21))
+    df = read_scan(tmp_path / "d")
+    assert _data(df).equals(
+        _data(home21))
+
+
+# -- reading back ---------------------------------------------------------------------------------------
+
+
+def test_label_grid_and_axes(tmp_path, home21):
+    out = tmp_path / "g"
+    scan(HOME21, out, chunk=200)
+    g = label_grid(out)
+    assert g.shape == (21, 21) and g.dtype == np.int8
+    xs, ys = grid_axes(out)
+    df = read_scan(out)
+    for r in df.sample(40, random_state=1).itertuples():
+        assert g[r.i, r.j] == r.outcome and xs[r.i] == r.x and ys[r.j] == r.y
+    np.testing.assert_array_equal(label_grid(df), g)
+    seqs = label_grid(out, "contact_sequence")
+    assert seqs.shape == (21, 21) and seqs[3, 4] == df.loc[3 * 21 + 4, "contact_sequence"]
+    steps = label_grid(df, "steps")
+    assert steps.dtype == np.int64 and steps[20, 20] == df["steps"].iloc[-1]
+
+
+def test_three_d_grid(tmp_path):
+    grid = Grid("seed3", ((0, 0.1), (0, 0.1), (0, 0.05)), (4, 3, 2))
+    out = tmp_path / "cube"
+    scan(grid, out, chunk=5)
+    g = label_grid(out)
+    assert g.shape == (4, 3, 2)
+    df = read_scan(out)
+    xs, ys, zs = grid_axes(out)
+    r = df.iloc[13]
+    assert (r.i, r.j, r.k) == np.unravel_index(13, (4, 3, 2))
+    roll = simulate(seed_slice(xs[r.i], ys[r.j], zs[r.k]))
+    assert (g[r.i, r.j, r.k], r.steps, r.contact_sequence) == (roll.outcome, roll.steps, roll.contact_sequence)
+
+
+def test_ic_at_reproduces_the_row_exactly(tmp_path):
+    out = tmp_path / "rs"
+    scan(Grid("seed", "red-sea", 21), out, chunk=200)
+    ic, cfg, row = ic_at(out, (1.65, 3.9))
+    assert (row["x"], row["y"]) == (1.65, 3.9)
+    roll = simulate(ic, config=cfg)
+    assert (roll.outcome, roll.steps, roll.contact_sequence) == (row["outcome"], row["steps"], row["contact_sequence"])
+    ic2, _, row2 = ic_at(out, (1.652, 3.898))  # nearest node
+    assert (row2["x"], row2["y"]) == (1.65, 3.9)
+    with pytest.raises(ValueError, match="no scanned IC near"):
+        ic_at(out, (5.0, 5.0))
+
+
+def test_physical_preset_gets_physical_L(tmp_path):
+    t = scan(Grid("seed", "home", 3), preset="physical").to_pandas()
+    ics = seed_slice(t["x"].to_numpy(), t["y"].to_numpy())
+    np.testing.assert_array_equal(t[["Lx", "Ly", "Lz"]].to_numpy(), -ics[:, 3:])
+    for r in t.itertuples():
+        roll = simulate([r.vx, r.vy, r.vz, r.Lx, r.Ly, r.Lz], preset="physical")
+        assert (roll.outcome, roll.steps, roll.contact_sequence) == (r.outcome, r.steps, r.contact_sequence)
+
+
+def test_sample_scan(tmp_path):
+    s = Sample("seed", ((0, 20), (0, 20)), 300, "sobol", seed=2)
+    out = tmp_path / "sobol"
+    scan(s, out, chunk=128)
+    df = read_scan(out)
+    assert (df["ic_id"] == np.arange(300)).all() and (df[["i", "j", "k"]] == -1).all().all()
+    coords = s.block(0, 300).coords
+    np.testing.assert_array_equal(df[["x", "y"]].to_numpy(), coords[:, :2])
+    with pytest.raises(ValueError, match="not a grid"):
+        label_grid(out)
+
+
+def test_metadata_and_manifest(tmp_path):
+    import pyarrow.parquet as pq
+
+    import dicetrace
+
+    out = tmp_path / "m"
+    scan(Grid("seed", "home", 4), out, chunk=10, gamma=0.01)
+    man = json.loads((out / MANIFEST).read_text())
+    assert man["dicetrace_version"] == dicetrace.__version__ and man["n_ics"] == 16 and man["n_chunks"] == 2
+    defn = ScanDefinition.from_dict(man["definition"])
+    assert defn.config.preset.gamma == 0.01 and defn.space == Grid("seed", "home", 4)
+    meta = json.loads(pq.read_schema(out / "part-000001.parquet").metadata[b"dicetrace"])
+    assert meta["scan"] == man["definition"] and meta["ic_range"] == [10, 16]
+    assert meta["dicetrace_version"] == dicetrace.__version__
+    assert len(pd.read_parquet(out)) == 16  # a plain Parquet dataset
+
+
+def test_png_and_rrd(tmp_path):
+    from rerun.chunk import RrdReader
+
+    from dicetrace.scan.maps import outcome_png, write_scan_rrd
+
+    out, png, rrd = tmp_path / "s", tmp_path / "map.png", tmp_path / "map.rrd"
+    scan(Grid("seed", "party", 9), out)
+    outcome_png(out, png)
+    write_scan_rrd(out, rrd)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    df = read_scan(out)
+    n = 0
+    for ch in RrdReader(str(rrd)).stream():
+        if ch.entity_path == "/scan/outcome":
+            batch = ch.to_record_batch()
+            n = len(batch.column(batch.schema.names.index("Points2D:positions"))[0])
+            label = str(batch.column(batch.schema.names.index("Points2D:labels"))[0][0])
+            r = {k: (float(v) if isinstance(v, np.floating) else v) for k, v in df.iloc[0].items()}
+            assert label.startswith(f"x={r['x']!r}, y={r['y']!r}: face {r['outcome']}, {r['steps']} steps")
+            ic = ", ".join(repr(r[k]) for k in ("vx", "vy", "vz"))
+            L = ", ".join(repr(r[k]) for k in ("Lx", "Ly", "Lz"))
+            assert f"U=({ic}) L=({L})" in label
+    assert n == 81
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--window", "atlantis", "--res", "5"], "unknown window"),
+        (["--window", "home"], "--res"),
+        (["--res", "5"], "--window"),
+        (["--slice", "seed3", "--window", "home", "--res", "5"], "z range"),
+        (["--slice", "nope", "--window", "home", "--res", "5"], "unknown slice"),
+        (["--window", "home", "--res", "5,5,5"], "--res needs 2"),
+        (["--sample", "sobol", "--box", "home"], "--n"),
+        (["--window", "home", "--res", "5", "--dask", "--scheduler", "tcp://x:1"], "not both"),
+        (["--window", "home", "--res", "5", "--set", "gama=0.01"], "--set needs NAME=VALUE"),
+    ],
+)
+def test_cli_bad_input(tmp_path, args, message, capsys, monkeypatch):
+    """One line on stderr and exit code 2 (run in-process: the same run_app as the console script)."""
+    from dicetrace.cli import app
+    from dicetrace.commands._common import run_app
+
+    monkeypatch.setattr(sys, "argv", ["dicetrace", "scan", *args, "--out", str(tmp_path / "x")])
+    with pytest.raises(SystemExit) as exc:
+        run_app(app)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
