@@ -16,6 +16,7 @@ ics = st.tuples(speed, speed, speed, spin, spin, spin).map(np.array)
 @settings(max_examples=30, deadline=None)
 @given(ics)
 @example(np.zeros(6))
+@example(np.array([0.0, 0.0, 98.76, 98.76, 98.76, 0.0]))  # balances: 60 000-step time cap
 def test_every_throw_ends_well_formed(ic):
     roll = simulate(ic, record=Record(states=True, energy=False))
     assert roll.status in ("settled", "time_cap")
@@ -24,11 +25,14 @@ def test_every_throw_ends_well_formed(ic):
     else:
         assert roll.outcome == -1
     assert roll.t_settle_s == roll.steps * roll.dt_s
-    # the orientation stays a rotation (exact Rodrigues steps): |q| = 1
+    # the orientation stays a rotation (exact Rodrigues steps): |q| = 1.
+    # Rounding accumulates like a random walk at worst linearly: 1.2e-12 was
+    # measured after a 60 000-step time-capped throw; allow 1e-13 + 5e-17/step.
+    tol = 1e-13 + 5e-17 * roll.steps
     q = roll.trace.quat_xyzw
-    assert np.abs(np.linalg.norm(q, axis=1) - 1).max() < 1e-12
+    assert np.abs(np.linalg.norm(q, axis=1) - 1).max() < tol
     rot = roll.trace.rotation[-1]
-    assert np.abs(rot @ rot.T - np.eye(3)).max() < 1e-12
+    assert np.abs(rot @ rot.T - np.eye(3)).max() < tol
     # the sequence starts empty, never repeats a set twice in a row, and is
     # what the extraction gives on the trace's own heights
     sets = roll.contact_sets
