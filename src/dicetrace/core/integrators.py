@@ -20,6 +20,7 @@ from dicetrace.core.model import (
     node_velocities,
     rotation_matrix,
 )
+from dicetrace.core.schemes import step_scheme
 
 SEMI_IMPLICIT_EULER = 0
 FORWARD_EULER = 1
@@ -28,7 +29,7 @@ RK4 = 3
 CONTACT_SUBSTEP = 4
 
 #: Integrator ids compiled into `step` (the Python layer refuses others).
-IMPLEMENTED = {SEMI_IMPLICIT_EULER, FORWARD_EULER}
+IMPLEMENTED = {SEMI_IMPLICIT_EULER, FORWARD_EULER, VERLET, RK4, CONTACT_SUBSTEP}
 
 
 @jit
@@ -172,5 +173,9 @@ def step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact):
         return step_semi_implicit(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
     elif integ == FORWARD_EULER:
         return step_forward_euler(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
+    elif integ == VERLET or integ == RK4 or integ == CONTACT_SUBSTEP:
+        # out of line (core.schemes): keeps this dispatch small enough for
+        # LLVM to inline the program's step into the loop
+        return step_scheme(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
     # Integrators not compiled in: signal with an impossible mask (caller maps to error).
     return False, -1

@@ -1,0 +1,94 @@
+"""``dicetrace accuracy``: the work-precision study (quick size) and its pieces."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from dicetrace import accuracy as acc
+
+
+def test_quick_study_cli_runs_under_a_minute(tmp_path):
+    t0 = time.perf_counter()
+    res = subprocess.run(
+        [sys.executable, "-m", "dicetrace.cli", "accuracy", "--quick", "--quiet", "--out", str(tmp_path)],
+        capture_output=True, text=True, timeout=600,
+    )
+    elapsed = time.perf_counter() - t0
+    assert res.returncode == 0, res.stderr
+    for name in ("study.csv", "orders.csv", "reference.csv", "work_precision.png", "summary.md"):
+        assert (tmp_path / name).stat().st_size > 0
+    with open(tmp_path / "study.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == list(acc.STUDY_COLUMNS)
+    # every preset × integrator × dt of the quick grid
+    assert len(rows) == 2 * sum(len(v) for v in acc.QUICK_DT_GRID.values())
+    for r in rows:
+        assert 0.0 <= float(r["outcome_agreement"]) <= 1.0
+        assert float(r["cpu_ms_per_ic"]) > 0
+        for rel in ("1e-12", "1e-09", "1e-06"):
+            assert 0.0 <= float(r[f"chaos_floor_{rel}"]) <= 1.0
+    text = (tmp_path / "summary.md").read_text()
+    assert "Best method for a time budget" in text and "chaos floor" in text.lower()
+    # compile time aside (the kernels are cached by the rest of the suite), well under a minute
+    assert elapsed < 120
+
+
+def test_bad_input_is_one_line_exit_2(tmp_path):
+    for args in (["--window", "nowhere"], ["--n", "1"], ["--integrator", "euler"], ["--presets", "seed,x"]):
+        res = subprocess.run(
+            [sys.executable, "-m", "dicetrace.cli", "accuracy", *args, "--out", str(tmp_path)],
+            capture_output=True, text=True, timeout=300,
+        )
+        assert res.returncode == 2, (args, res.stderr)
+        assert res.stderr.startswith("dicetrace: error:") and res.stderr.count("\n") == 1
+
+
+def test_sample_is_seeded_and_in_the_window():
+    a = acc.sample_ics("red-sea", 50, seed=3)
+    b = acc.sample_ics("red-sea", 50, seed=3)
+    np.testing.assert_array_equal(a, b)
+    from dicetrace.ics import SEED_SLICE
+
+    # the slice is affine: recover coordinates from U (2 directions, least squares)
+    d = np.array(SEED_SLICE.directions)[:, :3].T
+    xy = np.linalg.lstsq(d, a[:, :3].T, rcond=None)[0].T
+    assert np.all((xy[:, 0] >= 1.0 - 1e-9) & (xy[:, 0] <= 2.0 + 1e-9))
+    assert np.all((xy[:, 1] >= 3.5 - 1e-9) & (xy[:, 1] <= 4.5 + 1e-9))
+
+
+def test_perturbation_has_the_stated_relative_size():
+    ics = acc.sample_ics("zoom-out", 20, seed=0)
+    for rel in acc.PERTURBATIONS:
+        p = acc.perturb(ics, rel, seed=0)
+        r = np.linalg.norm(p - ics, axis=1) / np.linalg.norm(ics, axis=1)
+        np.testing.assert_allclose(r, rel, rtol=1e-3)  # rounding of the sum at 1e-12
+
+
+def test_fit_order_on_synthetic_errors():
+    dts = np.array([1e-3, 5e-4, 2.5e-4, 1.25e-4])
+    assert acc.fit_order(dts, 3.0 * dts**2) == pytest.approx(2.0)
+    # a rounding floor and an unresolved point are left out
+    errs = np.array([0.9, 2e-6, 1.25e-7, 1e-14])
+    assert acc.fit_order(dts, errs) == pytest.approx(4.0)
+    assert np.isnan(acc.fit_order(dts[:1], errs[:1]))
+
+
+def test_horizon_is_on_every_grid():
+    h = acc.first_impact_horizon(0.1713)
+    assert h >= 0.1713 + acc.FIRST_IMPACT_AFTER_S
+    for dts in list(acc.DT_GRID.values()) + list(acc.QUICK_DT_GRID.values()) + [[acc.REFERENCE.dt_s, acc.REFERENCE.check_dt_s]]:
+        for dt in dts:
+            n = h / dt
+            assert abs(n - round(n)) < 1e-9
+
+
+def test_agreement_counts_unsettled_as_disagreement():
+    ref = acc.Runs(np.array([1, 2, 3]), np.array(["settled"] * 3), np.zeros(3), np.zeros(3, int), np.zeros(3))
+    run = acc.Runs(np.array([1, 2, -1]), np.array(["settled", "settled", "blow_up"]), np.zeros(3), np.zeros(3, int), np.zeros(3))
+    assert acc.agreement(run, ref) == pytest.approx(2 / 3)

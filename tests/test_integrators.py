@@ -1,0 +1,265 @@
+"""Every integrator against analytic answers: convergence orders, the bouncing node, rigidity.
+
+The order tests step the real kernels (``core.integrators.step``) with a
+small driver that, unlike the program's loop, evaluates the forces at the
+initial state (the loop starts with zero forces, which would spoil the order
+of a segment that starts in contact).  The "single node" is the die dropped
+flat with zero spin: its four bottom corners touch the ground together and
+move as one node of mass 2 on a spring k (ω² = 4k/8 = k/2), with gravity and
+friction off where a closed form is wanted.
+
+Errors are regressed on log2(h) as in diffrax's ``test_ode_order``; each
+integrator must reach its declared order (``params.INTEGRATOR_ORDER``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+from scipy.spatial.transform import Rotation
+
+from dicetrace.core.integrators import IMPLEMENTED, step
+from dicetrace.core.model import init_offsets
+from dicetrace.core.schemes import finish
+from dicetrace.params import INTEGRATOR_ORDER, INTEGRATORS, Config, Numerics, Preset
+
+ALL = tuple(INTEGRATORS)
+
+
+@numba.njit(cache=False)
+def _drive(integ, kp, h, nstep, X, U, L, off, zmin, zmax):
+    """Step ``nstep`` times from (X, U, L, off) in place; track each node's height range."""
+    W = L / kp.inertia
+    F = np.zeros((8, 3))
+    uk = np.zeros((8, 3))
+    z = np.zeros(8)
+    P = np.zeros(8)
+    R = np.zeros((3, 3))
+    Rh = np.array([-1.0, 0.0])
+    contact, mask = finish(X, U, W, off, kp, F, uk, z, P)
+    for _ in range(nstep):
+        contact, mask = step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
+        if mask < 0:
+            return False
+        for k in range(8):
+            zmin[k] = min(zmin[k], z[k])
+            zmax[k] = max(zmax[k], z[k])
+    return True
+
+
+def kparams(substeps: int = 8, **preset):
+    return Config(preset=Preset(name="test", **preset), numerics=Numerics(substeps=substeps)).kernel_params()
+
+
+def run(integ, kp, h, t_end, X0, U0, L0):
+    """State after t_end (a multiple of h): X, U, L, offsets, node z ranges."""
+    X = np.array(X0, float)
+    U = np.array(U0, float)
+    L = np.array(L0, float)
+    off = np.empty((8, 3))
+    init_offsets(kp.half, off)
+    zmin = np.full(8, np.inf)
+    zmax = np.full(8, -np.inf)
+    n = int(round(t_end / h))
+    assert abs(n * h - t_end) < 1e-12 * t_end
+    assert _drive(INTEGRATORS[integ], kp, h, n, X, U, L, off, zmin, zmax)
+    return X, U, L, off, zmin, zmax
+
+
+def slopes(hs, errs):
+    """Local slopes of log2(err) against log2(h) between consecutive steps."""
+    return np.diff(np.log2(errs)) / np.diff(np.log2(hs))
+
+
+def test_every_integrator_is_compiled_in():
+    assert set(INTEGRATORS.values()) <= IMPLEMENTED
+    assert INTEGRATOR_ORDER == {
+        "semi-implicit-euler": 1,
+        "forward-euler": 1,
+        "verlet": 2,
+        "rk4": 4,
+        "contact-substep": 4,
+    }
+
+
+# -- free flight: parabola and exact rotation ---------------------------------------------------
+
+
+@pytest.mark.parametrize("integ", ALL)
+def test_free_flight_order(integ):
+    """Free flight: X = X0 + U0·t + g·t²/2, offsets turned by ω·t (ω = −L_program/I).
+
+    Verlet, RK4 and contact-substep are exact here (quadratic in t, constant
+    ω); the Euler schemes are first order (their position lags by g·h·t/2).
+    """
+    kp = kparams()
+    T = 0.125
+    U0, L0 = np.array([30.0, -20.0, 50.0]), np.array([80.0, -60.0, 120.0])
+    x_exact = np.array([0.0, 0.0, 15.0]) + U0 * T + np.array([0.0, 0.0, 0.5 * kp.g * T * T])
+    u_exact = U0 + np.array([0.0, 0.0, kp.g * T])
+    off_exact = np.empty((8, 3))
+    init_offsets(1.0, off_exact)
+    off_exact = Rotation.from_rotvec(-L0 / kp.inertia * T).apply(off_exact)
+    hs = T / 2.0 ** np.arange(4, 10)
+    errs = []
+    for h in hs:
+        X, U, L, off, zmin, _ = run(integ, kp, h, T, [0, 0, 15.0], U0, L0)
+        assert zmin.min() > 0  # no contact: a free-flight segment
+        errs.append(max(np.abs(X - x_exact).max(), np.abs(U - u_exact).max() / 100, np.abs(off - off_exact).max()))
+    errs = np.array(errs)
+    if INTEGRATOR_ORDER[integ] == 1:
+        assert np.all(np.abs(slopes(hs, errs) - 1.0) < 0.05), errs
+    else:
+        assert errs.max() < 1e-12, errs  # exact to rounding
+
+
+# -- the single undamped node on the penalty spring ------------------------------------------------
+
+T_CONTACT = 2.0**-6  # contact duration π/ω of the bounce test, s
+K_BOUNCE = 2.0 * (math.pi / T_CONTACT) ** 2  # so that ω = √(k/2) = π / T_CONTACT
+
+
+@pytest.mark.parametrize("integ", ALL)
+def test_undamped_bounce_order(integ):
+    """Die dropped flat at 100 cm/s onto an undamped, frictionless spring, no gravity.
+
+    Exact: contact from t = 0 to π/ω = T_CONTACT (both on the step grid),
+    exit speed = entry speed, then free flight: at 2·T_CONTACT the die is at
+    z = half + v·T_CONTACT moving up at v.  The exit/entry speed ratio → 1 and
+    the height error both converge at (at least) the integrator's order.
+    """
+    kp = kparams(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
+    v = 100.0
+    j = np.arange(3, 9) if integ != "contact-substep" else np.arange(0, 5)
+    hs = T_CONTACT / 2.0**j
+    ratio_err, z_err = [], []
+    for h in hs:
+        X, U, L, off, zmin, zmax = run(integ, kp, h, 2 * T_CONTACT, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+        assert zmin[[0, 2, 4, 6]].max() < 0 and zmax[[1, 3, 5, 7]].min() > 0  # the four bottom nodes bounced
+        ratio_err.append(abs(U[2] / v - 1.0))
+        z_err.append(abs(X[2] - (1.0 + v * T_CONTACT)))
+    order = INTEGRATOR_ORDER[integ]
+    for errs in (np.array(ratio_err), np.array(z_err)):
+        keep = errs > 1e-13  # above rounding
+        s = slopes(hs[keep], errs[keep])
+        assert len(s) >= 3 and np.all(s[-3:] > order - 0.15), (errs, s)
+    assert ratio_err[-1] < {1: 0.05, 2: 1e-6, 4: 1e-9}[order]
+
+
+# -- the damped node: restitution -------------------------------------------------------------------
+
+
+def restitution_exact(gamma: float, v: float) -> float:
+    """Exit/entry speed ratio of d'' = −ω²·d·(1 + γ·d'), d the penetration, d'(0) = v.
+
+    The program's normal force P = k·d·(1 − γ·u_z) with u_z = −d' (Hunt–Crossley
+    damping, proportional to the force).  With w = d': w·dw/dd = −ω²·d·(1 + γw),
+    so ∫ w/(1 + γw) dw = −ω² ∫ d dd, i.e. w/γ − ln(1 + γw)/γ² + ω²d²/2 is
+    conserved.  At entry and exit d = 0, so a = γv and b = γ·w_exit satisfy
+    b − ln(1 + b) = a − ln(1 + a) with −1 < b < 0, and e = −b/a.  ω (hence k)
+    drops out: the restitution depends on γ·v only.  (Cf. K. H. Hunt and
+    F. R. E. Crossley, J. Appl. Mech. 42 (1975) 440; the same first integral
+    appears in Marhefka & Orin, IEEE Trans. SMC-A 29 (1999) 566.)
+    """
+    a = gamma * v
+    c = a - math.log1p(a)
+    b = brentq(lambda b: b - math.log1p(b) - c, -1.0 + 1e-15, -1e-15, xtol=1e-17, rtol=1e-15)
+    return -b / a
+
+
+def test_restitution_formula_sanity():
+    # small damping: e ≈ 1 − (2/3)·γv (expand b − ln(1+b) to third order)
+    assert restitution_exact(1e-4, 1.0) == pytest.approx(1 - 2 / 3 * 1e-4, rel=1e-7)
+    assert 0.74 < restitution_exact(0.005, 100.0) < 0.76
+
+
+@pytest.mark.parametrize("integ", ALL)
+def test_damped_restitution_converges(integ):
+    """Restitution of the damped flat drop → the exact value, the same for k = 5e5 and 5e6."""
+    gamma, v = 0.005, 100.0
+    e_exact = restitution_exact(gamma, v)
+    first = {"forward-euler": 6, "semi-implicit-euler": 3, "verlet": 3, "rk4": 3, "contact-substep": 0}[integ]
+    for k in (5e5, 5e6):
+        kp = kparams(k=k, gamma=gamma, mu=0.0, g=0.0)
+        tc = math.pi / math.sqrt(k / 2.0)
+        errs = []
+        for j in range(first, first + 5):
+            h = tc / 2.0**j
+            X, U, L, off, zmin, _ = run(integ, kp, h, 3 * tc, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+            assert zmin.min() < 0
+            errs.append(abs(U[2] / v - e_exact))
+        tol = {"forward-euler": 0.01, "semi-implicit-euler": 2e-3, "verlet": 2e-4, "rk4": 1e-4, "contact-substep": 1e-8}
+        assert errs[-1] < tol[integ], errs
+        assert errs[-1] < 0.2 * errs[0] or errs[-1] < 1e-12, errs
+
+
+def test_contact_substep_restitution_independent_of_k():
+    gamma, v = 0.005, 100.0
+    out = []
+    for k in (5e5, 5e6, 5e7):
+        kp = kparams(k=k, gamma=gamma, mu=0.0, g=0.0)
+        tc = math.pi / math.sqrt(k / 2.0)
+        X, U, *_ = run("contact-substep", kp, tc / 16, 3 * tc, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+        out.append(U[2] / v)
+    assert np.ptp(out) < 1e-9 and out[0] == pytest.approx(restitution_exact(gamma, v), abs=1e-8)
+
+
+# -- a smooth contact segment with torques: the Lie-group order ------------------------------------
+
+
+@pytest.mark.parametrize("integ", ALL)
+def test_smooth_contact_order(integ):
+    """Die resting on its four bottom corners, sliding, spinning and rocking for 1/32 s.
+
+    All four corners stay below the ground and the other four above, the
+    per-node friction is regularised (v_reg = 10 cm/s) and the normal force
+    stays positive: the right-hand side is smooth, with friction torques
+    about every axis.  Error against RK4 at h = T/2¹³ (for RK4 itself,
+    against contact-substep at the same fine sub-step, an independent code
+    path): Lie-group RK4 must show order 4, Verlet 2, the Euler schemes 1.
+    """
+    kp = kparams(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
+    d_eq = 8 * 980.0 / (4 * kp.k)
+    T = 2.0**-5
+    X0, U0, L0 = [0, 0, 1 - d_eq], [3.0, -2.0, 0.3], [0.8, -0.6, 12.0]
+    ref_integ = "rk4" if integ != "rk4" else "contact-substep"
+    ref_h = T / 2**13 if ref_integ == "rk4" else T / 2**10
+    Xr, Ur, Lr, offr, *_ = run(ref_integ, kp, ref_h, T, X0, U0, L0)
+    j = np.arange(7, 11) if integ == "forward-euler" else np.arange(5, 9)
+    if integ == "contact-substep":
+        j = np.arange(3, 7)
+    hs = T / 2.0**j
+    errs = []
+    for h in hs:
+        X, U, L, off, zmin, zmax = run(integ, kp, h, T, X0, U0, L0)
+        assert zmax[[0, 2, 4, 6]].max() < 0 and zmin[[1, 3, 5, 7]].min() > 0
+        errs.append(max(np.abs(X - Xr).max(), np.abs(U - Ur).max() / 100, np.abs(L - Lr).max() / 100, np.abs(off - offr).max()))
+    s = slopes(hs, np.array(errs))
+    order = INTEGRATOR_ORDER[integ]
+    lo = 0.8 if integ == "forward-euler" else order - 0.2
+    assert np.all(s[-2:] > lo) and np.all(s[-2:] < order + 0.6), (errs, s)
+
+
+# -- rigidity ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("preset", ["seed", "physical"])
+@pytest.mark.parametrize("integ", ALL)
+def test_rigidity(integ, preset):
+    """The offsets stay a rigid cube (all pairwise distances, to 1e-10 cm) on a whole throw."""
+    from dicetrace.ics import seed_slice
+    from dicetrace.simulate import Record, simulate
+
+    ic = seed_slice(1.65, 3.9)
+    if preset == "physical":
+        ic = ic * np.array([1, 1, 1, -1, -1, -1])
+    r = simulate(ic, preset=preset, integrator=integ, dt_s=1e-3, t_max_s=5.0, record=Record(states=True, energy=False))
+    off = r.trace.node_offsets
+    gram0 = off[0] @ off[0].T
+    gram = np.einsum("nki,nli->nkl", off, off)
+    assert np.abs(gram - gram0).max() < 1e-10
+    assert r.steps > 100
