@@ -21,7 +21,7 @@ INTEGRATORS: dict[str, int] = {
     "forward-euler": 1,  # what the writeup claims it used
     "verlet": 2,  # velocity Verlet
     "rk4": 3,  # classical Runge-Kutta on the Lie group (commutator-free)
-    "contact-substep": 4,  # semi-implicit Euler, sub-stepped while in contact
+    "contact-substep": 4,  # contact-aware RK4: exact free flight, kink-aligned sub-steps in contact
 }
 
 #: Classical order of accuracy of each integrator on smooth segments.
@@ -30,8 +30,11 @@ INTEGRATOR_ORDER: dict[str, int] = {
     "forward-euler": 1,
     "verlet": 2,
     "rk4": 4,
-    "contact-substep": 1,
+    "contact-substep": 4,
 }
+
+#: Default friction regularisation speed of the per-node law, cm/s (see Preset).
+V_REG_CM_S = 10.0
 
 FRICTION_SPECTRAL = 0  # the program: −μ·P_k·u_xy,k / σ(all nodes' u_xy)
 FRICTION_PER_NODE = 1  # physical: −μ·max(P_k,0)·u_xy,k / sqrt(|u_xy,k|² + v_reg²)
@@ -92,10 +95,20 @@ class Preset:
     energy
         ``"point-mass"`` (the program's stop-test energy) or ``"rigid"``.
     v_reg_cm_s
-        Friction regularisation speed for ``"per-node"`` friction, cm/s.
+        Friction regularisation speed for ``"per-node"`` friction, cm/s:
+        F_xy = −μ·P·u_xy / sqrt(|u_xy|² + v_reg²), Coulomb's law above a few
+        v_reg, viscous below.  Default 10 cm/s (:data:`V_REG_CM_S`): impact
+        slip speeds are 10²–10³ cm/s, so friction there is ≥ 98 % of
+        Coulomb's; at 1 cm/s the law is so stiff while a corner sticks that
+        outcomes do not converge at any affordable step (analysis/accuracy).
     l_convention
         ``"program"``: an IC's L is the program's (−physical) angular momentum;
         ``"physical"``: it is the physical one.
+    integrator
+        The integrator used when none is named (``seed``: the program's
+        semi-implicit Euler; ``physical``: ``contact-substep``, because its
+        per-node friction is too stiff for an explicit 1 ms step — semi-implicit
+        Euler blows up on a third of throws there, see analysis/accuracy).
     """
 
     name: str = "seed"
@@ -108,8 +121,9 @@ class Preset:
     friction: str = "spectral"
     clamp_normal: bool = False
     energy: str = "point-mass"
-    v_reg_cm_s: float = 1e-3
+    v_reg_cm_s: float = V_REG_CM_S
     l_convention: str = "program"
+    integrator: str = "semi-implicit-euler"
 
     def __post_init__(self) -> None:
         for name in ("k", "gamma", "mu", "g", "half_side_cm", "z0_cm", "v_reg_cm_s"):
@@ -130,6 +144,8 @@ class Preset:
             raise ValueError(f"preset {self.name!r}: energy must be 'point-mass' or 'rigid', got {self.energy!r}")
         if self.l_convention not in ("program", "physical"):
             raise ValueError(f"preset {self.name!r}: l_convention must be 'program' or 'physical'")
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"preset {self.name!r}: unknown integrator {self.integrator!r}")
 
     @property
     def node_mass(self) -> float:
@@ -160,12 +176,17 @@ class Preset:
 
 PRESETS: dict[str, Preset] = {
     "seed": Preset(name="seed"),
+    # The program's slips corrected (DESIGN.md section 3): normal force clamped
+    # at zero, Coulomb friction per node on that clamped force (regularised
+    # by v_reg), energy with the dynamics' inertia, physical sign of L.
     "physical": Preset(
         name="physical",
         friction="per-node",
         clamp_normal=True,
         energy="rigid",
+        v_reg_cm_s=V_REG_CM_S,
         l_convention="physical",
+        integrator="contact-substep",
     ),
 }
 
@@ -191,7 +212,11 @@ class Numerics:
         Time cap, s of simulated time; a run that has not settled by then ends
         with status ``time_cap`` and no outcome.
     substeps
-        Sub-steps per step while a node is in contact (``contact-substep`` only).
+        ``contact-substep`` only: near the ground its RK4 sub-steps are at
+        most dt / substeps long (shorter where the friction law is stiff, and
+        cut where a node enters or leaves the ground).  dt itself then sets
+        only the free-flight step and the output granularity (contact sets,
+        stop test, settle time).
     """
 
     integrator: str = "semi-implicit-euler"
@@ -224,6 +249,116 @@ class Numerics:
     @property
     def order(self) -> int:
         return INTEGRATOR_ORDER[self.integrator]
+
+
+# -- automatic time step (``dt = "auto"``) ----------------------------------------------------
+
+#: Linear stability bound of ω·dt on the undamped penalty spring (ω = √k per
+#: unit mass, DESIGN.md section 7): semi-implicit Euler and Verlet 2, RK4 2√2
+#: (its interval on the imaginary axis).  Forward Euler has none: it
+#: amplifies every oscillation by √(1 + ω²dt²) per step.  ``contact-substep``
+#: applies RK4's bound to its sub-steps (dt / substeps).
+STABILITY_BOUND: dict[str, float] = {
+    "semi-implicit-euler": 2.0,
+    "forward-euler": 0.0,
+    "verlet": 2.0,
+    "rk4": 2.0 * math.sqrt(2.0),
+    "contact-substep": 2.0 * math.sqrt(2.0),
+}
+#: ``dt = "auto"`` keeps the stiffest rate times dt below this fraction of the bound.
+AUTO_DT_SAFETY = 0.5
+#: Forward Euler: energy gain allowed per contact (a contact lasts π/ω, gain ≈ e^{π·ω·dt/2} − 1).
+AUTO_DT_FE_GAIN = 0.01
+#: ``dt = "auto"`` never picks a step above this (the program's dt), s.
+AUTO_DT_MAX_S = 1e-3
+#: ``dt = "auto"`` refuses when the time cap would take more steps than this.
+AUTO_DT_MAX_STEPS = 20_000_000
+#: Inverse effective mass of a corner along the ground, at most 1/8 + 3·3/16 per node mass.
+_INV_MASS_NODE = 11.0 / 16.0
+#: Speed added to the drop speed when ``dt = "auto"`` is not told the ICs, cm/s.
+AUTO_DT_DEFAULT_THROW_CM_S = 300.0
+
+
+def impact_speed_cm_s(ics, preset: "Preset") -> float:
+    """Bound on any node's speed at the first impact over ICs (m, 6) or one IC, cm/s.
+
+    Free flight conserves energy: a node moves at most at |U| + |ω|·√3·half,
+    and the fall to the ground adds √(2·|g|·(z0 − half))·... (bounded by
+    adding the drop speed).  ω = |L| / I (either sign convention).
+    """
+    import numpy as np
+
+    a = np.atleast_2d(np.asarray(ics, dtype=float))
+    u = np.linalg.norm(a[:, :3], axis=1)
+    w = np.linalg.norm(a[:, 3:6], axis=1) / preset.inertia
+    drop = math.sqrt(max(0.0, 2.0 * abs(preset.g) * max(preset.z0_cm - preset.half_side_cm, 0.0)))
+    return float(np.max(u + w * math.sqrt(3.0) * preset.half_side_cm)) + drop
+
+
+def stiff_rates(preset: "Preset", v_impact_cm_s: float) -> tuple[float, float]:
+    """(spring rate, friction rate), 1/s, for impacts at ``v_impact_cm_s``.
+
+    Spring: √k·(1 + γ·v) (the damping P = k·d·(1 − γ·u_z) adds k·γ·d with
+    d ≲ v/√k).  Friction (per-node law only): μ·P/(m_eff·v_reg) with the peak
+    normal force P ≈ √k·v·(1 + γ·v): the rate of the regularised law where a
+    corner sticks at the peak of an impact.
+    """
+    w = math.sqrt(preset.k)
+    v = max(float(v_impact_cm_s), 0.0)
+    spring = w * (1.0 + preset.gamma * v)
+    fric = 0.0
+    if preset.friction == "per-node":
+        fric = preset.mu * _INV_MASS_NODE * w * v * (1.0 + preset.gamma * v) / preset.v_reg_cm_s
+    return spring, fric
+
+
+def auto_dt(
+    preset: "Preset",
+    integrator: str,
+    *,
+    v_impact_cm_s: float | None = None,
+    t_max_s: float = 60.0,
+    substeps: int = 8,
+) -> float:
+    """The time step ``dt = "auto"`` picks, s, or ValueError (one line) when none fits.
+
+    dt keeps the spring's rate λ (with damping, :func:`stiff_rates`) at
+    ``AUTO_DT_SAFETY`` of the integrator's bound (:data:`STABILITY_BOUND`):
+    dt = safety·bound/λ, per sub-step for ``contact-substep``.  The stick
+    rate of the per-node friction law is left out: the friction force is
+    bounded by μ·P, so an unresolved stick chatters by ~dt·μ·P/m but does not
+    grow (the stability map in analysis/accuracy checks this), and
+    ``contact-substep`` resolves it adaptively.  Forward Euler gets ω·dt = 2·gain/π
+    (energy gain ``AUTO_DT_FE_GAIN`` per contact).  Never above
+    ``AUTO_DT_MAX_S``.  Refuses when t_max_s/dt exceeds ``AUTO_DT_MAX_STEPS``.
+
+    Parameters
+    ----------
+    v_impact_cm_s
+        Largest node speed at impact, cm/s (see :func:`impact_speed_cm_s`);
+        None: the drop speed from z0 plus ``AUTO_DT_DEFAULT_THROW_CM_S``.
+    """
+    if integrator not in INTEGRATORS:
+        raise ValueError(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+    if v_impact_cm_s is None:
+        drop = math.sqrt(max(0.0, 2.0 * abs(preset.g) * max(preset.z0_cm - preset.half_side_cm, 0.0)))
+        v_impact_cm_s = drop + AUTO_DT_DEFAULT_THROW_CM_S
+    spring, _ = stiff_rates(preset, v_impact_cm_s)
+    if integrator == "forward-euler":
+        dt = 2.0 * AUTO_DT_FE_GAIN / math.pi / spring
+    elif integrator == "contact-substep":
+        dt = substeps * AUTO_DT_SAFETY * STABILITY_BOUND[integrator] / spring
+    else:
+        dt = AUTO_DT_SAFETY * STABILITY_BOUND[integrator] / spring
+    dt = min(dt, AUTO_DT_MAX_S)
+    steps = t_max_s / dt
+    if steps > AUTO_DT_MAX_STEPS:
+        raise ValueError(
+            f"dt auto: {integrator} needs dt <= {dt:.3g} s at k = {preset.k:g} and impact speed "
+            f"{v_impact_cm_s:.0f} cm/s, {steps:.3g} steps for a {t_max_s:g} s time cap "
+            f"(budget {AUTO_DT_MAX_STEPS:.3g}): use contact-substep, a smaller k or a shorter time cap"
+        )
+    return dt
 
 
 # Blow-up test on the energy the dynamics conserve (see core.model.energy_dynamic):
@@ -274,20 +409,33 @@ def make_config(
     preset: str | Preset = "seed",
     *,
     integrator: str | None = None,
-    dt_s: float | None = None,
+    dt_s: float | str | None = None,
     t_max_s: float | None = None,
+    v_impact_cm_s: float | None = None,
     **overrides,
 ) -> Config:
     """Build a :class:`Config` from a preset name and optional overrides.
 
     ``overrides`` are :class:`Preset` fields (``k``, ``gamma``, ``mu``, ...).
+    ``dt_s="auto"`` picks the step with :func:`auto_dt` for impacts at
+    ``v_impact_cm_s`` (cm/s; see :func:`impact_speed_cm_s`), or raises
+    ValueError when no step fits the budget.
     """
     p = get_preset(preset) if isinstance(preset, str) else preset
     if overrides:
         p = p.with_(**overrides)
-    kw = {}
-    if integrator is not None:
-        kw["integrator"] = integrator
+    kw = {"integrator": p.integrator if integrator is None else integrator}
+    integrator = kw["integrator"]
+    if isinstance(dt_s, str):
+        if dt_s.strip().lower() != "auto":
+            raise ValueError(f"time step dt must be a number > 0 or 'auto', got {dt_s!r}")
+        dt_s = auto_dt(
+            p,
+            integrator,
+            v_impact_cm_s=v_impact_cm_s,
+            t_max_s=Numerics.t_max_s if t_max_s is None else t_max_s,
+            substeps=Numerics.substeps,
+        )
     if dt_s is not None:
         kw["dt_s"] = dt_s
     if t_max_s is not None:

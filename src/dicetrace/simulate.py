@@ -14,7 +14,7 @@ import numpy as np
 
 from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
-from dicetrace.core.model import BUFFER_FULL, NODE_SIGNS
+from dicetrace.core.model import BUFFER_FULL, NODE_SIGNS, NON_FINITE
 from dicetrace.ics import validate_ic, validate_ics
 from dicetrace.params import Config, make_config
 
@@ -298,7 +298,10 @@ def simulate(
         tr_force = np.zeros((rows if record.forces else 0, FORCE_COLS))
         tr_energy = np.zeros((rows if record.energy else 0, ENERGY_COLS))
         run_roll(kic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
-        trace = _make_trace(n, cfg, tr_state, tr_force, tr_energy, record)
+        if status == NON_FINITE:  # the last step's state is not finite: keep the rows before it
+            rows = n
+            tr_state, tr_force, tr_energy = tr_state[:rows], tr_force[:rows], tr_energy[:rows]
+        trace = _make_trace(rows - 1, cfg, tr_state, tr_force, tr_energy, record)
     dt = cfg.numerics.dt_s
     return Roll(
         ic=ic,

@@ -17,6 +17,7 @@ ics = st.tuples(speed, speed, speed, spin, spin, spin).map(np.array)
 @given(ics)
 @example(np.zeros(6))
 @example(np.array([0.0, 0.0, 98.76, 98.76, 98.76, 0.0]))  # balances: 60 000-step time cap
+@example(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 3.7292051400518594e-293]))  # |ω|² underflows
 def test_every_throw_ends_well_formed(ic):
     roll = simulate(ic, record=Record(states=True, energy=False))
     assert roll.status in ("settled", "time_cap")

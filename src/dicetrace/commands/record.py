@@ -146,8 +146,11 @@ def register(app: typer.Typer) -> None:
             conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
         else:
-            cfg = build_config(preset or "seed", integrator, dt, t_max)
+            auto = dt is not None and dt.strip().lower() == "auto"
+            cfg = build_config(preset or "seed", integrator, None if auto else dt, t_max)
             the_ic, coords, desc = ic_from_options(ic, slice_name, at, cfg)
+            if auto:  # the step depends on this throw's impact speed
+                cfg = build_config(preset or "seed", integrator, dt, t_max, ics=the_ic)
         name = default_name(the_ic, coords, desc, cfg)
         if out is None:
             out = DEFAULT_FOLDER / f"{name}.rrd"

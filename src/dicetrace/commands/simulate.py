@@ -43,7 +43,7 @@ SLICE_HELP = (
 AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
 PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
 INTEGRATOR_HELP = "Integrator (default: the preset's, semi-implicit-euler)."
-DT_HELP = "Time step, s (default 0.001)."
+DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
 
 
@@ -63,18 +63,28 @@ def parse_positive(text: str | None, option: str, what: str) -> float | None:
     return v
 
 
-def build_config(preset: str, integrator: str | None, dt: str | None, t_max: str | None):
-    """A validated Config from the options' text, or a one-line failure naming the bad option."""
-    from dicetrace.params import INTEGRATORS, PRESETS, make_config
+def build_config(preset: str, integrator: str | None, dt: str | None, t_max: str | None, ics=None):
+    """A validated Config from the options' text, or a one-line failure naming the bad option.
+
+    ``--dt auto`` picks the step from the stiffness and the fastest first
+    impact of ``ics`` (see ``dicetrace.params.auto_dt``), or refuses.
+    """
+    from dicetrace.params import INTEGRATORS, PRESETS, get_preset, impact_speed_cm_s, make_config
 
     if preset not in PRESETS:
         fail(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
     if integrator is not None and integrator not in INTEGRATORS:
         fail(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
-    dt = parse_positive(dt, "--dt", "the time step in s")
+    v_impact = None
+    if dt is not None and dt.strip().lower() == "auto":
+        dt = "auto"
+        if ics is not None:
+            v_impact = impact_speed_cm_s(ics, get_preset(preset))
+    else:
+        dt = parse_positive(dt, "--dt", "the time step in s, or 'auto'")
     t_max = parse_positive(t_max, "--t-max", "the time cap in s")
     try:
-        cfg = make_config(preset, integrator=integrator, dt_s=dt, t_max_s=t_max)
+        cfg = make_config(preset, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact)
     except ValueError as e:
         fail(str(e))
     if integrator is not None:  # (the default one always is; this check imports numba)
@@ -397,7 +407,8 @@ def register(app: typer.Typer) -> None:
         """
         if fmt not in FORMATS:
             fail(f"unknown --format {fmt!r} (choose from {', '.join(FORMATS)})")
-        cfg = build_config(preset, integrator, dt, t_max)
+        auto = dt is not None and dt.strip().lower() == "auto"
+        cfg = build_config(preset, integrator, None if auto else dt, t_max)
         if ics is not None:
             if ic is not None or at is not None:
                 fail("give one source of ICs: --ics FILE, --ic, or --slice/--at")
@@ -408,6 +419,8 @@ def register(app: typer.Typer) -> None:
             ic_arr = one[None, :]
             coords = None if c is None else c[None, :]
             source = desc
+        if auto:  # the step depends on the fastest first impact of these ICs
+            cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr)
         if out is not None:
             check_output_file(out)
 

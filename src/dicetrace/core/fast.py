@@ -126,9 +126,9 @@ def _rotation(w0, w1, w2, h):
     and (b, a) (bitwise equal, see the module docstring).
     """
     n = _norm3(w0, w1, w2)
-    if n == 0.0:
-        return False, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
     n2 = n * n
+    if n2 == 0.0:  # ω = 0, or |ω| < 1.5e-154 where n² underflows: no turn (see model)
+        return False, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
     th = n * h
     c = math.cos(th)
     s = math.sin(th)

@@ -196,6 +196,8 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
         if contact:
             if energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest > e_blow:
                 status = BLOW_UP
+                if tracing:  # the state is finite: keep it for inspection
+                    _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
                 break
         # Stop test.  In free flight (no contact) the point-mass energy is
         # bounded below cheaply: Σ|u_k|² = 8|U|² + 16·h²|ω|² + rounding, so the

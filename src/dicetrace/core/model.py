@@ -82,12 +82,15 @@ def rotation_matrix(w0, w1, w2, h, R):
     """Fill R so that ``x_row @ R`` turns x by −|ω|·h about ω (program form).
 
     R = P + cos θ·(E − P) + sin θ·[ω]× / |ω|, P = ωωᵀ/(|ω|·|ω|), θ = |ω|·h.
-    Returns False (R untouched) when ω = 0.
+    Returns False (R untouched) when ω = 0, or when |ω| < 1.5e-154 so that
+    |ω|² underflows to 0: the program then divides 0 by 0 and its state turns
+    NaN; the turn, |ω|·dt, is below 1e-150 rad, so "no turn" is exact to
+    machine precision (found by hypothesis: L = (0, 0, 3.7e-293)).
     """
     n = norm3(w0, w1, w2)
-    if n == 0.0:
-        return False
     n2 = n * n
+    if n2 == 0.0:
+        return False
     th = n * h
     c = math.cos(th)
     s = math.sin(th)
