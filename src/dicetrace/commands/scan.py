@@ -180,8 +180,8 @@ def register(app: typer.Typer) -> None:
         origin: Optional[str] = typer.Option(None, "--origin", help="Custom slice origin VX,VY,VZ,LX,LY,LZ."),
         dirs: Optional[List[str]] = typer.Option(None, "--dir", help="Custom slice direction (6 numbers; 1 to 3 times)."),
         preset: str = typer.Option("seed", "--preset", help="Model preset: seed (the 2019 program, bit for bit) or physical."),
-        integrator: Optional[str] = typer.Option(None, "--integrator", help="Integrator (default semi-implicit-euler)."),
-        dt: Optional[str] = typer.Option(None, "--dt", help="Time step, s (default 0.001)."),
+        integrator: Optional[str] = typer.Option(None, "--integrator", help="Integrator: semi-implicit-euler, forward-euler, verlet, rk4, contact-substep (default: the preset's own, semi-implicit-euler for seed, contact-substep for physical)."),
+        dt: Optional[str] = typer.Option(None, "--dt", help="Time step, s (default 0.001), or 'auto' (chosen from the stiffness k for a 300 cm/s impact; refused when no step fits)."),
         t_max: Optional[str] = typer.Option(None, "--t-max", help="Time cap, s (default 60)."),
         sets: Optional[List[str]] = typer.Option(
             None, "--set", help="Override a preset parameter, NAME=VALUE (e.g. gamma=0.01, mu=0.6, k=1e6); repeatable."

@@ -42,7 +42,7 @@ SLICE_HELP = (
 )
 AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
 PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
-INTEGRATOR_HELP = "Integrator (default: the preset's, semi-implicit-euler)."
+INTEGRATOR_HELP = "Integrator: semi-implicit-euler, forward-euler, verlet, rk4, contact-substep (default: the preset's own, semi-implicit-euler for seed, contact-substep for physical)."
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
 
