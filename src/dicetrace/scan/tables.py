@@ -1,7 +1,7 @@
 """Summaries of a batch of throws → the ``rolls`` Arrow table, vectorised.
 
-The columns are DESIGN.md section 6's ``rolls`` table (the same fields,
-types and units as ``dicetrace.sinks.parquet.ROLLS_SCHEMA``) plus the grid
+The columns are DESIGN.md section 6's ``rolls`` table (``dicetrace.sinks.parquet.ROLLS_SCHEMA``, the
+same fields, types and units) plus the grid
 indices ``i, j, k`` (int32; k = 0 on 2-D grids, -1 for ICs that are not on
 a grid).  Everything is built column-wise: the contact-set lists share one
 flat uint8 buffer, and their text form (``0-6-68-...``) is written by a
@@ -19,42 +19,15 @@ from dicetrace.core._jit import jit
 from dicetrace.core.loop import run_batch
 from dicetrace.core.model import BUFFER_FULL
 
+from dicetrace.sinks.parquet import ROLLS_SCHEMA as SINK_ROLLS_SCHEMA
+
 STATUS_NAMES = ("settled", "time_cap", "non_finite", "blow_up")
-_L_UNIT = "node-mass*cm^2/s"
 DEFAULT_CAP = 128  # contact sets per IC in the first pass (longer throws are re-run with more)
 
 
-def _f(name: str, typ: pa.DataType, unit: str | None = None, nullable: bool = False) -> pa.Field:
-    return pa.field(name, typ, nullable=nullable, metadata={b"unit": unit.encode()} if unit else None)
-
-
-ROLLS_SCHEMA = pa.schema(
-    [
-        _f("ic_id", pa.int64()),
-        _f("i", pa.int32()),
-        _f("j", pa.int32()),
-        _f("k", pa.int32()),
-        _f("x", pa.float64(), "slice coordinate", nullable=True),
-        _f("y", pa.float64(), "slice coordinate", nullable=True),
-        _f("z", pa.float64(), "slice coordinate", nullable=True),
-        _f("vx", pa.float64(), "cm/s"),
-        _f("vy", pa.float64(), "cm/s"),
-        _f("vz", pa.float64(), "cm/s"),
-        _f("Lx", pa.float64(), _L_UNIT),
-        _f("Ly", pa.float64(), _L_UNIT),
-        _f("Lz", pa.float64(), _L_UNIT),
-        _f("preset", pa.string()),
-        _f("integrator", pa.string()),
-        _f("dt_s", pa.float64(), "s"),
-        _f("outcome", pa.int8()),
-        _f("status", pa.string()),
-        _f("steps", pa.int64()),
-        _f("t_settle_s", pa.float64(), "s"),
-        _f("contact_sets", pa.list_(pa.uint8())),
-        _f("contact_sequence", pa.string()),
-        _f("n_contact_changes", pa.int32()),
-    ]
-)
+# The sink's rolls schema with the grid indices i, j, k after ic_id.
+_GRID_FIELDS = [pa.field(name, pa.int32(), nullable=False) for name in ("i", "j", "k")]
+ROLLS_SCHEMA = pa.schema([SINK_ROLLS_SCHEMA.field(0), *_GRID_FIELDS, *list(SINK_ROLLS_SCHEMA)[1:]])
 
 # Text of every 8-bit contact set: node numbers ascending, "0" for the empty set.
 _SET_TEXT = ["".join(str(k + 1) for k in range(8) if m >> k & 1) or "0" for m in range(256)]
