@@ -138,11 +138,9 @@ def contact_sequence_text(sets: Iterable[int]) -> str:
         set), joined by ``-``; e.g. ``[0, 32, 40, 128, 0, 4]`` ->
         ``"0-6-68-8-0-3"``.
     """
-    parts = []
-    for s in _sets_to_array(sets):
-        s = int(s)
-        parts.append("".join(str(n + 1) for n in range(8) if s >> n & 1) or "0")
-    return "-".join(parts)
+    from dicetrace.simulate import sets_to_text
+
+    return sets_to_text(_sets_to_array(sets))
 
 
 def parse_contact_sequence(text: str) -> np.ndarray:
@@ -157,19 +155,11 @@ def parse_contact_sequence(text: str) -> np.ndarray:
     -------
     numpy.ndarray of uint8
     """
+    from dicetrace.simulate import text_to_sets
+
     if text == "":
         return np.zeros(0, dtype=np.uint8)
-    out = []
-    for part in text.split("-"):
-        mask = 0
-        if part != "0":
-            for ch in part:
-                n = int(ch)
-                if not 1 <= n <= 8:
-                    raise ValueError(f"node {n} out of range 1..8 in {text!r}")
-                mask |= 1 << (n - 1)
-        out.append(mask)
-    return np.array(out, dtype=np.uint8)
+    return text_to_sets(text)
 
 
 @lru_cache(maxsize=4)

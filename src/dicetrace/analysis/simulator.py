@@ -62,17 +62,6 @@ LABEL_KINDS = ("outcome", "contact_sequence", "contact_sequence_rotations", "con
 #: Points per call of :func:`~dicetrace.simulate.simulate_batch` (bounds the contact-set buffers).
 DEFAULT_CHUNK = 65536
 
-# Fallbacks for an ``ics`` module without named windows (kept in step with DESIGN.md §4).
-_WINDOWS = {
-    "home": ((0.0, 0.1), (0.0, 0.1)),
-    "zoom-out": ((0.0, 1.0), (0.0, 1.0)),
-    "more-out": ((0.0, 10.0), (0.0, 10.0)),
-    "most-out": ((0.0, 100.0), (0.0, 100.0)),
-    "red-sea": ((1.0, 2.0), (3.5, 4.5)),
-    "red-sea-2": ((1.4, 1.56), (3.95, 4.25)),
-    "party": ((0.02, 0.026), (0.01, 0.02)),
-    "green-island": ((0.055, 0.06), (0.035, 0.045)),
-}
 
 
 # --------------------------------------------------------------------------
@@ -139,17 +128,10 @@ def resolve_window(window, ndim: int = 2) -> tuple[tuple[float, float], ...]:
     Names are the writeup's (``home``, ``zoom-out``, ``more-out``,
     ``most-out``, ``red-sea``, ``red-sea-2``, ``party``, ``green-island``).
     """
-    try:
-        from dicetrace.ics import get_window
-    except ImportError:
-        get_window = None
-    if get_window is not None and (isinstance(window, str) or len(window) == ndim):
+    from dicetrace.ics import get_window
+
+    if isinstance(window, str) or len(window) == ndim:
         return get_window(window, ndim)
-    if isinstance(window, str):
-        key = window.strip().lower().replace("_", "-").replace(" ", "-")
-        if key not in _WINDOWS:
-            raise ValueError(f"unknown window {window!r} (choose from {', '.join(_WINDOWS)})")
-        return _WINDOWS[key]
     pairs = tuple((float(a), float(b)) for a, b in window)
     if len(pairs) != ndim:
         raise ValueError(f"window needs {ndim} (lo, hi) ranges, got {len(pairs)}")
