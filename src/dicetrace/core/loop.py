@@ -23,7 +23,8 @@ from numba import prange
 from dicetrace.core._jit import jit, jit_parallel
 from dicetrace.core.contacts import record_set
 from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
-from dicetrace.core.integrators import SEMI_IMPLICIT_EULER, step
+from dicetrace.core.fast_substep import roll_summary_cs
+from dicetrace.core.integrators import CONTACT_SUBSTEP, SEMI_IMPLICIT_EULER, step
 from dicetrace.core.model import (
     BLOW_UP,
     BUFFER_FULL,
@@ -94,6 +95,8 @@ def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy
     The summary path (all trace arrays with zero rows) of configurations
     that ``use_fast_path`` accepts runs the specialised kernel
     ``fast.roll_summary_sie``, bit-identical to ``run_roll_general``;
+    the summary path of ``contact-substep`` runs ``fast_substep.roll_summary_cs``
+    (the same loop without trace branches or step dispatch, bit-identical);
     everything else runs ``run_roll_general``.  Arguments and results are
     those of ``run_roll_general``.
     """
@@ -105,6 +108,8 @@ def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy
         z = np.empty(8)
         P = np.empty(8)
         return roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P)
+    if not tracing and integ == CONTACT_SUBSTEP:
+        return roll_summary_cs(ic, off0, kp, sets, set_steps)
     return run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
 
 
@@ -270,6 +275,8 @@ def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, se
                     ics[i], off0, kp, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap],
                     s_off[b], s_F[b], s_uk[b], s_z[b], s_P[b],
                 )
+            elif integ == CONTACT_SUBSTEP:
+                s, n, o, ns = roll_summary_cs(ics[i], off0, kp, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap])
             else:
                 s, n, o, ns = run_roll_general(
                     ics[i], off0, kp, integ, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], e0, e1, e2

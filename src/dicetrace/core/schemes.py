@@ -55,9 +55,6 @@ import numpy as np
 from dicetrace.core._jit import jit
 from dicetrace.core.model import (
     apply_rotation,
-    contact_forces,
-    node_heights,
-    node_velocities,
     rotation_matrix,
 )
 
@@ -162,17 +159,92 @@ def apply9(src, R, dst):
 
 
 @jit(inline="always")
+def forces_s(Xz, U0, U1, U2, w0, w1, w2, off, kp, F, uk, z, P):
+    """Heights z; when a node is strictly below the ground also uk, P, F.
+
+    Returns (below, mask) as ``model.node_heights``.  The same arithmetic, in
+    the same order, as ``model.node_heights``, ``model.node_velocities`` and
+    ``model.contact_forces`` (bit for bit), written out so that no array
+    crosses a call boundary: it runs four times per RK4 sub-step, and the
+    reference counting of the arrays passed to those out-of-line helpers
+    cost about as much as the arithmetic (cf4: 0.71 → 0.43 µs).
+    """
+    below = False
+    mask = 0
+    for k in range(8):
+        zk = Xz + off[k, 2]
+        z[k] = zk
+        if zk < 0.0:
+            below = True
+        if zk <= 0.0:
+            mask |= 1 << k
+    if not below:
+        return below, mask
+    k_ = kp.k
+    gam = kp.gamma
+    mu = kp.mu
+    clamp = kp.clamp_normal != 0.0
+    for k in range(8):
+        x0 = off[k, 0]
+        x1 = off[k, 1]
+        x2 = off[k, 2]
+        uk[k, 0] = U0 + (x1 * w2 - x2 * w1)
+        uk[k, 1] = U1 + (x2 * w0 - x0 * w2)
+        u2 = U2 + (x0 * w1 - x1 * w0)
+        uk[k, 2] = u2
+        d = max(0.0, -z[k])
+        p = k_ * d * (1.0 - gam * u2)
+        if clamp and p < 0.0:
+            p = 0.0
+        P[k] = p
+        F[k, 2] = p
+    if kp.friction_mode == 0.0:
+        a = 0.0
+        b = 0.0
+        c = 0.0
+        for k in range(8):
+            a += uk[k, 0] * uk[k, 0]
+            b += uk[k, 0] * uk[k, 1]
+            c += uk[k, 1] * uk[k, 1]
+        hd = (a - c) / 2.0
+        sig = math.sqrt((a + c) / 2.0 + math.sqrt(hd * hd + b * b))
+        if sig == 0.0:
+            for k in range(8):
+                F[k, 0] = 0.0
+                F[k, 1] = 0.0
+        else:
+            for k in range(8):
+                F[k, 0] = -mu * (P[k] * (uk[k, 0] / sig))
+                F[k, 1] = -mu * (P[k] * (uk[k, 1] / sig))
+    else:
+        vr2 = kp.v_reg * kp.v_reg
+        for k in range(8):
+            if P[k] == 0.0:
+                F[k, 0] = 0.0
+                F[k, 1] = 0.0
+            else:
+                s = math.sqrt(uk[k, 0] * uk[k, 0] + uk[k, 1] * uk[k, 1] + vr2)
+                F[k, 0] = -mu * P[k] * uk[k, 0] / s
+                F[k, 1] = -mu * P[k] * uk[k, 1] / s
+    return below, mask
+
+
+@jit(inline="always")
 def wrench(X, U, W, off, kp, F, uk, z, P):
+    """Contact force sum and torque at a state (array form of ``wrench_s``)."""
+    return wrench_s(X[2], U[0], U[1], U[2], W[0], W[1], W[2], off, kp, F, uk, z, P)
+
+
+@jit(inline="always")
+def wrench_s(Xz, U0, U1, U2, w0, w1, w2, off, kp, F, uk, z, P):
     """Contact force sum and torque at a state (scratch: F, uk, z, P).
 
     Returns (below, f0, f1, f2, t0, t1, t2): whether a node is below the
     ground, Σ F_k and τ = Σ F_k × x_k (program convention).
     """
-    below, mask = node_heights(X[2], off, z)
+    below, mask = forces_s(Xz, U0, U1, U2, w0, w1, w2, off, kp, F, uk, z, P)
     if not below:
         return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    node_velocities(U, off, W[0], W[1], W[2], uk)
-    contact_forces(z, uk, kp, F, P)
     f0 = 0.0
     f1 = 0.0
     f2 = 0.0
@@ -200,11 +272,8 @@ def wrench(X, U, W, off, kp, F, uk, z, P):
 @jit(inline="always")
 def finish(X, U, W, off, kp, F, uk, z, P):
     """Evaluate z, F, P (and uk in contact) at the new state: the step contract's end."""
-    below, mask = node_heights(X[2], off, z)
-    if below:
-        node_velocities(U, off, W[0], W[1], W[2], uk)
-        contact_forces(z, uk, kp, F, P)
-    else:
+    below, mask = forces_s(X[2], U[0], U[1], U[2], W[0], W[1], W[2], off, kp, F, uk, z, P)
+    if not below:
         for k in range(8):
             F[k, 0] = 0.0
             F[k, 1] = 0.0
@@ -393,9 +462,6 @@ def cf4(S, kp, h, f10, f11, f12, t10, t11, t12, F, uk, z, P):
     g = kp.g
     hh = 0.5 * h
     offs = work[0:8]
-    Xs = work[8]
-    Us = work[9]
-    Ws = work[10]
     # stage 1
     a10 = f10 / 8.0
     a11 = f11 / 8.0
@@ -405,70 +471,46 @@ def cf4(S, kp, h, f10, f11, f12, t10, t11, t12, F, uk, z, P):
     w12 = L[2] / I
     R1 = rot9(w10, w11, w12, hh)
     # stage 2
-    Xs[0] = X[0] + hh * U[0]
-    Xs[1] = X[1] + hh * U[1]
-    Xs[2] = X[2] + hh * U[2]
+    xs2 = X[2] + hh * U[2]
     u20 = U[0] + hh * a10
     u21 = U[1] + hh * a11
     u22 = U[2] + hh * a12
-    Us[0] = u20
-    Us[1] = u21
-    Us[2] = u22
     w20 = (L[0] + hh * t10) / I
     w21 = (L[1] + hh * t11) / I
     w22 = (L[2] + hh * t12) / I
-    Ws[0] = w20
-    Ws[1] = w21
-    Ws[2] = w22
     apply9(off, R1, offs)
-    c, f20, f21, f22, t20, t21, t22 = wrench(Xs, Us, Ws, offs, kp, F, uk, z, P)
+    c, f20, f21, f22, t20, t21, t22 = wrench_s(xs2, u20, u21, u22, w20, w21, w22, offs, kp, F, uk, z, P)
     a20 = f20 / 8.0
     a21 = f21 / 8.0
     a22 = f22 / 8.0 + g
     # stage 3
-    Xs[0] = X[0] + hh * u20
-    Xs[1] = X[1] + hh * u21
-    Xs[2] = X[2] + hh * u22
+    xs2 = X[2] + hh * u22
     u30 = U[0] + hh * a20
     u31 = U[1] + hh * a21
     u32 = U[2] + hh * a22
-    Us[0] = u30
-    Us[1] = u31
-    Us[2] = u32
     w30 = (L[0] + hh * t20) / I
     w31 = (L[1] + hh * t21) / I
     w32 = (L[2] + hh * t22) / I
-    Ws[0] = w30
-    Ws[1] = w31
-    Ws[2] = w32
     if w20 == w10 and w21 == w11 and w22 == w12:
         R2 = R1
     else:
         R2 = rot9(w20, w21, w22, hh)
         apply9(off, R2, offs)
-    c, f30, f31, f32, t30, t31, t32 = wrench(Xs, Us, Ws, offs, kp, F, uk, z, P)
+    c, f30, f31, f32, t30, t31, t32 = wrench_s(xs2, u30, u31, u32, w30, w31, w32, offs, kp, F, uk, z, P)
     a30 = f30 / 8.0
     a31 = f31 / 8.0
     a32 = f32 / 8.0 + g
     # stage 4
-    Xs[0] = X[0] + h * u30
-    Xs[1] = X[1] + h * u31
-    Xs[2] = X[2] + h * u32
+    xs2 = X[2] + h * u32
     u40 = U[0] + h * a30
     u41 = U[1] + h * a31
     u42 = U[2] + h * a32
-    Us[0] = u40
-    Us[1] = u41
-    Us[2] = u42
     w40 = (L[0] + h * t30) / I
     w41 = (L[1] + h * t31) / I
     w42 = (L[2] + h * t32) / I
-    Ws[0] = w40
-    Ws[1] = w41
-    Ws[2] = w42
     R4 = mul9(R1, rot9(w30 - 0.5 * w10, w31 - 0.5 * w11, w32 - 0.5 * w12, h))
     apply9(off, R4, offs)
-    c, f40, f41, f42, t40, t41, t42 = wrench(Xs, Us, Ws, offs, kp, F, uk, z, P)
+    c, f40, f41, f42, t40, t41, t42 = wrench_s(xs2, u40, u41, u42, w40, w41, w42, offs, kp, F, uk, z, P)
     a40 = f40 / 8.0
     a41 = f41 / 8.0
     a42 = f42 / 8.0 + g
