@@ -91,7 +91,6 @@ def main(argv=None) -> dict:
     args = C.parser(__doc__.splitlines()[0]).parse_args(argv)
     st = C.Study(NAME, args)
     import matplotlib.pyplot as plt
-    from matplotlib.colors import ListedColormap
 
     from dicetrace.analysis import canonical_contact_sequence, label_cells
     from dicetrace.analysis.plot import plot_contact_tree, plot_outcome_map

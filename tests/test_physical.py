@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from dicetrace.core.model import contact_forces
 from dicetrace.ics import seed_slice
-from dicetrace.params import PRESETS, V_REG_CM_S, Config, Numerics, get_preset, make_config
+from dicetrace.params import PRESETS, V_REG_CM_S, Config, Numerics, get_preset
 from dicetrace.simulate import Record, simulate, simulate_batch
 
 

@@ -237,9 +237,9 @@ def initial_offsets(config: Config, orientation=None) -> np.ndarray:
 
 
 def _check_integrator(config: Config) -> None:
-    from dicetrace.core import integrators
+    from dicetrace.core.integrators import IMPLEMENTED
 
-    if not getattr(integrators, "IMPLEMENTED", {0, 1}).__contains__(config.numerics.integrator_id):
+    if config.numerics.integrator_id not in IMPLEMENTED:
         raise ValueError(f"integrator {config.numerics.integrator!r} is not available in this build")
 
 

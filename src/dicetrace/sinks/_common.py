@@ -48,6 +48,5 @@ def written_rows(trace):
     last row unwritten (all zeros): no real state has all eight node offsets
     zero, so such rows are masked out.
     """
-    import numpy as np
 
     return ~(trace.node_offsets == 0.0).all(axis=(1, 2))
