@@ -188,13 +188,14 @@ def test_dask_local_cluster_equals_local_run(tmp_path, home21):
     pytest.importorskip("dask.distributed")
     from dask.distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
-            Client(cluster) as client:
-        t = scan(HOME21, chunk=100, dask=client)
-        assert _data(t).equals(_data(home21))
-        r = scan(HOME21, tmp_path / "d", chunk=100, dask=client)
-        assert r.complete
-        by_address = scan(HOME21, chunk=150, dask=cluster.scheduler_address)  # --scheduler ADDRESS
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        with Client(cluster) as client:
+            t = scan(HOME21, chunk=100, dask=client)
+            assert _data(t).equals(_data(home21))
+            r = scan(HOME21, tmp_path / "d", chunk=100, dask=client)
+            assert r.complete
+        # --scheduler ADDRESS: scan opens (and closes) a client of its own
+        by_address = scan(HOME21, chunk=150, dask=cluster.scheduler_address)
         assert _data(by_address).equals(_data(home21))
     df = read_scan(tmp_path / "d")
     assert _data(df).equals(

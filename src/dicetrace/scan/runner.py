@@ -302,7 +302,13 @@ def _open_dask(dask, n_workers):
     if isinstance(dask, Client):
         return dask, []
     if isinstance(dask, str):
-        client = Client(dask)
+        # distributed's handshake can trip (an AssertionError in Client) when the
+        # scheduler is still winding down another client's futures: try again once.
+        try:
+            client = Client(dask)
+        except (AssertionError, OSError):
+            time.sleep(1.0)
+            client = Client(dask)
         return client, [client]
     cluster = LocalCluster(
         n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=":0"
