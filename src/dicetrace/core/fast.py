@@ -66,6 +66,7 @@ from dicetrace.core.model import (
     TIME_CAP,
     BLOW_UP,
     FACE_OF_TOP4,
+    spectral_norm_xy,
 )
 
 #: Relative margin of the free-flight stop-test bound (the bound's own
@@ -582,15 +583,7 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
                     pmask |= 1 << k
             sparse = True  # every node outside pmask gets F == ±0 exactly (set below otherwise)
             if spectral:
-                a = 0.0
-                b = 0.0
-                c = 0.0
-                for k in range(8):
-                    a += uk[k, 0] * uk[k, 0]
-                    b += uk[k, 0] * uk[k, 1]
-                    c += uk[k, 1] * uk[k, 1]
-                hd = (a - c) / 2.0
-                sig = math.sqrt((a + c) / 2.0 + math.sqrt(hd * hd + b * b))
+                sig = spectral_norm_xy(uk)
                 if sig == 0.0:
                     for k in range(8):
                         F[k, 0] = 0.0

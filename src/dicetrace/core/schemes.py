@@ -55,6 +55,7 @@ import numpy as np
 from dicetrace.core._jit import jit
 from dicetrace.core.model import (
     apply_rotation,
+    friction_forces_inline,
     rotation_matrix,
 )
 
@@ -182,7 +183,6 @@ def forces_s(Xz, U0, U1, U2, w0, w1, w2, off, kp, F, uk, z, P):
         return below, mask
     k_ = kp.k
     gam = kp.gamma
-    mu = kp.mu
     clamp = kp.clamp_normal != 0.0
     for k in range(8):
         x0 = off[k, 0]
@@ -198,34 +198,7 @@ def forces_s(Xz, U0, U1, U2, w0, w1, w2, off, kp, F, uk, z, P):
             p = 0.0
         P[k] = p
         F[k, 2] = p
-    if kp.friction_mode == 0.0:
-        a = 0.0
-        b = 0.0
-        c = 0.0
-        for k in range(8):
-            a += uk[k, 0] * uk[k, 0]
-            b += uk[k, 0] * uk[k, 1]
-            c += uk[k, 1] * uk[k, 1]
-        hd = (a - c) / 2.0
-        sig = math.sqrt((a + c) / 2.0 + math.sqrt(hd * hd + b * b))
-        if sig == 0.0:
-            for k in range(8):
-                F[k, 0] = 0.0
-                F[k, 1] = 0.0
-        else:
-            for k in range(8):
-                F[k, 0] = -mu * (P[k] * (uk[k, 0] / sig))
-                F[k, 1] = -mu * (P[k] * (uk[k, 1] / sig))
-    else:
-        vr2 = kp.v_reg * kp.v_reg
-        for k in range(8):
-            if P[k] == 0.0:
-                F[k, 0] = 0.0
-                F[k, 1] = 0.0
-            else:
-                s = math.sqrt(uk[k, 0] * uk[k, 0] + uk[k, 1] * uk[k, 1] + vr2)
-                F[k, 0] = -mu * P[k] * uk[k, 0] / s
-                F[k, 1] = -mu * P[k] * uk[k, 1] / s
+    friction_forces_inline(uk, kp, F, P)
     return below, mask
 
 
