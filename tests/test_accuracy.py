@@ -26,8 +26,12 @@ def test_quick_study_cli_runs_under_a_minute(tmp_path):
     with open(tmp_path / "study.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == list(acc.STUDY_COLUMNS)
-    # every preset × integrator × dt of the quick grid
-    assert len(rows) == 2 * sum(len(v) for v in acc.QUICK_DT_GRID.values())
+    # every preset × integrator × dt (× tol for the error-controlled one) of the quick grid
+    per_preset = sum(len(v) * len(acc.QUICK_TOL_GRID.get(k, (None,))) for k, v in acc.QUICK_DT_GRID.items())
+    assert len(rows) == 2 * per_preset
+    tols = {float(r["tol"]) for r in rows if r["integrator"] == "contact-adaptive"}
+    assert tols == set(acc.QUICK_TOL_GRID["contact-adaptive"])
+    assert all(r["tol"] in ("", "nan") for r in rows if r["integrator"] != "contact-adaptive")
     for r in rows:
         assert 0.0 <= float(r["outcome_agreement"]) <= 1.0
         assert float(r["cpu_ms_per_ic"]) > 0

@@ -129,6 +129,7 @@ BAD = [
     (["--ic", "1,2,3,4,5,6", "--integrator", "magic"], "unknown integrator"),
     (["--ic", "1,2,3,4,5,6", "--dt", "0"], "--dt"),
     (["--ic", "1,2,3,4,5,6", "--dt", "inf"], "--dt"),
+    (["--ic", "1,2,3,4,5,6", "--tol", "abc"], "--tol"),
     (["--ic", "1,2,3,4,5,6", "--format", "xml"], "--format"),
     (["--ic", "1,2,3,4,5,6", "--out", "afile/out.csv"], "afile"),
     (["--ic", "1,2,3,4,5,6", "--out", "adir"], "folder"),

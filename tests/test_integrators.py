@@ -28,6 +28,8 @@ from dicetrace.core.schemes import finish
 from dicetrace.params import INTEGRATOR_ORDER, INTEGRATORS, Config, Numerics, Preset
 
 ALL = tuple(INTEGRATORS)
+#: Integrators whose accuracy is set by dt (contact-adaptive's by its tolerance).
+BY_DT = tuple(i for i in INTEGRATORS if i != "contact-adaptive")
 
 
 @numba.njit(cache=False)
@@ -39,7 +41,7 @@ def _drive(integ, kp, h, nstep, X, U, L, off, zmin, zmax):
     z = np.zeros(8)
     P = np.zeros(8)
     R = np.zeros((3, 3))
-    Rh = np.array([-1.0, 0.0])
+    Rh = np.array([-1.0, 0.0, 0.0])
     contact, mask = finish(X, U, W, off, kp, F, uk, z, P)
     for _ in range(nstep):
         contact, mask = step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
@@ -51,8 +53,9 @@ def _drive(integ, kp, h, nstep, X, U, L, off, zmin, zmax):
     return True
 
 
-def kparams(substeps: int = 8, **preset):
-    return Config(preset=Preset(name="test", **preset), numerics=Numerics(substeps=substeps)).kernel_params()
+def kparams(substeps: int = 8, integrator: str = "semi-implicit-euler", tol: float = 1e-7, **preset):
+    numerics = Numerics(integrator=integrator, substeps=substeps, tol=tol)
+    return Config(preset=Preset(name="test", **preset), numerics=numerics).kernel_params()
 
 
 def run(integ, kp, h, t_end, X0, U0, L0):
@@ -83,6 +86,7 @@ def test_every_integrator_is_compiled_in():
         "verlet": 2,
         "rk4": 4,
         "contact-substep": 4,
+        "contact-adaptive": 4,
     }
 
 
@@ -96,7 +100,7 @@ def test_free_flight_order(integ):
     Verlet, RK4 and contact-substep are exact here (quadratic in t, constant
     ω); the Euler schemes are first order (their position lags by g·h·t/2).
     """
-    kp = kparams()
+    kp = kparams(integrator=integ)
     T = 0.125
     U0, L0 = np.array([30.0, -20.0, 50.0]), np.array([80.0, -60.0, 120.0])
     x_exact = np.array([0.0, 0.0, 15.0]) + U0 * T + np.array([0.0, 0.0, 0.5 * kp.g * T * T])
@@ -123,7 +127,7 @@ T_CONTACT = 2.0**-6  # contact duration π/ω of the bounce test, s
 K_BOUNCE = 2.0 * (math.pi / T_CONTACT) ** 2  # so that ω = √(k/2) = π / T_CONTACT
 
 
-@pytest.mark.parametrize("integ", ALL)
+@pytest.mark.parametrize("integ", BY_DT)
 def test_undamped_bounce_order(integ):
     """Die dropped flat at 100 cm/s onto an undamped, frictionless spring, no gravity.
 
@@ -177,7 +181,7 @@ def test_restitution_formula_sanity():
     assert 0.74 < restitution_exact(0.005, 100.0) < 0.76
 
 
-@pytest.mark.parametrize("integ", ALL)
+@pytest.mark.parametrize("integ", BY_DT)
 def test_damped_restitution_converges(integ):
     """Restitution of the damped flat drop → the exact value, the same for k = 5e5 and 5e6."""
     gamma, v = 0.005, 100.0
@@ -211,7 +215,7 @@ def test_contact_substep_restitution_independent_of_k():
 # -- a smooth contact segment with torques: the Lie-group order ------------------------------------
 
 
-@pytest.mark.parametrize("integ", ALL)
+@pytest.mark.parametrize("integ", BY_DT)
 def test_smooth_contact_order(integ):
     """Die resting on its four bottom corners, sliding, spinning and rocking for 1/32 s.
 
@@ -268,8 +272,9 @@ def test_rigidity(integ, preset):
 # -- the summary fast path of contact-substep -------------------------------------------------------
 
 
+@pytest.mark.parametrize("integ_name", ["contact-substep", "contact-adaptive"])
 @pytest.mark.parametrize("preset", ["seed", "physical"])
-def test_contact_substep_fast_path_identical(preset):
+def test_contact_substep_fast_path_identical(preset, integ_name):
     """``fast_substep.roll_summary_cs`` (what ``run_roll``/``run_batch`` run for
     contact-substep summaries) equals ``run_roll_general`` bit for bit: status,
     steps, outcome and the whole contact-set sequence, on tilted and flat starts."""
@@ -280,9 +285,10 @@ def test_contact_substep_fast_path_identical(preset):
 
     assert fast_substep.E_BOUND_MARGIN == loop.E_BOUND_MARGIN
     rng = np.random.default_rng(3)
-    cfg = make_config(preset, integrator="contact-substep", dt_s=2e-3, t_max_s=10.0)
+    cfg = make_config(preset, integrator=integ_name, dt_s=2e-3, t_max_s=10.0, tol=1e-6)
     kp = cfg.kernel_params()
-    integ = INTEGRATORS["contact-substep"]
+    assert (kp.tol > 0) == (integ_name == "contact-adaptive")
+    integ = INTEGRATORS[integ_name]
     e0 = np.zeros((0, loop.STATE_COLS))
     e1 = np.zeros((0, loop.FORCE_COLS))
     e2 = np.zeros((0, loop.ENERGY_COLS))
@@ -304,3 +310,81 @@ def test_contact_substep_fast_path_identical(preset):
             assert np.array_equal(a[0][:n], b[0][:n]) and np.array_equal(a[1][:n], b[1][:n])
             settled += ra[0] == 0  # SETTLED
     assert settled >= 6
+
+
+# -- contact-adaptive: error control ------------------------------------------------------------------
+
+
+def test_adaptive_undamped_bounce_tolerance_proportional():
+    """The undamped flat bounce of test_undamped_bounce_order under error control.
+
+    dt = T_CONTACT only caps the sub-steps; the error follows the tolerance:
+    it falls monotonically and roughly in proportion (a local-error control
+    of an order-4 step gives global error ∝ tol^(4/4 .. 4/5)), down to the
+    1e-10 level, and exit speed = entry speed to 1e-9 at tol = 1e-10.
+    """
+    v = 100.0
+    tols = 10.0 ** -np.arange(4, 11)
+    ratio_err, z_err = [], []
+    for tol in tols:
+        kp = kparams(integrator="contact-adaptive", tol=tol, k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
+        X, U, L, off, zmin, zmax = run("contact-adaptive", kp, T_CONTACT / 2, 2 * T_CONTACT, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+        assert zmin[[0, 2, 4, 6]].max() < 0 and zmax[[1, 3, 5, 7]].min() > 0
+        ratio_err.append(abs(U[2] / v - 1.0))
+        z_err.append(abs(X[2] - (1.0 + v * T_CONTACT)))
+    for errs in (np.array(ratio_err), np.array(z_err)):
+        s = slopes(tols, errs)
+        assert np.all(np.diff(errs) < 0), errs
+        assert 0.6 < np.polyfit(np.log(tols), np.log(errs), 1)[0] < 1.3, (errs, s)
+    assert ratio_err[-1] < 1e-9
+
+
+@pytest.mark.parametrize("k", [5e5, 5e6])
+def test_adaptive_damped_restitution(k):
+    """Damped flat drop under error control: the exact restitution, for any k, to ~tol."""
+    gamma, v = 0.005, 100.0
+    e_exact = restitution_exact(gamma, v)
+    tc = math.pi / math.sqrt(k / 2.0)
+    errs = []
+    for tol in (1e-5, 1e-7, 1e-9):
+        kp = kparams(integrator="contact-adaptive", tol=tol, k=k, gamma=gamma, mu=0.0, g=0.0)
+        X, U, *_ = run("contact-adaptive", kp, tc / 4, 3 * tc, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+        errs.append(abs(U[2] / v - e_exact))
+    assert errs[-1] < 1e-8 and errs[-1] < 0.01 * errs[0], errs
+
+
+def test_adaptive_smooth_contact_follows_tolerance():
+    """The smooth four-corner contact of test_smooth_contact_order (friction torques on
+    every axis): the error against RK4 at h = T/2¹³ falls with the tolerance, to 1e-9."""
+    kp0 = kparams(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
+    d_eq = 8 * 980.0 / (4 * kp0.k)
+    T = 2.0**-5
+    X0, U0, L0 = [0, 0, 1 - d_eq], [3.0, -2.0, 0.3], [0.8, -0.6, 12.0]
+    Xr, Ur, Lr, offr, *_ = run("rk4", kp0, T / 2**13, T, X0, U0, L0)
+    errs = []
+    for tol in (1e-4, 1e-6, 1e-8, 1e-10):
+        kp = kparams(integrator="contact-adaptive", tol=tol, friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
+        X, U, L, off, zmin, zmax = run("contact-adaptive", kp, T / 4, T, X0, U0, L0)
+        assert zmax[[0, 2, 4, 6]].max() < 0 and zmin[[1, 3, 5, 7]].min() > 0
+        errs.append(max(np.abs(X - Xr).max(), np.abs(U - Ur).max() / 100, np.abs(L - Lr).max() / 100, np.abs(off - offr).max()))
+    assert np.all(np.diff(errs) < 0) and errs[-1] < 1e-9, errs
+
+
+def test_adaptive_matches_reference_on_throws():
+    """Whole physical throws: contact-adaptive at tol = 1e-11 and fixed sub-steps of
+    dt/128 (finer than the accuracy study's reference) converge to the same throws:
+    same outcomes, settle times within a step of their common 1 ms stop-test grid.
+    (At tol = 1e-9 one throw of these settles 11 ms late: settling of the physical
+    preset is slow rocking, whose threshold crossing moves with tiny differences.)"""
+    from dicetrace.ics import seed_slice
+    from dicetrace.params import PRESETS
+    from dicetrace.simulate import simulate_batch
+
+    rng = np.random.default_rng(11)
+    ics = np.array([seed_slice(*rng.uniform([1.0, 3.0], [2.5, 5.0])) * [1, 1, 1, -1, -1, -1] for _ in range(6)])
+    a = simulate_batch(ics, preset="physical", integrator="contact-adaptive", dt_s=1e-3, t_max_s=10.0, tol=1e-11)
+    fine = Numerics(integrator="contact-substep", dt_s=1e-3, t_max_s=10.0, substeps=128)
+    b = simulate_batch(ics, config=Config(preset=PRESETS["physical"], numerics=fine))
+    assert (a.status == "settled").all() and (b.status == "settled").all()
+    assert np.array_equal(a.outcome, b.outcome)
+    assert np.abs(a.t_settle_s - b.t_settle_s).max() <= 1e-3 + 1e-12

@@ -78,6 +78,7 @@ DT_GRID: dict[str, tuple[float, ...]] = {
     "verlet": (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
     "rk4": (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
     "contact-substep": (8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4),
+    "contact-adaptive": (1e-3,),
 }
 QUICK_DT_GRID: dict[str, tuple[float, ...]] = {
     "semi-implicit-euler": (1e-3, 2.5e-4),
@@ -85,6 +86,14 @@ QUICK_DT_GRID: dict[str, tuple[float, ...]] = {
     "verlet": (1e-3, 2.5e-4),
     "rk4": (1e-3, 2.5e-4),
     "contact-substep": (2e-3, 1e-3),
+    "contact-adaptive": (1e-3,),
+}
+#: Tolerances studied for the error-controlled integrator (at each of its dt).
+TOL_GRID: dict[str, tuple[float, ...]] = {
+    "contact-adaptive": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
+}
+QUICK_TOL_GRID: dict[str, tuple[float, ...]] = {
+    "contact-adaptive": (1e-4, 1e-6),
 }
 
 
@@ -109,6 +118,7 @@ STUDY_COLUMNS = (
     "integrator",
     "order",
     "dt_s",
+    "tol",
     "n_ics",
     "cpu_ms_per_ic",
     "outcome_agreement",
@@ -164,8 +174,8 @@ def perturb(ics: np.ndarray, rel: float, seed: int) -> np.ndarray:
     return ics + rel * np.linalg.norm(ics, axis=1, keepdims=True) * xi
 
 
-def config_for(preset: str, integrator: str, dt_s: float, t_max_s: float = T_MAX_S) -> Config:
-    return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s)
+def config_for(preset: str, integrator: str, dt_s: float, t_max_s: float = T_MAX_S, tol: float | None = None) -> Config:
+    return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, tol=tol)
 
 
 @dataclass
@@ -345,6 +355,7 @@ def study(
     for p in presets:
         get_preset(p)
     grid = dt_grid or (QUICK_DT_GRID if quick else DT_GRID)
+    tol_grid = QUICK_TOL_GRID if quick else TOL_GRID
     ref_spec = reference or (QUICK_REFERENCE if quick else REFERENCE)
     n_traj = min(n, int(n_traj if n_traj is not None else (QUICK_N_TRAJ if quick else N_TRAJ)))
     ics_prog = sample_ics(window, n, seed)
@@ -387,10 +398,11 @@ def study(
         )
         for integ in integrators:
             errs = []
-            dts = grid.get(integ, ())
-            for dt in dts:
-                say(f"[{preset}] {integ} dt={dt:g} s")
-                cfg = config_for(preset, integ, dt)
+            tols = tol_grid.get(integ, ())
+            runs_at = [(dt, tol) for dt in grid.get(integ, ()) for tol in (tols or (None,))]
+            for dt, tol in runs_at:
+                say(f"[{preset}] {integ} dt={dt:g} s" + ("" if tol is None else f" tol={tol:g}"))
+                cfg = config_for(preset, integ, dt, tol=tol)
                 runs = run_batch(ics, cfg, timed=True)
                 both = (runs.status == "settled") & (ref.status == "settled")
                 t_err = runs.t_settle_s[both] - ref.t_settle_s[both]
@@ -405,6 +417,7 @@ def study(
                         "integrator": integ,
                         "order": INTEGRATOR_ORDER[integ],
                         "dt_s": dt,
+                        "tol": float("nan") if tol is None else tol,
                         "n_ics": n,
                         "cpu_ms_per_ic": runs.cpu_ms_per_ic,
                         "outcome_agreement": agreement(runs, ref),
@@ -431,7 +444,11 @@ def study(
                     "preset": preset,
                     "integrator": integ,
                     "declared_order": INTEGRATOR_ORDER[integ],
-                    "fitted_order_first_impact": fit_order(dts, errs) if len(dts) >= 2 else float("nan"),
+                    # error-controlled runs: the exponent of the error against tol at one dt
+                    "fitted_order_first_impact": fit_order([t if t is not None else d for d, t in runs_at], errs)
+                    if len(runs_at) >= 2
+                    else float("nan"),
+                    "against": "tol" if tols else "dt",
                 }
             )
     notes = []
@@ -512,6 +529,7 @@ def budget_table(res: StudyResult, factors=(1.0, 10.0)) -> list[dict]:
                         "budget": f"{f:g}x seed ({f * base:.3g} ms)",
                         "integrator": integ,
                         "dt_s": b["dt_s"] if b else float("nan"),
+                        "tol": b.get("tol", float("nan")) if b else float("nan"),
                         "cpu_ms_per_ic": b["cpu_ms_per_ic"] if b else float("nan"),
                         "outcome_agreement": b["outcome_agreement"] if b else float("nan"),
                         "settle_time_bias_s": b["settle_time_bias_s"] if b else float("nan"),
@@ -520,6 +538,14 @@ def budget_table(res: StudyResult, factors=(1.0, 10.0)) -> list[dict]:
                     }
                 )
     return out
+
+
+def setting(r: dict) -> str:
+    """A run's numerical setting as text: dt, and tol for the error-controlled integrator."""
+    tol = r.get("tol", float("nan"))
+    if tol is not None and np.isfinite(tol):
+        return f"dt = {r['dt_s']:g} s, tol = {tol:g}"
+    return f"dt = {r['dt_s']:g} s"
 
 
 def _fmt(v, spec=".3g"):
@@ -571,22 +597,23 @@ def summary_markdown(res: StudyResult, command: str) -> str:
         "",
         "## All runs",
         "",
-        "| preset | integrator | dt (s) | CPU ms/IC | agreement | settle-time bias (s) | contact-count bias | "
+        "| preset | integrator | dt (s) | tol | CPU ms/IC | agreement | settle-time bias (s) | contact-count bias | "
         "first-impact error (cm) | free-flight energy drift | blow-ups | time caps |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in res.rows:
         lines.append(
-            f"| {r['preset']} | {r['integrator']} | {r['dt_s']:g} | {r['cpu_ms_per_ic']:.3g} | "
+            f"| {r['preset']} | {r['integrator']} | {r['dt_s']:g} | {_fmt(r.get('tol'), 'g')} | {r['cpu_ms_per_ic']:.3g} | "
             f"{r['outcome_agreement']:.3f} | {_fmt(r['settle_time_bias_s'], '+.4f')} | "
             f"{_fmt(r['contact_count_bias'], '+.2f')} | {_fmt(r['first_impact_error_cm'], '.2e')} | "
             f"{_fmt(r['free_flight_energy_drift'], '.1e')} | {r['blow_ups']} | {r['time_caps']} |"
         )
-    lines += ["", "## Fitted convergence orders (first-impact error against dt)", ""]
-    lines += ["| preset | integrator | declared order | fitted order |", "|---|---|---|---|"]
+    lines += ["", "## Fitted convergence orders (first-impact error against dt; for contact-adaptive against tol)", ""]
+    lines += ["| preset | integrator | declared order | against | fitted exponent |", "|---|---|---|---|---|"]
     for o in res.orders:
         lines.append(
-            f"| {o['preset']} | {o['integrator']} | {o['declared_order']} | {_fmt(o['fitted_order_first_impact'], '.2f')} |"
+            f"| {o['preset']} | {o['integrator']} | {o['declared_order']} | {o.get('against', 'dt')} | "
+            f"{_fmt(o['fitted_order_first_impact'], '.2f')} |"
         )
     bt = budget_table(res)
     if bt:
@@ -596,12 +623,12 @@ def summary_markdown(res: StudyResult, command: str) -> str:
             "",
             "Best run of each integrator whose CPU time per IC is within the budget.",
             "",
-            "| preset | budget | integrator | dt (s) | CPU ms/IC | agreement | settle-time bias (s) | floor 1e-12 | floor 1e-9 |",
-            "|---|---|---|---|---|---|---|---|---|",
+            "| preset | budget | integrator | dt (s) | tol | CPU ms/IC | agreement | settle-time bias (s) | floor 1e-12 | floor 1e-9 |",
+            "|---|---|---|---|---|---|---|---|---|---|",
         ]
         for b in bt:
             lines.append(
-                f"| {b['preset']} | {b['budget']} | {b['integrator']} | {_fmt(b['dt_s'], 'g')} | "
+                f"| {b['preset']} | {b['budget']} | {b['integrator']} | {_fmt(b['dt_s'], 'g')} | {_fmt(b['tol'], 'g')} | "
                 f"{_fmt(b['cpu_ms_per_ic'], '.3g')} | {_fmt(b['outcome_agreement'], '.3f')} | "
                 f"{_fmt(b['settle_time_bias_s'], '+.4f')} | {b['chaos_floor_1e-12']:.3f} | {b['chaos_floor_1e-09']:.3f} |"
             )
@@ -619,7 +646,7 @@ def summary_markdown(res: StudyResult, command: str) -> str:
                 lines.append(f"- `{preset}`, {bud:.3g} ms per throw: no run fits.")
             else:
                 lines.append(
-                    f"- `{preset}`, {bud:.3g} ms per throw: **{best['integrator']}** at dt = {best['dt_s']:g} s "
+                    f"- `{preset}`, {bud:.3g} ms per throw: **{best['integrator']}** at {setting(best)} "
                     f"(agreement {best['outcome_agreement']:.3f}, {best['cpu_ms_per_ic']:.3g} ms)."
                 )
     for note in res.notes:
@@ -645,7 +672,7 @@ def plot_study(res: StudyResult, path) -> None:
 
     presets = [p for p in PRESETS if any(r["preset"] == p for r in res.rows)]
     fig, axes = plt.subplots(len(presets), 2, figsize=(12, 4.6 * len(presets)), squeeze=False)
-    colors = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange")))
+    colors = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")))
     for row, preset in enumerate(presets):
         ref = next(x for x in res.references if x["preset"] == preset)
         ax, bx = axes[row]
@@ -656,7 +683,8 @@ def plot_study(res: StudyResult, path) -> None:
             c = [r["cpu_ms_per_ic"] for r in rr]
             ax.plot(c, [r["outcome_agreement"] for r in rr], "o-", color=colors[integ], label=integ)
             for r in rr:
-                ax.annotate(f"{r['dt_s']:g}", (r["cpu_ms_per_ic"], r["outcome_agreement"]), fontsize=6,
+                lab = f"{r['tol']:.0e}" if np.isfinite(r.get("tol", float("nan"))) else f"{r['dt_s']:g}"
+                ax.annotate(lab, (r["cpu_ms_per_ic"], r["outcome_agreement"]), fontsize=6,
                             xytext=(2, 2), textcoords="offset points", color=colors[integ])
             e = np.array([r["first_impact_error_cm"] for r in rr], float)
             e = np.where(np.isfinite(e), e, np.nan)
@@ -672,7 +700,7 @@ def plot_study(res: StudyResult, path) -> None:
         ax.set_ylim(0, 1.02)
         ax.set_xlabel("CPU time per throw (ms, one thread)")
         ax.set_ylabel("outcome agreement with the reference")
-        ax.set_title(f"{preset}: outcome agreement (labels: dt in s; dotted: seed cost, 10×)")
+        ax.set_title(f"{preset}: outcome agreement (labels: dt in s, or tol; dotted: seed cost, 10×)")
         ax.legend(fontsize=7, loc="upper left")
         bx.set_xscale("log")
         chk = ref["check_first_impact_error_cm"]
@@ -898,7 +926,8 @@ def stability_markdown(rows: list[dict], command: str) -> str:
         f"Largest dt (log bisection in [{DT_SEARCH[0]:g}, {DT_SEARCH[1]:g}] s) at which every IC of the extreme corpus "
         f"ends without a blow-up or a non-finite state within {STABILITY_T_MAX_S:g} s (the first impacts, where the "
         "speeds peak), against the linear bound on the undamped spring (ω = √k per unit mass; contact-substep: "
-        "RK4's bound per sub-step, 8 sub-steps), and the step `dt = \"auto\"` picks.",
+        "RK4's bound per sub-step, 8 sub-steps; contact-adaptive: RK4's bound on a sub-step as long as dt, though its "
+        "error control shortens them), and the step `dt = \"auto\"` picks.",
         "",
         "| preset | integrator | k | ω·dt stable | stable dt (s) | unstable dt (s) | linear bound ω·dt | auto dt (s) | auto stable | first failing IC |",
         "|---|---|---|---|---|---|---|---|---|---|",
@@ -924,7 +953,7 @@ def plot_stability(rows: list[dict], path) -> None:
 
     presets = [p for p in PRESETS if any(r["preset"] == p for r in rows)]
     fig, axes = plt.subplots(1, len(presets), figsize=(6.5 * len(presets), 4.6), squeeze=False)
-    colors = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange")))
+    colors = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")))
     for ax, preset in zip(axes[0], presets):
         for integ in INTEGRATORS:
             rr = [r for r in rows if r["preset"] == preset and r["integrator"] == integ]

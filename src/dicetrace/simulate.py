@@ -206,10 +206,10 @@ def contact_sequence_from_heights(z_steps) -> tuple[np.ndarray, np.ndarray]:
     return sets[:n].copy(), steps[:n].copy()
 
 
-def _resolve_config(config, preset, integrator, dt_s, t_max_s) -> Config:
+def _resolve_config(config, preset, integrator, dt_s, t_max_s, tol=None) -> Config:
     if config is not None:
         return config
-    return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s)
+    return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, tol=tol)
 
 
 def _to_kernel_ic(ic: np.ndarray, config: Config) -> np.ndarray:
@@ -251,6 +251,7 @@ def simulate(
     integrator: str | None = None,
     dt_s: float | None = None,
     t_max_s: float | None = None,
+    tol: float | None = None,
     record: Record | None = None,
     orientation=None,
 ) -> Roll:
@@ -264,7 +265,8 @@ def simulate(
         program's, the negative of the physical L).
     config
         A full :class:`~dicetrace.params.Config`; otherwise built from
-        ``preset``, ``integrator``, ``dt_s`` (s) and ``t_max_s`` (s).
+        ``preset``, ``integrator``, ``dt_s`` (s), ``t_max_s`` (s) and ``tol``
+        (the local error tolerance of ``contact-adaptive``).
     record
         Per-step channels to compute (None: summary only, nothing per step).
     orientation
@@ -275,7 +277,7 @@ def simulate(
     -------
     Roll
     """
-    cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s)
+    cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s, tol)
     _check_integrator(cfg)
     ic = validate_ic(ic)
     kic = _to_kernel_ic(ic, cfg)
@@ -369,6 +371,7 @@ def simulate_batch(
     integrator: str | None = None,
     dt_s: float | None = None,
     t_max_s: float | None = None,
+    tol: float | None = None,
     cap: int = 128,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads).
@@ -377,7 +380,7 @@ def simulate_batch(
     ``cap`` is the initial per-IC contact-set buffer (throws that need more
     are re-run with a larger one).
     """
-    cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s)
+    cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s, tol)
     _check_integrator(cfg)
     ics = validate_ics(ics)
     kics = _to_kernel_ic(ics, cfg)

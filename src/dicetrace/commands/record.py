@@ -34,6 +34,7 @@ from dicetrace.commands.simulate import (
     FAILED_STATUSES,
     IC_HELP,
     INTEGRATOR_HELP,
+    TOL_HELP,
     PRESET_HELP,
     SLICE_HELP,
     T_MAX_HELP,
@@ -128,6 +129,7 @@ def register(app: typer.Typer) -> None:
         integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
         dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
+        tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
         out: Optional[Path] = typer.Option(
             None, "--out", help="Output .rrd file (default: recordings/<name>.rrd, the name encoding the IC)."
         ),
@@ -143,14 +145,14 @@ def register(app: typer.Typer) -> None:
         if scan is not None:
             if ic is not None or slice_name is not None:
                 fail("give either --scan DIR --at X,Y or --ic / --slice, not both")
-            conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max}
+            conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
         else:
             auto = dt is not None and dt.strip().lower() == "auto"
-            cfg = build_config(preset or "seed", integrator, None if auto else dt, t_max)
+            cfg = build_config(preset or "seed", integrator, None if auto else dt, t_max, tol=tol)
             the_ic, coords, desc = ic_from_options(ic, slice_name, at, cfg)
             if auto:  # the step depends on this throw's impact speed
-                cfg = build_config(preset or "seed", integrator, dt, t_max, ics=the_ic)
+                cfg = build_config(preset or "seed", integrator, dt, t_max, ics=the_ic, tol=tol)
         name = default_name(the_ic, coords, desc, cfg)
         if out is None:
             out = DEFAULT_FOLDER / f"{name}.rrd"

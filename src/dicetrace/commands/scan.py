@@ -30,6 +30,7 @@ import numpy as np
 import typer
 
 from dicetrace.commands._common import fail, parse_floats
+from dicetrace.commands.simulate import INTEGRATOR_HELP, TOL_HELP
 
 SLICE_HELP = "Slice of IC space: seed (the writeup's 2-D), seed3 (3-D), seed-ortho, seed3-ortho (Gram–Schmidt)."
 WINDOW_HELP = (
@@ -180,9 +181,10 @@ def register(app: typer.Typer) -> None:
         origin: Optional[str] = typer.Option(None, "--origin", help="Custom slice origin VX,VY,VZ,LX,LY,LZ."),
         dirs: Optional[List[str]] = typer.Option(None, "--dir", help="Custom slice direction (6 numbers; 1 to 3 times)."),
         preset: str = typer.Option("seed", "--preset", help="Model preset: seed (the 2019 program, bit for bit) or physical."),
-        integrator: Optional[str] = typer.Option(None, "--integrator", help="Integrator: semi-implicit-euler, forward-euler, verlet, rk4, contact-substep (default: the preset's own, semi-implicit-euler for seed, contact-substep for physical)."),
+        integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
         dt: Optional[str] = typer.Option(None, "--dt", help="Time step, s (default 0.001), or 'auto' (chosen from the stiffness k for a 300 cm/s impact; refused when no step fits)."),
         t_max: Optional[str] = typer.Option(None, "--t-max", help="Time cap, s (default 60)."),
+        tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
         sets: Optional[List[str]] = typer.Option(
             None, "--set", help="Override a preset parameter, NAME=VALUE (e.g. gamma=0.01, mu=0.6, k=1e6); repeatable."
         ),
@@ -202,7 +204,7 @@ def register(app: typer.Typer) -> None:
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
-        cfg = apply_overrides(build_config(preset, integrator, dt, t_max), sets or [])
+        cfg = apply_overrides(build_config(preset, integrator, dt, t_max, tol=tol), sets or [])
         if chunk is not None and chunk < 1:
             fail(f"--chunk must be >= 1, got {chunk}")
         if threads is not None and threads < 1:

@@ -42,7 +42,8 @@ SLICE_HELP = (
 )
 AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
 PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
-INTEGRATOR_HELP = "Integrator: semi-implicit-euler, forward-euler, verlet, rk4, contact-substep (default: the preset's own, semi-implicit-euler for seed, contact-substep for physical)."
+INTEGRATOR_HELP = "Integrator: semi-implicit-euler, forward-euler, verlet, rk4, contact-substep, contact-adaptive (default: the preset's own, semi-implicit-euler for seed, contact-adaptive for physical)."
+TOL_HELP = "contact-adaptive only: local error tolerance of its sub-steps (default 1e-7; smaller is more accurate)."
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
 
@@ -63,7 +64,7 @@ def parse_positive(text: str | None, option: str, what: str) -> float | None:
     return v
 
 
-def build_config(preset: str, integrator: str | None, dt: str | None, t_max: str | None, ics=None):
+def build_config(preset: str, integrator: str | None, dt: str | None, t_max: str | None, ics=None, tol: str | None = None):
     """A validated Config from the options' text, or a one-line failure naming the bad option.
 
     ``--dt auto`` picks the step from the stiffness and the fastest first
@@ -83,8 +84,9 @@ def build_config(preset: str, integrator: str | None, dt: str | None, t_max: str
     else:
         dt = parse_positive(dt, "--dt", "the time step in s, or 'auto'")
     t_max = parse_positive(t_max, "--t-max", "the time cap in s")
+    tol = parse_positive(tol, "--tol", "the local error tolerance of contact-adaptive")
     try:
-        cfg = make_config(preset, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact)
+        cfg = make_config(preset, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol)
     except ValueError as e:
         fail(str(e))
     if integrator is not None:  # (the default one always is; this check imports numba)
@@ -398,6 +400,7 @@ def register(app: typer.Typer) -> None:
         integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
         dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
+        tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
         fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json."),
         out: Optional[Path] = typer.Option(None, "--out", help="Write the output to this file (atomically) instead of stdout."),
     ) -> None:
@@ -408,7 +411,7 @@ def register(app: typer.Typer) -> None:
         if fmt not in FORMATS:
             fail(f"unknown --format {fmt!r} (choose from {', '.join(FORMATS)})")
         auto = dt is not None and dt.strip().lower() == "auto"
-        cfg = build_config(preset, integrator, None if auto else dt, t_max)
+        cfg = build_config(preset, integrator, None if auto else dt, t_max, tol=tol)
         if ics is not None:
             if ic is not None or at is not None:
                 fail("give one source of ICs: --ics FILE, --ic, or --slice/--at")
@@ -420,7 +423,7 @@ def register(app: typer.Typer) -> None:
             coords = None if c is None else c[None, :]
             source = desc
         if auto:  # the step depends on the fastest first impact of these ICs
-            cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr)
+            cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr, tol=tol)
         if out is not None:
             check_output_file(out)
 

@@ -47,7 +47,7 @@ def roll_summary_cs(ic, off0, kp, sets, set_steps):
     z = np.empty(8)
     P = np.zeros(8)
     R = np.zeros((3, 3))
-    Rh = np.array([-1.0, 0.0])
+    Rh = np.array([-1.0, 0.0, 0.0])
 
     X[0] = 0.0
     X[1] = 0.0

@@ -27,9 +27,10 @@ FORWARD_EULER = 1
 VERLET = 2
 RK4 = 3
 CONTACT_SUBSTEP = 4
+CONTACT_ADAPTIVE = 5  # the same step with error-controlled sub-steps (kp.tol > 0)
 
 #: Integrator ids compiled into `step` (the Python layer refuses others).
-IMPLEMENTED = {SEMI_IMPLICIT_EULER, FORWARD_EULER, VERLET, RK4, CONTACT_SUBSTEP}
+IMPLEMENTED = {SEMI_IMPLICIT_EULER, FORWARD_EULER, VERLET, RK4, CONTACT_SUBSTEP, CONTACT_ADAPTIVE}
 
 
 @jit
@@ -173,7 +174,7 @@ def step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact):
         return step_semi_implicit(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
     elif integ == FORWARD_EULER:
         return step_forward_euler(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
-    elif integ == VERLET or integ == RK4 or integ == CONTACT_SUBSTEP:
+    elif integ == VERLET or integ == RK4 or integ == CONTACT_SUBSTEP or integ == CONTACT_ADAPTIVE:
         # out of line (core.schemes): keeps this dispatch small enough for
         # LLVM to inline the program's step into the loop
         return step_scheme(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)

@@ -24,7 +24,7 @@ from dicetrace.core._jit import jit, jit_parallel
 from dicetrace.core.contacts import record_set
 from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
 from dicetrace.core.fast_substep import roll_summary_cs
-from dicetrace.core.integrators import CONTACT_SUBSTEP, SEMI_IMPLICIT_EULER, step
+from dicetrace.core.integrators import CONTACT_ADAPTIVE, CONTACT_SUBSTEP, SEMI_IMPLICIT_EULER, step
 from dicetrace.core.model import (
     BLOW_UP,
     BUFFER_FULL,
@@ -108,7 +108,7 @@ def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy
         z = np.empty(8)
         P = np.empty(8)
         return roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P)
-    if not tracing and integ == CONTACT_SUBSTEP:
+    if not tracing and (integ == CONTACT_SUBSTEP or integ == CONTACT_ADAPTIVE):
         return roll_summary_cs(ic, off0, kp, sets, set_steps)
     return run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
 
@@ -148,7 +148,7 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
     z = np.empty(8)
     P = np.zeros(8)
     R = np.zeros((3, 3))
-    Rh = np.array([-1.0, 0.0])
+    Rh = np.array([-1.0, 0.0, 0.0])
     e_buf = np.zeros(5)
 
     X[0] = 0.0
@@ -275,7 +275,7 @@ def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, se
                     ics[i], off0, kp, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap],
                     s_off[b], s_F[b], s_uk[b], s_z[b], s_P[b],
                 )
-            elif integ == CONTACT_SUBSTEP:
+            elif integ == CONTACT_SUBSTEP or integ == CONTACT_ADAPTIVE:
                 s, n, o, ns = roll_summary_cs(ics[i], off0, kp, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap])
             else:
                 s, n, o, ns = run_roll_general(
