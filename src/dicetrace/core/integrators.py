@@ -5,6 +5,9 @@ contact forces at the current state (``contact`` says whether any is
 non-zero); on exit the state (X, U, L, W, off) has advanced by ``h`` and
 ``z``, ``F``, ``P`` (and ``uk`` where contact was found) are evaluated at the
 new state.  Rotations are exact (Rodrigues), so the offsets stay rigid.
+``R`` (3, 3) and ``Rh`` (3,) are per-throw scratch a scheme may keep between
+calls: ``Rh[0]``, ``Rh[1]`` cache the free-flight rotation, ``Rh[2]`` is
+contact-adaptive's proposed sub-step (start every throw at -1, 0, 0).
 
 Returns ``(contact, mask)``: whether any node is strictly below the ground
 (non-zero forces) and the bitmask of nodes at or below it.
