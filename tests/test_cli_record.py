@@ -114,7 +114,7 @@ BAD = [
     (["--slice", "seed", "--at", "1,2", "--dt", "nan"], "--dt"),
     (["--slice", "seed", "--at", "1,2", "--t-max", "-1"], "--t-max"),
     (["--slice", "seed", "--at", "1,2", "--tol", "0"], "--tol"),
-    (["--slice", "seed", "--at", "1,2", "--integrator", "contact-adaptive", "--tol", "2"], "tolerance tol"),
+    (["--slice", "seed", "--at", "1,2", "--integrator", "contact-adaptive", "--tol", "2"], "[1e-14, 1)"),
     (["--slice", "seed", "--at", "1,2", "--out", "x.txt"], ".rrd"),
     (["--slice", "seed", "--at", "1,2", "--out", "afile/x.rrd"], "afile"),
     (["--slice", "seed", "--at", "1,2", "--out", "adir.rrd"], "folder"),

@@ -203,6 +203,10 @@ def get_preset(name: str) -> Preset:
         raise ValueError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})") from None
 
 
+#: Smallest ``Numerics.tol``: below it the error estimate is rounding.
+TOL_MIN = 1e-14
+
+
 @dataclass(frozen=True)
 class Numerics:
     """How a preset is integrated.
@@ -226,7 +230,7 @@ class Numerics:
         ``contact-adaptive`` only: the local error tolerance of its sub-steps
         (relative: position error per sub-step in units of the half side,
         velocity error in units of the die's current speed |U| + √3·half·|ω|
-        + √(|g|·half)).  Its sub-steps are at most dt long.
+        + √(|g|·half)), in [``TOL_MIN``, 1).  Its sub-steps are at most dt long.
     """
 
     integrator: str = "semi-implicit-euler"
@@ -248,8 +252,8 @@ class Numerics:
             raise ValueError("time cap / dt is too large")
         if int(self.substeps) != self.substeps or self.substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
-        if not isinstance(self.tol, (int, float)) or not math.isfinite(self.tol) or not 0 < self.tol < 1:
-            raise ValueError(f"tolerance tol must be a number in (0, 1), got {self.tol!r}")
+        if not isinstance(self.tol, (int, float)) or not math.isfinite(self.tol) or not TOL_MIN <= self.tol < 1:
+            raise ValueError(f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {self.tol!r}")
 
     @property
     def max_steps(self) -> int:

@@ -43,7 +43,7 @@ SLICE_HELP = (
 AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
 PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
 INTEGRATOR_HELP = "Integrator: semi-implicit-euler, forward-euler, verlet, rk4, contact-substep, contact-adaptive (default: the preset's own, semi-implicit-euler for seed, contact-adaptive for physical)."
-TOL_HELP = "contact-adaptive only: local error tolerance of its sub-steps (default 1e-7; smaller is more accurate)."
+TOL_HELP = "contact-adaptive only: local error tolerance of its sub-steps, in [1e-14, 1) (default 1e-7; smaller is more accurate and slower)."
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
 
