@@ -907,7 +907,8 @@ def step_contact_substep(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact):
 
 @jit
 def step_scheme(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact):
-    """Dispatch the schemes of this module (ids 2, 3, 4 of params.INTEGRATORS).
+    """Dispatch the schemes of this module (ids 2, 3, 4 and 5 of params.INTEGRATORS; 5,
+    contact-adaptive, is the contact-substep step with kp.tol > 0).
 
     Called out of line from ``integrators.step``: inlining these larger
     kernels into the dispatch roughly doubled the per-step cost of the
