@@ -112,6 +112,9 @@ class Reference:
 REFERENCE = Reference("contact-substep", 1e-4)
 QUICK_REFERENCE = Reference("contact-substep", 2.5e-4)
 
+#: Plot colour of each integrator (work-precision and stability plots).
+INTEGRATOR_COLORS = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")))
+
 #: CSV columns of the study, in order.
 STUDY_COLUMNS = (
     "preset",
@@ -672,7 +675,7 @@ def plot_study(res: StudyResult, path) -> None:
 
     presets = [p for p in PRESETS if any(r["preset"] == p for r in res.rows)]
     fig, axes = plt.subplots(len(presets), 2, figsize=(12, 4.6 * len(presets)), squeeze=False)
-    colors = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")))
+    colors = INTEGRATOR_COLORS
     for row, preset in enumerate(presets):
         ref = next(x for x in res.references if x["preset"] == preset)
         ax, bx = axes[row]
@@ -953,7 +956,7 @@ def plot_stability(rows: list[dict], path) -> None:
 
     presets = [p for p in PRESETS if any(r["preset"] == p for r in rows)]
     fig, axes = plt.subplots(1, len(presets), figsize=(6.5 * len(presets), 4.6), squeeze=False)
-    colors = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")))
+    colors = INTEGRATOR_COLORS
     for ax, preset in zip(axes[0], presets):
         for integ in INTEGRATORS:
             rr = [r for r in rows if r["preset"] == preset and r["integrator"] == integ]
