@@ -1,4 +1,4 @@
-"""Shared fixtures: the reference data of the 2019 program (../shared/reference)."""
+"""Shared fixtures: the reference data of the 2019 program (tests/data/reference)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ REPO = HERE.parent
 def _reference_dir() -> Path | None:
     for cand in (
         os.environ.get("DICETRACE_REFERENCE"),
-        REPO.parent / "shared" / "reference",
         REPO / "tests" / "data" / "reference",
     ):
         if cand and (Path(cand) / "writeup_points.csv").exists():

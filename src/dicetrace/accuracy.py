@@ -43,12 +43,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from dicetrace.ics import SEED_SLICE, WINDOWS, Sample, get_window, to_preset_convention
+from dicetrace.ics import SEED_SLICE, WINDOWS, Sample, get_window
 from dicetrace.params import (
-    INTEGRATOR_ORDER,
     INTEGRATORS,
-    STABILITY_BOUND,
     Config,
+    convert_l,
     Numerics,
     auto_dt,
     get_preset,
@@ -72,29 +71,12 @@ N_TRAJ = 24
 QUICK_N_TRAJ = 4
 
 #: Steps studied per integrator, s.  Every one divides HORIZON_GRID_S.
-DT_GRID: dict[str, tuple[float, ...]] = {
-    "semi-implicit-euler": (1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5, 1.5625e-5, 7.8125e-6),
-    "forward-euler": (1e-3, 2.5e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5),
-    "verlet": (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
-    "rk4": (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
-    "contact-substep": (8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4),
-    "contact-adaptive": (1e-3,),
-}
-QUICK_DT_GRID: dict[str, tuple[float, ...]] = {
-    "semi-implicit-euler": (1e-3, 2.5e-4),
-    "forward-euler": (1e-4, 5e-5),
-    "verlet": (1e-3, 2.5e-4),
-    "rk4": (1e-3, 2.5e-4),
-    "contact-substep": (2e-3, 1e-3),
-    "contact-adaptive": (1e-3,),
-}
-#: Tolerances studied for the error-controlled integrator (at each of its dt).
-TOL_GRID: dict[str, tuple[float, ...]] = {
-    "contact-adaptive": (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
-}
-QUICK_TOL_GRID: dict[str, tuple[float, ...]] = {
-    "contact-adaptive": (1e-4, 1e-6),
-}
+#: (The steps and tolerances studied are each integrator's ``IntegratorSpec.study_dt_s``,
+#: ``quick_dt_s``, ``study_tol`` and ``quick_tol``; every step divides HORIZON_GRID_S.)
+DT_GRID: dict[str, tuple[float, ...]] = {n: s.study_dt_s for n, s in INTEGRATORS.items()}
+QUICK_DT_GRID: dict[str, tuple[float, ...]] = {n: s.quick_dt_s for n, s in INTEGRATORS.items()}
+TOL_GRID: dict[str, tuple[float, ...]] = {n: s.study_tol for n, s in INTEGRATORS.items() if s.adaptive}
+QUICK_TOL_GRID: dict[str, tuple[float, ...]] = {n: s.quick_tol for n, s in INTEGRATORS.items() if s.adaptive}
 
 
 @dataclass(frozen=True)
@@ -112,8 +94,8 @@ class Reference:
 REFERENCE = Reference("contact-substep", 1e-4)
 QUICK_REFERENCE = Reference("contact-substep", 2.5e-4)
 
-#: Plot colour of each integrator (work-precision and stability plots).
-INTEGRATOR_COLORS = dict(zip(INTEGRATORS, ("tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange", "tab:brown")))
+#: Plot colour of each integrator (work-precision and stability plots): its spec's colour.
+INTEGRATOR_COLORS = {n: s.color for n, s in INTEGRATORS.items()}
 
 #: CSV columns of the study, in order.
 STUDY_COLUMNS = (
@@ -367,7 +349,7 @@ def study(
     ref_runs = {}
     for preset in presets:
         conv = get_preset(preset).l_convention
-        ics = to_preset_convention(ics_prog, "program", conv)
+        ics = convert_l(ics_prog, "program", conv)
         say(f"[{preset}] reference {ref_spec.integrator} dt={ref_spec.dt_s:g} s on {n} ICs")
         ref_cfg = config_for(preset, ref_spec.integrator, ref_spec.dt_s)
         ref = run_batch(ics, ref_cfg, threads=threads)
@@ -418,7 +400,7 @@ def study(
                     {
                         "preset": preset,
                         "integrator": integ,
-                        "order": INTEGRATOR_ORDER[integ],
+                        "order": INTEGRATORS[integ].order,
                         "dt_s": dt,
                         "tol": float("nan") if tol is None else tol,
                         "n_ics": n,
@@ -446,7 +428,7 @@ def study(
                 {
                     "preset": preset,
                     "integrator": integ,
-                    "declared_order": INTEGRATOR_ORDER[integ],
+                    "declared_order": INTEGRATORS[integ].order,
                     # error-controlled runs: the exponent of the error against tol at one dt
                     "fitted_order_first_impact": fit_order([t if t is not None else d for d, t in runs_at], errs)
                     if len(runs_at) >= 2
@@ -859,7 +841,7 @@ def stability_map(
     rows = []
     for preset in presets:
         base = get_preset(preset)
-        ics = to_preset_convention(ics_prog, "program", base.l_convention)
+        ics = convert_l(ics_prog, "program", base.l_convention)
         v_imp = impact_speed_cm_s(ics_prog, base)
         for integ in integrators:
             for k in k_values:
@@ -867,7 +849,8 @@ def stability_map(
                 say(f"[{preset}] {integ} k={k:.3g}")
                 with numba_threads(1):
                     dt_ok, dt_bad, fail = largest_stable_dt(ics, p, integ, bisections=nb)
-                bound = STABILITY_BOUND[integ] * (8 if integ == "contact-substep" else 1)
+                spec = INTEGRATORS[integ]
+                bound = spec.stability_bound * (Numerics.substeps if spec.substepped and not spec.adaptive else 1)
                 try:
                     adt = auto_dt(p, integ, v_impact_cm_s=v_imp, t_max_s=STABILITY_T_MAX_S)
                     cfg = Config(preset=p, numerics=Numerics(integrator=integ, dt_s=adt, t_max_s=STABILITY_T_MAX_S))

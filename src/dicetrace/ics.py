@@ -38,6 +38,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from dicetrace.params import L_CONVENTIONS
+
 IC_FIELDS = ("vx", "vy", "vz", "Lx", "Ly", "Lz")
 
 # Seed slice (writeup section 6.2): L = x·A + y·B (+ z·C) + L0, U = x·UA + y·UB (+ z·UC).
@@ -101,7 +103,7 @@ SEED_DIRS_6D = np.concatenate([SEED_U_DIRS, SEED_L_DIRS], axis=1)
 #: The seed slices' origin (U = 0, L = (0, 100, 0)).
 SEED_ORIGIN_6D = np.concatenate([np.zeros(3), SEED_L_ORIGIN])
 
-L_CONVENTIONS = ("program", "physical")
+
 
 
 def _vec6(v, what: str) -> tuple[float, ...]:
@@ -533,12 +535,3 @@ def space_from_dict(d: dict) -> IcSpace:
     if kind == "points":
         return Points(sl, tuple(tuple(c) for c in d["coords"]))
     raise ValueError(f"unknown IC space kind {kind!r}")
-
-
-def to_preset_convention(ics: np.ndarray, slice_convention: str, preset_convention: str) -> np.ndarray:
-    """ICs from a slice's L convention to a preset's (L negated when they differ)."""
-    if slice_convention == preset_convention:
-        return ics
-    out = np.array(ics, dtype=np.float64, copy=True)
-    out[..., 3:] = -out[..., 3:]
-    return out

@@ -15,25 +15,116 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
-#: Integrator names → kernel ids.  The order is part of the kernel ABI.
-INTEGRATORS: dict[str, int] = {
-    "semi-implicit-euler": 0,  # the 2019 program's scheme (default for `seed`)
-    "forward-euler": 1,  # what the writeup claims it used
-    "verlet": 2,  # velocity Verlet
-    "rk4": 3,  # classical Runge-Kutta on the Lie group (commutator-free)
-    "contact-substep": 4,  # contact-aware RK4: exact free flight, kink-aligned sub-steps in contact
-    "contact-adaptive": 5,  # contact-substep with error-controlled sub-steps (tolerance `tol`)
+import numpy as np
+
+def _is_number(v) -> bool:
+    """A real number that is not a bool (``dt_s=True`` is no step)."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+@dataclass(frozen=True)
+class IntegratorSpec:
+    """Everything dicetrace knows about one integrator, in one place.
+
+    Parameters
+    ----------
+    name
+        The name users type (``--integrator``, ``integrator=``).
+    kernel_id
+        The integer the numba kernels dispatch on (part of the kernel ABI:
+        ``dicetrace.core.integrators`` compiles one step per id).
+    order
+        Classical order of accuracy on smooth segments.
+    stability_bound
+        Linear stability bound of ω·h on the undamped penalty spring
+        (ω = √k per unit mass); 0 when the scheme has none (forward Euler
+        amplifies every oscillation by √(1 + ω²h²) per step).  For the
+        sub-stepping schemes h is the sub-step.
+    substepped
+        Its contact steps are sub-steps of dt (``Numerics.substeps`` of them
+        at most, or error-controlled): ``dt = auto`` applies the bound per
+        sub-step.
+    adaptive
+        Error-controlled sub-steps (``Numerics.tol`` is its tolerance).
+    study_dt_s, quick_dt_s
+        Steps of the work-precision study (full and ``--quick``), s; each
+        divides the study's first-impact horizon grid of 8 ms.
+    study_tol, quick_tol
+        Tolerances of the study (adaptive schemes only).
+    color
+        Its colour in the study's plots (matplotlib name).
+    summary
+        One line for ``--help`` and the docs.
+    """
+
+    name: str
+    kernel_id: int
+    order: int
+    stability_bound: float
+    summary: str
+    color: str
+    study_dt_s: tuple[float, ...]
+    quick_dt_s: tuple[float, ...]
+    substepped: bool = False
+    adaptive: bool = False
+    study_tol: tuple[float, ...] = ()
+    quick_tol: tuple[float, ...] = ()
+
+
+_RK4_BOUND = 2.0 * math.sqrt(2.0)  # RK4's interval on the imaginary axis
+
+#: The integrators, by name (the order of ids is part of the kernel ABI).
+INTEGRATORS: dict[str, IntegratorSpec] = {
+    s.name: s
+    for s in (
+        IntegratorSpec(
+            "semi-implicit-euler", 0, 1, 2.0, "the 2019 program's scheme (default for seed)", "tab:blue",
+            study_dt_s=(1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5, 1.5625e-5, 7.8125e-6),
+            quick_dt_s=(1e-3, 2.5e-4),
+        ),
+        IntegratorSpec(
+            "forward-euler", 1, 1, 0.0, "textbook forward Euler (what the writeup says it used)", "tab:red",
+            study_dt_s=(1e-3, 2.5e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5),
+            quick_dt_s=(1e-4, 5e-5),
+        ),
+        IntegratorSpec(
+            "verlet", 2, 2, 2.0, "velocity Verlet", "tab:green",
+            study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
+            quick_dt_s=(1e-3, 2.5e-4),
+        ),
+        IntegratorSpec(
+            "rk4", 3, 4, _RK4_BOUND, "classical Runge-Kutta on the Lie group (commutator-free)", "tab:purple",
+            study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
+            quick_dt_s=(1e-3, 2.5e-4),
+        ),
+        IntegratorSpec(
+            "contact-substep", 4, 4, _RK4_BOUND,
+            "contact-aware RK4: exact free flight, kink-aligned sub-steps in contact", "tab:orange",
+            study_dt_s=(8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4),
+            quick_dt_s=(2e-3, 1e-3),
+            substepped=True,
+        ),
+        IntegratorSpec(
+            "contact-adaptive", 5, 4, _RK4_BOUND,
+            "contact-substep with error-controlled sub-steps (tolerance tol; default for physical)", "tab:brown",
+            study_dt_s=(1e-3,),
+            quick_dt_s=(1e-3,),
+            substepped=True,
+            adaptive=True,
+            study_tol=(1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
+            quick_tol=(1e-4, 1e-6),
+        ),
+    )
 }
 
-#: Classical order of accuracy of each integrator on smooth segments.
-INTEGRATOR_ORDER: dict[str, int] = {
-    "semi-implicit-euler": 1,
-    "forward-euler": 1,
-    "verlet": 2,
-    "rk4": 4,
-    "contact-substep": 4,
-    "contact-adaptive": 4,
-}
+
+def get_integrator(name: str) -> IntegratorSpec:
+    """The spec of integrator ``name`` (ValueError naming the choices)."""
+    try:
+        return INTEGRATORS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown integrator {name!r} (choose from {', '.join(INTEGRATORS)})") from None
+
 
 #: Default friction regularisation speed of the per-node law, cm/s (see Preset).
 V_REG_CM_S = 10.0
@@ -44,9 +135,49 @@ FRICTION_PER_NODE = 1  # physical: −μ·max(P_k,0)·u_xy,k / sqrt(|u_xy,k|² +
 ENERGY_POINT_MASS = 0  # the program's stop-test energy (point-mass kinetic energy)
 ENERGY_RIGID = 1  # kinetic energy with the inertia the dynamics use
 
+#: Conventions for the sign of an IC's angular momentum L.
+L_CONVENTIONS = ("program", "physical")
+#: The convention the kernels work in (the 2019 program's: −physical L).
+KERNEL_L_CONVENTION = "program"
+
+#: Body-frame node offsets in units of the half side: node = 1 + 4[x>0] + 2[y>0] + [z>0]
+#: (row k is node k + 1; docs/model.md §3).
+NODE_SIGNS = np.array(
+    [[(-1.0, 1.0)[(k >> 2) & 1], (-1.0, 1.0)[(k >> 1) & 1], (-1.0, 1.0)[k & 1]] for k in range(8)]
+)
+
+
+def convert_l(ics, from_convention: str, to_convention: str) -> np.ndarray:
+    """ICs (..., 6) from one L sign convention to another (L negated when they differ).
+
+    The one place where dicetrace flips L.  Returns the input itself when
+    the conventions agree, else a new float64 array.
+    """
+    for c in (from_convention, to_convention):
+        if c not in L_CONVENTIONS:
+            raise ValueError(f"L convention must be one of {', '.join(L_CONVENTIONS)}, got {c!r}")
+    if from_convention == to_convention:
+        return ics
+    out = np.array(ics, dtype=np.float64, copy=True)
+    out[..., 3:] = -out[..., 3:]
+    return out
+
+
+class KernelInputs(NamedTuple):
+    """What a kernel takes besides its output buffers (see :meth:`Config.kernel_inputs`)."""
+
+    ics: np.ndarray  # (m, 6) or (6,) float64, C-contiguous, kernel (program) L convention
+    off0: np.ndarray  # (8, 3) initial node offsets, cm
+    params: "KernelParams"
+    integrator_id: int
+
 
 class KernelParams(NamedTuple):
-    """Flat float parameters for the numba kernels (field order is the ABI)."""
+    """Flat parameters for the numba kernels (field order is the ABI).
+
+    Built only by :meth:`Config.kernel_params`; mode fields are compared with
+    the named constants above, never with literals.
+    """
 
     k: float  # ground stiffness per node mass, 1/s²
     gamma: float  # damping coefficient, s/cm
@@ -57,11 +188,11 @@ class KernelParams(NamedTuple):
     z0: float  # initial height of the centre of mass, cm
     dt: float  # time step, s
     max_steps: float  # time cap as a number of steps
-    e_stop: float  # stop-test energy threshold
-    e_offset: float  # energy offset subtracted in the stop-test energy
-    friction_mode: float  # FRICTION_SPECTRAL or FRICTION_PER_NODE
-    clamp_normal: float  # 1: normal force clamped at zero, 0: signed (program)
-    energy_mode: float  # ENERGY_POINT_MASS or ENERGY_RIGID
+    e_stop: float  # stop-test energy threshold, node-mass·cm²/s² above e_rest
+    e_rest: float  # energy of the die lying on a face (subtracted in the stop-test energy)
+    friction_mode: int  # FRICTION_SPECTRAL or FRICTION_PER_NODE
+    clamp_normal: bool  # True: normal force clamped at zero; False: signed (program)
+    energy_mode: int  # ENERGY_POINT_MASS or ENERGY_RIGID
     v_reg: float  # friction regularisation speed, cm/s (per-node mode)
     blowup_rel: float  # blow-up if E_dyn - E_rest > (1+rel)·(E0 - E_rest) + abs
     blowup_abs: float
@@ -133,7 +264,7 @@ class Preset:
     def __post_init__(self) -> None:
         for name in ("k", "gamma", "mu", "g", "half_side_cm", "z0_cm", "v_reg_cm_s"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
+            if not _is_number(v) or not math.isfinite(v):
                 raise ValueError(f"preset {self.name!r}: {name} must be a finite number, got {v!r}")
         if self.k <= 0:
             raise ValueError(f"preset {self.name!r}: stiffness k must be > 0, got {self.k}")
@@ -147,7 +278,7 @@ class Preset:
             raise ValueError(f"preset {self.name!r}: friction must be 'spectral' or 'per-node', got {self.friction!r}")
         if self.energy not in ("point-mass", "rigid"):
             raise ValueError(f"preset {self.name!r}: energy must be 'point-mass' or 'rigid', got {self.energy!r}")
-        if self.l_convention not in ("program", "physical"):
+        if self.l_convention not in L_CONVENTIONS:
             raise ValueError(f"preset {self.name!r}: l_convention must be 'program' or 'physical'")
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"preset {self.name!r}: unknown integrator {self.integrator!r}")
@@ -240,19 +371,16 @@ class Numerics:
     tol: float = 1e-7
 
     def __post_init__(self) -> None:
-        if self.integrator not in INTEGRATORS:
-            raise ValueError(
-                f"unknown integrator {self.integrator!r} (choose from {', '.join(INTEGRATORS)})"
-            )
-        if not isinstance(self.dt_s, (int, float)) or not math.isfinite(self.dt_s) or self.dt_s <= 0:
+        get_integrator(self.integrator)
+        if not _is_number(self.dt_s) or not math.isfinite(self.dt_s) or self.dt_s <= 0:
             raise ValueError(f"time step dt must be a finite number > 0, got {self.dt_s!r}")
-        if not isinstance(self.t_max_s, (int, float)) or not math.isfinite(self.t_max_s) or self.t_max_s <= 0:
+        if not _is_number(self.t_max_s) or not math.isfinite(self.t_max_s) or self.t_max_s <= 0:
             raise ValueError(f"time cap t_max must be a finite number > 0, got {self.t_max_s!r}")
         if self.t_max_s / self.dt_s > 2**40:
             raise ValueError("time cap / dt is too large")
         if int(self.substeps) != self.substeps or self.substeps < 1:
             raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
-        if not isinstance(self.tol, (int, float)) or not math.isfinite(self.tol) or not TOL_MIN <= self.tol < 1:
+        if not _is_number(self.tol) or not math.isfinite(self.tol) or not TOL_MIN <= self.tol < 1:
             raise ValueError(f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {self.tol!r}")
 
     @property
@@ -260,29 +388,21 @@ class Numerics:
         return int(math.ceil(self.t_max_s / self.dt_s - 1e-9))
 
     @property
-    def integrator_id(self) -> int:
+    def spec(self) -> IntegratorSpec:
+        """The integrator's :class:`IntegratorSpec`."""
         return INTEGRATORS[self.integrator]
 
     @property
+    def integrator_id(self) -> int:
+        return self.spec.kernel_id
+
+    @property
     def order(self) -> int:
-        return INTEGRATOR_ORDER[self.integrator]
+        return self.spec.order
 
 
 # -- automatic time step (``dt = "auto"``) ----------------------------------------------------
 
-#: Linear stability bound of ω·dt on the undamped penalty spring (ω = √k per
-#: unit mass, DESIGN.md section 7): semi-implicit Euler and Verlet 2, RK4 2√2
-#: (its interval on the imaginary axis).  Forward Euler has none: it
-#: amplifies every oscillation by √(1 + ω²dt²) per step.  ``contact-substep``
-#: applies RK4's bound to its sub-steps (dt / substeps).
-STABILITY_BOUND: dict[str, float] = {
-    "semi-implicit-euler": 2.0,
-    "forward-euler": 0.0,
-    "verlet": 2.0,
-    "rk4": 2.0 * math.sqrt(2.0),
-    "contact-substep": 2.0 * math.sqrt(2.0),
-    "contact-adaptive": 2.0 * math.sqrt(2.0),
-}
 #: ``dt = "auto"`` keeps the stiffest rate times dt below this fraction of the bound.
 AUTO_DT_SAFETY = 0.5
 #: Forward Euler: energy gain allowed per contact (a contact lasts π/ω, gain ≈ e^{π·ω·dt/2} − 1).
@@ -341,7 +461,7 @@ def auto_dt(
     """The time step ``dt = "auto"`` picks, s, or ValueError (one line) when none fits.
 
     dt keeps the spring's rate λ (with damping, :func:`stiff_rates`) at
-    ``AUTO_DT_SAFETY`` of the integrator's bound (:data:`STABILITY_BOUND`):
+    ``AUTO_DT_SAFETY`` of the integrator's bound (``IntegratorSpec.stability_bound``):
     dt = safety·bound/λ, per sub-step for ``contact-substep`` (the same rule
     for ``contact-adaptive``, whose dt only caps its error-controlled
     sub-steps).  The stick
@@ -358,18 +478,17 @@ def auto_dt(
         Largest node speed at impact, cm/s (see :func:`impact_speed_cm_s`);
         None: the drop speed from z0 plus ``AUTO_DT_DEFAULT_THROW_CM_S``.
     """
-    if integrator not in INTEGRATORS:
-        raise ValueError(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+    spec = get_integrator(integrator)
     if v_impact_cm_s is None:
         drop = math.sqrt(max(0.0, 2.0 * abs(preset.g) * max(preset.z0_cm - preset.half_side_cm, 0.0)))
         v_impact_cm_s = drop + AUTO_DT_DEFAULT_THROW_CM_S
     spring, _ = stiff_rates(preset, v_impact_cm_s)
-    if integrator == "forward-euler":
+    if spec.stability_bound == 0.0:
         dt = 2.0 * AUTO_DT_FE_GAIN / math.pi / spring
-    elif integrator in ("contact-substep", "contact-adaptive"):
-        dt = substeps * AUTO_DT_SAFETY * STABILITY_BOUND[integrator] / spring
+    elif spec.substepped:
+        dt = substeps * AUTO_DT_SAFETY * spec.stability_bound / spring
     else:
-        dt = AUTO_DT_SAFETY * STABILITY_BOUND[integrator] / spring
+        dt = AUTO_DT_SAFETY * spec.stability_bound / spring
     dt = min(dt, AUTO_DT_MAX_S)
     steps = t_max_s / dt
     if steps > AUTO_DT_MAX_STEPS:
@@ -408,16 +527,48 @@ class Config:
             dt=float(n.dt_s),
             max_steps=float(n.max_steps),
             e_stop=float(p.e_stop),
-            e_offset=float(p.e_rest),
-            friction_mode=float(FRICTION_SPECTRAL if p.friction == "spectral" else FRICTION_PER_NODE),
-            clamp_normal=1.0 if p.clamp_normal else 0.0,
-            energy_mode=float(ENERGY_POINT_MASS if p.energy == "point-mass" else ENERGY_RIGID),
+            e_rest=float(p.e_rest),
+            friction_mode=FRICTION_SPECTRAL if p.friction == "spectral" else FRICTION_PER_NODE,
+            clamp_normal=bool(p.clamp_normal),
+            energy_mode=ENERGY_POINT_MASS if p.energy == "point-mass" else ENERGY_RIGID,
             v_reg=float(p.v_reg_cm_s),
             blowup_rel=BLOWUP_REL,
             blowup_abs=BLOWUP_ABS_FRACTION * p.e_rest,
-            substeps=1.0 if n.integrator == "contact-adaptive" else float(n.substeps),
-            tol=float(n.tol) if n.integrator == "contact-adaptive" else 0.0,
+            substeps=1.0 if n.spec.adaptive else float(n.substeps),
+            tol=float(n.tol) if n.spec.adaptive else 0.0,
         )
+
+    def initial_offsets(self, orientation=None) -> np.ndarray:
+        """Initial node offsets (8, 3), cm: ±half on each axis, turned by ``orientation``.
+
+        ``orientation`` is a world-from-body rotation matrix (3, 3), or None
+        for the program's start (face 3 down, face 4 up).
+        """
+        off = NODE_SIGNS * self.preset.half_side_cm
+        if orientation is None:
+            return np.ascontiguousarray(off)
+        rot = np.asarray(orientation, dtype=np.float64)
+        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+            raise ValueError("orientation must be a finite 3×3 rotation matrix")
+        if np.abs(rot @ rot.T - np.eye(3)).max() > 1e-9 or np.linalg.det(rot) < 0:
+            raise ValueError("orientation is not a rotation matrix (RᵀR ≠ I or det < 0)")
+        return np.ascontiguousarray(off @ rot.T)
+
+    def kernel_inputs(self, ics, *, l_convention: str | None = None, orientation=None) -> KernelInputs:
+        """Turn validated ICs into kernel inputs: the one door from ICs to a kernel.
+
+        ``ics`` (m, 6) or (6,) are in ``l_convention`` (default: the preset's);
+        the kernels take L in the program's convention.  Also the initial
+        offsets (:meth:`initial_offsets`), the :class:`KernelParams` and the
+        integrator's kernel id.
+        """
+        conv = self.preset.l_convention if l_convention is None else l_convention
+        kics = np.ascontiguousarray(convert_l(ics, conv, KERNEL_L_CONVENTION), dtype=np.float64)
+        return KernelInputs(kics, self.initial_offsets(orientation), self.kernel_params(), self.numerics.integrator_id)
+
+    def to_preset_convention(self, ics, l_convention: str) -> np.ndarray:
+        """ICs given in ``l_convention`` expressed in this preset's convention."""
+        return convert_l(ics, l_convention, self.preset.l_convention)
 
     def as_dict(self) -> dict:
         """Plain dict of every parameter (stored in file metadata)."""

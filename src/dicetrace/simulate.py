@@ -12,22 +12,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import numba
+
 from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
-from dicetrace.core.model import BUFFER_FULL, NODE_SIGNS, NON_FINITE
 from dicetrace.ics import validate_ic, validate_ics
-from dicetrace.params import Config, make_config
+from dicetrace.params import NODE_SIGNS, Config, make_config
+from dicetrace.status import Status
 
-STATUS_NAMES = {0: "settled", 1: "time_cap", 2: "non_finite", 3: "blow_up"}
-STATUS_ADVICE = {
-    "settled": "the die came to rest; outcome is the face up (0: the top four nodes are no face)",
-    "time_cap": "the throw did not settle before the time cap (raise t_max_s, or it balances on an edge)",
-    "non_finite": "the state became NaN or infinite: the time step is too large for the stiffness",
-    "blow_up": "the energy grew beyond its start: a numerical blow-up (reduce dt or use another integrator)",
-}
 ENERGY_NAMES = ("stop_test", "kinetic_translational", "kinetic_rotational", "gravitational", "elastic", "total")
 
-_INITIAL_CAP = 256
+#: Contact sets per IC in the first pass (longer throws are re-run with ``CAP_GROWTH`` times more).
+DEFAULT_CAP = 128
+CAP_GROWTH = 8
 
 
 class SimulationError(RuntimeError):
@@ -93,14 +90,31 @@ class Trace:
         return np.einsum("kj,nki->nij", NODE_SIGNS, self.node_offsets) / (8.0 * half)
 
     @property
+    def written(self) -> np.ndarray:
+        """Boolean mask of the rows that hold a state.
+
+        A run that ends in a numerical failure may leave its last row
+        unwritten (all zeros): no real state has all eight node offsets zero,
+        so such rows are masked out.
+        """
+        return ~(self.node_offsets == 0.0).all(axis=(1, 2))
+
+    @property
     def quat_xyzw(self) -> np.ndarray | None:
-        """Orientation quaternions (n+1, 4) in (x, y, z, w) order, world from body."""
+        """Unit orientation quaternions (n+1, 4) in (x, y, z, w) order, world from body.
+
+        Rows whose state is not finite or not written (a numerical failure) are NaN.
+        """
         rot = self.rotation
         if rot is None:
             return None
-        from scipy.spatial.transform import Rotation
+        q = np.full((len(rot), 4), np.nan)
+        ok = np.isfinite(rot).all(axis=(1, 2)) & self.written
+        if ok.any():
+            from scipy.spatial.transform import Rotation
 
-        return Rotation.from_matrix(rot).as_quat()
+            q[ok] = Rotation.from_matrix(rot[ok]).as_quat()
+        return q
 
 
 @dataclass
@@ -111,7 +125,7 @@ class Roll:
     ----------
     ic : (6,) U (cm/s) and L in the preset's convention.
     outcome : face up 1..6; 0 when the top four nodes are no face; -1 unless settled.
-    status : "settled", "time_cap", "non_finite" or "blow_up".
+    status : a :class:`~dicetrace.Status` (compares equal to its label, e.g. ``"settled"``).
     steps : steps integrated; ``t_settle_s = steps·dt``.
     contact_sets : uint8 bitmasks (bit k = node k+1 at or below the ground).
     contact_steps : step at which each set was first seen (0 for the initial empty set).
@@ -119,7 +133,7 @@ class Roll:
 
     ic: np.ndarray
     outcome: int
-    status: str
+    status: Status
     steps: int
     t_settle_s: float
     dt_s: float
@@ -130,7 +144,7 @@ class Roll:
 
     @property
     def settled(self) -> bool:
-        return self.status == "settled"
+        return self.status is Status.SETTLED
 
     @property
     def contact_sequence(self) -> str:
@@ -207,40 +221,17 @@ def contact_sequence_from_heights(z_steps) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _resolve_config(config, preset, integrator, dt_s, t_max_s, tol=None) -> Config:
-    if config is not None:
-        return config
-    return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, tol=tol)
-
-
-def _to_kernel_ic(ic: np.ndarray, config: Config) -> np.ndarray:
-    if config.preset.l_convention == "physical":
-        ic = ic.copy()
-        ic[..., 3:] = -ic[..., 3:]
-    return ic
-
-
-def initial_offsets(config: Config, orientation=None) -> np.ndarray:
-    """Initial node offsets (8, 3), cm: ±half on each axis, turned by ``orientation``.
-
-    ``orientation`` is a world-from-body rotation matrix (3, 3) or None for
-    the program's start (face 3 down, face 4 up).
-    """
-    off = NODE_SIGNS * config.preset.half_side_cm
-    if orientation is None:
-        return np.ascontiguousarray(off)
-    rot = np.asarray(orientation, dtype=np.float64)
-    if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
-        raise ValueError("orientation must be a finite 3×3 rotation matrix")
-    if np.abs(rot @ rot.T - np.eye(3)).max() > 1e-9 or np.linalg.det(rot) < 0:
-        raise ValueError("orientation is not a rotation matrix (RᵀR ≠ I or det < 0)")
-    return np.ascontiguousarray(off @ rot.T)
-
-
-def _check_integrator(config: Config) -> None:
-    from dicetrace.core.integrators import IMPLEMENTED
-
-    if config.numerics.integrator_id not in IMPLEMENTED:
-        raise ValueError(f"integrator {config.numerics.integrator!r} is not available in this build")
+    """``config`` itself, or one built from the keyword arguments; never both."""
+    if config is None:
+        return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, tol=tol)
+    if not isinstance(config, Config):
+        raise TypeError(f"config must be a dicetrace.params.Config, not {type(config).__name__}")
+    given = [n for n, v in (("integrator", integrator), ("dt_s", dt_s), ("t_max_s", t_max_s), ("tol", tol)) if v is not None]
+    if preset != "seed":
+        given.insert(0, "preset")
+    if given:
+        raise ValueError(f"pass either config or {', '.join(given)}, not both (the config already fixes them)")
+    return config
 
 
 def simulate(
@@ -278,29 +269,36 @@ def simulate(
     Roll
     """
     cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s, tol)
-    _check_integrator(cfg)
+    if record is not None and not isinstance(record, Record):
+        raise TypeError(f"record must be a dicetrace.Record or None, not {type(record).__name__}")
     ic = validate_ic(ic)
-    kic = _to_kernel_ic(ic, cfg)
-    kp = cfg.kernel_params()
-    off0 = initial_offsets(cfg, orientation)
-    integ = cfg.numerics.integrator_id
+    kin = cfg.kernel_inputs(ic, orientation=orientation)
     empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
-    cap = _INITIAL_CAP
+    cap = DEFAULT_CAP
     while True:
         sets = np.zeros(cap, dtype=np.uint8)
         set_steps = np.zeros(cap, dtype=np.int32)
-        status, n, outcome, nsets = run_roll(kic, off0, kp, integ, sets, set_steps, *empty)
-        if status != BUFFER_FULL:
+        summary = run_roll(*kin, sets, set_steps, *empty)
+        if summary[0] != Status.BUFFER_FULL:
             break
-        cap *= 4
+        cap *= CAP_GROWTH
+    status, n, outcome, nsets = summary
     trace = None
     if record is not None:
+        # The summary told how many rows the trace needs; the trace run is the
+        # same arithmetic (the trace path writes, never steers), so it must end
+        # the same way: anything else is a kernel defect, never silently kept.
         rows = n + 1
         tr_state = np.zeros((rows if record.states else 0, STATE_COLS))
         tr_force = np.zeros((rows if record.forces else 0, FORCE_COLS))
         tr_energy = np.zeros((rows if record.energy else 0, ENERGY_COLS))
-        run_roll(kic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
-        if status == NON_FINITE:  # the last step's state is not finite: keep the rows before it
+        traced = run_roll(*kin, np.zeros(cap, np.uint8), np.zeros(cap, np.int32), tr_state, tr_force, tr_energy)
+        if tuple(int(v) for v in traced) != tuple(int(v) for v in summary):
+            raise RuntimeError(
+                f"the trace run ended as (status, steps, outcome, sets) = {tuple(map(int, traced))}, "
+                f"the summary run as {tuple(map(int, summary))}: kernel paths disagree (a bug; please report it)"
+            )
+        if status == Status.NON_FINITE:  # the last step's state is not finite: keep the rows before it
             rows = n
             tr_state, tr_force, tr_energy = tr_state[:rows], tr_force[:rows], tr_energy[:rows]
         trace = _make_trace(rows - 1, cfg, tr_state, tr_force, tr_energy, record)
@@ -308,7 +306,7 @@ def simulate(
     return Roll(
         ic=ic,
         outcome=int(outcome),
-        status=STATUS_NAMES[int(status)],
+        status=Status(int(status)),
         steps=int(n),
         t_settle_s=n * dt,
         dt_s=dt,
@@ -323,10 +321,9 @@ def _make_trace(n, cfg, tr_state, tr_force, tr_energy, record) -> Trace:
     step = np.arange(n + 1, dtype=np.int64)
     tr = Trace(step=step, t_s=step * cfg.numerics.dt_s)
     if record.states:
-        sign = -1.0 if cfg.preset.l_convention == "physical" else 1.0
         tr.cm_pos = tr_state[:, 0:3].copy()
         tr.cm_vel = tr_state[:, 3:6].copy()
-        tr.L = sign * tr_state[:, 6:9]
+        tr.L = np.array(cfg.to_preset_convention(tr_state[:, 3:9], "program")[:, 3:])
         tr.node_offsets = tr_state[:, 9:33].reshape(n + 1, 8, 3).copy()
     if record.forces:
         tr.forces = tr_force.reshape(n + 1, 8, 3).copy()
@@ -337,14 +334,19 @@ def _make_trace(n, cfg, tr_state, tr_force, tr_energy, record) -> Trace:
 
 @dataclass
 class BatchResult:
-    """Summaries of many throws (arrays aligned with the input ICs)."""
+    """Summaries of many throws (arrays aligned with the input ICs).
 
-    ics: np.ndarray
+    ``ics`` are in the preset's L convention.  The contact-set sequence of IC
+    i is ``sets[set_offsets[i]:set_offsets[i+1]]`` (first seen at the steps
+    ``set_steps[...]`` of the same range).
+    """
+
+    ics: np.ndarray  # (m, 6) float64
     outcome: np.ndarray  # int8
-    status_code: np.ndarray  # int8
+    status_code: np.ndarray  # int8 codes of dicetrace.Status
     steps: np.ndarray  # int64
     t_settle_s: np.ndarray  # float64
-    set_offsets: np.ndarray  # int64 (m+1,): sets of IC i are sets[set_offsets[i]:set_offsets[i+1]]
+    set_offsets: np.ndarray  # int64 (m+1,)
     sets: np.ndarray  # uint8
     set_steps: np.ndarray  # int32
     config: Config
@@ -354,13 +356,57 @@ class BatchResult:
 
     @property
     def status(self) -> np.ndarray:
-        return np.array([STATUS_NAMES[int(s)] for s in self.status_code], dtype=object)
+        """Status labels (object array of str)."""
+        return Status.labels_of(self.status_code)
 
     def contact_sets(self, i: int) -> np.ndarray:
         return self.sets[self.set_offsets[i] : self.set_offsets[i + 1]]
 
     def contact_sequences(self) -> list[str]:
         return [sets_to_text(self.contact_sets(i)) for i in range(len(self))]
+
+    def to_arrow(self, *, ic_ids=None, coords=None, metadata: dict | None = None):
+        """The ``rolls`` table of these throws (the Parquet sink's schema), as a pyarrow Table."""
+        from dicetrace.tables import rolls_table
+
+        return rolls_table(self, ic_ids=ic_ids, coords=coords, metadata=metadata)
+
+    def to_pandas(self, **kwargs):
+        """The ``rolls`` table as a pandas DataFrame (see :meth:`to_arrow`)."""
+        return self.to_arrow(**kwargs).to_pandas()
+
+
+class _Threads:
+    """Context: numba threads for this thread's parallel regions (None: leave as is)."""
+
+    def __init__(self, n: int | None):
+        self.n = n
+
+    def __enter__(self):
+        self.old = numba.get_num_threads()
+        if self.n is not None:
+            numba.set_num_threads(max(1, min(int(self.n), numba.config.NUMBA_NUM_THREADS)))
+
+    def __exit__(self, *exc):
+        numba.set_num_threads(self.old)
+
+
+def _run_batch(kin, cap: int, threads):
+    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC."""
+    m = len(kin.ics)
+    out = (
+        np.zeros(m, dtype=np.int8),
+        np.zeros(m, dtype=np.int64),
+        np.zeros(m, dtype=np.int8),
+        np.zeros(m, dtype=np.int64),
+        np.zeros(m * cap, dtype=np.uint8),
+        np.zeros(m * cap, dtype=np.int32),
+    )
+    if m:
+        status, steps, outcome, nsets, sets, set_steps = out
+        with _Threads(threads), numba.parallel_chunksize(1):
+            run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, status, steps, outcome, nsets, sets, set_steps)
+    return out
 
 
 def simulate_batch(
@@ -372,54 +418,70 @@ def simulate_batch(
     dt_s: float | None = None,
     t_max_s: float | None = None,
     tol: float | None = None,
-    cap: int = 128,
+    l_convention: str | None = None,
+    threads: int | None = None,
+    cap: int = DEFAULT_CAP,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads).
 
-    Summary path only; bit-identical to calling :func:`simulate` row by row.
-    ``cap`` is the initial per-IC contact-set buffer (throws that need more
-    are re-run with a larger one).
+    The one door onto the batch kernel (scans and studies call it).  Summary
+    path only; bit-identical to calling :func:`simulate` row by row, whatever
+    the number of threads.
+
+    Parameters
+    ----------
+    ics
+        (m, 6) ICs, L in ``l_convention`` (default: the preset's).
+    config, preset, integrator, dt_s, t_max_s, tol
+        As in :func:`simulate`.
+    threads
+        numba threads for this call (None: numba's current setting).
+    cap
+        Initial per-IC contact-set buffer; throws that need more are re-run
+        (all together, in parallel) with ``CAP_GROWTH`` times more until they fit.
     """
     cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s, tol)
-    _check_integrator(cfg)
+    if isinstance(cap, bool) or not isinstance(cap, (int, np.integer)) or cap < 1:
+        raise ValueError(f"cap must be an integer >= 1, got {cap!r}")
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
+        raise ValueError(f"threads must be an integer >= 1 or None, got {threads!r}")
+    conv = cfg.preset.l_convention if l_convention is None else l_convention
     ics = validate_ics(ics)
-    kics = _to_kernel_ic(ics, cfg)
-    kp = cfg.kernel_params()
-    integ = cfg.numerics.integrator_id
+    kin = cfg.kernel_inputs(ics, l_convention=conv)
     m = len(ics)
-    status = np.zeros(m, dtype=np.int8)
-    steps = np.zeros(m, dtype=np.int64)
-    outcome = np.zeros(m, dtype=np.int8)
-    nsets = np.zeros(m, dtype=np.int64)
-    sets = np.zeros(m * cap, dtype=np.uint8)
-    set_steps = np.zeros(m * cap, dtype=np.int32)
-    if m:
-        run_batch(kics, initial_offsets(cfg), kp, integ, cap, status, steps, outcome, nsets, sets, set_steps)
-    sets2 = sets.reshape(m, cap)
-    steps2 = set_steps.reshape(m, cap)
-    seq_sets, seq_steps = [], []
-    for i in range(m):
-        if status[i] == BUFFER_FULL:
-            r = simulate(ics[i], config=cfg)
-            status[i] = {v: k for k, v in STATUS_NAMES.items()}[r.status]
-            steps[i] = r.steps
-            outcome[i] = r.outcome
-            nsets[i] = len(r.contact_sets)
-            seq_sets.append(r.contact_sets)
-            seq_steps.append(r.contact_steps)
-        else:
-            seq_sets.append(sets2[i, : nsets[i]])
-            seq_steps.append(steps2[i, : nsets[i]])
+    status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads)
+    full = np.arange(cap)[None, :] < nsets[:, None]
+    extra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    todo = np.nonzero(status == Status.BUFFER_FULL)[0]
+    big = cap
+    while todo.size:
+        big *= CAP_GROWTH
+        st, sp, oc, ns, ss, sst = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads)
+        done = st != Status.BUFFER_FULL
+        for r in np.nonzero(done)[0]:
+            i = todo[r]
+            status[i], steps[i], outcome[i], nsets[i] = st[r], sp[r], oc[r], ns[r]
+            extra[int(i)] = (ss[r * big : r * big + ns[r]].copy(), sst[r * big : r * big + ns[r]].copy())
+        todo = todo[~done]
     offsets = np.zeros(m + 1, dtype=np.int64)
     np.cumsum(nsets, out=offsets[1:])
+    sets2, steps2 = sets.reshape(m, cap), set_steps.reshape(m, cap)
+    if not extra:
+        flat_sets, flat_steps = sets2[full], steps2[full]
+    else:
+        flat_sets = np.empty(int(offsets[-1]), dtype=np.uint8)
+        flat_steps = np.empty(int(offsets[-1]), dtype=np.int32)
+        for i in range(m):
+            a, b = offsets[i], offsets[i + 1]
+            flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets2[i, : nsets[i]], steps2[i, : nsets[i]])
     return BatchResult(
-        ics=ics,
+        ics=cfg.to_preset_convention(ics, conv),
         outcome=outcome,
         status_code=status,
         steps=steps,
         t_settle_s=steps * cfg.numerics.dt_s,
         set_offsets=offsets,
-        sets=np.concatenate(seq_sets) if m else np.zeros(0, np.uint8),
-        set_steps=np.concatenate(seq_steps) if m else np.zeros(0, np.int32),
+        sets=flat_sets,
+        set_steps=flat_steps,
         config=cfg,
     )

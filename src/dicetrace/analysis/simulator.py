@@ -37,6 +37,7 @@ import numpy as np
 
 from dicetrace.params import Config, make_config
 from dicetrace.simulate import simulate_batch
+from dicetrace.status import Status
 
 from .grouping import UNSETTLED_LABEL, canonical_contact_sequence
 
@@ -236,15 +237,6 @@ def _resolve_config(config: Config | None, preset: str, overrides: dict) -> Conf
     return config
 
 
-def _to_preset(ics: np.ndarray, slice_conv: str, config: Config) -> np.ndarray:
-    conv = config.preset.l_convention
-    if slice_conv in ("preset", conv):
-        return ics
-    out = np.array(ics, dtype=np.float64, copy=True)
-    out[:, 3:] = -out[:, 3:]
-    return out
-
-
 def run_on_slice(
     points,
     slice_spec="seed",
@@ -293,10 +285,10 @@ def _run(sl: _ResolvedSlice, cfg: Config, pts: np.ndarray, sequences: bool, chun
     seqs: list[str] | None = [] if sequences else None
     for a in range(0, n, max(1, chunk)):
         b = min(n, a + chunk)
-        ics = _to_preset(sl.to_ics(pts[a:b]), sl.l_convention, cfg)
-        res = simulate_batch(ics, config=cfg)
+        conv = None if sl.l_convention == "preset" else sl.l_convention
+        res = simulate_batch(sl.to_ics(pts[a:b]), config=cfg, l_convention=conv)
         status[a:b] = res.status_code
-        outcome[a:b] = np.where(res.status_code == 0, res.outcome, UNSETTLED_LABEL)
+        outcome[a:b] = np.where(res.status_code == Status.SETTLED, res.outcome, UNSETTLED_LABEL)
         t[a:b] = res.t_settle_s
         steps[a:b] = res.steps
         if seqs is not None:

@@ -31,7 +31,6 @@ from dicetrace.commands.simulate import (
     AT_HELP,
     DT_HELP,
     EXIT_NUMERICAL_FAILURE,
-    FAILED_STATUSES,
     IC_HELP,
     INTEGRATOR_HELP,
     TOL_HELP,
@@ -42,6 +41,7 @@ from dicetrace.commands.simulate import (
     check_output_file,
     fmt_num,
     ic_from_options,
+    preset_or_fail,
 )
 
 DEFAULT_FOLDER = Path("recordings")
@@ -148,11 +148,9 @@ def register(app: typer.Typer) -> None:
             conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
         else:
-            auto = dt is not None and dt.strip().lower() == "auto"
-            cfg = build_config(preset or "seed", integrator, None if auto else dt, t_max, tol=tol)
-            the_ic, coords, desc = ic_from_options(ic, slice_name, at, cfg)
-            if auto:  # the step depends on this throw's impact speed
-                cfg = build_config(preset or "seed", integrator, dt, t_max, ics=the_ic, tol=tol)
+            conv = preset_or_fail(preset or "seed").l_convention
+            the_ic, coords, desc = ic_from_options(ic, slice_name, at, conv)
+            cfg = build_config(preset or "seed", integrator, dt, t_max, ics=the_ic, tol=tol)
         name = default_name(the_ic, coords, desc, cfg)
         if out is None:
             out = DEFAULT_FOLDER / f"{name}.rrd"
@@ -162,7 +160,7 @@ def register(app: typer.Typer) -> None:
         if parquet is not None:
             check_output_folder(parquet)
 
-        from dicetrace.simulate import STATUS_ADVICE, Record, simulate
+        from dicetrace.simulate import Record, simulate
 
         roll = simulate(the_ic, config=cfg, record=Record(states=True, energy=True))
         label = ic_label(the_ic, coords, desc)
@@ -185,10 +183,10 @@ def register(app: typer.Typer) -> None:
             f"outcome {outcome}  status {roll.status}  steps {roll.steps}  t_settle_s {roll.t_settle_s:.6g}  "
             f"contact_sequence {roll.contact_sequence}  wrote {' '.join(written)}"
         )
-        if roll.status in FAILED_STATUSES:
+        if roll.status.failed:
             print(
                 f"dicetrace: numerical failure: status {roll.status} after {roll.steps} steps "
-                f"(t = {roll.t_settle_s:.6g} s): {STATUS_ADVICE[roll.status]}; "
+                f"(t = {roll.t_settle_s:.6g} s): {roll.status.advice}; "
                 f"the recording was still written for inspection: {out}",
                 file=sys.stderr,
             )

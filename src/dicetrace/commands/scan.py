@@ -120,22 +120,23 @@ def build_space(sl, window, z, res, sample, n, box, seed, points):
         fail(str(e))
 
 
-def apply_overrides(cfg, items: List[str]):
-    """The config with ``NAME=VALUE`` preset overrides applied (numbers, booleans or words)."""
-    from dataclasses import fields, replace
+def parse_overrides(preset_name: str, items: List[str]) -> dict:
+    """``--set NAME=VALUE`` items as Preset field overrides (numbers, booleans or words)."""
+    from dataclasses import fields
 
-    from dicetrace.params import Config
+    from dicetrace.commands.simulate import preset_or_fail
 
     if not items:
-        return cfg
-    names = {f.name: f for f in fields(cfg.preset) if f.name != "name"}
+        return {}
+    preset = preset_or_fail(preset_name)
+    names = {f.name: f for f in fields(preset) if f.name != "name"}
     changes = {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip().replace("-", "_")
         if not sep or key not in names:
             fail(f"--set needs NAME=VALUE with NAME one of {', '.join(sorted(names))}, got {item!r}")
-        current = getattr(cfg.preset, key)
+        current = getattr(preset, key)
         text = text.strip()
         if isinstance(current, bool):
             if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
@@ -148,10 +149,7 @@ def apply_overrides(cfg, items: List[str]):
                 fail(f"--set {key} needs a number, got {text!r}")
         else:
             changes[key] = text
-    try:
-        return Config(preset=replace(cfg.preset, **changes), numerics=cfg.numerics)
-    except ValueError as e:
-        fail(str(e))
+    return changes
 
 
 def _existing_chunk(out: Path) -> int | None:
@@ -204,7 +202,7 @@ def register(app: typer.Typer) -> None:
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
-        cfg = apply_overrides(build_config(preset, integrator, dt, t_max, tol=tol), sets or [])
+        cfg = build_config(preset, integrator, dt, t_max, tol=tol, overrides=parse_overrides(preset, sets or []))
         if chunk is not None and chunk < 1:
             fail(f"--chunk must be >= 1, got {chunk}")
         if threads is not None and threads < 1:

@@ -27,9 +27,9 @@ import numpy as np
 import typer
 
 from dicetrace.commands._common import atomic_path, check_writable_file, fail, parse_floats
+from dicetrace.status import Status
 
 FORMATS = ("table", "csv", "json")
-FAILED_STATUSES = ("non_finite", "blow_up")
 EXIT_NUMERICAL_FAILURE = 1
 
 IC_HELP = (
@@ -64,45 +64,48 @@ def parse_positive(text: str | None, option: str, what: str) -> float | None:
     return v
 
 
-def build_config(preset: str, integrator: str | None, dt: str | None, t_max: str | None, ics=None, tol: str | None = None):
-    """A validated Config from the options' text, or a one-line failure naming the bad option.
+def preset_or_fail(name: str):
+    """The :class:`~dicetrace.params.Preset` named ``--preset NAME``, or a one-line failure."""
+    from dicetrace.params import get_preset
 
-    ``--dt auto`` picks the step from the stiffness and the fastest first
-    impact of ``ics`` (see ``dicetrace.params.auto_dt``), or refuses.
+    try:
+        return get_preset(name)
+    except ValueError as e:
+        fail(f"--preset: {e}")
+
+
+def build_config(
+    preset: str, integrator: str | None, dt: str | None, t_max: str | None, ics=None, tol: str | None = None,
+    overrides: dict | None = None,
+):
+    """The validated Config of a command, built once from the options' text, or a one-line failure.
+
+    ``--dt auto`` picks the step from the final model (the preset with
+    ``overrides`` applied) and the fastest first impact of ``ics`` (see
+    ``dicetrace.params.auto_dt``), or refuses.  Values are validated where
+    they enter: numbers here, everything else by ``make_config``.
     """
-    from dicetrace.params import INTEGRATORS, PRESETS, get_preset, impact_speed_cm_s, make_config
+    from dicetrace.params import impact_speed_cm_s, make_config
 
-    if preset not in PRESETS:
-        fail(f"unknown preset {preset!r} (choose from {', '.join(PRESETS)})")
-    if integrator is not None and integrator not in INTEGRATORS:
-        fail(f"unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+    base = preset_or_fail(preset)
+    overrides = dict(overrides or {})
     v_impact = None
     if dt is not None and dt.strip().lower() == "auto":
         dt = "auto"
         if ics is not None:
-            v_impact = impact_speed_cm_s(ics, get_preset(preset))
+            try:
+                v_impact = impact_speed_cm_s(ics, base.with_(**overrides))
+            except (ValueError, TypeError) as e:
+                fail(f"--set: {e}")
     else:
         dt = parse_positive(dt, "--dt", "the time step in s, or 'auto'")
     t_max = parse_positive(t_max, "--t-max", "the time cap in s")
     tol = parse_positive(tol, "--tol", "the local error tolerance of contact-adaptive")
     try:
-        cfg = make_config(preset, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol)
-    except ValueError as e:
-        fail(str(e))
-    if integrator is not None:  # (the default one always is; this check imports numba)
-        _check_integrator_available(cfg)
-    return cfg
-
-
-def _check_integrator_available(cfg) -> None:
-    from dicetrace.core import integrators
-
-    available = getattr(integrators, "IMPLEMENTED", None)
-    if available is not None and cfg.numerics.integrator_id not in available:
-        from dicetrace.params import INTEGRATORS
-
-        names = [n for n, i in INTEGRATORS.items() if i in available]
-        fail(f"integrator {cfg.numerics.integrator!r} is not available in this build (available: {', '.join(names)})")
+        return make_config(base, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol, **overrides)
+    except (ValueError, TypeError) as e:
+        opt = "--integrator" if "integrator" in str(e) else "--dt" if "dt" in str(e) else "--tol" if "tol" in str(e) else None
+        fail(f"{opt}: {e}" if opt else str(e))
 
 
 def check_output_file(path: Path) -> Path:
@@ -143,22 +146,22 @@ def get_slice(name: str | None, ndim: int | None = None):
     return sl
 
 
-def slice_ics(name: str, coords: np.ndarray, cfg) -> np.ndarray:
+def slice_ics(name: str, coords: np.ndarray, l_convention: str) -> np.ndarray:
     """ICs (m, 6) of slice ``name`` at coordinates (m, ndim), in the preset's L convention.
 
     The seed slices give the 2019 program's L; a preset that takes the
     physical L (``physical``) gets it negated, so the throw is the same.
     """
-    from dicetrace.ics import to_preset_convention
+    from dicetrace.params import convert_l
 
     coords = np.asarray(coords, dtype=np.float64)
     sl = get_slice(name, coords.shape[1])
     ics = np.asarray(sl.ics(coords), dtype=np.float64).reshape(-1, 6)
-    return to_preset_convention(ics, sl.l_convention, cfg.preset.l_convention)
+    return convert_l(ics, sl.l_convention, l_convention)
 
 
-def ic_from_options(ic: str | None, slice_name: str | None, at: str | None, cfg):
-    """One IC from ``--ic`` or ``--slice NAME --at X,Y[,Z]`` (in ``cfg``'s L convention).
+def ic_from_options(ic: str | None, slice_name: str | None, at: str | None, l_convention: str):
+    """One IC from ``--ic`` or ``--slice NAME --at X,Y[,Z]`` (in the preset's ``l_convention``).
 
     Returns (ic (6,), coords (k,) or None, description dict).
     """
@@ -178,7 +181,7 @@ def ic_from_options(ic: str | None, slice_name: str | None, at: str | None, cfg)
     if len(coords) not in (1, 2, 3):
         fail(f"--at needs 2 (X,Y) or 3 (X,Y,Z) comma-separated numbers, got {len(coords)} in {at!r}")
     c = np.array(coords, dtype=np.float64)
-    return slice_ics(slice_name, c[None, :], cfg)[0], c, {"kind": "slice", "slice": slice_name}
+    return slice_ics(slice_name, c[None, :], l_convention)[0], c, {"kind": "slice", "slice": slice_name}
 
 
 def fmt_num(v: float) -> str:
@@ -192,7 +195,7 @@ _IC_COLS = ("vx", "vy", "vz", "lx", "ly", "lz")
 _XYZ = ("x", "y", "z")
 
 
-def read_ics_csv(path: Path, slice_name: str | None, cfg):
+def read_ics_csv(path: Path, slice_name: str | None, l_convention: str):
     """ICs from a CSV file: columns vx,vy,vz,Lx,Ly,Lz, or x,y[,z] with a slice.
 
     Returns (ics (m, 6), coords (m, k) or None).  Columns are matched without
@@ -251,7 +254,7 @@ def read_ics_csv(path: Path, slice_name: str | None, cfg):
     coords = vals[:, len(want) :] if coord_cols else None
     if has_ic:
         return vals[:, : len(want)], coords
-    return slice_ics(slice_name, coords, cfg), coords
+    return slice_ics(slice_name, coords, l_convention), coords
 
 
 def run_ics(ics: np.ndarray, cfg):
@@ -259,16 +262,15 @@ def run_ics(ics: np.ndarray, cfg):
 
     (Both are bit-identical; the single throw skips the batch's thread start-up.)
     """
-    from dicetrace.simulate import STATUS_NAMES, BatchResult, simulate, simulate_batch
+    from dicetrace.simulate import BatchResult, simulate, simulate_batch
 
     if len(ics) != 1:
         return simulate_batch(ics, config=cfg)
     r = simulate(ics[0], config=cfg)
-    code = {v: k for k, v in STATUS_NAMES.items()}[r.status]
     return BatchResult(
         ics=ics.copy(),
         outcome=np.array([r.outcome], dtype=np.int8),
-        status_code=np.array([code], dtype=np.int8),
+        status_code=np.array([r.status], dtype=np.int8),
         steps=np.array([r.steps], dtype=np.int64),
         t_settle_s=np.array([r.t_settle_s]),
         set_offsets=np.array([0, len(r.contact_sets)], dtype=np.int64),
@@ -283,8 +285,6 @@ def run_ics(ics: np.ndarray, cfg):
 
 def result_rows(batch, coords) -> tuple[list[str], list[list]]:
     """Column names and rows (python values) of a batch's summaries."""
-    from dicetrace.simulate import STATUS_NAMES
-
     names = ["ic_id"]
     ncoord = 0 if coords is None else coords.shape[1]
     names += list(_XYZ[:ncoord])
@@ -300,7 +300,7 @@ def result_rows(batch, coords) -> tuple[list[str], list[list]]:
             int(batch.outcome[i]),
             int(batch.steps[i]),
             float(batch.t_settle_s[i]),
-            STATUS_NAMES[int(batch.status_code[i])],
+            Status(int(batch.status_code[i])).label,
             seqs[i],
         ]
         rows.append(row)
@@ -368,15 +368,13 @@ def _fix_mode(path: Path) -> None:
 
 def report_failures(statuses, what: str = "IC") -> bool:
     """One line on stderr if any run failed numerically; True if so."""
-    from dicetrace.simulate import STATUS_ADVICE
-
-    statuses = list(statuses)
-    bad = [s for s in statuses if s in FAILED_STATUSES]
+    statuses = [Status.from_label(s) if isinstance(s, str) else Status(int(s)) for s in statuses]
+    bad = [s for s in statuses if s.failed]
     if not bad:
         return False
     kinds = sorted(set(bad))
-    counts = ", ".join(f"{k}: {bad.count(k)}" for k in kinds)
-    advice = STATUS_ADVICE[kinds[0]]
+    counts = ", ".join(f"{k.label}: {bad.count(k)}" for k in kinds)
+    advice = kinds[0].advice
     print(
         f"dicetrace: numerical failure: {len(bad)} of {len(statuses)} {what}(s) failed ({counts}): {advice}",
         file=sys.stderr,
@@ -410,20 +408,18 @@ def register(app: typer.Typer) -> None:
         """
         if fmt not in FORMATS:
             fail(f"unknown --format {fmt!r} (choose from {', '.join(FORMATS)})")
-        auto = dt is not None and dt.strip().lower() == "auto"
-        cfg = build_config(preset, integrator, None if auto else dt, t_max, tol=tol)
+        conv = preset_or_fail(preset).l_convention
         if ics is not None:
             if ic is not None or at is not None:
                 fail("give one source of ICs: --ics FILE, --ic, or --slice/--at")
-            ic_arr, coords = read_ics_csv(ics, slice_name, cfg)
+            ic_arr, coords = read_ics_csv(ics, slice_name, conv)
             source = {"ics_file": str(ics)}
         else:
-            one, c, desc = ic_from_options(ic, slice_name, at, cfg)
+            one, c, desc = ic_from_options(ic, slice_name, at, conv)
             ic_arr = one[None, :]
             coords = None if c is None else c[None, :]
             source = desc
-        if auto:  # the step depends on the fastest first impact of these ICs
-            cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr, tol=tol)
+        cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr, tol=tol)
         if out is not None:
             check_output_file(out)
 

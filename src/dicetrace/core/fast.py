@@ -60,14 +60,11 @@ import math
 
 from dicetrace.core._jit import jit
 from dicetrace.core.model import (
-    BUFFER_FULL,
-    NON_FINITE,
-    SETTLED,
-    TIME_CAP,
-    BLOW_UP,
     FACE_OF_TOP4,
     spectral_norm_xy,
 )
+from dicetrace.params import ENERGY_POINT_MASS, FRICTION_SPECTRAL
+from dicetrace.status import Status
 
 #: Relative margin of the free-flight stop-test bound (the bound's own
 #: rounding is ~1e-15 relative; the rigid-body drift of the offsets after
@@ -244,11 +241,11 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     k_ = kp.k
     gam = kp.gamma
     mu = kp.mu
-    clamp = kp.clamp_normal != 0.0
-    spectral = kp.friction_mode == 0.0
+    clamp = kp.clamp_normal
+    spectral = kp.friction_mode == FRICTION_SPECTRAL
     vr2 = kp.v_reg * kp.v_reg
     e_stop = kp.e_stop
-    e_rest = kp.e_offset
+    e_rest = kp.e_rest
     mg = -kp.g
     half2 = kp.half * kp.half
 
@@ -295,7 +292,7 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     rot_ok, R00, R01, R02, R10, R11, R12, R20, R21, R22 = _rotation(W0, W1, W2, h)
 
     maxn = int(kp.max_steps)
-    status = TIME_CAP
+    status = Status.TIME_CAP
     n = 0
     pmask = 0  # nodes with a non-zero normal force at the last force evaluation
     sparse = False  # whether every other node's force is an exact zero
@@ -395,12 +392,12 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
                 if not tame:
                     # non-finite check of run_roll: X_z + ΣU, ΣL + x_1x + x_8z (x_8z = -x_1z)
                     if not (math.isfinite(X2 + U0 + U1 + U2) and math.isfinite(lsum + o00 + -o02)):
-                        status = NON_FINITE
+                        status = Status.NON_FINITE
                         done = True
                         break
                 if last_mask != 0 and n >= 2:  # record the empty set
                     if nsets >= sets.shape[0]:
-                        status = BUFFER_FULL
+                        status = Status.BUFFER_FULL
                         done = True
                         break
                     sets[nsets] = 0
@@ -621,11 +618,11 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
                 P[k] = 0.0
         contact = below
         if not (math.isfinite(X2 + U0 + U1 + U2) and math.isfinite(L0 + L1 + L2 + off[0, 0] + off[7, 2])):
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         nsets, last_mask, ok = _record(n, mask, last_mask, sets, set_steps, nsets)
         if not ok:
-            status = BUFFER_FULL
+            status = Status.BUFFER_FULL
             break
         if contact:
             # model.energy_dynamic: the blow-up test
@@ -637,7 +634,7 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
                 d = max(0.0, -z[k])
                 el += d * d
             if (e + 0.5 * k_ * el) - e_rest > e_blow:
-                status = BLOW_UP
+                status = Status.BLOW_UP
                 break
         else:
             # free flight ending at (or near) the ground: exact energy needs u_k
@@ -668,13 +665,13 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
             el += d * P[k]
         e = ((0.5 * ke + mg * sz) + 0.5 * el) - e_rest
         if not math.isfinite(e):
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         if e <= e_stop:
-            status = SETTLED
+            status = Status.SETTLED
             break
 
-    if status == SETTLED:
+    if status == Status.SETTLED:
         # model.face_up on the final heights (z is current: the tail ran this step)
         top = 0
         for k in range(8):

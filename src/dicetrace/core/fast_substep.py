@@ -17,11 +17,6 @@ import numpy as np
 from dicetrace.core._jit import jit
 from dicetrace.core.contacts import record_set
 from dicetrace.core.model import (
-    BLOW_UP,
-    BUFFER_FULL,
-    NON_FINITE,
-    SETTLED,
-    TIME_CAP,
     energy_dynamic,
     energy_stop,
     face_up,
@@ -29,6 +24,8 @@ from dicetrace.core.model import (
     node_velocities,
 )
 from dicetrace.core.schemes import step_contact_substep
+from dicetrace.params import ENERGY_POINT_MASS
+from dicetrace.status import Status
 
 #: Same value as ``loop.E_BOUND_MARGIN`` (not imported: loop imports this module).
 E_BOUND_MARGIN = 1e-7
@@ -67,35 +64,35 @@ def roll_summary_cs(ic, off0, kp, sets, set_steps):
     nsets = 1
     last_mask = 0
 
-    e_rest = kp.e_offset
+    e_rest = kp.e_rest
     e0 = energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest
     e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
-    point_mass = kp.energy_mode == 0.0
+    point_mass = kp.energy_mode == ENERGY_POINT_MASS
 
     h = kp.dt
     maxn = int(kp.max_steps)
-    status = TIME_CAP
+    status = Status.TIME_CAP
     n = 0
     half2 = kp.half * kp.half
     while n < maxn:
         n += 1
         contact, mask = step_contact_substep(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
         if mask < 0:
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         if not (
             math.isfinite(X[2] + U[0] + U[1] + U[2])
             and math.isfinite(L[0] + L[1] + L[2] + off[0, 0] + off[7, 2])
         ):
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         nsets, last_mask, ok = record_set(n, mask, last_mask, sets, set_steps, nsets)
         if not ok:
-            status = BUFFER_FULL
+            status = Status.BUFFER_FULL
             break
         if contact:
             if energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest > e_blow:
-                status = BLOW_UP
+                status = Status.BLOW_UP
                 break
         if point_mass:
             need = True
@@ -118,10 +115,10 @@ def roll_summary_cs(ic, off0, kp, sets, set_steps):
         else:
             e = energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest
         if not math.isfinite(e):
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         if e <= kp.e_stop:
-            status = SETTLED
+            status = Status.SETTLED
             break
-    outcome = face_up(z) if status == SETTLED else -1
+    outcome = face_up(z) if status == Status.SETTLED else -1
     return status, n, outcome, nsets

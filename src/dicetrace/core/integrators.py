@@ -24,16 +24,15 @@ from dicetrace.core.model import (
     rotation_matrix,
 )
 from dicetrace.core.schemes import step_scheme
+from dicetrace.params import INTEGRATORS
 
-SEMI_IMPLICIT_EULER = 0
-FORWARD_EULER = 1
-VERLET = 2
-RK4 = 3
-CONTACT_SUBSTEP = 4
-CONTACT_ADAPTIVE = 5  # the same step with error-controlled sub-steps (kp.tol > 0)
-
-#: Integrator ids compiled into `step` (the Python layer refuses others).
-IMPLEMENTED = {SEMI_IMPLICIT_EULER, FORWARD_EULER, VERLET, RK4, CONTACT_SUBSTEP, CONTACT_ADAPTIVE}
+# Kernel ids, read from the one integrator table (dicetrace.params.INTEGRATORS).
+SEMI_IMPLICIT_EULER = INTEGRATORS["semi-implicit-euler"].kernel_id
+FORWARD_EULER = INTEGRATORS["forward-euler"].kernel_id
+VERLET = INTEGRATORS["verlet"].kernel_id
+RK4 = INTEGRATORS["rk4"].kernel_id
+CONTACT_SUBSTEP = INTEGRATORS["contact-substep"].kernel_id
+CONTACT_ADAPTIVE = INTEGRATORS["contact-adaptive"].kernel_id  # the same step with error-controlled sub-steps (kp.tol > 0)
 
 
 @jit
@@ -181,5 +180,5 @@ def step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact):
         # out of line (core.schemes): keeps this dispatch small enough for
         # LLVM to inline the program's step into the loop
         return step_scheme(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
-    # Integrators not compiled in: signal with an impossible mask (caller maps to error).
+    # An id outside the table: signal with an impossible mask (the loop reports non_finite).
     return False, -1

@@ -26,11 +26,6 @@ from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
 from dicetrace.core.fast_substep import roll_summary_cs
 from dicetrace.core.integrators import CONTACT_ADAPTIVE, CONTACT_SUBSTEP, SEMI_IMPLICIT_EULER, step
 from dicetrace.core.model import (
-    BLOW_UP,
-    BUFFER_FULL,
-    NON_FINITE,
-    SETTLED,
-    TIME_CAP,
     energy_dynamic,
     energy_parts,
     energy_stop,
@@ -38,6 +33,8 @@ from dicetrace.core.model import (
     node_heights,
     node_velocities,
 )
+from dicetrace.params import ENERGY_POINT_MASS
+from dicetrace.status import Status
 
 STATE_COLS = 33
 FORCE_COLS = 24
@@ -67,11 +64,11 @@ def _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_ene
                 tr_force[n, 3 * k + j] = F[k, j]
     if tr_energy.shape[0] > n:
         node_velocities(U, off, W[0], W[1], W[2], uk)
-        if kp.energy_mode == 0.0:
+        if kp.energy_mode == ENERGY_POINT_MASS:
             tr_energy[n, 0] = energy_stop(uk, z, P, kp)
         energy_parts(U, W[0], W[1], W[2], z, kp, e_buf)
-        if kp.energy_mode != 0.0:
-            tr_energy[n, 0] = e_buf[4] - kp.e_offset
+        if kp.energy_mode != ENERGY_POINT_MASS:
+            tr_energy[n, 0] = e_buf[4] - kp.e_rest
         for j in range(5):
             tr_energy[n, 1 + j] = e_buf[j]
 
@@ -85,7 +82,7 @@ def use_fast_path(integ, kp, off0):
     rule (the ``seed`` preset and its parameter variations), from
     mirror-symmetric initial offsets (any start built as ±half·R is).
     """
-    return integ == SEMI_IMPLICIT_EULER and kp.energy_mode == 0.0 and mirror_symmetric(off0)
+    return integ == SEMI_IMPLICIT_EULER and kp.energy_mode == ENERGY_POINT_MASS and mirror_symmetric(off0)
 
 
 @jit
@@ -169,38 +166,38 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
     nsets = 1
     last_mask = 0
 
-    e_rest = kp.e_offset
+    e_rest = kp.e_rest
     e0 = energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest
     e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
-    point_mass = kp.energy_mode == 0.0
+    point_mass = kp.energy_mode == ENERGY_POINT_MASS
     tracing = tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0
     if tracing:
         _write_trace(0, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
 
     h = kp.dt
     maxn = int(kp.max_steps)
-    status = TIME_CAP
+    status = Status.TIME_CAP
     n = 0
     half2 = kp.half * kp.half
     while n < maxn:
         n += 1
         contact, mask = step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
         if mask < 0:
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         if not (
             math.isfinite(X[2] + U[0] + U[1] + U[2])
             and math.isfinite(L[0] + L[1] + L[2] + off[0, 0] + off[7, 2])
         ):
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         nsets, last_mask, ok = record_set(n, mask, last_mask, sets, set_steps, nsets)
         if not ok:
-            status = BUFFER_FULL
+            status = Status.BUFFER_FULL
             break
         if contact:
             if energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest > e_blow:
-                status = BLOW_UP
+                status = Status.BLOW_UP
                 if tracing:  # the state is finite: keep it for inspection
                     _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
                 break
@@ -230,12 +227,12 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
         if tracing:
             _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
         if not math.isfinite(e):
-            status = NON_FINITE
+            status = Status.NON_FINITE
             break
         if e <= kp.e_stop:
-            status = SETTLED
+            status = Status.SETTLED
             break
-    outcome = face_up(z) if status == SETTLED else -1
+    outcome = face_up(z) if status == Status.SETTLED else -1
     return status, n, outcome, nsets
 
 

@@ -24,13 +24,7 @@ import math
 import numpy as np
 
 from dicetrace.core._jit import jit
-
-# Status codes returned by the kernels (mapped to names in dicetrace.status).
-SETTLED = 0
-TIME_CAP = 1
-NON_FINITE = 2
-BLOW_UP = 3
-BUFFER_FULL = 4  # contact-set buffer too small: the caller retries with a larger one
+from dicetrace.params import FRICTION_SPECTRAL, NODE_SIGNS
 
 # Face table: FACE_OF_TOP4[mask] for an 8-bit mask of the top four nodes
 # (bit k = node k+1); 0 where the four nodes are no face.
@@ -38,12 +32,6 @@ _FACES = {1: (1, 2, 3, 4), 2: (1, 2, 5, 6), 3: (1, 3, 5, 7), 4: (2, 4, 6, 8), 5:
 FACE_OF_TOP4 = np.zeros(256, dtype=np.int8)
 for _face, _nodes in _FACES.items():
     FACE_OF_TOP4[sum(1 << (n - 1) for n in _nodes)] = _face
-
-# Body-frame node offsets in units of the half side: node = 1 + 4[x>0] + 2[y>0] + [z>0].
-NODE_SIGNS = np.array(
-    [[(-1.0, 1.0)[(k >> 2) & 1], (-1.0, 1.0)[(k >> 1) & 1], (-1.0, 1.0)[k & 1]] for k in range(8)]
-)
-
 
 @jit
 def init_offsets(half, off):
@@ -168,7 +156,7 @@ def contact_forces(z, uk, kp, F, P):
     """
     k_ = kp.k
     gam = kp.gamma
-    clamp = kp.clamp_normal != 0.0
+    clamp = kp.clamp_normal
     for k in range(8):
         d = max(0.0, -z[k])
         p = k_ * d * (1.0 - gam * uk[k, 2])
@@ -200,7 +188,7 @@ def spectral_norm_xy(uk):
 def _friction_forces(uk, kp, F, P):
     """Horizontal friction F_xy from velocities uk and the normal forces P (see contact_forces)."""
     mu = kp.mu
-    if kp.friction_mode == 0.0:
+    if kp.friction_mode == FRICTION_SPECTRAL:
         sig = spectral_norm_xy(uk)
         if sig == 0.0:
             for k in range(8):
@@ -246,7 +234,7 @@ def energy_stop(uk, z, P, kp):
     for k in range(8):
         d = max(0.0, -z[k])
         el += d * P[k]
-    return ((0.5 * ke + (-kp.g) * sz) + 0.5 * el) - kp.e_offset
+    return ((0.5 * ke + (-kp.g) * sz) + 0.5 * el) - kp.e_rest
 
 
 @jit

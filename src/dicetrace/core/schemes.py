@@ -71,11 +71,7 @@ from dicetrace.core.model import (
     friction_forces_inline,
     rotation_matrix,
 )
-
-#: Classical orders (smooth segments).
-VERLET_ORDER = 2
-RK4_ORDER = 4
-CONTACT_SUBSTEP_ORDER = 4
+from dicetrace.params import FRICTION_SPECTRAL
 
 #: Radius of the die's circumsphere in half sides (√3).
 CIRCUM = math.sqrt(3.0)
@@ -205,7 +201,7 @@ def forces_s(Xz, U0, U1, U2, w0, w1, w2, off, kp, F, uk, z, P):
         return below, mask
     k_ = kp.k
     gam = kp.gamma
-    clamp = kp.clamp_normal != 0.0
+    clamp = kp.clamp_normal
     for k in range(8):
         x0 = off[k, 0]
         x1 = off[k, 1]
@@ -650,7 +646,7 @@ def friction_rate(z, uk, P, kp):
     scheme chatters there with an amplitude ~ h·μ·P as the program does.
     """
     lam = 0.0
-    if kp.friction_mode == 0.0:
+    if kp.friction_mode == FRICTION_SPECTRAL:
         return lam
     else:
         for k in range(8):

@@ -32,7 +32,7 @@ from dicetrace.scan.runner import (
     scan,
     write_chunk,
 )
-from dicetrace.scan.tables import ROLLS_SCHEMA, rolls_table, run_summaries, sequences_array
+from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
 
 __all__ = [
     "DEFAULT_CHUNK",
@@ -53,10 +53,7 @@ __all__ = [
     "read_manifest",
     "read_scan",
     "read_scan_table",
-    "rolls_table",
-    "run_summaries",
     "scan",
     "scan_definition",
-    "sequences_array",
     "write_chunk",
 ]

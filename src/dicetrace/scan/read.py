@@ -46,7 +46,7 @@ def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
     files = sorted(str(p) for p in folder.glob("part-*.parquet"))
     cols = None if columns is None else list(dict.fromkeys(["ic_id", *columns]))
     if not files:
-        from dicetrace.scan.tables import ROLLS_SCHEMA
+        from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
 
         table = ROLLS_SCHEMA.empty_table()
         if cols is not None:

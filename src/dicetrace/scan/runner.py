@@ -27,10 +27,10 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from dicetrace.ics import to_preset_convention, validate_ics
 from dicetrace.params import Config, make_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, describe_differences
-from dicetrace.scan.tables import DEFAULT_CAP, rolls_table, run_summaries
+from dicetrace.simulate import DEFAULT_CAP, simulate_batch
+from dicetrace.tables import rolls_table
 
 MANIFEST = "_scan.json"
 METADATA_KEY = b"dicetrace"
@@ -51,13 +51,6 @@ def _version() -> str:
     return dicetrace.__version__
 
 
-def _check_integrator(config: Config) -> None:
-    from dicetrace.core import integrators
-
-    if config.numerics.integrator_id not in getattr(integrators, "IMPLEMENTED", {0, 1}):
-        raise ValueError(f"integrator {config.numerics.integrator!r} is not available in this build")
-
-
 # -- computing one chunk ----------------------------------------------------------------------
 
 
@@ -68,30 +61,12 @@ def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, c
     The rows do not depend on it, nor on the chunk size: every IC is the
     serial kernel's result for that IC.
     """
-    from dicetrace.simulate import initial_offsets
-
-    cfg = defn.config
-    _check_integrator(cfg)
     start, stop = defn.chunk_range(c)
     blk = defn.space.block(start, stop)
-    slice_conv = defn.space.slice.l_convention
-    ics = to_preset_convention(blk.ics, slice_conv, cfg.preset.l_convention)
-    kics = validate_ics(to_preset_convention(blk.ics, slice_conv, "program"))
-    status, steps, outcome, offsets, sets = run_summaries(
-        kics, initial_offsets(cfg), cfg.kernel_params(), cfg.numerics.integrator_id, cap=cap, threads=threads
+    batch = simulate_batch(
+        blk.ics, config=defn.config, l_convention=defn.space.slice.l_convention, threads=threads, cap=cap
     )
-    return rolls_table(
-        ic_id=blk.ic_id,
-        index=blk.index,
-        coords=blk.coords,
-        ics=ics,
-        config=cfg,
-        status=status,
-        steps=steps,
-        outcome=outcome,
-        set_offsets=offsets,
-        sets=sets,
-    )
+    return rolls_table(batch, coords=blk.coords, ic_ids=blk.ic_id, index=blk.index)
 
 
 def _chunk_task(defn_dict: dict, c: int, threads: int | None) -> tuple[int, pa.Table]:
@@ -419,7 +394,6 @@ def scan(
     pyarrow.Table (``out`` is None: sorted by ``ic_id``) or :class:`ScanReport`.
     """
     defn = _definition(space, config, preset, integrator, dt_s, t_max_s, chunk, overrides)
-    _check_integrator(defn.config)
     t0 = time.perf_counter()
     if out is None:
         tables = [t for _, t in iter_scan(defn, threads=threads, dask=dask, n_workers=n_workers)]

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dicetrace.sinks._common import quaternions_xyzw, remove_quietly, temp_path_beside, written_rows
+from dicetrace.sinks._common import remove_quietly, temp_path_beside
 
 #: Face colours of the writeup: 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black (RGB).
 FACE_COLORS = np.array(
@@ -232,7 +232,7 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     cfg = roll.config
     half = float(cfg.preset.half_side_cm)
     # rows with a finite, written state (a numerical failure may end in NaN or unwritten rows)
-    rows = written_rows(tr) & np.isfinite(tr.cm_pos).all(axis=1) & np.isfinite(tr.node_offsets).all(axis=(1, 2))
+    rows = tr.written & np.isfinite(tr.cm_pos).all(axis=1) & np.isfinite(tr.node_offsets).all(axis=(1, 2))
     steps = tr.step[rows].astype(np.int64)
     t_s = tr.t_s[rows].astype(np.float64)
     nrow = len(steps)
@@ -246,7 +246,7 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     cm = tr.cm_pos[rows]
     off = tr.node_offsets[rows]  # (nrow, 8, 3)
     nodes = cm[:, None, :] + off
-    quat = quaternions_xyzw(tr)[rows]
+    quat = tr.quat_xyzw[rows]
     energy = {key: np.asarray(v)[rows] for key, v in tr.energy.items()}
 
     # -- static: frame, ground, summary ------------------------------------------------------

@@ -25,7 +25,7 @@ from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 from dicetrace.simulate import Record, initial_offsets, simulate, simulate_batch
 
-GOLDEN = Path(__file__).parent / "data" / "kernel_golden_2000.npz"
+GOLDEN = Path(__file__).resolve().parents[1] / "data" / "kernel_golden_2000.npz"
 EMPTY = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
 CAP = 4096
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 ANALYSIS = REPO / "analysis"
 STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation")
 MAX_FIGURE_BYTES = 300_000
