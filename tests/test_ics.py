@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dicetrace.params import convert_l
 from dicetrace.ics import (
     SEED_DIRS_6D,
     SLICES,
@@ -19,7 +20,6 @@ from dicetrace.ics import (
     grid_axis,
     seed_slice,
     space_from_dict,
-    to_preset_convention,
 )
 
 
@@ -172,7 +172,7 @@ def test_points_and_dict_round_trip():
 
 def test_conventions():
     ics = seed_slice([1.0], [2.0])
-    phys = to_preset_convention(ics, "program", "physical")
+    phys = convert_l(ics, "program", "physical")
     np.testing.assert_array_equal(phys[:, :3], ics[:, :3])
     np.testing.assert_array_equal(phys[:, 3:], -ics[:, 3:])
-    assert to_preset_convention(ics, "program", "program") is ics
+    assert convert_l(ics, "program", "program") is ics

@@ -23,7 +23,7 @@ from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll, run_roll_general
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.simulate import Record, initial_offsets, simulate, simulate_batch
+from dicetrace.simulate import Record, simulate, simulate_batch
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "kernel_golden_2000.npz"
 EMPTY = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
@@ -39,7 +39,7 @@ def golden():
 def _serial(fn, ics, cfg, off0=None, integ=None):
     """(status, steps, outcome, [sets], [set_steps]) of every IC through ``fn`` (run_roll-like)."""
     kp = cfg.kernel_params()
-    off0 = initial_offsets(cfg) if off0 is None else off0
+    off0 = cfg.initial_offsets() if off0 is None else off0
     integ = cfg.numerics.integrator_id if integ is None else integ
     out = []
     sets = np.zeros(CAP, np.uint8)
@@ -135,7 +135,7 @@ def test_fast_path_from_a_tilted_start():
 
     cfg = make_config("seed")
     rot = Rotation.from_rotvec([0.3, -0.7, 0.2]).as_matrix()
-    off0 = initial_offsets(cfg, rot)
+    off0 = cfg.initial_offsets(rot)
     assert mirror_symmetric(off0)
     rng = np.random.default_rng(3)
     xy = rng.uniform(0.0, 20.0, size=(100, 2))
@@ -145,7 +145,7 @@ def test_fast_path_from_a_tilted_start():
 
 def test_non_symmetric_start_falls_back_to_general_loop():
     cfg = make_config("seed")
-    off0 = initial_offsets(cfg).copy()
+    off0 = cfg.initial_offsets().copy()
     off0[0, 0] = np.nextafter(off0[0, 0], 0.0)
     assert not mirror_symmetric(off0)
     ics = seed_slice(np.array([1.65, 0.3]), np.array([3.9, 7.1]))
@@ -155,7 +155,7 @@ def test_non_symmetric_start_falls_back_to_general_loop():
 def test_buffer_full_is_reported_identically():
     cfg = make_config("seed")
     kp = cfg.kernel_params()
-    off0 = initial_offsets(cfg)
+    off0 = cfg.initial_offsets()
     ic = seed_slice(1.65, 3.9)  # 23 contact sets
     for cap in (1, 5, 23):
         res = []
@@ -196,7 +196,7 @@ def test_writeup_points_and_trace_still_match_the_program(reference_dir):
 def test_batch_is_thread_and_schedule_invariant(golden, threads):
     cfg = make_config("seed")
     kp = cfg.kernel_params()
-    off0 = initial_offsets(cfg)
+    off0 = cfg.initial_offsets()
     ics = golden["ics"][:300]
     m, cap = len(ics), 64
     results = []
@@ -221,7 +221,7 @@ def test_scratch_kernel_is_reentrant():
     """Scratch arrays carry nothing from one throw to the next."""
     cfg = make_config("seed")
     kp = cfg.kernel_params()
-    off0 = initial_offsets(cfg)
+    off0 = cfg.initial_offsets()
     scratch = [np.full((8, 3), np.nan), np.full((8, 3), np.nan), np.full((8, 3), np.nan), np.full(8, np.nan),
                np.full(8, np.nan)]
     a, b = seed_slice(1.65, 3.9), seed_slice(0.019775, 0.0182)

@@ -15,7 +15,6 @@ import numpy as np
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_roll_general
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.simulate import initial_offsets
 
 N = 2000
 
@@ -30,7 +29,7 @@ def main():
     x, y = golden_points()
     ics = seed_slice(x, y)
     cfg = make_config("seed")
-    kp, off0 = cfg.kernel_params(), initial_offsets(cfg)
+    kp, off0 = cfg.kernel_params(), cfg.initial_offsets()
     empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     status = np.zeros(N, np.int8)
     steps = np.zeros(N, np.int64)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from dicetrace.params import INTEGRATORS, STABILITY_BOUND, auto_dt, get_preset, impact_speed_cm_s, make_config
+from dicetrace.params import INTEGRATORS, auto_dt, get_preset, impact_speed_cm_s, make_config
 from dicetrace.simulate import STATUS_NAMES, simulate, simulate_batch
 
 ALL = tuple(INTEGRATORS)
@@ -61,7 +61,7 @@ def test_auto_dt_respects_the_linear_bound():
         q = p.with_(k=k)
         for integ in ("semi-implicit-euler", "verlet", "rk4"):
             dt = auto_dt(q, integ, v_impact_cm_s=0.0)
-            assert math.sqrt(k) * dt <= 0.5 * STABILITY_BOUND[integ] * (1 + 1e-12) or dt == 1e-3
+            assert math.sqrt(k) * dt <= 0.5 * INTEGRATORS[integ].stability_bound * (1 + 1e-12) or dt == 1e-3
 
 
 def test_auto_dt_at_high_stiffness_gives_a_correct_answer():
@@ -73,7 +73,7 @@ def test_auto_dt_at_high_stiffness_gives_a_correct_answer():
     v = impact_speed_cm_s(ic, get_preset("seed"))
     for integ in ("semi-implicit-euler", "rk4", "contact-substep"):
         cfg = make_config("seed", integrator=integ, dt_s="auto", k=5e7, v_impact_cm_s=v)
-        assert math.sqrt(5e7) * cfg.numerics.dt_s < STABILITY_BOUND[integ] * (8 if integ == "contact-substep" else 1)
+        assert math.sqrt(5e7) * cfg.numerics.dt_s < INTEGRATORS[integ].stability_bound * (8 if integ == "contact-substep" else 1)
         r = simulate(ic, config=cfg)
         assert r.status == "settled", (integ, cfg.numerics.dt_s)
     ref = simulate(ic, config=make_config("seed", integrator="contact-substep", dt_s=2.5e-5, k=5e7))
