@@ -38,7 +38,7 @@ PROGRAM_WINDOWS = {
     "green-island-6.2-4": ((0.057269466, 0.0572694705), (0.043622917, 0.043622924)),
 }
 
-#: The writeup's eight windows (DESIGN.md section 4), in the writeup's order.
+#: The writeup's eight windows (docs/model.md §11), in the writeup's order.
 WRITEUP_WINDOWS = ("home", "zoom-out", "more-out", "most-out", "red-sea", "red-sea-2", "party", "green-island")
 
 

@@ -7,7 +7,7 @@ the physical one); the ``physical`` preset takes the physical L.  Slices map
 1–3 coordinates to an IC with the program's arithmetic (left to right, no
 fused multiply-add), so grids reproduce the program bit for bit.
 
-IC spaces (DESIGN.md section 4), all plain frozen dataclasses that turn
+IC spaces (docs/model.md §11), all plain frozen dataclasses that turn
 into JSON-able dicts and back (``to_dict`` / :func:`space_from_dict`):
 
 :class:`Slice`

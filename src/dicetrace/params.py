@@ -312,7 +312,7 @@ class Preset:
 
 PRESETS: dict[str, Preset] = {
     "seed": Preset(name="seed"),
-    # The program's slips corrected (DESIGN.md section 3): normal force clamped
+    # The program's slips corrected (docs/model.md §7): normal force clamped
     # at zero, Coulomb friction per node on that clamped force (regularised
     # by v_reg), energy with the dynamics' inertia, physical sign of L.
     "physical": Preset(

@@ -22,7 +22,7 @@ from dicetrace.analysis import (
     wilson_interval,
 )
 
-# Faces as node sets (DESIGN.md section 1)
+# Faces as node sets (docs/model.md §3)
 FACES = {
     1: {1, 2, 3, 4},
     2: {1, 2, 5, 6},
@@ -80,7 +80,7 @@ def _node_perm(m: np.ndarray) -> tuple[int, ...]:
 
 
 def test_text_round_trip_matches_seed_format():
-    # DESIGN.md section 2 example, bit n-1 = node n
+    # docs/model.md §8 notation, bit n-1 = node n
     sets = [0, 32, 160, 128, 0, 4, 0, 1]
     assert contact_sequence_text(sets) == "0-6-68-8-0-3-0-1"
     np.testing.assert_array_equal(parse_contact_sequence("0-6-68-8-0-3-0-1"), sets)
@@ -209,7 +209,7 @@ def test_basins_fractions_table_is_tidy():
 
 
 def test_writeup_points_topology(reference_dir):
-    # The 2019 program's six throws (shared/reference/writeup_points.csv):
+    # The 2019 program's six throws (tests/data/reference/writeup_points.csv):
     # the three "red sea" throws all give 3 yet are topologically different
     # (writeup 5.5), and so are the three yellow throws (writeup 5.7).
     pts = pd.read_csv(reference_dir / "writeup_points.csv")

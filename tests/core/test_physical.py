@@ -1,4 +1,4 @@
-"""The ``physical`` preset (DESIGN.md section 3): clamped normal force, per-node friction,
+"""The ``physical`` preset (docs/model.md §7): clamped normal force, per-node friction,
 energy with the dynamics' inertia, the physical sign of L, and convergence."""
 
 from __future__ import annotations

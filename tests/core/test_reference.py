@@ -1,9 +1,9 @@
 """The `seed` preset against the 2019 program's own output (GNU Octave runs).
 
-Data: ../shared/reference (README there), a copy in tests/data/reference.
+Data: tests/data/reference (README there).
 The program's spectral norm comes from LAPACK's SVD, whose last bits no
 portable formula reproduces; dicetrace uses the closed form through the 2×2
-Gram matrix (DESIGN.md §2).  So the traces agree bit for bit until the first
+Gram matrix (docs/model.md §5.5).  So the traces agree bit for bit until the first
 ground contact and to rounding error after it, until chaos amplifies those
 ulps: the bounds below are what that gives.
 """

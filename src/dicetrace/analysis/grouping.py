@@ -1,7 +1,7 @@
 """Group rolls into basins and count them.
 
 A *grouping config* turns a rolls table (one row per initial condition, see
-``DESIGN.md`` section 6) into one hashable label per row, in the manner of
+the ``rolls`` table of ``dicetrace.tables``) into one hashable label per row, in the manner of
 Attractors.jl's ``group_features(features, config) -> labels``. The labels are
 what every other analysis function works on: outcome grids, basin fractions,
 cells, boundaries.
@@ -111,7 +111,7 @@ def cube_node_permutations(*, reflections: bool = False) -> np.ndarray:
     Notes
     -----
     Each symmetry is a signed 3x3 permutation matrix acting on the body
-    coordinates of the nodes, whose entries are +-1 (``DESIGN.md`` section 1).
+    coordinates of the nodes, whose entries are +-1 (docs/model.md §3).
     """
     return _perm_table(bool(reflections))
 
@@ -348,7 +348,7 @@ def group_features(df: pd.DataFrame, config: AbstractGroupingConfig) -> pd.Serie
     Parameters
     ----------
     df : pandas.DataFrame
-        Rolls table (``DESIGN.md`` section 6).
+        Rolls table (the ``rolls`` table of ``dicetrace.tables``).
     config : AbstractGroupingConfig
         E.g. ``GroupByOutcome()`` or ``GroupByContactSequence(canonical="rotations")``.
 

@@ -51,7 +51,7 @@ FACE_COLORS = np.array(
 FACE_NORMALS = np.array(
     [[-1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0], [0, 0, 1.0], [0, 1.0, 0], [1.0, 0, 0]]
 )
-#: Corner nodes (0-based) of each face, rows in face order 1..6 (DESIGN.md section 1).
+#: Corner nodes (0-based) of each face, rows in face order 1..6 (docs/model.md §3).
 FACE_NODES = np.array([[0, 1, 2, 3], [0, 1, 4, 5], [0, 2, 4, 6], [1, 3, 5, 7], [2, 3, 6, 7], [4, 5, 6, 7]])
 
 BODY_COLOR = (236, 230, 214)  # ivory
