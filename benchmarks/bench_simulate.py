@@ -25,7 +25,7 @@ import numpy as np
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll_general
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.simulate import initial_offsets, simulate_batch
+from dicetrace.simulate import simulate_batch
 
 
 @numba.njit(cache=True)
@@ -70,7 +70,7 @@ def main() -> None:
     ics = np.ascontiguousarray(seed_slice(xy[:, 0], xy[:, 1]))
     cfg = make_config("seed")
     kp = cfg.kernel_params()
-    off0 = initial_offsets(cfg)
+    off0 = cfg.initial_offsets()
     m = len(ics)
     cap = 128
     print(f"seed preset, {m:,} ICs on the seed slice, x, y uniform in [0, 20] (rng 1); "

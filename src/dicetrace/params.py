@@ -617,3 +617,29 @@ def make_config(
     if tol is not None:
         kw["tol"] = tol
     return Config(preset=p, numerics=Numerics(**kw))
+
+
+def resolve_config(config: "Config | str | None" = None, /, **options) -> Config:
+    """The configuration of an API call: ``config`` itself, or :func:`make_config` of the options.
+
+    Every entry point (``simulate``, ``simulate_batch``, ``scan``, the
+    studies) takes ``config=`` or the keyword options of :func:`make_config`
+    (``preset``, ``integrator``, ``dt_s``, ``t_max_s``, ``tol``,
+    ``v_impact_cm_s`` and :class:`Preset` field overrides), never both: a
+    given Config already fixes them.  ``config`` may also be a preset name.
+    Options whose value is None count as not given.
+    """
+    options = {k: v for k, v in options.items() if v is not None}
+    if config is None or isinstance(config, (str, Preset)):
+        if config is not None:
+            if "preset" in options:
+                raise ValueError("give the preset once: config='NAME' or preset='NAME'")
+            options["preset"] = config
+        return make_config(**options)
+    if not isinstance(config, Config):
+        raise TypeError(f"config must be a dicetrace.params.Config or a preset name, not {type(config).__name__}")
+    if options:
+        raise ValueError(
+            f"pass either config or {', '.join(sorted(options))}, not both (the config already fixes them)"
+        )
+    return config

@@ -17,7 +17,7 @@ import numba
 from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
 from dicetrace.ics import validate_ic, validate_ics
-from dicetrace.params import NODE_SIGNS, Config, make_config
+from dicetrace.params import NODE_SIGNS, Config, resolve_config
 from dicetrace.status import Status
 
 ENERGY_NAMES = ("stop_test", "kinetic_translational", "kinetic_rotational", "gravitational", "elastic", "total")
@@ -220,32 +220,7 @@ def contact_sequence_from_heights(z_steps) -> tuple[np.ndarray, np.ndarray]:
     return sets[:n].copy(), steps[:n].copy()
 
 
-def _resolve_config(config, preset, integrator, dt_s, t_max_s, tol=None) -> Config:
-    """``config`` itself, or one built from the keyword arguments; never both."""
-    if config is None:
-        return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, tol=tol)
-    if not isinstance(config, Config):
-        raise TypeError(f"config must be a dicetrace.params.Config, not {type(config).__name__}")
-    given = [n for n, v in (("integrator", integrator), ("dt_s", dt_s), ("t_max_s", t_max_s), ("tol", tol)) if v is not None]
-    if preset != "seed":
-        given.insert(0, "preset")
-    if given:
-        raise ValueError(f"pass either config or {', '.join(given)}, not both (the config already fixes them)")
-    return config
-
-
-def simulate(
-    ic,
-    *,
-    config: Config | None = None,
-    preset: str = "seed",
-    integrator: str | None = None,
-    dt_s: float | None = None,
-    t_max_s: float | None = None,
-    tol: float | None = None,
-    record: Record | None = None,
-    orientation=None,
-) -> Roll:
+def simulate(ic, *, config: Config | str | None = None, record: Record | None = None, orientation=None, **options) -> Roll:
     """Throw the die once.
 
     Parameters
@@ -254,10 +229,13 @@ def simulate(
         (vx, vy, vz, Lx, Ly, Lz): velocity in cm/s and angular momentum in
         node-mass·cm²/s, L in the preset's convention (``seed``: the 2019
         program's, the negative of the physical L).
-    config
-        A full :class:`~dicetrace.params.Config`; otherwise built from
-        ``preset``, ``integrator``, ``dt_s`` (s), ``t_max_s`` (s) and ``tol``
-        (the local error tolerance of ``contact-adaptive``).
+    config, **options
+        A full :class:`~dicetrace.params.Config` (or a preset name), or the
+        keyword options of :func:`~dicetrace.params.make_config`: ``preset``
+        (default ``"seed"``), ``integrator``, ``dt_s`` (s, or ``"auto"``),
+        ``t_max_s`` (s), ``tol`` (the local error tolerance of
+        ``contact-adaptive``) and Preset field overrides (``k``, ``gamma``,
+        ...); never both (see :func:`~dicetrace.params.resolve_config`).
     record
         Per-step channels to compute (None: summary only, nothing per step).
     orientation
@@ -268,7 +246,7 @@ def simulate(
     -------
     Roll
     """
-    cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s, tol)
+    cfg = resolve_config(config, **options)
     if record is not None and not isinstance(record, Record):
         raise TypeError(f"record must be a dicetrace.Record or None, not {type(record).__name__}")
     ic = validate_ic(ic)
@@ -412,15 +390,11 @@ def _run_batch(kin, cap: int, threads):
 def simulate_batch(
     ics,
     *,
-    config: Config | None = None,
-    preset: str = "seed",
-    integrator: str | None = None,
-    dt_s: float | None = None,
-    t_max_s: float | None = None,
-    tol: float | None = None,
+    config: Config | str | None = None,
     l_convention: str | None = None,
     threads: int | None = None,
     cap: int = DEFAULT_CAP,
+    **options,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads).
 
@@ -432,7 +406,7 @@ def simulate_batch(
     ----------
     ics
         (m, 6) ICs, L in ``l_convention`` (default: the preset's).
-    config, preset, integrator, dt_s, t_max_s, tol
+    config, **options
         As in :func:`simulate`.
     threads
         numba threads for this call (None: numba's current setting).
@@ -440,7 +414,7 @@ def simulate_batch(
         Initial per-IC contact-set buffer; throws that need more are re-run
         (all together, in parallel) with ``CAP_GROWTH`` times more until they fit.
     """
-    cfg = _resolve_config(config, preset, integrator, dt_s, t_max_s, tol)
+    cfg = resolve_config(config, **options)
     if isinstance(cap, bool) or not isinstance(cap, (int, np.integer)) or cap < 1:
         raise ValueError(f"cap must be an integer >= 1, got {cap!r}")
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):

@@ -27,7 +27,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from dicetrace.params import Config, make_config
+from dicetrace.params import Config, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, describe_differences
 from dicetrace.simulate import DEFAULT_CAP, simulate_batch
 from dicetrace.tables import rolls_table
@@ -261,13 +261,12 @@ class ScanReport:
     ics_computed: int = 0
 
 
-def _definition(space, config, preset, integrator, dt_s, t_max_s, chunk, overrides) -> ScanDefinition:
+def _definition(space, config, chunk, options) -> ScanDefinition:
     if isinstance(space, ScanDefinition):
-        if config is not None or overrides:
+        if config is not None or any(v is not None for v in options.values()):
             raise ValueError("give a ScanDefinition or a space with its configuration, not both")
         return space
-    cfg = config if config is not None else make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, **overrides)
-    return ScanDefinition(space, cfg, chunk)
+    return ScanDefinition(space, resolve_config(config, **options), chunk)
 
 
 def _open_dask(dask, n_workers):
@@ -317,17 +316,13 @@ def _iter_dask(defn: ScanDefinition, todo: list[int], dask, n_workers, threads) 
 def iter_scan(
     space,
     *,
-    config: Config | None = None,
-    preset: str = "seed",
-    integrator: str | None = None,
-    dt_s: float | None = None,
-    t_max_s: float | None = None,
+    config: Config | str | None = None,
     chunk: int = DEFAULT_CHUNK,
     chunks: Iterable[int] | None = None,
     threads: int | None = None,
     dask=None,
     n_workers: int | None = None,
-    **overrides,
+    **options,
 ) -> Iterator[tuple[int, pa.Table]]:
     """Stream a scan: yields ``(chunk_index, rolls_table)`` as chunks finish.
 
@@ -335,7 +330,7 @@ def iter_scan(
     cluster, an address, or a ``Client``) as they complete.  ``chunks``
     restricts the run to those chunk indices.  Arguments as :func:`scan`.
     """
-    defn = _definition(space, config, preset, integrator, dt_s, t_max_s, chunk, overrides)
+    defn = _definition(space, config, chunk, options)
     todo = list(range(defn.n_chunks)) if chunks is None else list(chunks)
     if dask:
         yield from _iter_dask(defn, todo, dask, n_workers, threads)
@@ -348,18 +343,14 @@ def scan(
     space,
     out=None,
     *,
-    config: Config | None = None,
-    preset: str = "seed",
-    integrator: str | None = None,
-    dt_s: float | None = None,
-    t_max_s: float | None = None,
+    config: Config | str | None = None,
     chunk: int = DEFAULT_CHUNK,
     threads: int | None = None,
     progress: bool = False,
     dask=None,
     n_workers: int | None = None,
     max_chunks: int | None = None,
-    **overrides,
+    **options,
 ):
     """Throw the die from every IC of an IC space (summaries only).
 
@@ -373,8 +364,9 @@ def scan(
         A folder: the scan is written there as a Parquet dataset, chunk by
         chunk, resuming whatever a previous run of the same scan finished.
         None: nothing is written and the whole rolls table is returned.
-    config, preset, integrator, dt_s, t_max_s, **overrides
-        The configuration (see :func:`dicetrace.params.make_config`).
+    config, **options
+        The configuration: a Config, or the keyword options of
+        :func:`dicetrace.params.make_config` (see :func:`dicetrace.params.resolve_config`).
     chunk
         ICs per chunk (file, Dask task).  Part of the definition.
     threads
@@ -393,7 +385,7 @@ def scan(
     -------
     pyarrow.Table (``out`` is None: sorted by ``ic_id``) or :class:`ScanReport`.
     """
-    defn = _definition(space, config, preset, integrator, dt_s, t_max_s, chunk, overrides)
+    defn = _definition(space, config, chunk, options)
     t0 = time.perf_counter()
     if out is None:
         tables = [t for _, t in iter_scan(defn, threads=threads, dask=dask, n_workers=n_workers)]

@@ -1,32 +1,9 @@
 """Parquet sink: writes the ``rolls``, ``contacts`` and ``trajectory`` tables of :mod:`dicetrace.tables`.
 
-Three Arrow tables with explicit schemas, readable with plain
-``pandas.read_parquet`` (no dicetrace needed):
-
-``rolls``
-    one row per IC: ``ic_id``, slice coordinates ``x, y, z`` (null when the
-    IC is not on a slice), the IC ``vx, vy, vz`` (cm/s) and ``Lx, Ly, Lz``
-    (node-mass·cm²/s, in the preset's convention), ``preset``,
-    ``integrator``, ``dt_s``, ``outcome`` (1..6; 0 undefined; -1 not
-    settled), ``status``, ``steps``, ``t_settle_s``, ``contact_sets``
-    (list<uint8>: bit k = node k+1 at or below the ground), its text form
-    ``contact_sequence`` (the program's, e.g. ``0-6-68-8``) and
-    ``n_contact_changes``.
-``contacts``
-    one row per node event: ``ic_id, step, t_s, node`` (1..8), ``kind``
-    (``"enter"`` / ``"leave"``).
-``trajectory``
-    one row per step of one throw: ``ic_id, step, t_s``, centre of mass
-    ``cm_{x,y,z}_cm``, its velocity ``vcm_{x,y,z}_cm_s``, the orientation
-    quaternion ``qx, qy, qz, qw`` (world from body), ``Lx, Ly, Lz``, node
-    positions ``n1_x_cm`` … ``n8_z_cm`` and energies ``e_stop_test,
-    e_kin_trans, e_kin_rot, e_grav, e_elastic, e_total``
-    (node-mass·cm²/s²).
-
-Every table carries, under the schema-metadata key ``b"dicetrace"``, a JSON
-object with the full configuration (``Config.as_dict()``), the IC(s) and the
-dicetrace version: ``json.loads(pq.read_schema(f).metadata[b"dicetrace"])``.
-Each field also states its unit in its own metadata (key ``b"unit"``).
+The tables (columns, units, metadata) are defined in :mod:`dicetrace.tables`;
+this module writes them atomically into a folder as ``rolls.parquet``,
+``contacts.parquet`` and ``trajectory.parquet``, readable with plain
+``pandas.read_parquet`` (no dicetrace needed).
 """
 
 from __future__ import annotations
