@@ -1,0 +1,117 @@
+"""The integrator table: one :class:`IntegratorSpec` per integrator, read by every layer.
+
+Bottom layer (imports nothing of the package).  The kernels dispatch on
+``kernel_id``; ``Numerics`` validates names against it; ``dt = "auto"`` reads
+the stability bound; the accuracy study reads its grids and plot colour.
+Adding an integrator is one scheme file in ``dicetrace.core``, one row here,
+and its tests.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class IntegratorSpec:
+    """Everything dicetrace knows about one integrator, in one place.
+
+    Parameters
+    ----------
+    name
+        The name users type (``--integrator``, ``integrator=``).
+    kernel_id
+        The integer the numba kernels dispatch on (part of the kernel ABI:
+        ``dicetrace.core.integrators`` compiles one step per id).
+    order
+        Classical order of accuracy on smooth segments.
+    stability_bound
+        Linear stability bound of ω·h on the undamped penalty spring
+        (ω = √k per unit mass); 0 when the scheme has none (forward Euler
+        amplifies every oscillation by √(1 + ω²h²) per step).  For the
+        sub-stepping schemes h is the sub-step.
+    substepped
+        Its contact steps are sub-steps of dt (``Numerics.substeps`` of them
+        at most, or error-controlled): ``dt = auto`` applies the bound per
+        sub-step.
+    adaptive
+        Error-controlled sub-steps (``Numerics.tol`` is its tolerance).
+    study_dt_s, quick_dt_s
+        Steps of the work-precision study (full and ``--quick``), s; each
+        divides the study's first-impact horizon grid of 8 ms.
+    study_tol, quick_tol
+        Tolerances of the study (adaptive schemes only).
+    color
+        Its colour in the study's plots (matplotlib name).
+    summary
+        One line for ``--help`` and the docs.
+    """
+
+    name: str
+    kernel_id: int
+    order: int
+    stability_bound: float
+    summary: str
+    color: str
+    study_dt_s: tuple[float, ...]
+    quick_dt_s: tuple[float, ...]
+    substepped: bool = False
+    adaptive: bool = False
+    study_tol: tuple[float, ...] = ()
+    quick_tol: tuple[float, ...] = ()
+
+
+_RK4_BOUND = 2.0 * math.sqrt(2.0)  # RK4's interval on the imaginary axis
+
+#: The integrators, by name (the order of ids is part of the kernel ABI).
+INTEGRATORS: dict[str, IntegratorSpec] = {
+    s.name: s
+    for s in (
+        IntegratorSpec(
+            "semi-implicit-euler", 0, 1, 2.0, "the 2019 program's scheme (default for seed)", "tab:blue",
+            study_dt_s=(1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5, 1.5625e-5, 7.8125e-6),
+            quick_dt_s=(1e-3, 2.5e-4),
+        ),
+        IntegratorSpec(
+            "forward-euler", 1, 1, 0.0, "textbook forward Euler (what the writeup says it used)", "tab:red",
+            study_dt_s=(1e-3, 2.5e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5),
+            quick_dt_s=(1e-4, 5e-5),
+        ),
+        IntegratorSpec(
+            "verlet", 2, 2, 2.0, "velocity Verlet", "tab:green",
+            study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
+            quick_dt_s=(1e-3, 2.5e-4),
+        ),
+        IntegratorSpec(
+            "rk4", 3, 4, _RK4_BOUND, "classical Runge-Kutta on the Lie group (commutator-free)", "tab:purple",
+            study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
+            quick_dt_s=(1e-3, 2.5e-4),
+        ),
+        IntegratorSpec(
+            "contact-substep", 4, 4, _RK4_BOUND,
+            "contact-aware RK4: exact free flight, kink-aligned sub-steps in contact", "tab:orange",
+            study_dt_s=(8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4),
+            quick_dt_s=(2e-3, 1e-3),
+            substepped=True,
+        ),
+        IntegratorSpec(
+            "contact-adaptive", 5, 4, _RK4_BOUND,
+            "contact-substep with error-controlled sub-steps (tolerance tol; default for physical)", "tab:brown",
+            study_dt_s=(1e-3,),
+            quick_dt_s=(1e-3,),
+            substepped=True,
+            adaptive=True,
+            study_tol=(1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
+            quick_tol=(1e-4, 1e-6),
+        ),
+    )
+}
+
+
+def get_integrator(name: str) -> IntegratorSpec:
+    """The spec of integrator ``name`` (ValueError naming the choices)."""
+    try:
+        return INTEGRATORS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown integrator {name!r} (choose from {', '.join(INTEGRATORS)})") from None
