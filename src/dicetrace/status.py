@@ -51,6 +51,9 @@ class Status(IntEnum):
     def __str__(self) -> str:
         return self.label
 
+    def __format__(self, spec: str) -> str:
+        return format(self.label, spec)
+
     def __eq__(self, other) -> bool:
         if isinstance(other, str):
             return self.label == other

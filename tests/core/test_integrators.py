@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation
 from dicetrace.core.integrators import step
 from dicetrace.core.model import init_offsets
 from dicetrace.core.schemes import finish
-from dicetrace.params import INTEGRATORS, Config, Numerics, Preset
+from dicetrace.params import INTEGRATORS, Config, Numerics, Preset, make_config
 
 ALL = tuple(INTEGRATORS)
 #: Integrators whose accuracy is set by dt (contact-adaptive's by its tolerance).

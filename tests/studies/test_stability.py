@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from dicetrace.params import INTEGRATORS, auto_dt, get_preset, impact_speed_cm_s, make_config
-from dicetrace.simulate import STATUS_NAMES, simulate, simulate_batch
+from dicetrace.simulate import simulate, simulate_batch
+from dicetrace.status import LABELS
 
 ALL = tuple(INTEGRATORS)
 
@@ -40,7 +41,7 @@ def test_blow_up_is_never_an_outcome_in_a_batch():
     for integ, dt in (("forward-euler", 1e-3), ("semi-implicit-euler", 3e-3), ("rk4", 5e-3)):
         r = simulate_batch(ics, integrator=integ, dt_s=dt, t_max_s=5.0)
         status = r.status
-        assert set(status) <= set(STATUS_NAMES.values())
+        assert set(status) <= set(LABELS)
         assert np.all(r.outcome[status != "settled"] == -1)
         assert np.all((r.outcome[status == "settled"] >= 0) & (r.outcome[status == "settled"] <= 6))
 

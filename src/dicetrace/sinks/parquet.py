@@ -25,6 +25,7 @@ from dicetrace.tables import (  # noqa: F401  (re-exported: the sink's public na
     ROLLS_SCHEMA,
     TABLE_NAMES,
     TRAJECTORY_SCHEMA,
+    _ids,
     contacts_table,
     metadata_json,
     read_metadata,

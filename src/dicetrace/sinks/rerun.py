@@ -155,7 +155,7 @@ def metadata_values(roll, ic_label: str | None = None) -> dict:
         "ic_label": ic_label or "",
         "l_convention": roll.config.preset.l_convention,
         "outcome": int(roll.outcome),
-        "status": roll.status,
+        "status": roll.status.label,
         "steps": int(roll.steps),
         "t_settle_s": float(roll.t_settle_s),
         "contact_sequence": roll.contact_sequence,
