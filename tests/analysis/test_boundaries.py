@@ -1,4 +1,4 @@
-"""Boundaries: uncertainty exponent, dimension, basin entropy, Wada tests.
+"""Boundaries: uncertainty exponent, dimension, basin entropy (the Wada tests: test_wada.py).
 
 Known answers:
 - straight boundary: alpha = 1, D = 1 (Grebogi, McDonald, Ott & Yorke 1983);
@@ -6,8 +6,7 @@ Known answers:
   alpha = 1 - ln2/ln3 (McDonald et al. 1985, Physica D 17:125);
 - Weierstrass graph: D = s (Kaplan, Mallet-Paret & Yorke 1984);
 - Newton z**3 - 1 on [-1, 1]**2: D = 1.42, alpha ~ 0.6 (Attractors.jl test
-  suite, test/basins/uncertainty_tests.jl, band 0.55 <= alpha <= 0.65), and
-  Wada (every boundary point of the Julia set borders all three basins).
+  suite, test/basins/uncertainty_tests.jl, band 0.55 <= alpha <= 0.65).
 """
 
 from __future__ import annotations
@@ -21,7 +20,6 @@ from analysis_synthetic import (
     line_classify,
     newton_classify,
     sample_grid,
-    sector_classify,
     triadic_classify,
     weierstrass,
     weierstrass_classify,
@@ -37,8 +35,6 @@ from dicetrace.analysis import (
     uncertainty_exponent,
     uncertainty_exponent_perturbation,
     uncertainty_exponent_resolution,
-    wada_grid_test,
-    wada_merge_test,
 )
 
 UNIT = [(0.0, 1.0), (0.0, 1.0)]
@@ -196,37 +192,3 @@ def test_basin_entropy_newton_is_fractal():
     # the straight line never passes the criterion
     line = sample_grid(line_classify, UNIT, (300, 300))
     assert basin_entropy(line, 5).Sbb < math.log(2)
-
-
-def test_wada_merge_newton_vs_pie(newton_grid):
-    w = wada_merge_test(newton_grid, r_max=5)
-    assert w.wada and w.r_wada <= 3
-    pie = sample_grid(sector_classify, UNIT, (300, 300))
-    wp = wada_merge_test(pie, r_max=5)
-    assert not wp.wada
-    assert wp.far_fraction[-1] > 0.5  # most of each ray borders two sectors only
-
-
-def test_wada_merge_stripes_as_attractors_jl():
-    # Attractors.jl test/basins/wada_tests.jl: stripes 1111 2222 3333 are not
-    # Wada; 123123... are (every boundary node borders all three labels).
-    wide = np.repeat(np.array([1] * 4 + [2] * 4 + [3] * 4)[:, None], 12, axis=1)
-    assert not wada_merge_test(wide, r_max=2).wada
-    thin = np.repeat(np.array([1, 2, 3] * 4)[:, None], 12, axis=1)
-    w = wada_merge_test(thin, r_max=2, tol=0.0)
-    assert w.r_wada == 1  # as Attractors.jl's test_wada_merge(M, 1) == 0
-    with pytest.raises(ValueError):
-        wada_merge_test(np.array([[1, 2], [2, 1]]))
-
-
-def test_wada_grid_method_newton_vs_pie(newton_grid):
-    # Newton: the fraction of refined boundary segments showing all three
-    # basins grows to 1 (0.996 at 24 levels); threshold 0.95 as Daza et al.
-    # (2015) use W -> 1. The pie's rays never show a third label.
-    rng = np.random.default_rng(0)
-    w = wada_grid_test(newton_classify, newton_grid, [(-1, 1), (-1, 1)], max_segments=1000, rng=rng)
-    assert w.wada and w.wada_fraction[-1] > 0.95
-    assert np.all(np.diff(w.wada_fraction) >= 0)
-    pie = sample_grid(sector_classify, UNIT, (200, 200))
-    wp = wada_grid_test(sector_classify, pie, UNIT, max_segments=500, rng=rng)
-    assert not wp.wada and wp.wada_fraction[-1] < 0.05

@@ -1,4 +1,4 @@
-"""Analysis of scan results: basins, cells, boundaries, settle times, vertices.
+"""Analysis of scan results: basins, cells, boundaries, Wada tests, settle times, vertices.
 
 Pure functions over rolls tables (one row per initial condition) and label
 grids (integer arrays indexed ``[i, j(, k)]``; labels 1..6 faces, 0 undefined,
@@ -11,13 +11,13 @@ Vocabulary follows Attractors.jl (``group_features``, ``basins_fractions``,
 ``basin_entropy``, ``uncertainty_exponent``).
 """
 
+from types import ModuleType as _ModuleType
+
 from .boundaries import (
     BasinEntropy,
     BoxCountingDimension,
     PowerLawFit,
     UncertaintyExponent,
-    WadaGridResult,
-    WadaMergeResult,
     basin_entropy,
     boundary_box_fraction,
     boundary_dimension,
@@ -28,8 +28,6 @@ from .boundaries import (
     uncertainty_exponent,
     uncertainty_exponent_perturbation,
     uncertainty_exponent_resolution,
-    wada_grid_test,
-    wada_merge_test,
 )
 from .cells import cells_table, label_cells, same_cell, slice_cell_components
 from .grouping import (
@@ -59,6 +57,7 @@ from .settle import (
 )
 from .sweep import chaos_measures, chaos_sweep
 from .vertices import find_vertices
+from .wada import WadaGridResult, WadaMergeResult, wada_grid_test, wada_merge_test
 from .wedge import (
     ball_hill_energy,
     ball_hill_outcome,
@@ -69,68 +68,5 @@ from .wedge import (
     ball_hill_vector_field,
 )
 
-__all__ = [
-    # grouping
-    "AbstractGroupingConfig",
-    "GroupByOutcome",
-    "GroupByContactSequence",
-    "group_features",
-    "basins_fractions",
-    "basins_fractions_table",
-    "wilson_interval",
-    "cube_node_permutations",
-    "contact_sequence_text",
-    "parse_contact_sequence",
-    "permute_contact_sets",
-    "canonical_contact_sequence",
-    "UNSETTLED_LABEL",
-    "UNDEFINED_LABEL",
-    # cells
-    "label_cells",
-    "cells_table",
-    "same_cell",
-    "slice_cell_components",
-    # repetition
-    "label_autocorrelation",
-    "find_periods",
-    "periodic_cells_connected",
-    # boundaries
-    "PowerLawFit",
-    "UncertaintyExponent",
-    "BoxCountingDimension",
-    "BasinEntropy",
-    "WadaMergeResult",
-    "WadaGridResult",
-    "boundary_mask",
-    "boundary_fraction",
-    "boundary_box_fraction",
-    "uncertainty_exponent",
-    "uncertainty_exponent_perturbation",
-    "uncertainty_exponent_resolution",
-    "box_counting_dimension",
-    "boundary_dimension",
-    "basin_entropy",
-    "wada_merge_test",
-    "wada_grid_test",
-    "fit_power_law",
-    # settle
-    "BoundaryBracket",
-    "SettleFit",
-    "bisect_boundary",
-    "fit_settle_divergence",
-    "settle_profile",
-    "edge_balance_rate",
-    # vertices
-    "find_vertices",
-    # sweep
-    "chaos_measures",
-    "chaos_sweep",
-    # wedge
-    "ball_hill_vector_field",
-    "ball_hill_energy",
-    "ball_hill_separatrices",
-    "ball_hill_outcome",
-    "ball_hill_outcome_energy",
-    "ball_hill_saddle_rate",
-    "ball_hill_transit_time",
-]
+#: Every name imported above: the public names of the submodules that this package re-exports.
+__all__ = [_n for _n, _v in list(globals().items()) if not _n.startswith("_") and not isinstance(_v, _ModuleType)]
