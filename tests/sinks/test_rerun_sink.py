@@ -206,19 +206,99 @@ def test_recording_metadata_has_config_ic_and_version(roll, rrd):
     assert meta["ic_label"] == "seed slice at x = 1.65, y = 3.9"
 
 
-def test_blueprint_has_3d_timeseries_and_textlog_views(rrd):
+def blueprint_rows(path) -> dict[str, dict]:
+    """The blueprint store of ``path`` as {entity path: {component: value}} (row ids and log_time left out)."""
     from rerun.chunk import RrdReader
 
-    reader = RrdReader(str(rrd))
-    assert len(reader.recordings()) == 1
-    bps = reader.blueprints()
-    assert len(bps) == 1
-    classes = set()
-    for ch in reader.stream(store=bps[0]):
-        rb = ch.to_record_batch()
-        if "ViewBlueprint:class_identifier" in rb.schema.names:
-            classes.update(x for row in rb.column("ViewBlueprint:class_identifier").to_pylist() for x in row)
-    assert {"3D", "TimeSeries", "TextLog", "TextDocument"} <= classes
+    reader = RrdReader(str(path))
+    (store,) = reader.blueprints()
+    rows: dict[str, dict] = {}
+    for ch in reader.stream(store=store):
+        for row in pa.Table.from_batches([ch.to_record_batch()]).to_pylist():
+            rows.setdefault(ch.entity_path, {}).update(
+                {k: v for k, v in row.items() if k not in ("rerun.controls.RowId", "log_time", "blueprint")}
+            )
+    return rows
+
+
+def blueprint_views(rows: dict[str, dict]) -> dict[str, tuple[str, str]]:
+    """{view entity: (class, space origin)} of a blueprint's views."""
+    return {
+        k: (v["ViewBlueprint:class_identifier"][0], v["ViewBlueprint:space_origin"][0])
+        for k, v in rows.items()
+        if "ViewBlueprint:class_identifier" in v
+    }
+
+
+# The view class that shows each archetype the sink logs.
+VIEW_OF_ARCHETYPE = {
+    "Points3D": "3D", "Boxes3D": "3D", "LineStrips3D": "3D", "ViewCoordinates": "3D",
+    "Scalars": "TimeSeries", "SeriesLines": "TimeSeries", "TextLog": "TextLog", "TextDocument": "TextDocument",
+}  # fmt: skip
+
+
+def test_blueprint_shows_every_logged_entity_and_no_empty_view(rrd, temporal, static):
+    """Each entity the recording logs lies under the origin of a view that can draw it, and each view has data."""
+    rows = blueprint_rows(rrd)
+    views = blueprint_views(rows)
+    assert sorted(views.values()) == sorted(
+        [("3D", "/world"), ("TimeSeries", "/energy"), ("TimeSeries", "/stop_test"), ("TextLog", "/contacts"),
+         ("TextDocument", "/summary")]
+    )  # fmt: skip
+
+    def under(entity, origin):
+        return entity == origin or entity.startswith(origin.rstrip("/") + "/")
+
+    logged = {}
+    for tables in (temporal, static):
+        for entity, t in tables.items():
+            logged.setdefault(entity, set()).update(c.split(":")[0] for c in t.column_names if ":" in c)
+    assert {"/world/die/nodes", "/world/die/body", "/world/cm_path", "/energy/total", "/stop_test/threshold"} <= set(logged)
+    for entity, archetypes in logged.items():
+        for arch in archetypes:
+            want = VIEW_OF_ARCHETYPE[arch]
+            assert any(cls == want and under(entity, origin) for cls, origin in views.values()), (
+                f"{entity} ({arch}) is in no {want} view of the blueprint"
+            )
+    for cls, origin in views.values():
+        assert any(under(e, origin) for e in logged), f"the {cls} view of {origin} shows nothing that is logged"
+    # every view shows its whole subtree, and the panels point at timelines the recording has
+    assert all(rows[k + "/ViewContents"]["ViewContents:query"] == ["$origin/**"] for k in views)
+    (log_view,) = [k for k, (cls, _) in views.items() if cls == "TextLog"]
+    timelines = set(temporal["/contacts"].column_names) - {c for c in temporal["/contacts"].column_names if ":" in c}
+    used = {c["timeline"] for c in rows[log_view + "/TextLogColumns"]["TextLogColumns:timeline_columns"]}
+    assert used <= timelines == {"step", "sim_time"}
+    assert rows["/time_panel"]["TimePanelBlueprint:timeline"] == ["step"]
+    # the layout reaches every view from the viewport's root container
+    import uuid
+
+    todo = ["container/" + str(uuid.UUID(bytes=bytes(rows["/viewport"]["ViewportBlueprint:root_container"][0])))]
+    reached = set()
+    while todo:
+        node = todo.pop()
+        reached.add("/" + node)
+        todo += rows.get("/" + node, {}).get("ContainerBlueprint:contents") or []
+    assert set(views) <= reached
+
+
+def test_camera_frames_the_path(roll, rrd):
+    """With a roll the 3-D camera looks at the middle of the centre-of-mass path from far enough to see all of it."""
+    rows = blueprint_rows(rrd)
+    (eye,) = [v for k, v in rows.items() if k.endswith("/EyeControls3D")]
+    target = np.array(eye["EyeControls3D:look_target"][0])
+    position = np.array(eye["EyeControls3D:position"][0])
+    assert eye["EyeControls3D:eye_up"][0] == [0.0, 0.0, 1.0]
+    cm = roll.trace.cm_pos
+    lo, hi = cm.min(axis=0), cm.max(axis=0)
+    np.testing.assert_allclose(target[:2], 0.5 * (lo[:2] + hi[:2]), rtol=1e-6)
+    span = np.linalg.norm(hi - lo)
+    dist = np.linalg.norm(position - target)
+    assert span < dist < 10 * span  # the whole path fits the view, and the die is not a speck
+    assert position[2] > target[2]  # from above
+    # the travel runs across the view: the line of sight is (nearly) perpendicular to it
+    travel = cm[-1, :2] - cm[0, :2]
+    sight = (target - position)[:2]
+    assert abs(np.dot(travel, sight)) < 1e-3 * np.linalg.norm(travel) * np.linalg.norm(sight)
 
 
 @pytest.mark.skipif(not RERUN_CLI.exists() and shutil.which("rerun") is None, reason="rerun CLI not installed")
@@ -261,7 +341,12 @@ def test_failed_run_is_still_recorded(tmp_path):
     assert np.isfinite(pos).all() and 1 <= len(pos) <= r.steps + 1
 
 
-def test_default_blueprint_without_roll():
-    import rerun.blueprint as rrb
-
-    assert isinstance(default_blueprint(), rrb.Blueprint)
+def test_default_blueprint_without_roll_has_the_same_views_and_no_camera(rrd, tmp_path):
+    """Without a roll the layout is the recording's one, only the 3-D camera is left to the viewer."""
+    path = tmp_path / "bp.rbl"
+    default_blueprint().save("dicetrace", path)
+    alone, written = blueprint_rows(path), blueprint_rows(rrd)
+    assert sorted(blueprint_views(alone).values()) == sorted(blueprint_views(written).values())
+    assert not [k for k in alone if k.endswith("/EyeControls3D")]
+    assert [k for k in written if k.endswith("/EyeControls3D")]
+    assert alone["/time_panel"] == written["/time_panel"]
