@@ -100,51 +100,79 @@ def test_numerical_failure_exits_1_and_keeps_the_recording(tmp_path):
     assert out.exists() and "/world/die/nodes" in read_rrd(out)
 
 
+def case(args, *names, gap=None):
+    """One bad input: ``names`` must all appear in the error line, the offending option or path first.
+
+    ``gap``: the message does not name that yet (a strict xfail: it turns into
+    a failure once the message is fixed, so the mark is then removed).
+    """
+    marks = [pytest.mark.xfail(strict=True, reason=f"the message does not name {gap} yet")] if gap else []
+    return pytest.param(args, names, id=" ".join(args) or "no-ic", marks=marks)
+
+
+AT = ["--slice", "seed", "--at", "1,2"]
 BAD = [
-    (["--ic", "1,2,3,4,5"], "6 comma-separated"),
-    (["--ic", "1,2,3,nan,5,6"], "non-finite"),
-    (["--ic", "1,2,x,4,5,6"], "numbers"),
-    (["--slice", "seed", "--at", "1"], "X,Y"),
-    (["--slice", "mars", "--at", "1,2"], "unknown slice"),
-    (["--at", "1,2"], "--slice"),
-    ([], "no initial condition"),
-    (["--slice", "seed", "--at", "1,2", "--preset", "moon"], "unknown preset"),
-    (["--slice", "seed", "--at", "1,2", "--integrator", "magic"], "unknown integrator"),
-    (["--slice", "seed", "--at", "1,2", "--dt", "0"], "--dt"),
-    (["--slice", "seed", "--at", "1,2", "--dt", "nan"], "--dt"),
-    (["--slice", "seed", "--at", "1,2", "--t-max", "-1"], "--t-max"),
-    (["--slice", "seed", "--at", "1,2", "--tol", "0"], "--tol"),
-    (["--slice", "seed", "--at", "1,2", "--integrator", "contact-adaptive", "--tol", "2"], "[1e-14, 1)"),
-    (["--slice", "seed", "--at", "1,2", "--out", "x.txt"], ".rrd"),
-    (["--slice", "seed", "--at", "1,2", "--out", "afile/x.rrd"], "afile"),
-    (["--slice", "seed", "--at", "1,2", "--out", "adir.rrd"], "folder"),
-    (["--slice", "seed", "--at", "1,2", "--out", "/proc/x.rrd"], "/proc"),
-    (["--slice", "seed", "--at", "1,2", "--out", "ok.rrd", "--parquet", "afile"], "afile"),
+    case(["--ic", "1,2,3,4,5"], "--ic", "6 comma-separated"),
+    case(["--ic", "1,2,3,nan,5,6"], "--ic", "non-finite"),
+    case(["--ic", "1,2,x,4,5,6"], "--ic", "numbers", "'1,2,x,4,5,6'"),
+    case(["--slice", "seed", "--at", "1"], "--at", "X,Y", gap="--at"),
+    case(["--slice", "seed", "--at", "1,2,3,4"], "--at", "got 4"),
+    case(["--slice", "mars", "--at", "1,2"], "--slice", "unknown slice 'mars'", gap="--slice"),
+    case(["--at", "1,2"], "--slice", "--at needs"),
+    case([], "--ic", "--slice", "no initial condition"),
+    case(["--ic", "1,2,3,4,5,6", *AT], "--ic", "--slice"),
+    case([*AT, "--preset", "moon"], "--preset", "unknown preset 'moon'"),
+    case([*AT, "--integrator", "magic"], "--integrator", "unknown integrator 'magic'"),
+    case([*AT, "--dt", "0"], "--dt", "> 0", "'0'"),
+    case([*AT, "--dt", "nan"], "--dt", "'nan'"),
+    case([*AT, "--dt", "fast"], "--dt", "'fast'"),
+    case([*AT, "--dt"], "--dt", "requires an argument"),
+    case([*AT, "--dt", "auto", "--t-max", "1e9"], "--dt", "time cap"),
+    case([*AT, "--dt", "0.1", "--t-max", "1e12"], "--t-max", "--dt", "too large", gap="--t-max"),
+    case([*AT, "--t-max", "-1"], "--t-max", "'-1'"),
+    case([*AT, "--tol", "0"], "--tol", "'0'"),
+    case([*AT, "--tol", "1e-300"], "--tol", "[1e-14, 1)"),
+    case([*AT, "--integrator", "contact-adaptive", "--tol", "2"], "--tol", "[1e-14, 1)"),
+    case([*AT, "--bogus"], "--bogus"),
+    case([*AT, "--out", "x.txt"], "--out", "'x.txt'", ".rrd"),
+    case([*AT, "--out", "afile/x.rrd"], "'afile'"),
+    case([*AT, "--out", "adir.rrd"], "'adir.rrd'", "folder"),
+    case([*AT, "--out", "/proc/x.rrd"], "'/proc'"),
+    case([*AT, "--out", "ok.rrd", "--parquet", "afile"], "--parquet", "'afile'"),
+    case(["--scan", "nowhere", "--at", "1,2"], "--scan", "'nowhere'"),
+    case(["--scan", "adir.rrd", "--at", "1,2"], "--scan", "'adir.rrd'", "_scan.json"),
+    case(["--scan", "adir.rrd"], "--at", "--scan needs"),
+    case(["--scan", "adir.rrd", "--ic", "1,2,3,4,5,6"], "--scan", "--ic"),
 ]
 
 
-@pytest.mark.parametrize("args,needle", BAD, ids=[" ".join(a) or "no-ic" for a, _ in BAD])
-def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, needle):
+@pytest.mark.parametrize("args,names", BAD)
+def test_bad_input_is_one_line_naming_the_option_and_writes_nothing(tmp_path, dicetrace_cli, assert_one_line_error, args, names):
     (tmp_path / "afile").write_text("not a folder")
     (tmp_path / "adir.rrd").mkdir()
     (tmp_path / "existing.rrd").write_bytes(b"keep me")
     before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
-    res = run_cli("record", *args, cwd=tmp_path)
-    assert res.returncode == 2, (res.stdout, res.stderr)
-    err = res.stderr.strip().splitlines()
-    assert len(err) == 1, res.stderr
-    assert err[0].startswith("dicetrace: error: ") and needle in err[0]
-    assert "Traceback" not in res.stderr
+    res = dicetrace_cli("record", *args, cwd=tmp_path)
     after = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
     assert after == before  # nothing created (no recordings/ folder, no temporary)
     assert (tmp_path / "existing.rrd").read_bytes() == b"keep me"
+    assert_one_line_error(res, *names)
 
 
-def test_bad_input_leaves_an_existing_output_untouched(tmp_path):
+def test_bad_input_through_the_console_script(tmp_path):
+    """The real process: exit code 2, one line naming the option, no traceback."""
+    res = run_cli("record", "--slice", "seed", "--at", "1,2", "--dt", "-0.5", cwd=tmp_path)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.startswith("dicetrace: error: --dt ") and res.stderr.count("\n") == 1
+    assert "Traceback" not in res.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_input_leaves_an_existing_output_untouched(tmp_path, dicetrace_cli, assert_one_line_error):
     out = tmp_path / "existing.rrd"
     out.write_bytes(b"keep me")
-    res = run_cli("record", "--ic", "1,2,3,4,5,nan", "--out", str(out), cwd=tmp_path)
-    assert res.returncode == 2
+    res = dicetrace_cli("record", "--ic", "1,2,3,4,5,nan", "--out", str(out), cwd=tmp_path)
+    assert_one_line_error(res, "--ic", "non-finite")
     assert out.read_bytes() == b"keep me"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["existing.rrd"]
 
@@ -166,5 +194,7 @@ def test_record_a_scanned_point_reproduces_its_row(tmp_path):
     assert rolls["ic_id"][0] == row["ic_id"] and (rolls["x"][0], rolls["y"][0]) == (1.75, 4.0)
     assert rolls["outcome"][0] == row["outcome"]
 
-    res = run_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--dt", "0.002", cwd=tmp_path)
-    assert res.returncode == 2 and "--dt" in res.stderr and "Traceback" not in res.stderr
+    res = run_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--dt", "0.002", "--preset", "physical", cwd=tmp_path)
+    assert res.returncode == 2 and "Traceback" not in res.stderr and res.stdout == ""
+    (line,) = res.stderr.strip().splitlines()
+    assert line.startswith("dicetrace: error: --scan ") and "drop --preset, --dt" in line

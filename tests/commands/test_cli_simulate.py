@@ -115,53 +115,77 @@ def test_numerical_failure_exits_1_with_rows_printed(tmp_path):
     assert len(err) == 1 and "blow_up" in err[0] and "Traceback" not in res.stderr
 
 
-def _write(path: Path, text: str) -> str:
-    path.write_text(text)
-    return str(path)
+def case(args, *names, gap=None):
+    """One bad input: ``names`` must all appear in the error line, the offending option or path first.
+
+    ``CSV:<text>`` in ``args`` is written to a file whose path replaces it; ``{csv}``
+    in ``names`` is that path.  ``gap``: the message does not name that yet (a
+    strict xfail: it fails once the message is fixed, so the mark is then removed).
+    """
+    marks = [pytest.mark.xfail(strict=True, reason=f"the message does not name {gap} yet")] if gap else []
+    return pytest.param(args, names, id=" ".join(args).replace("\n", "|"), marks=marks)
 
 
+IC = ["--ic", "1,2,3,4,5,6"]
 BAD = [
-    (["--ic", "1,2,3,4,5"], "6 comma-separated"),
-    (["--ic", "1,2,3,4,5,nan"], "non-finite"),
-    (["--slice", "seed", "--at", "1,2,3,4"], "X,Y"),
-    (["--at", "1,2"], "--slice"),
-    (["--ic", "1,2,3,4,5,6", "--preset", "moon"], "unknown preset"),
-    (["--ic", "1,2,3,4,5,6", "--integrator", "magic"], "unknown integrator"),
-    (["--ic", "1,2,3,4,5,6", "--dt", "0"], "--dt"),
-    (["--ic", "1,2,3,4,5,6", "--dt", "inf"], "--dt"),
-    (["--ic", "1,2,3,4,5,6", "--tol", "abc"], "--tol"),
-    (["--ic", "1,2,3,4,5,6", "--tol", "1e-300"], "tolerance tol"),
-    (["--ic", "1,2,3,4,5,6", "--format", "xml"], "--format"),
-    (["--ic", "1,2,3,4,5,6", "--out", "afile/out.csv"], "afile"),
-    (["--ic", "1,2,3,4,5,6", "--out", "adir"], "folder"),
-    (["--ics", "missing.csv"], "does not exist"),
-    (["--ics", "CSV:"], "empty"),
-    (["--ics", "CSV:x,y\n"], "no rows"),
-    (["--ics", "CSV:a,b\n1,2\n"], "needs columns"),
-    (["--ics", "CSV:x,y\n1,2\n"], "--slice seed"),
-    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5\n"], "line 2"),
-    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,six\n"], "not a number"),
-    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n1,2,3,4,5,nan\n"], "line 3"),
-    (["--ics", "CSV:x,y\n1,\n", "--slice", "seed"], "not a number"),
-    (["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n", "--ic", "1,2,3,4,5,6"], "one source"),
+    case(["--ic", "1,2,3,4,5"], "--ic", "6 comma-separated"),
+    case(["--ic", "1,2,3,4,5,nan"], "--ic", "non-finite"),
+    case(["--slice", "seed", "--at", "1,2,3,4"], "--at", "got 4"),
+    case(["--at", "1,2"], "--slice", "--at needs"),
+    case([], "--ic", "--slice", "no initial condition"),
+    case([*IC, "--preset", "moon"], "--preset", "unknown preset 'moon'"),
+    case([*IC, "--integrator", "magic"], "--integrator", "unknown integrator 'magic'"),
+    case([*IC, "--dt", "0"], "--dt", "'0'"),
+    case([*IC, "--dt", "inf"], "--dt", "'inf'"),
+    case([*IC, "--dt", "fast"], "--dt", "'fast'"),
+    case([*IC, "--dt", "0.1", "--t-max", "1e12"], "--t-max", "--dt", "too large", gap="--t-max"),
+    case([*IC, "--t-max", "0"], "--t-max", "'0'"),
+    case([*IC, "--tol", "abc"], "--tol", "'abc'"),
+    case([*IC, "--tol", "1e-300"], "--tol", "[1e-14, 1)"),
+    case([*IC, "--integrator", "contact-adaptive", "--tol", "1"], "--tol", "[1e-14, 1)"),
+    case([*IC, "--format", "xml"], "--format", "'xml'"),
+    case([*IC, "--out", "afile/out.csv"], "'afile'"),
+    case([*IC, "--out", "adir"], "'adir'", "folder"),
+    case(["--ics", "missing.csv"], "'missing.csv'", "does not exist"),
+    case(["--ics", "adir"], "'adir'", "is a folder"),
+    case(["--ics", "CSV:"], "{csv}", "empty"),
+    case(["--ics", "CSV:x,y\n"], "{csv}", "no rows"),
+    case(["--ics", "CSV:a,b\n1,2\n"], "{csv}", "needs columns"),
+    case(["--ics", "CSV:x,y\n1,2\n"], "{csv}", "--slice seed"),
+    case(["--ics", "CSV:x,y\n1,2\n", "--slice", "mars"], "--slice", "unknown slice 'mars'", gap="--slice"),
+    case(["--ics", "CSV:x,x,y\n1,2,3\n", "--slice", "seed"], "{csv}", "repeated column(s) x"),
+    case(["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5\n"], "{csv}", "line 2"),
+    case(["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,six\n"], "{csv}", "line 2, column lz", "'six'"),
+    case(["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n1,2,3,4,5,nan\n"], "{csv}", "line 3", "not finite"),
+    case(["--ics", "CSV:x,y\n1,\n", "--slice", "seed"], "{csv}", "column y", "not a number"),
+    case(["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n", *IC], "--ics", "--ic", "one source"),
 ]
 
 
-@pytest.mark.parametrize("args,needle", BAD, ids=[" ".join(a).replace("\n", "|") for a, _ in BAD])
-def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, args, needle):
+@pytest.mark.parametrize("args,names", BAD)
+def test_bad_input_is_one_line_naming_the_option_and_writes_nothing(tmp_path, dicetrace_cli, assert_one_line_error, args, names):
     (tmp_path / "afile").write_text("not a folder")
     (tmp_path / "adir").mkdir()
-    args = [_write(tmp_path / "bad.csv", a[4:]) if a.startswith("CSV:") else a for a in args]
+    csv_path = tmp_path / "bad.csv"
+    if any(a.startswith("CSV:") for a in args):
+        csv_path.write_text(next(a for a in args if a.startswith("CSV:"))[4:])
+    args = [str(csv_path) if a.startswith("CSV:") else a for a in args]
+    names = [n.replace("{csv}", repr(str(csv_path))) for n in names]
     existing = tmp_path / "existing.csv"
     existing.write_text("keep me")
     before = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
-    res = run_cli(*args, "--out", str(existing), cwd=tmp_path) if "--out" not in args else run_cli(*args, cwd=tmp_path)
-    assert res.returncode == 2, (res.stdout, res.stderr)
-    err = res.stderr.strip().splitlines()
-    assert len(err) == 1, res.stderr
-    assert err[0].startswith("dicetrace: error: ") and needle in err[0], err[0]
-    assert "Traceback" not in res.stderr
-    assert res.stdout == ""
+    extra = [] if "--out" in args else ["--out", str(existing)]
+    res = dicetrace_cli("simulate", *args, *extra, cwd=tmp_path)
     after = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
     assert after == before
     assert existing.read_text() == "keep me"
+    assert_one_line_error(res, *names)
+
+
+def test_bad_input_through_the_console_script(tmp_path):
+    """The real process: exit code 2, one line naming the option, no traceback."""
+    res = run_cli("--ic", "1,2,3,4,5,6", "--t-max", "soon", cwd=tmp_path)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.startswith("dicetrace: error: --t-max ") and res.stderr.count("\n") == 1
+    assert "Traceback" not in res.stderr
+    assert list(tmp_path.iterdir()) == []
