@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dicetrace.params import convert_l
 from dicetrace.ics import (
     SEED_DIRS_6D,
     SLICES,
@@ -169,10 +168,3 @@ def test_points_and_dict_round_trip():
     for space in (p, Grid("seed3-ortho", ((0, 1), (0, 1), (0, 1)), 4), Sample("seed", "home", 10, "sobol", 2)):
         assert space_from_dict(space.to_dict()) == space
 
-
-def test_conventions():
-    ics = seed_slice([1.0], [2.0])
-    phys = convert_l(ics, "program", "physical")
-    np.testing.assert_array_equal(phys[:, :3], ics[:, :3])
-    np.testing.assert_array_equal(phys[:, 3:], -ics[:, 3:])
-    assert convert_l(ics, "program", "program") is ics
