@@ -296,6 +296,20 @@ def test_png_and_rrd(tmp_path):
     outcome_png(out, png)
     write_scan_rrd(out, rrd)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the map shows each outcome of the grid in its colour, in proportion to its cells, and no other outcome
+    import matplotlib.image
+
+    from dicetrace.scan.maps import OUTCOME_RGB
+
+    img = np.round(matplotlib.image.imread(png)[..., :3] * 255).astype(int)
+    grid = label_grid(out)
+    colored = [1, 2, 3, 4, 5]  # white (-1), grey (0) and black (6) are also the figure's paper, text and axes
+    pixels = {o: int((img == np.array(OUTCOME_RGB[o])).all(axis=-1).sum()) for o in colored}
+    cells = {o: int((grid == o).sum()) for o in colored}
+    assert {o for o, n in pixels.items() if n} == {o for o, n in cells.items() if n}
+    assert sum(1 for n in cells.values() if n) > 1
+    for o in colored:
+        assert pixels[o] / sum(pixels.values()) == pytest.approx(cells[o] / sum(cells.values()), abs=0.02), o
     df = read_scan(out)
     n = 0
     for ch in RrdReader(str(rrd)).stream():
