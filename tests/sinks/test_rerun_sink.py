@@ -145,6 +145,20 @@ def test_face_plates_sit_on_their_faces_in_the_writeup_colours(roll, temporal, s
     assert int(np.argmax(centres[-1, :, 2])) + 1 == roll.outcome
 
 
+def test_face_tables_agree_with_the_node_numbering():
+    """Each face's four nodes are the corners on its outward normal, and opposite faces add up to 7."""
+    from dicetrace.params import NODE_SIGNS
+    from dicetrace.sinks.rerun import FACE_NODES, FACE_NORMALS
+
+    for f in range(6):
+        on_face = NODE_SIGNS @ FACE_NORMALS[f] == 1.0
+        assert sorted(FACE_NODES[f]) == np.flatnonzero(on_face).tolist(), f"face {f + 1}"
+        opposite = 6 - f - 1  # face 7 − (f+1)
+        np.testing.assert_array_equal(FACE_NORMALS[opposite], -FACE_NORMALS[f])
+    np.testing.assert_array_equal(FACE_NORMALS[2], [0, 0, -1])  # the program's start: face 3 down, face 4 up
+    np.testing.assert_array_equal(FACE_NORMALS[3], [0, 0, 1])
+
+
 def test_energies_equal_the_trace(roll, temporal):
     for key in ("kinetic_translational", "kinetic_rotational", "gravitational", "elastic", "total"):
         got = values(temporal[f"/energy/{key}"], "Scalars:scalars")[:, 0]
