@@ -227,7 +227,7 @@ def get_slice(name: str) -> Slice:
 
 # -- windows --------------------------------------------------------------------------------
 
-#: The writeup's windows on the seed slice, ((x0, x1), (y0, y1)).
+#: Named windows on the seed slice, ((x0, x1), (y0, y1)): the writeup's eight, the program's zooms, the studies' zooms.
 WINDOWS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
     "home": ((0.0, 0.1), (0.0, 0.1)),
     "zoom-out": ((0.0, 1.0), (0.0, 1.0)),
@@ -237,6 +237,18 @@ WINDOWS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
     "red-sea-2": ((1.4, 1.56), (3.95, 4.25)),
     "party": ((0.02, 0.026), (0.01, 0.02)),
     "green-island": ((0.055, 0.06), (0.035, 0.045)),
+    # The 2019 program's own windows (its interactive scatter, interactiveScatter/scatters.pde)
+    # beyond the writeup's: the zooms below party and green island (the vertex hunt).
+    "party-2": ((0.0197, 0.0205), (0.0177, 0.0186)),
+    "party-3": ((0.01975, 0.01984), (0.0182, 0.0183)),
+    "green-island-2": ((0.057, 0.0576), (0.042, 0.044)),
+    "green-island-3": ((0.05725, 0.0573), (0.04358, 0.04372)),
+    "green-island-4": ((0.057266, 0.057274), (0.043615, 0.043635)),
+    "green-island-5": ((0.057269, 0.0572702), (0.043621, 0.043625)),
+    "green-island-6.2-4": ((0.057269466, 0.0572694705), (0.043622917, 0.043622924)),
+    # Deeper red-sea zooms (study b), inside red sea 2 where its border is richest.
+    "red-sea-3": ((1.40, 1.45), (3.95, 4.02)),
+    "red-sea-4": ((1.405, 1.42), (3.955, 3.975)),
 }
 
 #: The writeup's three "red sea" topology throws on the seed slice (section 5.5).
