@@ -14,58 +14,26 @@ Vocabulary follows Attractors.jl (``group_features``, ``basins_fractions``,
 from types import ModuleType as _ModuleType
 
 from .boundaries import (
-    BasinEntropy,
-    BoxCountingDimension,
-    PowerLawFit,
-    UncertaintyExponent,
-    basin_entropy,
-    boundary_box_fraction,
-    boundary_dimension,
-    boundary_fraction,
-    boundary_mask,
-    box_counting_dimension,
-    fit_power_law,
-    uncertainty_exponent,
-    uncertainty_exponent_perturbation,
-    uncertainty_exponent_resolution,
+    BasinEntropy, BoxCountingDimension, PowerLawFit, UncertaintyExponent, basin_entropy,
+    boundary_box_fraction, boundary_dimension, boundary_fraction, boundary_mask, box_counting_dimension,
+    fit_power_law, uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution,
 )
 from .cells import cells_table, label_cells, same_cell, slice_cell_components
 from .grouping import (
-    UNDEFINED_LABEL,
-    UNSETTLED_LABEL,
-    AbstractGroupingConfig,
-    GroupByContactSequence,
-    GroupByOutcome,
-    basins_fractions,
-    basins_fractions_table,
-    canonical_contact_sequence,
-    contact_sequence_text,
-    cube_node_permutations,
-    group_features,
-    parse_contact_sequence,
-    permute_contact_sets,
-    wilson_interval,
+    UNDEFINED_LABEL, UNSETTLED_LABEL, AbstractGroupingConfig, GroupByContactSequence, GroupByOutcome,
+    basins_fractions, basins_fractions_table, canonical_contact_sequence, contact_sequence_text,
+    cube_node_permutations, group_features, parse_contact_sequence, permute_contact_sets, wilson_interval,
 )
 from .repetition import find_periods, label_autocorrelation, periodic_cells_connected
 from .settle import (
-    BoundaryBracket,
-    SettleFit,
-    bisect_boundary,
-    edge_balance_rate,
-    fit_settle_divergence,
-    settle_profile,
+    BoundaryBracket, SettleFit, bisect_boundary, edge_balance_rate, fit_settle_divergence, settle_profile,
 )
 from .sweep import chaos_measures, chaos_sweep
 from .vertices import find_vertices
 from .wada import WadaGridResult, WadaMergeResult, wada_grid_test, wada_merge_test
 from .wedge import (
-    ball_hill_energy,
-    ball_hill_outcome,
-    ball_hill_outcome_energy,
-    ball_hill_saddle_rate,
-    ball_hill_separatrices,
-    ball_hill_transit_time,
-    ball_hill_vector_field,
+    ball_hill_energy, ball_hill_outcome, ball_hill_outcome_energy, ball_hill_saddle_rate,
+    ball_hill_separatrices, ball_hill_transit_time, ball_hill_vector_field,
 )
 
 #: Every name imported above: the public names of the submodules that this package re-exports.

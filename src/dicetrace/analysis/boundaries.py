@@ -143,6 +143,13 @@ class UncertaintyExponent:
     def dimension(self) -> float:
         return self.ndim - self.alpha
 
+    @classmethod
+    def fit(cls, eps, f, *, ndim: int, method: str, n=None, weights=None) -> "UncertaintyExponent":
+        """Fit ``f ~ eps**alpha`` (:func:`fit_power_law`, optionally weighted) and hold the result."""
+        fit = fit_power_law(eps, f, weights=weights)
+        return cls(alpha=fit.slope, alpha_stderr=fit.slope_stderr, eps=eps, f=f, ndim=ndim, method=method,
+                   intercept=fit.intercept, n=n)
+
 
 @dataclasses.dataclass(frozen=True)
 class BoxCountingDimension:
@@ -286,7 +293,8 @@ def uncertainty_exponent(
     Parameters
     ----------
     grid : array_like, 2-D or 3-D
-        Label grid.
+        Label grid; ``f(eps)`` is the fraction of its boxes of side ``eps``
+        (method ``"boxes"``) or of its subsampled nodes that are uncertain.
     box_sizes : sequence of int, optional
         Scales in grid nodes. Default ``2 .. max(shape)//20`` (Attractors.jl's
         default), at least ``2..5``.
@@ -330,17 +338,7 @@ def uncertainty_exponent(
         else:
             raise ValueError(f"method must be 'boxes' or 'subsample', not {method!r}")
     eps = sizes * float(spacing)
-    fit = fit_power_law(eps, f)
-    return UncertaintyExponent(
-        alpha=fit.slope,
-        alpha_stderr=fit.slope_stderr,
-        eps=eps,
-        f=f,
-        ndim=arr.ndim,
-        method=method,
-        intercept=fit.intercept,
-        n=n,
-    )
+    return UncertaintyExponent.fit(eps, f, ndim=arr.ndim, method=method, n=n)
 
 
 def uncertainty_exponent_resolution(
@@ -369,17 +367,8 @@ def uncertainty_exponent_resolution(
     arrs = [as_label_grid(g) for g in grids]
     f = np.array([boundary_fraction(a, connectivity=connectivity) for a in arrs])
     eps = np.asarray(spacings, dtype=float)
-    fit = fit_power_law(eps, f)
-    return UncertaintyExponent(
-        alpha=fit.slope,
-        alpha_stderr=fit.slope_stderr,
-        eps=eps,
-        f=f,
-        ndim=arrs[0].ndim,
-        method="resolution",
-        intercept=fit.intercept,
-        n=np.array([a.size for a in arrs], dtype=np.int64),
-    )
+    return UncertaintyExponent.fit(eps, f, ndim=arrs[0].ndim, method="resolution",
+                                   n=np.array([a.size for a in arrs], dtype=np.int64))
 
 
 def uncertainty_exponent_perturbation(
@@ -447,17 +436,8 @@ def uncertainty_exponent_perturbation(
     # binomial variance of log f: (1 - f) / (n f)
     with np.errstate(divide="ignore", invalid="ignore"):
         w = np.where((f > 0) & (f < 1), npts * f / (1 - f), 0.0)
-    fit = fit_power_law(eps_arr, f, weights=w)
-    return UncertaintyExponent(
-        alpha=fit.slope,
-        alpha_stderr=fit.slope_stderr,
-        eps=eps_arr,
-        f=f,
-        ndim=d,
-        method=f"perturbation-{direction}",
-        intercept=fit.intercept,
-        n=np.full(len(eps_arr), npts, dtype=np.int64),
-    )
+    return UncertaintyExponent.fit(eps_arr, f, ndim=d, method=f"perturbation-{direction}",
+                                   n=np.full(len(eps_arr), npts, dtype=np.int64), weights=w)
 
 
 # --------------------------------------------------------------------------
