@@ -1,4 +1,4 @@
-"""``dicetrace accuracy``: the work-precision study (quick size) and its pieces."""
+"""``dicetrace accuracy``: the work-precision study (quick size, default output folder) and its pieces."""
 
 from __future__ import annotations
 
@@ -10,28 +10,38 @@ import time
 import numpy as np
 import pytest
 
-from dicetrace import accuracy as acc
+from dicetrace.params import INTEGRATORS
+from dicetrace.status import Status
+from dicetrace.studies import accuracy as acc
 
 
 def test_quick_study_cli_runs_under_a_minute(tmp_path):
+    """No --out: the results go to ./dicetrace-results/accuracy of the current folder."""
     t0 = time.perf_counter()
     res = subprocess.run(
-        [sys.executable, "-m", "dicetrace.cli", "accuracy", "--quick", "--quiet", "--out", str(tmp_path)],
-        capture_output=True, text=True, timeout=600,
+        [sys.executable, "-m", "dicetrace.cli", "accuracy", "--quick", "--quiet"],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path,
     )
     elapsed = time.perf_counter() - t0
     assert res.returncode == 0, res.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dicetrace-results"]
+    assert "wrote dicetrace-results/accuracy/summary.md" in res.stdout
+    tmp_path = tmp_path / "dicetrace-results" / "accuracy"
     for name in ("study.csv", "orders.csv", "reference.csv", "work_precision.png", "summary.md"):
         assert (tmp_path / name).stat().st_size > 0
     with open(tmp_path / "study.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == list(acc.STUDY_COLUMNS)
-    # every preset × integrator × dt (× tol for the error-controlled one) of the quick grid
-    per_preset = sum(len(v) * len(acc.QUICK_TOL_GRID.get(k, (None,))) for k, v in acc.QUICK_DT_GRID.items())
+    # every preset × integrator × quick step (× quick tolerance for an error-controlled one) of its spec
+    per_preset = sum(len(s.quick_dt_s) * max(1, len(s.quick_tol) * s.adaptive) for s in INTEGRATORS.values())
     assert len(rows) == 2 * per_preset
-    tols = {float(r["tol"]) for r in rows if r["integrator"] == "contact-adaptive"}
-    assert tols == set(acc.QUICK_TOL_GRID["contact-adaptive"])
-    assert all(r["tol"] in ("", "nan") for r in rows if r["integrator"] != "contact-adaptive")
+    for name, spec in INTEGRATORS.items():
+        mine = [r for r in rows if r["integrator"] == name]
+        assert {float(r["dt_s"]) for r in mine} == set(spec.quick_dt_s)
+        if spec.adaptive:
+            assert {float(r["tol"]) for r in mine} == set(spec.quick_tol)
+        else:
+            assert all(r["tol"] in ("", "nan") for r in mine)
     for r in rows:
         assert 0.0 <= float(r["outcome_agreement"]) <= 1.0
         assert float(r["cpu_ms_per_ic"]) > 0
@@ -86,13 +96,40 @@ def test_fit_order_on_synthetic_errors():
 def test_horizon_is_on_every_grid():
     h = acc.first_impact_horizon(0.1713)
     assert h >= 0.1713 + acc.FIRST_IMPACT_AFTER_S
-    for dts in list(acc.DT_GRID.values()) + list(acc.QUICK_DT_GRID.values()) + [[acc.REFERENCE.dt_s, acc.REFERENCE.check_dt_s]]:
+    steps = [s.study_dt_s + s.quick_dt_s for s in INTEGRATORS.values()]
+    for dts in steps + [[acc.REFERENCE.dt_s, acc.REFERENCE.check_dt_s]]:
         for dt in dts:
             n = h / dt
             assert abs(n - round(n)) < 1e-9
 
 
 def test_agreement_counts_unsettled_as_disagreement():
-    ref = acc.Runs(np.array([1, 2, 3]), np.array(["settled"] * 3), np.zeros(3), np.zeros(3, int), np.zeros(3))
-    run = acc.Runs(np.array([1, 2, -1]), np.array(["settled", "settled", "blow_up"]), np.zeros(3), np.zeros(3, int), np.zeros(3))
+    settled = int(Status.SETTLED)
+    ref = acc.Runs(np.array([1, 2, 3]), np.array([settled] * 3), np.zeros(3), np.zeros(3, int), np.zeros(3))
+    run = acc.Runs(np.array([1, 2, -1]), np.array([settled, settled, int(Status.BLOW_UP)]), np.zeros(3),
+                   np.zeros(3, int), np.zeros(3))
     assert acc.agreement(run, ref) == pytest.approx(2 / 3)
+
+
+def test_study_runs_come_from_the_integrator_table():
+    """The steps and tolerances of a study run are its spec's, nothing else."""
+    adaptive = next(n for n, s in INTEGRATORS.items() if s.adaptive)
+    spec = INTEGRATORS[adaptive]
+    assert acc.study_runs(adaptive) == [(dt, tol) for dt in spec.study_dt_s for tol in spec.study_tol]
+    assert acc.study_runs("rk4", quick=True) == [(dt, None) for dt in INTEGRATORS["rk4"].quick_dt_s]
+    with pytest.raises(ValueError, match="unknown integrator"):
+        acc.check_integrators(["euler"])
+
+
+def test_quick_run_may_not_overwrite_committed_results(tmp_path):
+    """A folder holding the committed-results marker takes full runs only; the refusal writes nothing."""
+    from dicetrace.studies.outputs import COMMITTED_MARKER
+
+    (tmp_path / COMMITTED_MARKER).write_text("committed\n")
+    target = tmp_path / "accuracy"
+    for cmd in (["accuracy", "--quick"], ["accuracy", "--n", "20"], ["stability", "--quick"], ["stability", "--k", "5e5"]):
+        res = subprocess.run([sys.executable, "-m", "dicetrace.cli", *cmd, "--out", str(target)],
+                             capture_output=True, text=True, timeout=300)
+        assert res.returncode == 2, (cmd, res.stderr)
+        assert "committed full-run results" in res.stderr and res.stderr.count("\n") == 1
+        assert not target.exists()

@@ -1,11 +1,14 @@
-"""The studies of ``analysis/``: ``run_all.py --quick`` into a temporary folder, outputs and numbers checked.
+"""The writeup studies of ``dicetrace.studies``: ``dicetrace analyze all --quick`` into a temporary folder.
 
-This is the CI run of the studies (CI-sized grids); the full run is
-``python analysis/run_all.py`` and takes minutes.
+This is the CI run of the studies (CI-sized grids), through the command
+line, from a folder outside the repository; the outputs and their numbers
+are checked.  The full run (``dicetrace analyze all --out analysis``, which
+regenerates the committed results) takes minutes.
 """
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import subprocess
@@ -14,40 +17,44 @@ from pathlib import Path
 
 import pytest
 
+from dicetrace.studies import LETTERS, WRITEUP_STUDIES, resolve
+
 REPO = Path(__file__).resolve().parents[2]
-ANALYSIS = REPO / "analysis"
-STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation")
 MAX_FIGURE_BYTES = 300_000
 
-pytestmark = pytest.mark.skipif(not (ANALYSIS / "run_all.py").exists(), reason="analysis/ folder not present")
+
+def _dicetrace(*args, cwd, timeout=300):
+    return subprocess.run([sys.executable, "-m", "dicetrace.cli", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=timeout)
 
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
-    out = tmp_path_factory.mktemp("studies")
-    proc = subprocess.run(
-        [sys.executable, str(ANALYSIS / "run_all.py"), "--quick", "--out", str(out)],
-        cwd=out, capture_output=True, text=True, timeout=900,
-    )
+    here = tmp_path_factory.mktemp("studies")
+    proc = _dicetrace("analyze", "all", "--quick", cwd=here, timeout=900)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    out = here / "dicetrace-results" / "analysis"  # the default output folder
     results = {p.stem: json.loads(p.read_text()) for p in (out / "results").glob("*.json")}
     return out, results, proc
 
 
 def test_every_study_wrote_results_and_figures(quick_run):
     out, results, _ = quick_run
-    for name in STUDIES:
+    for name in WRITEUP_STUDIES:
         assert name in results, f"no results/{name}.json"
         r = results[name]
-        assert r["quick"] is True
+        assert r["quick"] is True and r["study"] == name
         assert r["figures"], f"{name} drew no figure"
-        for key, fig in r["figures"].items():
+        for fig in r["figures"].values():
             p = out / fig["path"]
             assert p.exists(), p
             assert 0 < p.stat().st_size < MAX_FIGURE_BYTES, (p, p.stat().st_size)
+            assert p.name[0] in LETTERS and LETTERS[p.name[0]] == name  # figures carry their study's letter
     timing = results["run_all"]
-    assert set(timing["timings_s"]) == set(STUDIES)
+    assert set(timing["timings_s"]) == set(WRITEUP_STUDIES)
     assert timing["total_s"] > 0
+    with open(out / "results" / "damping_sweep.csv") as f:
+        assert [float(r["gamma"]) for r in csv.DictReader(f)] == [0.0025, 0.005, 0.01, 0.02]
 
 
 def test_report_is_assembled(quick_run):
@@ -71,36 +78,68 @@ def test_numbers_are_sane(quick_run):
         assert 0.0 <= d["Sb"] <= math.log(6) + 1e-9
         assert d["Sbb"] is None or 0.0 < d["Sbb"] <= math.log(6) + 1e-9
         assert d["dimension"] == pytest.approx(2.0 - d["alpha"])
+    assert set(R["fractal"]["extra_windows"]) == {"red-sea-3", "red-sea-4", "party-2", "party-3"}
     throws = R["topology"]["throws"]
     assert [t["outcome"] for t in throws] == [3, 3, 3]
-    assert all(t["matches_program"] in (True, None) for t in throws)
+    assert all(t["matches_program"] is True for t in throws)  # bit-exact against the 2019 program
     assert not any(p["same"] for p in R["topology"]["pairs"])  # the writeup: topologically different
     assert R["topology"]["cell"]["n_sequences"] >= 1
     for f in R["wedge"]["fits"]:  # the fit recovers the ball-hill saddle rate sqrt(g/R)
         assert f["lambda"] == pytest.approx(R["wedge"]["saddle_rate_per_s"], rel=0.01)
     assert R["settle"]["predicted"]["fixed_pivot_per_s"] == pytest.approx(22.797, abs=1e-3)
+    assert all("profile" not in f and len(f["t_range_s"]) == 2 for f in R["settle"]["runs"]["seed"]["fits"])
     assert [row["gamma"] for row in R["damping"]["sweep"]] == [0.0025, 0.005, 0.01, 0.02]
     for row in R["damping"]["sweep"]:
         assert 0.0 <= row["boundary_fraction"] <= 1.0
     assert len(R["animation"]["frame_change_fraction"]) == R["animation"]["res"][2] - 1
-    assert R["vertices"]["hunts"]
+    assert [h["window"] for h in R["vertices"]["hunts"]][:3] == ["party", "green-island", "home"]
+    assert len(R["vertices"]["triple_squares"]["rows"]) == 7  # the program's green-island chain
 
 
-def test_cli_runs_one_study(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, "-m", "dicetrace.cli", "analyze", "wedge", "--quick", "--out", str(tmp_path)],
-        cwd=REPO, capture_output=True, text=True, timeout=300,
-    )
+def test_program_throws_are_the_reference_files():
+    """The topology study's copy of the program's three throws is rows 1-3 of the reference data."""
+    from dicetrace.studies.topology import PROGRAM_THROWS
+
+    with open(REPO / "tests" / "data" / "reference" / "writeup_points.csv", newline="") as f:
+        rows = list(csv.DictReader(f))[:3]
+    got = {(round(float(r["x"]), 6), round(float(r["y"]), 6)): (int(r["outcome"]), int(r["steps"]), r["contact_sequence"])
+           for r in rows}
+    assert got == PROGRAM_THROWS
+
+
+def test_resolve_names_and_letters():
+    assert resolve(["all"]) == list(WRITEUP_STUDIES)
+    assert resolve(["g", "cells", "settle"]) == ["settle", "cells"]
+    with pytest.raises(ValueError, match="unknown study"):
+        resolve(["accuracy"])  # an integrator study has its own command
+
+
+def test_cli_runs_one_study_and_the_report_alone(tmp_path):
+    proc = _dicetrace("analyze", "wedge", "--quick", "--out", str(tmp_path), cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert (tmp_path / "results" / "wedge.json").exists()
     assert (tmp_path / "figures" / "h_ball_hill.png").exists()
-    assert (tmp_path / "REPORT.md").exists()
+    (tmp_path / "REPORT.md").unlink()
+    proc = _dicetrace("analyze", "--report-only", "--out", str(tmp_path), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "![h_ball_hill](figures/h_ball_hill.png)" in (tmp_path / "REPORT.md").read_text()
 
 
 def test_cli_rejects_an_unknown_study(tmp_path):
-    proc = subprocess.run(
-        [sys.executable, "-m", "dicetrace.cli", "analyze", "nonsense", "--out", str(tmp_path)],
-        cwd=REPO, capture_output=True, text=True, timeout=120,
-    )
+    proc = _dicetrace("analyze", "nonsense", "--out", str(tmp_path), cwd=tmp_path)
     assert proc.returncode == 2
     assert "unknown study" in proc.stderr
+
+
+@pytest.mark.skipif(not (REPO / "analysis" / ".committed-results").exists(), reason="no committed results here")
+def test_quick_run_never_touches_the_committed_results():
+    """``--quick`` (or --res, --seed) into analysis/ is refused before anything is written."""
+    before = {p: p.stat().st_mtime_ns for p in (REPO / "analysis").rglob("*") if p.is_file()}
+    for args in (["--quick"], ["--res", "21"], ["--seed", "1"]):
+        proc = _dicetrace("analyze", "wedge", *args, "--out", "analysis", cwd=REPO)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert "committed full-run results" in proc.stderr and proc.stderr.count("\n") == 1
+        proc = _dicetrace("analyze", "wedge", *args, "--out", "analysis/figures", cwd=REPO)
+        assert proc.returncode == 2, (args, proc.stderr)
+    after = {p: p.stat().st_mtime_ns for p in (REPO / "analysis").rglob("*") if p.is_file()}
+    assert after == before

@@ -1,4 +1,4 @@
-"""Study d: the topology of throws in one cell (writeup 5.5).
+"""Study d (topology): the topology of throws in one cell (writeup 5.5).
 
 The three red-sea throws (1.65, 3.9), (1.5, 4), (1.2, 4.4): outcomes,
 ground-contact sequences, and whether they are topologically the same
@@ -7,32 +7,26 @@ sea grouped by contact sequence: how many distinct sequences the outcome-3
 cell holds, into how many contact-sequence cells it splits, and the
 canonical forms modulo the 24 rotations / 48 symmetries; a prefix tree of
 the sequences in the cell.
-
-    python analysis/d_topology.py [--quick] [--res N] [--out DIR]
 """
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
-import _common as C
+from dicetrace.ics import TOPOLOGY_POINTS
+from dicetrace.studies.context import Computed, Context, Output
+from dicetrace.studies.text import md_table
 
 NAME = "topology"
-POINTS = ((1.65, 3.9), (1.5, 4.0), (1.2, 4.4))
-
-
-def reference_sequences() -> dict:
-    import csv
-
-    for d in (C.REPO.parent / "shared" / "reference", C.REPO / "tests" / "data" / "reference"):
-        p = Path(d) / "writeup_points.csv"
-        if p.exists():
-            with open(p, newline="") as f:
-                return {(round(float(r["x"]), 6), round(float(r["y"]), 6)): r for r in csv.DictReader(f)}
-    return {}
+#: The 2019 program's own run of the three throws (GNU Octave; rows 1-3 of
+#: tests/data/reference/writeup_points.csv): (outcome, steps, contact sequence).
+PROGRAM_THROWS = {
+    (1.65, 3.9): (3, 540, "0-6-68-8-0-3-0-1-0-8-48-4-24-2-0-2-4-0-6-0-48-0-6"),
+    (1.5, 4.0): (3, 552, "0-6-68-0-3-0-2-26-2-0-8-48-4-0-2-0-6-0-6-26-2-0-8-48-248-24"),
+    (1.2, 4.4): (3, 479, "0-6-68-0-3-0-2-0-6-0-6-68-0-2-24-4-0-8"),
+}
+#: Contact sets shown in the tree of the cell's sequences.
+TREE_DEPTH = 8
 
 
 def simpson(counts: np.ndarray) -> float:
@@ -87,37 +81,30 @@ def fast_components(codes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, in
     return out, int(inv.max() + 1) if mask.any() else 0
 
 
-def main(argv=None) -> dict:
-    args = C.parser(__doc__.splitlines()[0]).parse_args(argv)
-    st = C.Study(NAME, args)
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis import canonical_contact_sequence, label_cells
-    from dicetrace.analysis.plot import plot_contact_tree, plot_outcome_map
+def three_throws() -> tuple[list[dict], list[dict]]:
+    """The writeup's three throws (checked against the program) and their pairwise comparison."""
+    from dicetrace.analysis import canonical_contact_sequence
     from dicetrace.ics import seed_slice
     from dicetrace.simulate import simulate
 
-    ref = reference_sequences()
     throws = []
-    for x, y in POINTS:
+    for x, y in TOPOLOGY_POINTS:
         r = simulate(seed_slice(x, y))
         seq = r.contact_sequence
-        rr = ref.get((round(x, 6), round(y, 6)))
+        prog = PROGRAM_THROWS.get((x, y))
         throws.append({
             "x": x, "y": y, "outcome": r.outcome, "steps": r.steps, "t_settle_s": r.t_settle_s,
             "n_changes": r.n_contact_changes, "sequence": seq,
             "rotations": canonical_contact_sequence(seq, canonical="rotations"),
             "symmetries": canonical_contact_sequence(seq, canonical="symmetries"),
-            "matches_program": (rr["contact_sequence"] == seq and int(rr["outcome"]) == r.outcome
-                                and int(rr["steps"]) == r.steps) if rr else None,
+            "matches_program": (prog == (r.outcome, r.steps, seq)) if prog else None,
         })
     pairs = []
-    for a in range(3):
-        for b in range(a + 1, 3):
+    for a in range(len(throws)):
+        for b in range(a + 1, len(throws)):
             ta, tb = throws[a], throws[b]
-            sa, sb = ta["sequence"].split("-"), tb["sequence"].split("-")
             common = 0
-            for u, v in zip(sa, sb):
+            for u, v in zip(ta["sequence"].split("-"), tb["sequence"].split("-")):
                 if u != v:
                     break
                 common += 1
@@ -125,51 +112,41 @@ def main(argv=None) -> dict:
                           "same": ta["sequence"] == tb["sequence"],
                           "same_rot": ta["rotations"] == tb["rotations"],
                           "same_sym": ta["symmetries"] == tb["symmetries"], "common_prefix": common})
-    st.results["throws"] = throws
-    st.results["pairs"] = pairs
-    st.results["tables"]["throws"] = C.md_table(throws, [
-        ("x", "x", ""), ("y", "y", ""), ("outcome", "outcome", "d"), ("steps", "steps", "d"),
-        ("n_changes", "contact changes", "d"), ("sequence", "contact sequence", ""),
-        ("matches_program", "= program", "")])
-    st.results["tables"]["pairs"] = C.md_table(pairs, [
-        ("a", "throw", ""), ("b", "throw", ""), ("same", "same sequence", ""),
-        ("same_rot", "same mod rotations", ""), ("same_sym", "same mod symmetries", ""),
-        ("common_prefix", "common prefix (sets)", "d")])
-    fig = plot_contact_tree({t["sequence"]: 1 for t in throws},
-                            title="Contact sequences of the three red-sea throws")
-    st.save_fig(fig, "d_tree_three", caption="Prefix tree of the three writeup throws' contact sequences.")
+    return throws, pairs
 
+
+def compute(ctx: Context) -> Computed:
+    from dicetrace.analysis import canonical_contact_sequence, label_cells
+
+    throws, pairs = three_throws()
     # ---- the red-sea grid grouped by contact sequence
-    res = st.res(301, 41)
-    s = st.sample("red-sea", res, sequences=True)
+    res = ctx.res(301, 41)
+    s = ctx.sample("red-sea", res, sequences=True)
     g, seq = s.labels, s.sequences
     ax_x, ax_y = s.axes
     ids, n = label_cells(g)
-    # the outcome-3 cell holding (1.5, 4.0) (nearest node), and where the other two throws lie
+
     def node(x, y):
         return int(np.argmin(np.abs(ax_x - x))), int(np.argmin(np.abs(ax_y - y)))
 
-    cell_of = {p: int(ids[node(*p)]) for p in POINTS}
-    label_of = {p: int(g[node(*p)]) for p in POINTS}
+    # the outcome-3 cell holding (1.5, 4.0) (nearest node), and where the other two throws lie
+    cell_of = {p: int(ids[node(*p)]) for p in TOPOLOGY_POINTS}
+    label_of = {p: int(g[node(*p)]) for p in TOPOLOGY_POINTS}
     cid = cell_of[(1.5, 4.0)]
     in_cell = ids == cid
-    cell_seqs = seq[in_cell]
-    uniq, counts = np.unique(cell_seqs.astype(str), return_counts=True)
+    uniq, counts = np.unique(seq[in_cell].astype(str), return_counts=True)
     order = np.argsort(-counts)
     rot = {u: canonical_contact_sequence(u, canonical="rotations") for u in uniq}
     sym = {u: canonical_contact_sequence(u, canonical="symmetries") for u in uniq}
-    n_rot = len(set(rot.values()))
-    n_sym = len(set(sym.values()))
-    rot_counts = {}
-    for u, c in zip(uniq, counts):
-        rot_counts[rot[u]] = rot_counts.get(rot[u], 0) + c
+    rot_counts: dict = {}
+    for u, cnt in zip(uniq, counts):
+        rot_counts[rot[u]] = rot_counts.get(rot[u], 0) + cnt
     # contact-sequence cells inside the outcome cell, and in the whole window
     kmax = int(max(len(str(q).split("-")) for q in seq.ravel()))
     codes = prefix_codes(seq, kmax)
-    full = codes[-1]  # equal code <=> equal whole sequence
-    seq_ids, n_seq_cells = fast_components(full, in_cell)
+    seq_ids, n_seq_cells = fast_components(codes[-1], in_cell)  # equal last code <=> equal whole sequence
     sizes = np.bincount(seq_ids[in_cell])[1:]
-    _, n_whole = fast_components(full, np.ones_like(in_cell))
+    _, n_whole = fast_components(codes[-1], np.ones_like(in_cell))
     prefix_len = np.array([len(u.split("-")) for u in uniq])
     # how many leading sets all throws of the cell share
     parts = [u.split("-") for u in uniq]
@@ -179,9 +156,10 @@ def main(argv=None) -> dict:
     cell = {
         "cell_id": cid, "label": int(g[in_cell][0]), "n_nodes": int(in_cell.sum()),
         "frac_of_window": float(in_cell.mean()),
-        "points_in_cell": {f"({p[0]}, {p[1]})": cell_of[p] == cid for p in POINTS},
-        "points_label": {f"({p[0]}, {p[1]})": label_of[p] for p in POINTS},
-        "n_sequences": int(len(uniq)), "n_rotation_classes": n_rot, "n_symmetry_classes": n_sym,
+        "points_in_cell": {f"({p[0]}, {p[1]})": cell_of[p] == cid for p in TOPOLOGY_POINTS},
+        "points_label": {f"({p[0]}, {p[1]})": label_of[p] for p in TOPOLOGY_POINTS},
+        "n_sequences": int(len(uniq)), "n_rotation_classes": len(set(rot.values())),
+        "n_symmetry_classes": len(set(sym.values())),
         "largest_sequence_frac": float(counts.max() / counts.sum()),
         "largest_rotation_class_frac": float(max(rot_counts.values()) / counts.sum()),
         "simpson_same_sequence": simpson(counts),
@@ -197,69 +175,71 @@ def main(argv=None) -> dict:
     split_curve = []
     for k in range(1, min(40, kmax) + 1):
         ck = codes[k - 1]
-        _, c = np.unique(ck[in_cell], return_counts=True)
+        _, cnt = np.unique(ck[in_cell], return_counts=True)
         ids_k, n_k = fast_components(ck, in_cell)
         szk = np.bincount(ids_k[in_cell])[1:]
-        split_curve.append({"k": k, "n_prefixes": int(len(c)), "largest_frac": float(c.max() / c.sum()),
+        split_curve.append({"k": k, "n_prefixes": int(len(cnt)), "largest_frac": float(cnt.max() / cnt.sum()),
                             "n_prefix_cells": n_k, "largest_prefix_cell_frac": float(szk.max() / in_cell.sum())})
     cell["split_curve"] = split_curve
+    window = {"res": res, "n_nodes": int(g.size), "n_sequences": int(len(np.unique(seq.astype(str)))),
+              "n_seq_cells": int(n_whole), "n_outcome_cells": int(n)}
+    ctx.log(f"cell {cid}: {cell['n_nodes']} nodes, {cell['n_sequences']} sequences, "
+            f"{cell['n_rotation_classes']} rotation classes, {cell['n_seq_cells']} sequence cells")
+    results = {"throws": throws, "pairs": pairs, "cell": cell, "window": window, "res": res}
+    return Computed(results, {"sample": s, "seq_ids": seq_ids, "cell_sequences": dict(zip(map(str, uniq), counts))})
+
+
+def render(c: Computed, out: Output) -> None:
+    import matplotlib.pyplot as plt
+
+    from dicetrace.analysis.plot import plot_contact_tree, plot_outcome_map
+
+    R = c.results
+    out.tables["throws"] = md_table(R["throws"], [
+        ("x", "x", ""), ("y", "y", ""), ("outcome", "outcome", "d"), ("steps", "steps", "d"),
+        ("n_changes", "contact changes", "d"), ("sequence", "contact sequence", ""),
+        ("matches_program", "= program", "")])
+    out.tables["pairs"] = md_table(R["pairs"], [
+        ("a", "throw", ""), ("b", "throw", ""), ("same", "same sequence", ""),
+        ("same_rot", "same mod rotations", ""), ("same_sym", "same mod symmetries", ""),
+        ("common_prefix", "common prefix (sets)", "d")])
+    fig = plot_contact_tree({t["sequence"]: 1 for t in R["throws"]},
+                            title="Contact sequences of the three red-sea throws")
+    out.save_fig(fig, "d_tree_three", caption="Prefix tree of the three writeup throws' contact sequences.")
+    cell, split_curve = R["cell"], R["cell"]["split_curve"]
     fig, ax = plt.subplots(figsize=(6, 4.2))
     ks = [r["k"] for r in split_curve]
     ax.semilogy(ks, [r["n_prefixes"] for r in split_curve], "o-", ms=3, label="distinct prefixes")
     ax.semilogy(ks, [r["n_prefix_cells"] for r in split_curve], "s-", ms=3, label="connected prefix cells")
-    ax.axhline(in_cell.sum(), color="0.5", ls=":", label="throws in the cell")
-    ax.set_xlabel("k: contact sets compared (sequence prefix length)")
-    ax.set_ylabel("count")
-    ax.set_title("How the face-3 cell splits by contact-sequence prefix")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    st.save_fig(fig, "d_prefix_split", caption="Number of distinct contact-sequence prefixes of length k in the "
-                "face-3 cell, and of the connected regions they form, against k.")
-    window_stats = {
-        "res": res, "n_nodes": int(g.size), "n_sequences": int(len(np.unique(seq.astype(str)))),
-        "n_seq_cells": int(n_whole), "n_outcome_cells": int(n),
-    }
-    st.results["cell"] = cell
-    st.results["window"] = window_stats
-    st.log(f"cell {cid}: {cell['n_nodes']} nodes, {cell['n_sequences']} sequences, {n_rot} rotation classes, "
-           f"{cell['n_seq_cells']} sequence cells")
-
-    # figure: the outcome cell and its contact-sequence cells
+    ax.axhline(cell["n_nodes"], color="0.5", ls=":", label="throws in the cell")
+    out.save_plot(fig, ax, "d_prefix_split", xlabel="k: contact sets compared (sequence prefix length)",
+                  ylabel="count", title="How the face-3 cell splits by contact-sequence prefix", legend=8,
+                  caption="Number of distinct contact-sequence prefixes of length k in the face-3 cell, and of the "
+                  "connected regions they form, against k.")
+    # the outcome cell and its contact-sequence cells
+    s, seq_ids, res = c.plot["sample"], c.plot["seq_ids"], R["res"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
-    plot_outcome_map(g, extent=s.extent, ax=axes[0], legend=False, title=f"red sea ({res}²): outcomes")
-    for p in POINTS:
-        axes[0].plot(*p, "wo", ms=5, mec="k")
-    rng = np.random.default_rng(0)
-    nid = seq_ids.max()
-    cols = rng.uniform(0.15, 1.0, size=(nid + 1, 3))
+    plot_outcome_map(s.labels, extent=s.extent, ax=axes[0], legend=False, title=f"red sea ({res}²): outcomes")
+    cols = np.random.default_rng(0).uniform(0.15, 1.0, size=(seq_ids.max() + 1, 3))
     cols[0] = (0.85, 0.85, 0.85)
-    img = cols[seq_ids]
     (x0, x1), (y0, y1) = s.extent
-    axes[1].imshow(np.transpose(img, (1, 0, 2)), origin="lower", extent=(x0, x1, y0, y1), aspect="auto",
+    axes[1].imshow(np.transpose(cols[seq_ids], (1, 0, 2)), origin="lower", extent=(x0, x1, y0, y1), aspect="auto",
                    interpolation="nearest")
-    for p in POINTS:
-        axes[1].plot(*p, "wo", ms=5, mec="k")
-    axes[1].set_title(f"the face-3 cell split by contact sequence ({cell['n_seq_cells']} cells)", fontsize=9)
-    axes[1].set_xlabel("x")
-    axes[1].set_ylabel("y")
-    fig.tight_layout()
-    st.save_fig(fig, "d_redsea_sequence_cells", caption="Left: outcomes of the red-sea window with the three "
-                "throws (white dots). Right: the face-3 cell holding (1.5, 4) coloured by contact-sequence cell "
-                "(random colours; grey outside the cell).")
-    # tree of the sequences in the cell (first 8 sets; branches holding < 0.5 % of the cell hidden)
-    depth = 8
-    fig = plot_contact_tree({str(u): int(c) for u, c in zip(uniq, counts)}, max_depth=depth,
-                            min_count=max(1, int(0.005 * counts.sum())),
-                            title=f"Contact-sequence tree of the face-3 cell (first {depth} sets)")
-    st.save_fig(fig, "d_tree_cell", caption=f"Prefix tree of the contact sequences in the face-3 cell (first "
-                f"{depth} contact sets; edge width ~ log of the throws through it; branches with fewer than 0.5 % "
-                "of the cell hidden).")
-    st.results["tables"]["top_sequences"] = C.md_table(cell["top_sequences"], [
+    for ax in axes:
+        for p in TOPOLOGY_POINTS:
+            ax.plot(*p, "wo", ms=5, mec="k")
+    out.save_plot(fig, axes[1], "d_redsea_sequence_cells", xlabel="x", ylabel="y", legend=None, title_size=9,
+                  title=f"the face-3 cell split by contact sequence ({cell['n_seq_cells']} cells)",
+                  caption="Left: outcomes of the red-sea window with the three throws (white dots). Right: the "
+                  "face-3 cell holding (1.5, 4) coloured by contact-sequence cell (random colours; grey outside "
+                  "the cell).")
+    counts = c.plot["cell_sequences"]
+    total = sum(counts.values())
+    fig = plot_contact_tree({u: int(n) for u, n in counts.items()}, max_depth=TREE_DEPTH,
+                            min_count=max(1, int(0.005 * total)),
+                            title=f"Contact-sequence tree of the face-3 cell (first {TREE_DEPTH} sets)")
+    out.save_fig(fig, "d_tree_cell", caption=f"Prefix tree of the contact sequences in the face-3 cell (first "
+                 f"{TREE_DEPTH} contact sets; edge width ~ log of the throws through it; branches with fewer than "
+                 "0.5 % of the cell hidden).")
+    out.tables["top_sequences"] = md_table(cell["top_sequences"], [
         ("sequence", "contact sequence", ""), ("count", "throws", "d")])
-    st.results["res"] = res
-    st.write()
-    return st.results
-
-
-if __name__ == "__main__":
-    main(sys.argv[1:])

@@ -1,0 +1,55 @@
+"""The studies of dicetrace, in one place: the registry of their names and the modules that run them.
+
+Two kinds, both shipped in the package and run from any folder:
+
+- the nine **writeup studies** (``dicetrace analyze NAME|all``), one module
+  each, ``compute(ctx)`` then ``render(computed, out)`` (see
+  :mod:`dicetrace.studies.context`); :func:`dicetrace.studies.runner.run`
+  runs them and :mod:`dicetrace.studies.report` assembles ``REPORT.md``;
+- the **integrator studies**: the work-precision study
+  (:mod:`~dicetrace.studies.accuracy`, rendered by
+  :mod:`~dicetrace.studies.accuracy_render`; ``dicetrace accuracy``) and the
+  stable-step map (:mod:`~dicetrace.studies.stability`; ``dicetrace stability``).
+
+Where their outputs go (a working folder by default; the committed results
+only on purpose) is :mod:`dicetrace.studies.outputs`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..i).
+WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation")
+#: Letter of each writeup study (its figures' prefix) -> name.
+LETTERS = dict(zip("abcdefghi", WRITEUP_STUDIES))
+#: The integrator studies (their own commands).
+INTEGRATOR_STUDIES = ("accuracy", "stability")
+#: Every study's name.
+STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES
+
+
+def resolve(names) -> list[str]:
+    """Writeup study names from names, letters (a..i) or ``all`` (ValueError naming the choices)."""
+    out: list[str] = []
+    for n in names or ("all",):
+        key = str(n).strip().lower()
+        if key == "all":
+            return list(WRITEUP_STUDIES)
+        key = LETTERS.get(key, key)
+        if key not in WRITEUP_STUDIES:
+            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..i)")
+        if key not in out:
+            out.append(key)
+    return out
+
+
+def study_module(name: str) -> ModuleType:
+    """The module of study ``name`` (``dicetrace.studies.<name>``)."""
+    if name not in STUDY_NAMES:
+        raise ValueError(f"unknown study {name!r} (choose from {', '.join(STUDY_NAMES)})")
+    return importlib.import_module(f"dicetrace.studies.{name}")
+
+
+__all__ = ["WRITEUP_STUDIES", "LETTERS", "INTEGRATOR_STUDIES", "STUDY_NAMES", "resolve", "study_module"]

@@ -1,0 +1,89 @@
+"""The studies run from an installed (not editable) package, from a folder outside the repository.
+
+``pip install`` of the package's sources (``pyproject.toml``, ``README.md``
+and ``src/``, copied, so that the build leaves nothing in the checkout and
+nothing else of the repository is at hand) into a fresh virtual environment;
+then,
+through the installed entry point and with a temporary folder as the current
+directory, ``dicetrace analyze all --quick --out DIR``, ``dicetrace accuracy
+--quick --out DIR``, a small ``dicetrace stability --quick`` and a study
+without ``--out`` (default ``./dicetrace-results/<study>``): nothing may come
+from the source tree.  One test, so that parallel workers do not install
+twice; slow (the install and numba's first compilation in the new
+environment take a few minutes).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import subprocess
+import venv
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def _run(args, cwd, env, timeout=1800):
+    proc = subprocess.run([str(a) for a in args], capture_output=True, text=True, cwd=cwd, env=env, timeout=timeout)
+    assert proc.returncode == 0, (args, proc.stdout[-3000:] + proc.stderr[-3000:])
+    return proc
+
+
+def _check_analyze(out: Path) -> None:
+    names = {p.stem for p in (out / "results").glob("*.json")}
+    assert names == {"cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge",
+                     "animation", "run_all"}
+    topo = json.loads((out / "results" / "topology.json").read_text())
+    assert all(t["matches_program"] is True for t in topo["throws"])
+    report = (out / "REPORT.md").read_text()
+    assert report.startswith("> **Quick run.**") and "{{" not in report
+    assert (out / "figures" / "i_redsea_z.gif").stat().st_size > 0
+
+
+def _check_accuracy(out: Path) -> None:
+    for name in ("study.csv", "orders.csv", "reference.csv", "presets.json", "work_precision.png", "summary.md"):
+        assert (out / name).stat().st_size > 0, name
+    with open(out / "study.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert {r["preset"] for r in rows} == {"seed", "physical"}
+    assert all(0.0 <= float(r["outcome_agreement"]) <= 1.0 for r in rows)
+
+
+@pytest.mark.slow
+def test_installed_package_runs_the_studies_from_any_folder(tmp_path):
+    src = tmp_path / "source"
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy2(REPO / name, src / name)
+    shutil.copytree(REPO / "src", src / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.nbi", "*.nbc"))
+    env_dir = tmp_path / "venv"
+    venv.EnvBuilder(with_pip=True).create(env_dir)
+    py, exe = env_dir / "bin" / "python", env_dir / "bin" / "dicetrace"
+    proc = subprocess.run([str(py), "-m", "pip", "install", "-q", str(src)], capture_output=True, text=True,
+                          timeout=1800, cwd=tmp_path)
+    if proc.returncode != 0 and "No matching distribution" in proc.stderr:
+        pytest.skip("the dependencies cannot be installed here (no package index)")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    work = tmp_path / "elsewhere"
+    work.mkdir()
+
+    where = Path(_run([py, "-c", "import dicetrace.studies as s; print(s.__file__)"], work, env).stdout.strip())
+    assert "site-packages" in where.parts and REPO not in where.resolve().parents and src not in where.parents
+
+    _run([exe, "analyze", "all", "--quick", "--out", work / "analysis-out"], work, env)
+    _check_analyze(work / "analysis-out")
+    _run([exe, "accuracy", "--quick", "--quiet", "--out", work / "accuracy-out"], work, env)
+    _check_accuracy(work / "accuracy-out")
+    _run([exe, "stability", "--quick", "--quiet", "--integrator", "semi-implicit-euler", "--presets", "seed",
+          "--out", work / "stability-out"], work, env)
+    assert "semi-implicit-euler" in (work / "stability-out" / "stability.md").read_text()
+    assert sorted(p.name for p in work.iterdir()) == ["accuracy-out", "analysis-out", "stability-out"]
+    # without --out: the working folder ./dicetrace-results/<study>
+    _run([exe, "analyze", "wedge", "--quick"], work, env)
+    assert (work / "dicetrace-results" / "analysis" / "results" / "wedge.json").exists()
