@@ -23,7 +23,7 @@ import time
 import numba
 import numpy as np
 
-from dicetrace.accuracy import sample_ics
+from dicetrace.studies.accuracy import sample_ics
 from dicetrace.params import make_config
 from dicetrace.simulate import simulate_batch
 

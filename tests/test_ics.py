@@ -118,7 +118,8 @@ def test_grid_block_layout():
 
 
 def test_windows_by_name_and_by_numbers():
-    assert set(WINDOWS) == {"home", "zoom-out", "more-out", "most-out", "red-sea", "red-sea-2", "party", "green-island"}
+    # the writeup's eight windows are there (with the program's zooms and the studies' deep zooms)
+    assert {"home", "zoom-out", "more-out", "most-out", "red-sea", "red-sea-2", "party", "green-island"} <= set(WINDOWS)
     assert get_window("red sea") == ((1.0, 2.0), (3.5, 4.5))
     assert get_window("Green_Island") == ((0.055, 0.06), (0.035, 0.045))
     assert get_window("0,0.1,0,0.2") == ((0.0, 0.1), (0.0, 0.2))

@@ -143,7 +143,7 @@ def test_same_motion_in_both_conventions():
 
 def test_physical_preset_converges_with_contact_substep():
     """Halving contact-substep's step changes no outcome on 16 throws and the first 0.3 s agree to 1e-6 cm."""
-    from dicetrace.accuracy import sample_ics
+    from dicetrace.studies.accuracy import sample_ics
 
     ics = sample_ics("zoom-out", 16, seed=5) * np.array([1, 1, 1, -1, -1, -1])
     a = simulate_batch(ics, preset="physical", integrator="contact-substep", dt_s=2.5e-4)
@@ -160,7 +160,7 @@ def test_physical_preset_converges_with_contact_substep():
 def test_physical_and_seed_differ_on_the_same_throws():
     """The corrections matter: on the same throws the physical die settles later on average
     (measured in analysis/accuracy: ≈ 1.1 s against 0.7 s on the zoom-out window)."""
-    from dicetrace.accuracy import sample_ics
+    from dicetrace.studies.accuracy import sample_ics
 
     ics = sample_ics("zoom-out", 24, seed=1)
     s = simulate_batch(ics, preset="seed", integrator="contact-substep", dt_s=1e-3)

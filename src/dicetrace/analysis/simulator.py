@@ -2,7 +2,7 @@
 
 The measures of :mod:`dicetrace.analysis` that need new simulations
 (:func:`~dicetrace.analysis.boundaries.uncertainty_exponent_perturbation`,
-:func:`~dicetrace.analysis.boundaries.wada_grid_test`,
+:func:`~dicetrace.analysis.wada.wada_grid_test`,
 :func:`~dicetrace.analysis.settle.bisect_boundary`,
 :func:`~dicetrace.analysis.settle.settle_profile`,
 :func:`~dicetrace.analysis.vertices.find_vertices`, ...) take a callable
@@ -43,7 +43,7 @@ from .grouping import UNSETTLED_LABEL, canonical_contact_sequence
 
 __all__ = [
     "LABEL_KINDS",
-    "DEFAULT_CHUNK",
+    "BATCH_POINTS",
     "SliceRun",
     "SliceClassifier",
     "SliceSettle",
@@ -60,8 +60,9 @@ __all__ = [
 
 #: What a classifier returns per point.
 LABEL_KINDS = ("outcome", "contact_sequence", "contact_sequence_rotations", "contact_sequence_symmetries")
-#: Points per call of :func:`~dicetrace.simulate.simulate_batch` (bounds the contact-set buffers).
-DEFAULT_CHUNK = 65536
+#: Points per call of :func:`~dicetrace.simulate.simulate_batch` (bounds the contact-set
+#: buffers; not a scan's chunk, which is ICs per Parquet file: ``dicetrace.scan.DEFAULT_CHUNK``).
+BATCH_POINTS = 65536
 
 
 
@@ -244,7 +245,7 @@ def run_on_slice(
     config: Config | None = None,
     preset: str = "seed",
     sequences: bool = False,
-    chunk: int = DEFAULT_CHUNK,
+    chunk: int = BATCH_POINTS,
     **overrides,
 ) -> SliceRun:
     """Throw the die from slice points, in parallel batches.
@@ -373,7 +374,7 @@ def classify_on_slice(
     config: Config | None = None,
     preset: str = "seed",
     label: str = "outcome",
-    chunk: int = DEFAULT_CHUNK,
+    chunk: int = BATCH_POINTS,
     **overrides,
 ) -> SliceClassifier:
     """A classifier of slice points by simulation, for the analysis measures.
@@ -412,7 +413,7 @@ def settle_on_slice(
     config: Config | None = None,
     preset: str = "seed",
     label: str = "outcome",
-    chunk: int = DEFAULT_CHUNK,
+    chunk: int = BATCH_POINTS,
     **overrides,
 ) -> SliceSettle:
     """Like :func:`classify_on_slice`, returning ``(labels, t_settle_s)``.
@@ -473,7 +474,7 @@ def sample_window(
     config: Config | None = None,
     preset: str = "seed",
     sequences: bool = False,
-    chunk: int = DEFAULT_CHUNK,
+    chunk: int = BATCH_POINTS,
     **overrides,
 ) -> WindowSample:
     """Outcome (and settle-time) grid of a window, by simulation.
