@@ -1,8 +1,12 @@
-"""Shared fixtures: the reference data of the 2019 program (tests/data/reference)."""
+"""Shared fixtures: the reference data of the 2019 program (tests/data/reference), the golden-file switch, and
+``dicetrace`` run in-process (the console script's own ``run_app``, without the ~2 s start-up of a new
+interpreter: numba's cache, rerun, pandas)."""
 
 from __future__ import annotations
 
 import os
+import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -49,3 +53,57 @@ def pytest_addoption(parser):
 def update_golden(request) -> bool:
     """True when this run regenerates the golden files instead of checking them."""
     return bool(request.config.getoption("--update-golden")) or os.environ.get(UPDATE_GOLDEN_ENV, "") not in ("", "0")
+
+
+# -- dicetrace in-process ------------------------------------------------------------------------
+
+
+@dataclass
+class CliResult:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+@pytest.fixture
+def dicetrace_cli(monkeypatch, capsys):
+    """``run(*args, cwd=PATH)`` runs ``dicetrace ARGS`` in ``cwd`` and returns its exit code, stdout and stderr.
+
+    An exception that escapes ``run_app`` (what a user would see as a
+    traceback) propagates and fails the test.
+    """
+    from dicetrace.cli import app
+    from dicetrace.commands._common import run_app
+
+    def run(*args: str, cwd: Path) -> CliResult:
+        capsys.readouterr()
+        with monkeypatch.context() as mp:
+            mp.chdir(cwd)
+            mp.setattr(sys, "argv", ["dicetrace", *args])
+            with pytest.raises(SystemExit) as exc:
+                run_app(app)
+        out, err = capsys.readouterr()
+        code = exc.value.code
+        return CliResult(0 if code is None else int(code), out, err)
+
+    return run
+
+
+def _assert_one_line_error(res: CliResult, *names: str) -> str:
+    """Exit code 2, nothing on stdout, no traceback, and one ``dicetrace: error:`` line naming every one of ``names``."""
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
+    assert "Traceback" not in res.stderr and "Traceback" not in res.stdout
+    assert res.stdout == ""
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    line = lines[0]
+    assert line.startswith("dicetrace: error: "), line
+    missing = [n for n in names if n not in line]
+    assert not missing, f"the message does not name {missing}: {line}"
+    return line
+
+
+@pytest.fixture
+def assert_one_line_error():
+    """``check(result, *names)``: exit code 2, nothing on stdout, no traceback, one error line naming all ``names``."""
+    return _assert_one_line_error

@@ -43,9 +43,9 @@ def sequence_from_log(rrd: Path) -> str:
     return sets_to_text(sets)
 
 
-def test_record_seed_slice_writes_rrd_and_parquet(tmp_path):
+def test_record_seed_slice_writes_rrd_and_parquet(tmp_path, dicetrace_cli):
     out = tmp_path / "throw.rrd"
-    res = run_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     lines = res.stdout.strip().splitlines()
     assert len(lines) == 1
@@ -66,8 +66,8 @@ def test_record_seed_slice_writes_rrd_and_parquet(tmp_path):
     ]
 
 
-def test_default_output_name_encodes_the_ic(tmp_path):
-    res = run_cli("record", "--slice", "seed", "--at", "1.5,4,0.25", "--t-max", "0.2", cwd=tmp_path)
+def test_default_output_name_encodes_the_ic(tmp_path, dicetrace_cli):
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.5,4,0.25", "--t-max", "0.2", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     rrd = tmp_path / "recordings" / "seed_x1.5_y4_z0.25.rrd"
     assert rrd.exists()
@@ -89,9 +89,9 @@ def test_default_name_of_a_direct_ic_and_non_default_numerics():
     )
 
 
-def test_numerical_failure_exits_1_and_keeps_the_recording(tmp_path):
+def test_numerical_failure_exits_1_and_keeps_the_recording(tmp_path, dicetrace_cli):
     out = tmp_path / "fail.rrd"
-    res = run_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--out", str(out), cwd=tmp_path)
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--out", str(out), cwd=tmp_path)
     assert res.returncode == 1
     err = res.stderr.strip().splitlines()
     assert len(err) == 1 and "blow_up" in err[0] and "inspection" in err[0]
@@ -178,7 +178,7 @@ def test_bad_input_leaves_an_existing_output_untouched(tmp_path, dicetrace_cli, 
     assert sorted(p.name for p in tmp_path.iterdir()) == ["existing.rrd"]
 
 
-def test_record_a_scanned_point_reproduces_its_row(tmp_path):
+def test_record_a_scanned_point_reproduces_its_row(tmp_path, dicetrace_cli):
     scan_mod = pytest.importorskip("dicetrace.scan")
     from dicetrace.ics import Grid
 
@@ -187,7 +187,7 @@ def test_record_a_scanned_point_reproduces_its_row(tmp_path):
     df = scan_mod.read_scan(folder)
     row = df[(df["x"] == 1.75) & (df["y"] == 4.0)].iloc[0]
     out = tmp_path / "pt.rrd"
-    res = run_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)
+    res = dicetrace_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert f"steps {row['steps']} " in res.stdout and row["contact_sequence"] in res.stdout
     assert sequence_from_log(out) == row["contact_sequence"]
@@ -195,7 +195,7 @@ def test_record_a_scanned_point_reproduces_its_row(tmp_path):
     assert rolls["ic_id"][0] == row["ic_id"] and (rolls["x"][0], rolls["y"][0]) == (1.75, 4.0)
     assert rolls["outcome"][0] == row["outcome"]
 
-    res = run_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--dt", "0.002", "--preset", "physical", cwd=tmp_path)
+    res = dicetrace_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--dt", "0.002", "--preset", "physical", cwd=tmp_path)
     assert res.returncode == 2 and "Traceback" not in res.stderr and res.stdout == ""
     (line,) = res.stderr.strip().splitlines()
     assert line.startswith("dicetrace: error: --scan ") and "drop --preset, --dt" in line

@@ -30,8 +30,8 @@ def read_csv(text: str) -> list[dict]:
     return list(csv.DictReader(io.StringIO(text)))
 
 
-def test_one_slice_ic_as_csv(tmp_path):
-    res = run_cli("--slice", "seed", "--at", "1.65,3.9", "--format", "csv", cwd=tmp_path)
+def test_one_slice_ic_as_csv(tmp_path, dicetrace_cli):
+    res = dicetrace_cli("simulate", "--slice", "seed", "--at", "1.65,3.9", "--format", "csv", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     rows = read_csv(res.stdout)
     assert len(rows) == 1
@@ -46,8 +46,8 @@ def test_one_slice_ic_as_csv(tmp_path):
     assert row["contact_sequence"] == SEQ_1_65_3_9
 
 
-def test_table_format_is_the_default(tmp_path):
-    res = run_cli("--ic", "14.082195,11.464215,9.868485,13.80303,122.82757,15.51864", cwd=tmp_path)
+def test_table_format_is_the_default(tmp_path, dicetrace_cli):
+    res = dicetrace_cli("simulate", "--ic", "14.082195,11.464215,9.868485,13.80303,122.82757,15.51864", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     header, row = res.stdout.strip().splitlines()
     assert header.split() == [
@@ -57,11 +57,11 @@ def test_table_format_is_the_default(tmp_path):
     assert fields[7:] == ["3", "540", "0.54", "settled", SEQ_1_65_3_9]
 
 
-def test_csv_file_of_slice_coordinates_to_json_file(tmp_path):
+def test_csv_file_of_slice_coordinates_to_json_file(tmp_path, dicetrace_cli):
     ics_csv = tmp_path / "ics.csv"
     ics_csv.write_text("x,y,comment\n" + "".join(f"{x},{y},topology\n" for x, y in TOPOLOGY_XY))
     out = tmp_path / "out.json"
-    res = run_cli("--ics", str(ics_csv), "--slice", "seed", "--format", "json", "--out", str(out), cwd=tmp_path)
+    res = dicetrace_cli("simulate", "--ics", str(ics_csv), "--slice", "seed", "--format", "json", "--out", str(out), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert res.stdout == ""
     doc = json.loads(out.read_text())
@@ -78,18 +78,19 @@ def test_csv_file_of_slice_coordinates_to_json_file(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ics.csv", "out.json"]  # no temporary left
 
 
-def test_csv_of_ic_components_round_trips_our_own_csv(tmp_path):
+def test_csv_of_ic_components_round_trips_our_own_csv(tmp_path, dicetrace_cli):
     """The CSV that `simulate --format csv` writes is a valid --ics input (its vx..Lz columns are used)."""
     first = tmp_path / "first.csv"
     ics_csv = tmp_path / "ics.csv"
     ics_csv.write_text("x,y\n" + "".join(f"{x},{y}\n" for x, y in TOPOLOGY_XY))
-    res = run_cli("--ics", str(ics_csv), "--slice", "seed", "--format", "csv", "--out", str(first), cwd=tmp_path)
+    res = dicetrace_cli("simulate", "--ics", str(ics_csv), "--slice", "seed", "--format", "csv", "--out", str(first), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
-    res2 = run_cli("--ics", str(first), "--format", "csv", cwd=tmp_path)
+    res2 = dicetrace_cli("simulate", "--ics", str(first), "--format", "csv", cwd=tmp_path)
     assert res2.returncode == 0, res2.stderr
     assert read_csv(res2.stdout) == read_csv(first.read_text())
 
 
+@pytest.mark.slow
 def test_thousands_of_ics_in_one_process(tmp_path):
     x, y = np.meshgrid(np.linspace(1.0, 2.0, 50), np.linspace(3.5, 4.5, 40))
     xy = np.column_stack([x.ravel(), y.ravel()])
@@ -107,8 +108,8 @@ def test_thousands_of_ics_in_one_process(tmp_path):
     assert wall < 30, f"2000 ICs took {wall:.1f} s"
 
 
-def test_numerical_failure_exits_1_with_rows_printed(tmp_path):
-    res = run_cli("--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--format", "csv", cwd=tmp_path)
+def test_numerical_failure_exits_1_with_rows_printed(tmp_path, dicetrace_cli):
+    res = dicetrace_cli("simulate", "--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--format", "csv", cwd=tmp_path)
     assert res.returncode == 1
     assert read_csv(res.stdout)[0]["status"] == "blow_up"
     err = res.stderr.strip().splitlines()

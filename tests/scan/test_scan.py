@@ -68,16 +68,17 @@ def test_home_grid_matches_simulate_point_for_point(home21):
     assert set(df["dt_s"]) == {0.001}
 
 
-def test_cli_scan_matches_cli_simulate(tmp_path, home21):
+def test_cli_scan_matches_cli_simulate(tmp_path, home21, dicetrace_cli):
     """`dicetrace scan --slice seed --window home --res 21` = `dicetrace simulate` on the same ICs."""
-    res = cli("scan", "--slice", "seed", "--window", "home", "--res", "21", "--out", str(tmp_path / "home"), "-q")
+    res = dicetrace_cli("scan", "--slice", "seed", "--window", "home", "--res", "21", "--out", str(tmp_path / "home"), "-q",
+                        cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     df = read_scan(tmp_path / "home")
     assert _data(df).select(["ic_id", "outcome", "steps"]).equals(
         _data(home21).select(["ic_id", "outcome", "steps"]))
     pts = tmp_path / "pts.csv"
     df[["x", "y"]].to_csv(pts, index=False, float_format="%.17g")
-    sim = cli("simulate", "--slice", "seed", "--ics", str(pts), "--format", "csv")
+    sim = dicetrace_cli("simulate", "--slice", "seed", "--ics", str(pts), "--format", "csv", cwd=tmp_path)
     assert sim.returncode == 0, sim.stderr
     rows = list(csv.DictReader(io.StringIO(sim.stdout)))
     assert len(rows) == 441
@@ -86,8 +87,9 @@ def test_cli_scan_matches_cli_simulate(tmp_path, home21):
             s["outcome"], s["steps"], s["status"], s["contact_sequence"])
 
 
-def test_numeric_window_equals_named_window(tmp_path, home21):
-    res = cli("scan", "--window", "0,0.1,0,0.1", "--res", "21", "--out", str(tmp_path / "w"), "--chunk", "100", "-q")
+def test_numeric_window_equals_named_window(tmp_path, home21, dicetrace_cli):
+    res = dicetrace_cli("scan", "--window", "0,0.1,0,0.1", "--res", "21", "--out", str(tmp_path / "w"), "--chunk", "100", "-q",
+                        cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert _data(read_scan(tmp_path / "w")).equals(
         _data(home21))
@@ -139,6 +141,7 @@ def test_resume_after_interruption(tmp_path, home21):
     assert (r3.chunks_skipped, r3.chunks_computed) == (9, 0)
 
 
+@pytest.mark.slow
 def test_resume_after_sigkill(tmp_path):
     out = tmp_path / "killed"
     args = ["scan", "--window", "0,1,0,1", "--res", "100", "--chunk", "250", "--threads", "1", "--out", str(out), "-q"]
@@ -159,7 +162,7 @@ def test_resume_after_sigkill(tmp_path):
     assert _data(df).equals(_data(want))
 
 
-def test_refuses_to_mix_definitions(tmp_path):
+def test_refuses_to_mix_definitions(tmp_path, dicetrace_cli):
     out = tmp_path / "s"
     scan(Grid("seed", "home", 5), out, chunk=10)
     with pytest.raises(ScanMismatchError, match="res"):
@@ -171,7 +174,7 @@ def test_refuses_to_mix_definitions(tmp_path):
     with pytest.raises(ScanMismatchError, match="window"):
         scan(Grid("seed", "zoom-out", 5), out, chunk=10)
     assert len(read_scan(out)) == 25  # untouched
-    res = cli("scan", "--window", "party", "--res", "5", "--out", str(out))
+    res = dicetrace_cli("scan", "--window", "party", "--res", "5", "--out", str(out), cwd=tmp_path)
     assert res.returncode == 2
     assert "holds a different scan" in res.stderr and "Traceback" not in res.stderr
     other = tmp_path / "notascan"
@@ -184,6 +187,7 @@ def test_refuses_to_mix_definitions(tmp_path):
 # -- Dask --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_equals_local_run(tmp_path, home21):
     pytest.importorskip("dask.distributed")
     from dask.distributed import Client, LocalCluster
