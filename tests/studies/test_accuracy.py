@@ -15,6 +15,7 @@ from dicetrace.status import Status
 from dicetrace.studies import accuracy as acc
 
 
+@pytest.mark.slow
 def test_quick_study_cli_runs_under_a_minute(tmp_path):
     """No --out: the results go to ./dicetrace-results/accuracy of the current folder."""
     t0 = time.perf_counter()
@@ -53,6 +54,7 @@ def test_quick_study_cli_runs_under_a_minute(tmp_path):
     assert elapsed < 120
 
 
+@pytest.mark.slow
 def test_bad_input_is_one_line_exit_2(tmp_path):
     for args in (["--window", "nowhere"], ["--n", "1"], ["--integrator", "euler"], ["--presets", "seed,x"]):
         res = subprocess.run(
@@ -121,6 +123,7 @@ def test_study_runs_come_from_the_integrator_table():
         acc.check_integrators(["euler"])
 
 
+@pytest.mark.slow
 def test_quick_run_may_not_overwrite_committed_results(tmp_path):
     """A folder holding the committed-results marker takes full runs only; the refusal writes nothing."""
     from dicetrace.studies.outputs import COMMITTED_MARKER

@@ -123,6 +123,7 @@ def test_stability_map_small():
     assert r["auto_dt_stable"] is True and r["auto_dt_s"] <= r["dt_stable_s"]
 
 
+@pytest.mark.slow
 def test_stability_cli_rejects_bad_input(tmp_path):
     import subprocess
     import sys

@@ -38,6 +38,7 @@ def quick_run(tmp_path_factory):
     return out, results, proc
 
 
+@pytest.mark.slow
 def test_every_study_wrote_results_and_figures(quick_run):
     out, results, _ = quick_run
     for name in WRITEUP_STUDIES:
@@ -57,6 +58,7 @@ def test_every_study_wrote_results_and_figures(quick_run):
         assert [float(r["gamma"]) for r in csv.DictReader(f)] == [0.0025, 0.005, 0.01, 0.02]
 
 
+@pytest.mark.slow
 def test_report_is_assembled(quick_run):
     out, _, _ = quick_run
     text = (out / "REPORT.md").read_text()
@@ -66,6 +68,7 @@ def test_report_is_assembled(quick_run):
     assert "{{" not in text
 
 
+@pytest.mark.slow
 def test_numbers_are_sane(quick_run):
     _, R, _ = quick_run
     for w, d in R["cells"]["windows"].items():
@@ -114,6 +117,7 @@ def test_resolve_names_and_letters():
         resolve(["accuracy"])  # an integrator study has its own command
 
 
+@pytest.mark.slow
 def test_cli_runs_one_study_and_the_report_alone(tmp_path):
     proc = _dicetrace("analyze", "wedge", "--quick", "--out", str(tmp_path), cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -131,6 +135,7 @@ def test_cli_rejects_an_unknown_study(tmp_path):
     assert "unknown study" in proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not (REPO / "analysis" / ".committed-results").exists(), reason="no committed results here")
 def test_quick_run_never_touches_the_committed_results():
     """``--quick`` (or --res, --seed) into analysis/ is refused before anything is written."""
