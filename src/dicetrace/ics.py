@@ -339,6 +339,40 @@ def _block(ids, index, coords_nd, sl: Slice) -> IcBlock:
     return IcBlock(ids.astype(np.int64), index.astype(np.int32), coords, sl.ics(coords_nd).reshape(m, 6))
 
 
+#: Most ICs a space may hold: ``ic_id`` is int64.
+MAX_ICS = 2**63 - 1
+#: Most grid points per axis: grid indices are int32.
+MAX_AXIS_POINTS = 2**31 - 1
+#: Most points of a scrambled Sobol sample (scipy's 30 bits).
+MAX_SOBOL_POINTS = 2**30
+
+
+def _is_count(v) -> bool:
+    """A whole number (an int, a numpy integer or an integral float), not a bool."""
+    if isinstance(v, (bool, np.bool_)):
+        return False
+    if isinstance(v, (int, np.integer)):
+        return True
+    return isinstance(v, (float, np.floating)) and math.isfinite(v) and float(v).is_integer()
+
+
+def _show(v) -> str:
+    """A value for a message: numpy scalars as Python numbers (100, not np.int64(100))."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, tuple):
+        return "(" + ", ".join(_show(x) for x in v) + ("," if len(v) == 1 else "") + ")"
+    return repr(v)
+
+
+def _slice_of(s) -> "Slice":
+    if isinstance(s, str):
+        return get_slice(s)
+    if not isinstance(s, Slice):
+        raise TypeError(f"slice must be a Slice or a slice name ({', '.join(SLICES)}), got {type(s).__name__}")
+    return s
+
+
 def _check_range(start: int, stop: int, size: int) -> tuple[int, int]:
     start, stop = int(start), int(stop)
     if not 0 <= start <= stop <= size:
@@ -369,12 +403,18 @@ class Grid:
     kind: str = field(default="grid", init=False)
 
     def __post_init__(self) -> None:
-        sl = get_slice(self.slice) if isinstance(self.slice, str) else self.slice
+        sl = _slice_of(self.slice)
         object.__setattr__(self, "slice", sl)
         object.__setattr__(self, "window", get_window(self.window, sl.ndim))
         res = self.res
-        if isinstance(res, (int, np.integer)):
-            res = (int(res),) * sl.ndim
+        if isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_)):
+            res = (res,) * sl.ndim
+        try:
+            res = tuple(res)
+        except TypeError:
+            raise ValueError(f"resolution must be an integer or one integer per axis, got {_show(res)}") from None
+        if any(not _is_count(r) for r in res):
+            raise ValueError(f"resolution must be whole numbers >= 1 on every axis, got {_show(res)}")
         res = tuple(int(r) for r in res)
         if len(res) == 1 and sl.ndim > 1:
             res = res * sl.ndim
@@ -394,7 +434,8 @@ class Grid:
 
     @property
     def size(self) -> int:
-        return int(np.prod(self.res, dtype=np.int64))
+        """Number of grid points, exactly (a Python int, however large; a scan takes at most ``MAX_ICS``)."""
+        return math.prod(self.res)
 
     def axes(self) -> list[np.ndarray]:
         """The coordinate vector of each axis (the program's point formula)."""
@@ -436,14 +477,18 @@ class Sample:
     kind: str = field(default="sample", init=False)
 
     def __post_init__(self) -> None:
-        sl = get_slice(self.slice) if isinstance(self.slice, str) else self.slice
+        sl = _slice_of(self.slice)
         object.__setattr__(self, "slice", sl)
         object.__setattr__(self, "box", get_window(self.box, sl.ndim))
-        if int(self.n) != self.n or self.n < 1:
-            raise ValueError(f"sample size must be an integer >= 1, got {self.n!r}")
+        if not _is_count(self.n) or self.n < 1:
+            raise ValueError(f"sample size n must be an integer >= 1, got {_show(self.n)}")
         object.__setattr__(self, "n", int(self.n))
-        if self.method not in SAMPLE_METHODS:
-            raise ValueError(f"unknown sample method {self.method!r} (choose from {', '.join(SAMPLE_METHODS)})")
+        if not isinstance(self.method, str) or self.method not in SAMPLE_METHODS:
+            raise ValueError(f"unknown sample method {_show(self.method)} (choose from {', '.join(SAMPLE_METHODS)})")
+        if self.method == "sobol" and self.n > MAX_SOBOL_POINTS:
+            raise ValueError(f"a sobol sample has at most 2**30 = {MAX_SOBOL_POINTS:,} points, got n = {self.n:,}")
+        if not _is_count(self.seed) or self.seed < 0 or self.seed >= 2**64:
+            raise ValueError(f"sample seed must be an integer in [0, 2**64), got {_show(self.seed)}")
         object.__setattr__(self, "seed", int(self.seed))
 
     @property
@@ -506,9 +551,12 @@ class Points:
     kind: str = field(default="points", init=False)
 
     def __post_init__(self) -> None:
-        sl = get_slice(self.slice) if isinstance(self.slice, str) else self.slice
+        sl = _slice_of(self.slice)
         object.__setattr__(self, "slice", sl)
-        c = np.atleast_2d(np.asarray(self.coords, dtype=np.float64))
+        try:
+            c = np.atleast_2d(np.asarray(self.coords, dtype=np.float64))
+        except (TypeError, ValueError):
+            raise ValueError(f"points must be numbers, {sl.ndim} per point") from None
         if c.shape[1] != sl.ndim or len(c) < 1:
             raise ValueError(f"points on the {sl.ndim}-D slice {sl.name!r} need {sl.ndim} coordinates each, got shape {c.shape}")
         if not np.all(np.isfinite(c)):

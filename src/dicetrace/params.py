@@ -14,7 +14,7 @@ ICs into everything a kernel needs).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -23,8 +23,18 @@ from dicetrace.integrators import INTEGRATORS, IntegratorSpec, get_integrator  #
 
 
 def _is_number(v) -> bool:
-    """A real number that is not a bool (``dt_s=True`` is no step)."""
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    """A real number that is not a bool (``dt_s=True`` is no step); numpy reals count."""
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+
+
+def _plain(v):
+    """A numpy scalar as the Python number it holds (stored, printed and written as JSON like one)."""
+    return v.item() if isinstance(v, np.generic) else v
+
+
+def _show(v) -> str:
+    """A value for a message: 100.0, not np.float64(100.0)."""
+    return repr(_plain(v))
 
 
 #: Default friction regularisation speed of the per-node law, cm/s (see Preset).
@@ -163,18 +173,36 @@ class Preset:
     integrator: str = "semi-implicit-euler"
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str):
+            raise ValueError(f"preset name must be a string, got {_show(self.name)}")
         for name in ("k", "gamma", "mu", "g", "half_side_cm", "z0_cm", "v_reg_cm_s"):
             v = getattr(self, name)
             if not _is_number(v) or not math.isfinite(v):
-                raise ValueError(f"preset {self.name!r}: {name} must be a finite number, got {v!r}")
+                raise ValueError(f"preset {self.name!r}: {name} must be a finite number, got {_show(v)}")
+            object.__setattr__(self, name, _plain(v))
         if self.k <= 0:
-            raise ValueError(f"preset {self.name!r}: stiffness k must be > 0, got {self.k}")
-        if self.gamma < 0 or self.mu < 0:
-            raise ValueError(f"preset {self.name!r}: gamma and mu must be >= 0")
+            raise ValueError(f"preset {self.name!r}: stiffness k must be > 0, got {self.k!r}")
+        if self.gamma < 0:
+            raise ValueError(f"preset {self.name!r}: damping gamma must be >= 0, got {self.gamma!r}")
+        if self.mu < 0:
+            raise ValueError(f"preset {self.name!r}: friction coefficient mu must be >= 0, got {self.mu!r}")
+        if self.g > 0:
+            raise ValueError(
+                f"preset {self.name!r}: gravity g must be <= 0 (cm/s² along z; negative points down, the default is "
+                f"-980; positive would lift the die away from the ground), got {self.g!r}"
+            )
         if self.half_side_cm <= 0:
-            raise ValueError(f"preset {self.name!r}: half_side_cm must be > 0")
+            raise ValueError(f"preset {self.name!r}: half_side_cm must be > 0, got {self.half_side_cm!r}")
+        if self.z0_cm < self.half_side_cm:
+            raise ValueError(
+                f"preset {self.name!r}: z0_cm (the start height of the centre) must be >= half_side_cm "
+                f"({self.half_side_cm!r}: the die starts on or above the ground), got {self.z0_cm!r}"
+            )
         if self.v_reg_cm_s <= 0:
-            raise ValueError(f"preset {self.name!r}: v_reg_cm_s must be > 0")
+            raise ValueError(f"preset {self.name!r}: v_reg_cm_s must be > 0, got {self.v_reg_cm_s!r}")
+        if not isinstance(self.clamp_normal, (bool, np.bool_)):
+            raise ValueError(f"preset {self.name!r}: clamp_normal must be True or False, got {_show(self.clamp_normal)}")
+        object.__setattr__(self, "clamp_normal", bool(self.clamp_normal))
         if self.friction not in ("spectral", "per-node"):
             raise ValueError(f"preset {self.name!r}: friction must be 'spectral' or 'per-node', got {self.friction!r}")
         if self.energy not in ("point-mass", "rigid"):
@@ -274,15 +302,28 @@ class Numerics:
     def __post_init__(self) -> None:
         get_integrator(self.integrator)
         if not _is_number(self.dt_s) or not math.isfinite(self.dt_s) or self.dt_s <= 0:
-            raise ValueError(f"time step dt must be a finite number > 0, got {self.dt_s!r}")
+            raise ValueError(f"time step dt must be a finite number > 0, got {_show(self.dt_s)}")
         if not _is_number(self.t_max_s) or not math.isfinite(self.t_max_s) or self.t_max_s <= 0:
-            raise ValueError(f"time cap t_max must be a finite number > 0, got {self.t_max_s!r}")
+            raise ValueError(f"time cap t_max must be a finite number > 0, got {_show(self.t_max_s)}")
+        object.__setattr__(self, "dt_s", _plain(self.dt_s))
+        object.__setattr__(self, "t_max_s", _plain(self.t_max_s))
+        if self.dt_s > self.t_max_s:
+            raise ValueError(
+                f"time step dt ({self.dt_s!r} s) is longer than the time cap t_max ({self.t_max_s!r} s): "
+                "not even one step fits"
+            )
         if self.t_max_s / self.dt_s > 2**40:
-            raise ValueError("time cap / dt is too large")
-        if int(self.substeps) != self.substeps or self.substeps < 1:
-            raise ValueError(f"substeps must be an integer >= 1, got {self.substeps!r}")
+            raise ValueError(
+                f"time cap / dt is too large: t_max {self.t_max_s!r} s / dt {self.dt_s!r} s = "
+                f"{self.t_max_s / self.dt_s:.3g} steps (at most 2**40)"
+            )
+        sub = self.substeps
+        if not _is_number(sub) or not math.isfinite(sub) or int(sub) != sub or sub < 1:
+            raise ValueError(f"substeps must be an integer >= 1, got {_show(sub)}")
+        object.__setattr__(self, "substeps", _plain(sub))
         if not _is_number(self.tol) or not math.isfinite(self.tol) or not TOL_MIN <= self.tol < 1:
-            raise ValueError(f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {self.tol!r}")
+            raise ValueError(f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {_show(self.tol)}")
+        object.__setattr__(self, "tol", _plain(self.tol))
 
     @property
     def max_steps(self) -> int:
@@ -496,11 +537,35 @@ def make_config(
     ValueError when no step fits the budget.  ``tol``: the local error
     tolerance of ``contact-adaptive`` (default ``Numerics.tol``).
     """
-    p = get_preset(preset) if isinstance(preset, str) else preset
+    if isinstance(preset, str):
+        p = get_preset(preset)
+    elif isinstance(preset, Preset):
+        p = preset
+    else:
+        raise TypeError(f"preset must be a preset name or a dicetrace.params.Preset, not {type(preset).__name__}")
     if overrides:
+        names = {f.name for f in fields(Preset)} - {"name"}
+        unknown = sorted(set(overrides) - names)
+        if unknown:
+            raise TypeError(
+                f"unknown preset parameter(s) {', '.join(unknown)} (choose from {', '.join(sorted(names))})"
+            )
         p = p.with_(**overrides)
     kw = {"integrator": p.integrator if integrator is None else integrator}
     integrator = kw["integrator"]
+    spec = get_integrator(integrator)
+    if tol is not None and not spec.adaptive:
+        import warnings
+
+        warnings.warn(
+            f"tol (the error tolerance of contact-adaptive's sub-steps) has no effect on {integrator}, "
+            "whose steps are fixed",
+            UserWarning,
+            stacklevel=2,
+        )
+    if v_impact_cm_s is not None and (not _is_number(v_impact_cm_s) or not math.isfinite(v_impact_cm_s)
+                                      or v_impact_cm_s < 0):
+        raise ValueError(f"v_impact_cm_s must be a finite number >= 0, got {_show(v_impact_cm_s)}")
     if isinstance(dt_s, str):
         if dt_s.strip().lower() != "auto":
             raise ValueError(f"time step dt must be a number > 0 or 'auto', got {dt_s!r}")
