@@ -250,6 +250,7 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
     if record is not None and not isinstance(record, Record):
         raise TypeError(f"record must be a dicetrace.Record or None, not {type(record).__name__}")
     ic = validate_ic(ic)
+    _check_orientation(orientation)
     kin = cfg.kernel_inputs(ic, orientation=orientation)
     empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     cap = DEFAULT_CAP
@@ -267,6 +268,7 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         # same arithmetic (the trace path writes, never steers), so it must end
         # the same way: anything else is a kernel defect, never silently kept.
         rows = n + 1
+        check_trace_memory(rows, record, cfg)
         tr_state = np.zeros((rows if record.states else 0, STATE_COLS))
         tr_force = np.zeros((rows if record.forces else 0, FORCE_COLS))
         tr_energy = np.zeros((rows if record.energy else 0, ENERGY_COLS))
@@ -293,6 +295,52 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         config=cfg,
         trace=trace,
     )
+
+
+def _check_orientation(orientation) -> None:
+    if orientation is None:
+        return
+    try:
+        rot = np.asarray(orientation, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"orientation must be a 3×3 rotation matrix of numbers, got {type(orientation).__name__}") from None
+    if rot.shape != (3, 3):
+        raise ValueError(f"orientation must be a 3×3 rotation matrix, got shape {rot.shape}")
+
+
+def trace_bytes(rows: int, record: Record) -> int:
+    """Bytes of the per-step trace arrays of ``rows`` rows (states, forces, energy as requested)."""
+    cols = STATE_COLS * bool(record.states) + FORCE_COLS * bool(record.forces) + ENERGY_COLS * bool(record.energy)
+    return int(rows) * cols * 8
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux MemAvailable; None when unknown)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_trace_memory(rows: int, record: Record, cfg: Config, *, factor: float = 1.0, what: str = "record") -> None:
+    """Refuse (ValueError naming ``what``) a trace whose arrays, times ``factor``, exceed the available memory."""
+    need = trace_bytes(rows, record) * factor
+    avail = available_memory()
+    if avail is not None and need > avail:
+        raise ValueError(
+            f"{what}: the trace of {rows - 1:,} steps (dt {cfg.numerics.dt_s:g} s, time cap {cfg.numerics.t_max_s:g} s) "
+            f"needs about {need / 2**30:.3g} GiB, more than the {avail / 2**30:.3g} GiB of memory available: "
+            "use a larger dt, a shorter time cap, or record fewer channels"
+        )
 
 
 def _make_trace(n, cfg, tr_state, tr_force, tr_energy, record) -> Trace:

@@ -9,7 +9,6 @@ this module writes them atomically into a folder as ``rolls.parquet``,
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from dicetrace.sinks._common import remove_quietly, temp_path_beside
+from dicetrace.sinks._common import OutputError, Staging, destination, output_folder
 from dicetrace.tables import (  # noqa: F401  (re-exported: the sink's public names)
     CONTACTS_SCHEMA,
     GRID_ROLLS_SCHEMA,
@@ -60,14 +59,19 @@ def write_tables(
     coords=None,
     ic_ids=None,
     metadata: Mapping | None = None,
+    staging: Staging | None = None,
 ) -> dict[str, Path]:
     """Write ``rolls.parquet``, ``contacts.parquet`` (and ``trajectory.parquet``) into ``directory``.
 
     Give either a ``source`` (a Roll, Rolls or a BatchResult; see
     :func:`tables_for`) or ready ``tables`` (names from ``rolls``,
     ``contacts``, ``trajectory``).  Each file is written under a temporary
-    name and renamed only once every file is complete: on error nothing is
-    left behind and existing files are untouched.
+    name and renamed only once every file is complete: on error (a full
+    disk raises :class:`~dicetrace.sinks._common.OutputError` naming the
+    file) nothing is left behind, not even a folder made for them, and
+    existing files are untouched.  With ``staging`` (a
+    :class:`~dicetrace.sinks._common.Staging`) the files are only staged
+    there, to be committed together with other outputs.
 
     Returns
     -------
@@ -81,18 +85,26 @@ def write_tables(
     unknown = set(tables) - set(TABLE_NAMES)
     if unknown:
         raise ValueError(f"unknown table name(s) {sorted(unknown)}; expected {TABLE_NAMES}")
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    staged: list[tuple[Path, Path]] = []
+    directory = output_folder(directory, what="Parquet folder")
+    own = staging is None
+    st = Staging() if own else staging
+    finals: dict[str, Path] = {}
     try:
         for name, table in tables.items():
             final = directory / f"{name}.parquet"
-            tmp = temp_path_beside(final)
-            staged.append((tmp, final))
-            pq.write_table(table, tmp, compression="zstd")
-        for tmp, final in staged:
-            os.replace(tmp, final)
-    finally:
-        for tmp, _ in staged:
-            remove_quietly(tmp)
-    return {final.stem: final for _, final in staged}
+            dest = destination(final, what="Parquet file")
+            if dest.kind != "file":
+                raise OutputError(f"{dest.label}: Parquet tables are written as regular files")
+            tmp = st.path(dest)
+            try:
+                pq.write_table(table, tmp, compression="zstd")
+            except OSError as e:
+                raise st.fail(dest, e) from None
+            finals[name] = final
+        if own:
+            st.commit()
+    except BaseException:
+        if own:
+            st.discard()
+        raise
+    return finals

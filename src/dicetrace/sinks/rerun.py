@@ -35,12 +35,11 @@ pyarrow) or open it with the ``rerun`` viewer.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
-from dicetrace.sinks._common import remove_quietly, temp_path_beside
+from dicetrace.sinks._common import Destination, destination, write_bytes
 
 #: Face colours of the writeup: 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black (RGB).
 FACE_COLORS = np.array(
@@ -92,9 +91,14 @@ def write_rrd(
         offsets, centre of mass, L) and energies:
         ``simulate(ic, record=Record(states=True, energy=True))``.
     path
-        Output ``.rrd`` file.  Written under a temporary name beside it and
-        renamed when complete: an existing file is replaced only by a whole
-        new one, and nothing is left behind on error.
+        Output ``.rrd`` file, a character device or FIFO, or ``"-"`` for
+        standard output (see :func:`dicetrace.sinks._common.destination`).
+        The recording is encoded in memory first; a regular file is then
+        written under a temporary name beside it and renamed when complete:
+        an existing file is replaced only by a whole new one, and nothing is
+        left behind on error (a full disk raises
+        :class:`~dicetrace.sinks._common.OutputError` naming the path).
+        A symbolic link is followed (its target is written).
     name
         Recording name shown by the viewer (default: the file's stem).
     ic_label
@@ -112,36 +116,67 @@ def write_rrd(
     Path
         ``path``.
     """
-    import rerun as rr
-
     tr = roll.trace
     if tr is None or tr.node_offsets is None or tr.energy is None:
         raise ValueError("write_rrd needs a roll with states and energy: simulate(..., record=Record(states=True, energy=True))")
-    path = Path(path)
-    name = name or path.stem
+    dest = destination(path, what="recording", suffix=".rrd")
+    name = name or Path(dest.given).stem or "dicetrace"
+    data = encode_rrd_of(roll, name=name, ic_label=ic_label, trail_every=trail_every, application_id=application_id)
+    write_bytes(dest, data)
+    return Path(path) if not isinstance(path, Destination) else Path(dest.given)
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    rec = rr.RecordingStream(application_id)
-    tmp = temp_path_beside(path)
-    try:
-        with open(tmp, "xb"):  # an unwritable folder raises OSError here, before any work
-            pass
-        rec.save(tmp, default_blueprint=default_blueprint(roll))
+
+def encode_rrd_of(
+    roll,
+    *,
+    name: str = "dicetrace",
+    ic_label: str | None = None,
+    trail_every: int | None = None,
+    application_id: str = "dicetrace",
+) -> bytes:
+    """The bytes of :func:`write_rrd`'s recording of ``roll`` (nothing is written)."""
+    tr = roll.trace
+    if tr is None or tr.node_offsets is None or tr.energy is None:
+        raise ValueError("write_rrd needs a roll with states and energy: simulate(..., record=Record(states=True, energy=True))")
+
+    def log(rec) -> None:
         rec.send_recording_name(name)
-        rec.send_property("dicetrace", rr.AnyValues(**metadata_values(roll, ic_label)))
+        rec.send_property("dicetrace", _rr().AnyValues(**metadata_values(roll, ic_label)))
         log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every)
-        rec.flush()
-        rec.disconnect()
-        os.replace(tmp, path)
-    except BaseException:
+
+    return encode_rrd(log, default_blueprint(roll), application_id=application_id)
+
+
+def _rr():
+    import rerun as rr
+
+    return rr
+
+
+#: Longest wait for rerun to finish encoding a recording in memory, s.
+ENCODE_TIMEOUT_S = 600.0
+
+
+def encode_rrd(log, blueprint, *, application_id: str = "dicetrace") -> bytes:
+    """The bytes of a ``.rrd`` recording: ``log(rec)`` logs into a fresh stream with ``blueprint`` as its default.
+
+    Encoded in memory (rerun's binary stream), so that all file writing is
+    Python's own (errors such as a full disk surface as exceptions, never as
+    a stuck or dying background writer).
+    """
+    rr = _rr()
+    rec = rr.RecordingStream(application_id)
+    stream = rec.binary_stream()
+    try:
+        rec.send_blueprint(blueprint, make_active=False, make_default=True)
+        log(rec)
+        data = stream.read(flush=True, flush_timeout_sec=ENCODE_TIMEOUT_S)
+    finally:
         try:
             rec.disconnect()
         except Exception:  # pragma: no cover - already failing; keep the first error
             pass
-        raise
-    finally:
-        remove_quietly(tmp)
-    return path
+    return bytes(data or b"")
 
 
 def metadata_values(roll, ic_label: str | None = None) -> dict:
