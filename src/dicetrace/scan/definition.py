@@ -8,14 +8,26 @@ compared on resume, and shipped to Dask workers as a plain dict.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 
-from dicetrace.ics import IcSpace, space_from_dict
+import numpy as np
+
+from dicetrace.ics import MAX_AXIS_POINTS, MAX_ICS, IcSpace, space_from_dict
 from dicetrace.params import Config, Numerics, Preset
 
 FORMAT = "dicetrace-scan/1"
 #: ICs per chunk (one Parquet file, one Dask task): ~0.3 s of work on one core.
 DEFAULT_CHUNK = 8192
+#: Largest chunk: one chunk's buffers are held in memory (about 1 KiB per IC: 16 GiB).
+MAX_CHUNK = 1 << 24
+
+
+def _show(v) -> str:
+    """A value for a message: numpy scalars as plain Python numbers (100, not np.float64(100.0))."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    return repr(v)
 
 
 def config_from_dict(d: dict) -> Config:
@@ -35,9 +47,29 @@ class ScanDefinition:
     chunk: int = DEFAULT_CHUNK
 
     def __post_init__(self) -> None:
-        if int(self.chunk) != self.chunk or self.chunk < 1:
-            raise ValueError(f"chunk must be an integer >= 1, got {self.chunk!r}")
-        object.__setattr__(self, "chunk", int(self.chunk))
+        from dicetrace.ics import Grid, Points, Sample
+
+        if not isinstance(self.space, (Grid, Sample, Points)):
+            raise TypeError(f"space must be a Grid, Sample or Points (dicetrace.ics), not {type(self.space).__name__}")
+        if not isinstance(self.config, Config):
+            raise TypeError(f"config must be a dicetrace.params.Config, not {type(self.config).__name__}")
+        c = self.chunk
+        if (isinstance(c, bool) or not isinstance(c, (int, float, np.integer, np.floating))
+                or not math.isfinite(c) or int(c) != c or c < 1):
+            raise ValueError(f"chunk must be an integer >= 1, got {_show(c)}")
+        if int(c) > MAX_CHUNK:
+            raise ValueError(f"chunk must be at most {MAX_CHUNK:,} ICs (one chunk is held in memory), got {int(c):,}")
+        object.__setattr__(self, "chunk", int(c))
+        size = self.space.size
+        if size > MAX_ICS:
+            raise ValueError(
+                f"the space has {size:,} ICs ({size:.3g}): more than a scan can number (ic_id is int64, at most {MAX_ICS:.3g})"
+            )
+        if isinstance(self.space, Grid) and max(self.space.res) > MAX_AXIS_POINTS:
+            raise ValueError(
+                f"the grid has {max(self.space.res):,} points on an axis: a scan takes at most {MAX_AXIS_POINTS:,} "
+                "(grid indices are int32)"
+            )
 
     @property
     def size(self) -> int:
@@ -48,8 +80,9 @@ class ScanDefinition:
         return -(-self.size // self.chunk)
 
     def chunk_range(self, c: int) -> tuple[int, int]:
-        if not 0 <= c < self.n_chunks:
+        if isinstance(c, bool) or not isinstance(c, (int, np.integer)) or not 0 <= c < self.n_chunks:
             raise ValueError(f"chunk {c} outside 0..{self.n_chunks - 1}")
+        c = int(c)
         return c * self.chunk, min(self.size, (c + 1) * self.chunk)
 
     def to_dict(self) -> dict:

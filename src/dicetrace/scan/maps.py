@@ -7,11 +7,11 @@ writeup's: face 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black;
 
 from __future__ import annotations
 
-import os
-import uuid
 from pathlib import Path
 
 import numpy as np
+
+from dicetrace.sinks._common import destination, staged, write_bytes
 
 #: RGB (0-255) of each outcome label -1..6.
 OUTCOME_RGB: dict[int, tuple[int, int, int]] = {
@@ -34,8 +34,16 @@ def _rgb_table() -> np.ndarray:
     return t
 
 
-def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int = 150) -> Path:
-    """Draw a 2-D grid scan's outcome map (or z-level ``k`` of a 3-D one) into ``path``."""
+def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int = 150, staging=None) -> Path:
+    """Draw a 2-D grid scan's outcome map (or z-level ``k`` of a 3-D one) into ``path``.
+
+    ``path``: a ``.png`` file (written atomically), a character device or
+    FIFO, or ``"-"`` (standard output); see
+    :func:`dicetrace.sinks._common.destination`.  Checked before any work.
+    ``staging``: a :class:`~dicetrace.sinks._common.Staging` to stage the
+    file in (put in place by its ``commit``, with the other outputs).
+    """
+    dest = destination(path, what="outcome map", suffix=".png")
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -74,17 +82,19 @@ def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int 
                        for o in order if o in present],
               loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False, title="face up")
     fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-        os.replace(tmp, path)
+        if staging is None:
+            with staged(dest) as tmp:
+                fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png")
+        else:
+            tmp = staging.path(dest)
+            try:
+                fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png")
+            except OSError as e:
+                raise staging.fail(dest, e) from None
     finally:
         plt.close(fig)
-        if tmp.exists():
-            tmp.unlink()
-    return path
+    return Path(dest.given)
 
 
 def scan_labels(df) -> list[str]:
@@ -105,7 +115,7 @@ def scan_labels(df) -> list[str]:
     return out
 
 
-def write_scan_rrd(folder, path, *, labels: bool = True) -> Path:
+def write_scan_rrd(folder, path, *, labels: bool = True, staging=None) -> Path:
     """The scan as a Rerun recording: one point per IC, coloured by outcome.
 
     2-D slices are logged as ``Points2D`` at (x, −y) (the 2-D view's y axis
@@ -113,14 +123,17 @@ def write_scan_rrd(folder, path, *, labels: bool = True) -> Path:
     Each point's label holds its slice coordinates, outcome, steps and the
     full IC (exact ``repr`` floats: ``dicetrace record --ic ...`` or
     ``--scan DIR --at X,Y`` reproduces it).  Class ids are ``outcome + 1``
-    with an annotation context naming the faces.
+    with an annotation context naming the faces.  ``path`` as in
+    :func:`outcome_png` (``.rrd``), checked before any work; ``staging`` too.
     """
     import rerun as rr
     import rerun.blueprint as rrb
 
     from dicetrace.ics import Grid
     from dicetrace.scan.read import read_scan, scan_definition
+    from dicetrace.sinks.rerun import encode_rrd
 
+    dest = destination(path, what="scan map", suffix=".rrd")
     defn = scan_definition(folder)
     df = read_scan(folder, columns=["x", "y", "z", "outcome", "steps", "vx", "vy", "vz", "Lx", "Ly", "Lz"])
     nd = defn.space.ndim
@@ -133,15 +146,12 @@ def write_scan_rrd(folder, path, *, labels: bool = True) -> Path:
         pts = df[["x", "y", "z"][:nd]].to_numpy()
         ext = np.maximum(pts.max(axis=0) - pts.min(axis=0), 1e-12) if len(pts) else np.ones(nd)
         radius = 0.5 * float(np.prod(ext) / max(len(pts), 1)) ** (1.0 / nd)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:8]}.tmp")
-    rec = rr.RecordingStream("dicetrace-scan")
     view = (rrb.Spatial2DView(origin="/scan", name="outcome map") if nd <= 2
             else rrb.Spatial3DView(origin="/scan", name="outcome map"))
-    try:
-        rec.save(tmp, default_blueprint=rrb.Blueprint(view, collapse_panels=True))
-        rec.send_recording_name(f"scan {path.stem}")
+    stem = Path(dest.given).stem or "scan"
+
+    def log(rec) -> None:
+        rec.send_recording_name(f"scan {stem}")
         rec.log(
             "/scan",
             rr.AnnotationContext([
@@ -163,13 +173,17 @@ def write_scan_rrd(folder, path, *, labels: bool = True) -> Path:
         rec.log("/scan/outcome", arch, static=True)
         rec.log("/scan/definition", rr.TextDocument(_definition_markdown(defn), media_type="text/markdown"),
                 static=True)
-        rec.flush()
-        rec.disconnect()
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+
+    data = encode_rrd(log, rrb.Blueprint(view, collapse_panels=True), application_id="dicetrace-scan")
+    if staging is None:
+        write_bytes(dest, data)
+    else:
+        tmp = staging.path(dest)
+        try:
+            tmp.write_bytes(data)
+        except OSError as e:
+            raise staging.fail(dest, e) from None
+    return Path(dest.given)
 
 
 def _definition_markdown(defn) -> str:

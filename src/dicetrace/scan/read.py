@@ -18,7 +18,14 @@ import pyarrow.dataset as pads
 
 from dicetrace.ics import Grid
 from dicetrace.scan.definition import ScanDefinition
-from dicetrace.scan.runner import METADATA_KEY, read_manifest
+from dicetrace.scan.runner import (
+    METADATA_KEY,
+    CorruptChunkError,
+    chunk_files,
+    read_chunk_log,
+    read_manifest,
+    verify_chunk,
+)
 
 #: Fill value of label_grid cells that the (partial) scan has not computed yet.
 MISSING = -2
@@ -39,11 +46,62 @@ def scan_definition(source) -> ScanDefinition:
     return ScanDefinition.from_dict(d["scan"])
 
 
+def _folder_of(folder) -> Path:
+    if not isinstance(folder, (str, Path)) and not hasattr(folder, "__fspath__"):
+        raise TypeError(f"folder must be a scan folder path, not {type(folder).__name__}")
+    return Path(folder)
+
+
+def verified_chunk_files(folder, manifest: dict | None = None) -> list[str]:
+    """The chunk files of a scan folder, each checked against the checksum logged when it was written.
+
+    Raises :class:`CorruptChunkError` naming the first file that does not
+    match (or, for a folder written before checksums were logged, that does
+    not decode).  Only this scan's chunk indices are returned.
+    """
+    folder = _folder_of(folder)
+    manifest = read_manifest(folder) if manifest is None else manifest
+    defn = ScanDefinition.from_dict(manifest["definition"])
+    log = read_chunk_log(folder)
+    files = []
+    for c, p in chunk_files(folder).items():
+        if c >= defn.n_chunks:
+            continue
+        entry = log.get(c)
+        start, stop = defn.chunk_range(c)
+        why = verify_chunk(p, entry, stop - start) if entry is not None else None
+        if why is not None:
+            raise CorruptChunkError(f"scan chunk {str(p)!r} is damaged: {why}; re-run the scan into {str(folder)!r} "
+                                    "to recompute it")
+        files.append(str(p))
+    return files
+
+
+def _dataset_table(files: list[str], columns, filter=None) -> pa.Table:
+    """Read chunk files; a file that fails to decode is named in the error."""
+    try:
+        return pads.dataset(files, format="parquet").to_table(columns=columns, filter=filter)
+    except (pa.ArrowException, OSError, ValueError):
+        for f in files:  # find the culprit
+            try:
+                pads.dataset([f], format="parquet").to_table(columns=columns, filter=filter)
+            except (pa.ArrowException, OSError, ValueError) as e:
+                raise CorruptChunkError(
+                    f"scan chunk {f!r} cannot be read ({type(e).__name__}: {' '.join(str(e).split())[:160]})"
+                ) from None
+        raise
+
+
 def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
-    """The rolls table of a scan folder as Arrow, sorted by ``ic_id`` (finished chunks only)."""
-    folder = Path(folder)
+    """The rolls table of a scan folder as Arrow, sorted by ``ic_id`` (finished chunks only).
+
+    Every chunk is verified against the checksum in the chunk log
+    (``_scan.chunks.jsonl``) first: a damaged one raises
+    :class:`CorruptChunkError` naming the file.
+    """
+    folder = _folder_of(folder)
     manifest = read_manifest(folder)
-    files = sorted(str(p) for p in folder.glob("part-*.parquet"))
+    files = verified_chunk_files(folder, manifest)
     cols = None if columns is None else list(dict.fromkeys(["ic_id", *columns]))
     if not files:
         from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
@@ -52,22 +110,39 @@ def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
         if cols is not None:
             table = table.select(cols)
     else:
-        table = pads.dataset(files, format="parquet").to_table(columns=cols, filter=filter).sort_by("ic_id")
+        table = _dataset_table(files, cols, filter).sort_by("ic_id")
     meta = {"scan": manifest["definition"], "dicetrace_version": manifest.get("dicetrace_version")}
     return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, sort_keys=True).encode()})
 
 
-def outcome_counts(folder) -> dict[int, int]:
-    """How many ICs of a scan folder ended on each outcome (streamed: constant memory)."""
-    files = sorted(str(p) for p in Path(folder).glob("part-*.parquet"))
-    counts: dict[int, int] = {}
+def _column_counts(folder, column: str) -> dict:
+    files = verified_chunk_files(folder)
+    counts: dict = {}
     if not files:
         return counts
-    for batch in pads.dataset(files, format="parquet").to_batches(columns=["outcome"]):
-        vals, n = np.unique(batch.column(0).to_numpy(), return_counts=True)
+    try:
+        batches = list(pads.dataset(files, format="parquet").to_batches(columns=[column]))
+    except (pa.ArrowException, OSError, ValueError):
+        _dataset_table(files, [column])  # names the file that fails
+        raise
+    for batch in batches:
+        arr = batch.column(0)
+        if pa.types.is_dictionary(arr.type):
+            arr = arr.dictionary_decode()
+        vals, n = np.unique(arr.to_numpy(zero_copy_only=False), return_counts=True)
         for v, c in zip(vals.tolist(), n.tolist()):
             counts[v] = counts.get(v, 0) + c
     return dict(sorted(counts.items()))
+
+
+def outcome_counts(folder) -> dict[int, int]:
+    """How many ICs of a scan folder ended on each outcome (streamed per chunk)."""
+    return _column_counts(folder, "outcome")
+
+
+def status_counts(folder) -> dict[str, int]:
+    """How many ICs of a scan folder ended with each status (``settled``, ``time_cap``, ``blow_up``, ...)."""
+    return _column_counts(folder, "status")
 
 
 def read_scan(folder, columns=None):
@@ -139,7 +214,12 @@ def ic_at(folder, coords, *, tol: float | None = None):
     grids, no limit otherwise).
     """
     defn = scan_definition(folder)
-    c = np.asarray(coords, dtype=np.float64).reshape(-1)
+    try:
+        c = np.asarray(coords, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"coords must be numbers (x, y[, z]), got {coords!r}") from None
+    if not np.all(np.isfinite(c)):
+        raise ValueError("coords must be finite numbers")
     nd = defn.space.ndim
     if c.size != nd:
         raise ValueError(f"the scan's slice is {nd}-D: give {nd} coordinates, got {c.size}")
@@ -154,7 +234,8 @@ def ic_at(folder, coords, *, tol: float | None = None):
         steps = [(hi - lo) / max(n - 1, 1) for (lo, hi), n in zip(defn.space.window, defn.space.res)]
         tol = 0.5 * float(np.sqrt(sum(s * s for s in steps))) + 1e-12
     if tol is not None and d[r] > tol:
-        raise ValueError(f"no scanned IC near {tuple(c)} (nearest at distance {d[r]:.3g} > {tol:.3g})")
+        at = ", ".join(f"{float(v):g}" for v in c)
+        raise ValueError(f"no scanned IC near ({at}) (nearest at distance {float(d[r]):.3g} > {float(tol):.3g})")
     row = {name: t.column(name)[r].as_py() for name in t.column_names}
     ic = np.array([row[n] for n in ("vx", "vy", "vz", "Lx", "Ly", "Lz")], dtype=np.float64)
     return ic, defn.config, row

@@ -1,12 +1,19 @@
 """Run a scan: chunks of ICs through the batch kernel, streamed to Parquet.
 
 A scan folder holds ``_scan.json`` (the manifest: the scan definition, the
-dicetrace version) and one Parquet file per finished chunk,
-``part-NNNNNN.parquet``, each written under a hidden temporary name and
-renamed when complete.  So a Ctrl-C or a kill loses at most the chunks in
-flight; running the same scan again skips the finished chunks and ends with
-exactly one row per IC.  A different definition against an existing folder
-is refused (:class:`ScanMismatchError`), never mixed in.
+dicetrace version), one Parquet file per finished chunk,
+``part-NNNNNN.parquet``, and the manifest's chunk log ``_scan.chunks.jsonl``
+(one line per finished chunk: its file, rows, size and SHA-256).  Each chunk
+is written under a hidden temporary name, its checksum logged, and then
+renamed.  So a Ctrl-C or a kill loses at most the chunks in flight; running
+the same scan again verifies the finished chunks against their checksums
+(recomputing, with a :class:`ScanWarning`, any that are damaged), skips the
+good ones and ends with exactly one row per IC.  A different definition
+against an existing folder is refused (:class:`ScanMismatchError`), never
+mixed in.  One writer at a time: a scan holds the folder's lock
+(``.dicetrace-scan.lock``, via ``filelock``) while it writes; a second one
+waits at most ``wait`` seconds, then refuses (:class:`ScanBusyError`),
+touching nothing.
 
 The folder is a plain Parquet dataset: ``pandas.read_parquet(folder)`` reads
 it (files whose names start with ``_`` or ``.`` are not data).
@@ -14,31 +21,68 @@ it (files whose names start with ``_`` or ``.`` are not data).
 
 from __future__ import annotations
 
+import hashlib
+import itertools
 import json
+import math
 import os
+import re
 import time
 import uuid
+import warnings
 from collections import deque
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from dicetrace.ics import Grid, Points, Sample
 from dicetrace.params import Config, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, describe_differences
 from dicetrace.simulate import DEFAULT_CAP, simulate_batch
+from dicetrace.sinks._common import OutputError, free_bytes, human_bytes, make_folders, output_folder, remove_quietly
 from dicetrace.tables import rolls_table
 
 MANIFEST = "_scan.json"
+#: The manifest's chunk log: one JSON line per finished chunk (file, rows, bytes, sha256).
+CHUNK_LOG = "_scan.chunks.jsonl"
+#: The folder's writer lock (held by the one scan writing into it).
+LOCK = ".dicetrace-scan.lock"
 METADATA_KEY = b"dicetrace"
 DICTIONARY_COLUMNS = ["preset", "integrator", "status", "outcome", "dt_s", "k"]
+#: Longest wait for a Dask scheduler to answer, s (the message of a failed connection states it).
+DASK_CONNECT_TIMEOUT_S = 10.0
+#: Bytes on disk per IC, a round upper estimate (measured 80–110 on the writeup's windows).
+BYTES_PER_IC = 128
+#: Bytes on disk per chunk file beyond its rows (Parquet footer, the definition in its metadata; measured ~11 KiB).
+BYTES_PER_CHUNK = 16 * 1024
+#: Memory per IC of a chunk in flight, bytes (contact-set buffers, summaries, the Arrow table).
+MEMORY_PER_IC = 1024
+_PART = re.compile(r"^part-(\d{6,})\.parquet$")
 
 
 class ScanMismatchError(ValueError):
     """The folder holds a scan with a different definition."""
+
+
+class ScanBusyError(RuntimeError):
+    """Another scan holds the folder's writer lock."""
+
+
+class CorruptChunkError(ValueError):
+    """A chunk file does not match the checksum recorded when it was written (the message names the file)."""
+
+
+class SchedulerError(ConnectionError):
+    """The Dask scheduler could not be reached, or is not one."""
+
+
+class ScanWarning(UserWarning):
+    """Something a scan repaired on the way (a damaged chunk recomputed)."""
 
 
 def part_name(c: int) -> str:
@@ -49,6 +93,36 @@ def _version() -> str:
     import dicetrace
 
     return dicetrace.__version__
+
+
+# -- checking arguments -------------------------------------------------------------------------
+
+
+def _check_int(value, name: str, lo: int, *, none: bool = True) -> int | None:
+    if value is None and none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+        more = " or None" if none else ""
+        raise ValueError(f"{name} must be an integer >= {lo}{more}, got {value!r}")
+    return int(value)
+
+
+def _check_space_finite(defn: ScanDefinition) -> None:
+    """Refuse a space whose ICs overflow: the corners of a window or box (an IC is affine in its coordinates), or every point."""
+    space = defn.space
+    if isinstance(space, (Grid, Sample)):
+        box = space.window if isinstance(space, Grid) else space.box
+        coords = np.array(list(itertools.product(*box)), dtype=np.float64)
+    else:
+        coords = np.array(space.coords, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        ics = np.asarray(space.slice.ics(coords), dtype=np.float64).reshape(-1, 6)
+    bad = ~np.isfinite(ics).all(axis=1)
+    if bad.any():
+        at = ", ".join(f"{float(v):g}" for v in coords[int(np.argmax(bad))])
+        where = "window" if isinstance(space, Grid) else "box" if isinstance(space, Sample) else "points"
+        raise ValueError(f"the scan's {where} gives non-finite ICs (at {at} on slice {space.slice.name!r}): "
+                         "its coordinates are too large")
 
 
 # -- computing one chunk ----------------------------------------------------------------------
@@ -99,77 +173,174 @@ def read_manifest(folder) -> dict:
     p = Path(folder) / MANIFEST
     if not p.is_file():
         raise FileNotFoundError(f"{str(folder)!r} is not a dicetrace scan folder (no {MANIFEST})")
-    return json.loads(p.read_text())
+    try:
+        return json.loads(p.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{str(p)!r}: unreadable scan manifest ({' '.join(str(e).split())})") from None
 
 
 def _atomic_write_text(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
     try:
-        tmp.write_text(text)
+        with open(tmp, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, path)
     finally:
         if tmp.exists():
             tmp.unlink()
 
 
-def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
-    """Create or check the scan folder; return the chunks already finished.
+def file_sha256(path) -> tuple[str, int]:
+    """(SHA-256 hex digest, size in bytes) of a file."""
+    with open(path, "rb") as f:
+        digest = hashlib.file_digest(f, "sha256")
+        size = f.tell()
+    return digest.hexdigest(), size
 
-    Raises :class:`ScanMismatchError` when the folder holds another scan, and
+
+def read_chunk_log(folder) -> dict[int, dict]:
+    """The chunk log of a scan folder: chunk index → its last entry (file, rows, bytes, sha256).
+
+    A torn last line (a write killed half way) is skipped: that chunk's
+    file was never renamed into place.
+    """
+    entries: dict[int, dict] = {}
+    try:
+        with open(Path(folder) / CHUNK_LOG) as f:
+            for line in f:
+                try:
+                    e = json.loads(line)
+                    entries[int(e["chunk"])] = e
+                except (ValueError, KeyError, TypeError):
+                    continue
+    except FileNotFoundError:
+        pass
+    return entries
+
+
+def _append_chunk_log(folder: Path, entry: dict) -> None:
+    with open(folder / CHUNK_LOG, "a") as f:
+        f.write(json.dumps(entry, sort_keys=True) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def chunk_files(folder) -> dict[int, Path]:
+    """Chunk index → path of every ``part-NNNNNN.parquet`` in ``folder`` (one listing, any number of chunks)."""
+    folder = Path(folder)
+    out = {}
+    with os.scandir(folder) as it:
+        for e in it:
+            m = _PART.match(e.name)
+            if m:
+                out[int(m.group(1))] = folder / e.name
+    return dict(sorted(out.items()))
+
+
+def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
+    """Why chunk file ``path`` is not the finished chunk its log ``entry`` describes (None: it is).
+
+    Without a log entry (a folder written before checksums were logged) the
+    file must decode completely and hold ``rows`` rows.
+    """
+    if entry is not None:
+        try:
+            digest, size = file_sha256(path)
+        except OSError as e:
+            return f"unreadable ({e.strerror or e})"
+        if size != entry.get("bytes") or digest != entry.get("sha256"):
+            return f"its SHA-256 differs from the one recorded in {CHUNK_LOG}"
+        if entry.get("rows") != rows:
+            return f"it holds {entry.get('rows')} rows, the chunk has {rows}"
+        return None
+    try:
+        n = pq.read_table(path).num_rows
+    except Exception as e:  # noqa: BLE001 - any decoding error means "not a finished chunk"
+        return f"it does not decode ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
+    return None if n == rows else f"it holds {n} rows, the chunk has {rows}"
+
+
+def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
+    """True if ``folder`` holds this scan's manifest, False if none; ScanMismatchError if another scan's."""
+    mpath = folder / MANIFEST
+    if not mpath.exists():
+        return False
+    try:
+        have = json.loads(mpath.read_text())["definition"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest {MANIFEST} ({e})") from None
+    want = defn.to_dict()
+    if json.dumps(have, sort_keys=True) != json.dumps(want, sort_keys=True):
+        diffs = describe_differences(have, want)
+        shown = "; ".join(diffs[:4]) + (f"; and {len(diffs) - 4} more" if len(diffs) > 4 else "")
+        raise ScanMismatchError(
+            f"{str(folder)!r} holds a different scan ({shown}). "
+            "Use another --out folder, or delete this one to start over."
+        )
+    return True
+
+
+def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
+    """Create or check the scan folder; return the chunks already finished (and verified).
+
+    Call it holding the folder's lock (:func:`scan` does).  Raises
+    :class:`ScanMismatchError` when the folder holds another scan, and
     FileExistsError when it holds files that are not a dicetrace scan.
-    Leftover temporary files of interrupted writes are removed; a chunk file
-    with the wrong number of rows is treated as unfinished.
+    Leftover temporary files of interrupted writes are removed.  Every
+    finished chunk is checked against its logged checksum; a damaged one
+    (or one with the wrong number of rows) is deleted, to be recomputed,
+    with a :class:`ScanWarning` naming it.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    mpath = folder / MANIFEST
-    want = defn.to_dict()
-    if mpath.exists():
-        try:
-            have = json.loads(mpath.read_text())["definition"]
-        except (ValueError, KeyError) as e:
-            raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest {MANIFEST} ({e})") from None
-        if json.dumps(have, sort_keys=True) != json.dumps(want, sort_keys=True):
-            diffs = describe_differences(have, want)
-            shown = "; ".join(diffs[:4]) + (f"; and {len(diffs) - 4} more" if len(diffs) > 4 else "")
-            raise ScanMismatchError(
-                f"{str(folder)!r} holds a different scan ({shown}). "
-                "Use another --out folder, or delete this one to start over."
-            )
-    else:
+    if not _check_manifest(folder, defn):
         data = [p for p in folder.iterdir() if not p.name.startswith(".")]
         if data:
             raise FileExistsError(
                 f"{str(folder)!r} is not empty and holds no dicetrace scan ({MANIFEST} missing): use another folder"
             )
         manifest = {
-            "format": want["format"],
+            "format": defn.to_dict()["format"],
             "dicetrace_version": _version(),
-            "definition": want,
+            "definition": defn.to_dict(),
             "n_ics": defn.size,
             "n_chunks": defn.n_chunks,
+            "chunk_log": CHUNK_LOG,
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
-        _atomic_write_text(mpath, json.dumps(manifest, indent=1, sort_keys=True))
+        _atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True))
     for p in folder.glob(".part-*.tmp"):
         p.unlink(missing_ok=True)
+    log = read_chunk_log(folder)
     done = set()
-    for c in range(defn.n_chunks):
-        p = folder / part_name(c)
-        if p.exists():
-            start, stop = defn.chunk_range(c)
-            try:
-                ok = pq.read_metadata(p).num_rows == stop - start
-            except Exception:
-                ok = False
-            if ok:
-                done.add(c)
+    for c, p in chunk_files(folder).items():
+        if c >= defn.n_chunks:
+            continue
+        start, stop = defn.chunk_range(c)
+        why = verify_chunk(p, log.get(c), stop - start)
+        if why is None:
+            if c not in log:  # adopt a chunk of a folder written before checksums were logged
+                digest, size = file_sha256(p)
+                _append_chunk_log(folder, {"chunk": c, "file": p.name, "rows": stop - start, "bytes": size,
+                                           "sha256": digest})
+            done.add(c)
+        else:
+            warnings.warn(f"scan chunk {str(p)!r} is damaged ({why}): recomputing it", ScanWarning, stacklevel=3)
+            p.unlink(missing_ok=True)
     return done
 
 
 def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
-    """Write chunk ``c`` atomically (temporary name, then rename)."""
-    path = Path(folder) / part_name(c)
+    """Write chunk ``c`` atomically (temporary name, checksum logged, then rename).
+
+    A write that fails (say, on a full disk) leaves no temporary file and
+    raises :class:`~dicetrace.sinks._common.OutputError` naming the chunk;
+    the chunks finished before are kept.
+    """
+    folder = Path(folder)
+    path = folder / part_name(c)
     tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
     try:
         pq.write_table(
@@ -178,11 +349,52 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
             compression="zstd",
             use_dictionary=DICTIONARY_COLUMNS,  # high-cardinality columns gain nothing and cost time
         )
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        digest, size = file_sha256(tmp)
+        _append_chunk_log(folder, {"chunk": c, "file": path.name, "rows": table.num_rows, "bytes": size,
+                                   "sha256": digest})
         os.replace(tmp, path)
+    except OSError as e:
+        if isinstance(e, OutputError):
+            raise
+        reason = os.strerror(e.errno) if e.errno else " ".join(str(e).split())
+        raise OutputError(
+            f"cannot write scan chunk {str(path)!r}: {reason} (the finished chunks are kept: "
+            "free space and re-run the same scan to resume)"
+        ) from None
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        remove_quietly(tmp)
     return path
+
+
+class _FolderLock:
+    """The folder's writer lock (``filelock``); refuses in one line after ``wait`` seconds."""
+
+    def __init__(self, folder: Path, wait: float):
+        from filelock import FileLock
+
+        self.folder, self.wait = folder, wait
+        self.lock = FileLock(str(folder / LOCK), timeout=wait)
+
+    def __enter__(self):
+        from filelock import Timeout
+
+        try:
+            self.lock.acquire()
+        except Timeout:
+            raise ScanBusyError(
+                f"another dicetrace scan is writing into {str(self.folder)!r} (it holds {LOCK}); "
+                f"waited {self.wait:g} s: let it finish (then re-run: finished chunks are skipped), "
+                "or wait for it (--wait SECONDS)"
+            ) from None
+        return self
+
+    def __exit__(self, *exc):
+        self.lock.release()
 
 
 # -- progress ------------------------------------------------------------------------------------
@@ -219,6 +431,7 @@ class _Progress:
             TextColumn("ETA"),
             TimeRemainingColumn(),
             console=Console(stderr=True),
+            transient=True,
         )
         self.bar.start()
         self.task = self.bar.add_task(label, total=total, completed=done, rate="")
@@ -261,56 +474,184 @@ class ScanReport:
     ics_computed: int = 0
 
 
+_SPACES = (Grid, Sample, Points)
+
+
 def _definition(space, config, chunk, options) -> ScanDefinition:
     if isinstance(space, ScanDefinition):
         if config is not None or any(v is not None for v in options.values()):
             raise ValueError("give a ScanDefinition or a space with its configuration, not both")
         return space
+    if not isinstance(space, _SPACES):
+        raise TypeError(
+            f"space must be a Grid, Sample or Points (dicetrace.ics) or a ScanDefinition, not {type(space).__name__}"
+        )
     return ScanDefinition(space, resolve_config(config, **options), chunk)
 
 
-def _open_dask(dask, n_workers):
+def _check_dask(dask) -> None:
+    if dask is None or isinstance(dask, bool) or isinstance(dask, str):
+        if isinstance(dask, str):
+            check_scheduler_address(dask)
+        return
+    try:
+        from dask.distributed import Client
+    except ImportError:  # pragma: no cover
+        Client = ()
+    if not isinstance(dask, Client):
+        raise TypeError(f"dask must be None, True, a scheduler address or a dask.distributed.Client, not {type(dask).__name__}")
+
+
+_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+
+
+def check_scheduler_address(address: str) -> tuple[str, str, int | None]:
+    """(scheme, host, port) of a Dask scheduler address, or ValueError naming it."""
+    if not isinstance(address, str):
+        raise TypeError(f"the scheduler address must be a string, not {type(address).__name__}")
+    text = address.strip()
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    bad = ValueError(f"scheduler address {address!r} is not SCHEME://HOST:PORT (e.g. tcp://127.0.0.1:8786)")
+    if scheme not in _SCHEMES or not rest or any(c.isspace() for c in rest) or "/" in rest:
+        raise bad
+    if scheme == "inproc":
+        return scheme, rest, None
+    if rest.startswith("["):  # [IPv6]:port
+        host, _, port_text = rest[1:].partition("]")
+        port_text = port_text[1:] if port_text.startswith(":") else port_text
+    else:
+        host, _, port_text = rest.rpartition(":") if ":" in rest else (rest, "", "")
+    if not host:
+        raise bad
+    port = None
+    if port_text:
+        if not port_text.isdigit() or not 0 < int(port_text) < 65536:
+            raise bad
+        port = int(port_text)
+    return scheme, host, port
+
+
+def _connect(address: str, timeout: float):
+    """A Client of the scheduler at ``address``, within ``timeout`` seconds, or :class:`SchedulerError`."""
+    import socket
+
+    from dask.distributed import Client
+
+    scheme, host, port = check_scheduler_address(address)
+    deadline = time.monotonic() + timeout
+    if scheme in ("tcp", "tls") and port is not None:
+        try:
+            with socket.create_connection((host, port), timeout=timeout):
+                pass
+        except OSError as e:
+            why = "timed out" if isinstance(e, TimeoutError) else (e.strerror or str(e))
+            raise SchedulerError(
+                f"cannot reach the Dask scheduler at {address!r} within {timeout:g} s: {why}"
+            ) from None
+    last = None
+    for _attempt in range(2):
+        left = deadline - time.monotonic()
+        if left <= 0.5:
+            break
+        try:
+            return _client_within(Client, address, left, timeout)
+        except AssertionError as e:
+            # distributed's handshake can trip when the scheduler is still winding
+            # down another client's futures: try again, within the same deadline.
+            last = e
+            time.sleep(min(0.5, max(0.0, deadline - time.monotonic() - 0.5)))
+        except SchedulerError:
+            raise
+        except OSError as e:
+            raise SchedulerError(
+                f"no answer from the Dask scheduler at {address!r} within {timeout:g} s "
+                f"({' '.join(str(e).split())[:160]})"
+            ) from None
+        except Exception as e:  # noqa: BLE001 - a server that is not a Dask scheduler fails in many ways
+            raise SchedulerError(
+                f"{address!r} does not answer as a Dask scheduler (the handshake failed: "
+                f"{type(e).__name__}: {' '.join(str(e).split())[:160]})"
+            ) from None
+    raise SchedulerError(f"the Dask scheduler at {address!r} did not complete the handshake within {timeout:g} s"
+                         + (f" ({type(last).__name__})" if last is not None else ""))
+
+
+def _client_within(Client, address: str, left: float, timeout: float):
+    """``Client(address)``, given at most ``left`` seconds: distributed's own timeout does not cover a
+    server that accepts the connection and then says nothing, so the handshake runs in a thread."""
+    import threading
+
+    box: dict = {}
+
+    def make() -> None:
+        try:
+            box["client"] = Client(address, timeout=left)
+        except BaseException as e:  # noqa: BLE001 - handed to the caller
+            box["error"] = e
+
+    th = threading.Thread(target=make, name="dicetrace-dask-connect", daemon=True)
+    th.start()
+    th.join(left + 0.5)
+    if th.is_alive():
+        raise SchedulerError(f"no answer from the Dask scheduler at {address!r} within {timeout:g} s "
+                             "(the server accepted the connection but did not complete the handshake)")
+    if "error" in box:
+        raise box["error"]
+    return box["client"]
+
+
+def _open_dask(dask, n_workers, timeout: float = DASK_CONNECT_TIMEOUT_S):
     """(client, closers) for ``dask``: True (a LocalCluster), an address, or a Client."""
     from dask.distributed import Client, LocalCluster
 
     if isinstance(dask, Client):
         return dask, []
     if isinstance(dask, str):
-        # distributed's handshake can trip (an AssertionError in Client) when the
-        # scheduler is still winding down another client's futures: try again once.
-        try:
-            client = Client(dask)
-        except (AssertionError, OSError):
-            time.sleep(1.0)
-            client = Client(dask)
+        client = _connect(dask, timeout)
         return client, [client]
-    cluster = LocalCluster(
-        n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=":0"
-    )
+    try:
+        cluster = LocalCluster(
+            n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=":0"
+        )
+    except Exception as e:  # noqa: BLE001
+        raise SchedulerError(f"could not start a local Dask cluster: {type(e).__name__}: {' '.join(str(e).split())[:160]}") from None
     client = Client(cluster)
     return client, [client, cluster]
 
 
-def _iter_dask(defn: ScanDefinition, todo: list[int], dask, n_workers, threads) -> Iterator[tuple[int, pa.Table]]:
+def _iter_dask(defn: ScanDefinition, todo: Iterable[int], client, threads) -> Iterator[tuple[int, pa.Table]]:
+    """Chunks on a Dask cluster as they complete, with a bounded number of tasks in flight."""
     from dask.distributed import as_completed
 
-    client, closers = _open_dask(dask, n_workers)
-    futures = []
+    d = defn.to_dict()
+    run = uuid.uuid4().hex[:8]
     try:
-        d = defn.to_dict()
-        futures = [
-            client.submit(_chunk_task, d, c, threads or 1, key=f"dicetrace-scan-{uuid.uuid4().hex[:8]}-{c}", pure=False)
-            for c in todo
-        ]
-        for fut in as_completed(futures):
+        width = max(4, 2 * sum(client.nthreads().values()))
+    except Exception:  # noqa: BLE001
+        width = 16
+    it = iter(todo)
+
+    def submit(c):
+        return client.submit(_chunk_task, d, c, threads or 1, key=f"dicetrace-scan-{run}-{c}", pure=False)
+
+    live = {submit(c) for c in itertools.islice(it, width)}
+    try:
+        ac = as_completed(list(live))
+        for fut in ac:
             c, table = fut.result()
+            live.discard(fut)
             fut.release()
+            nxt = next(it, None)
+            if nxt is not None:
+                f2 = submit(nxt)
+                live.add(f2)
+                ac.add(f2)
             yield c, table
     finally:
-        for f in futures:
+        for f in live:
             f.cancel()
-        for x in closers:
-            x.close()
 
 
 def iter_scan(
@@ -331,12 +672,33 @@ def iter_scan(
     restricts the run to those chunk indices.  Arguments as :func:`scan`.
     """
     defn = _definition(space, config, chunk, options)
-    todo = list(range(defn.n_chunks)) if chunks is None else list(chunks)
+    _check_int(threads, "threads", 1)
+    _check_int(n_workers, "n_workers", 1)
+    _check_dask(dask)
+    todo = range(defn.n_chunks) if chunks is None else chunks
     if dask:
-        yield from _iter_dask(defn, todo, dask, n_workers, threads)
+        client, closers = _open_dask(dask, n_workers)
+        try:
+            yield from _iter_dask(defn, todo, client, threads)
+        finally:
+            for x in closers:
+                x.close()
         return
     for c in todo:
         yield c, compute_chunk(defn, c, threads=threads)
+
+
+def _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask) -> None:
+    if out is not None and not isinstance(out, (str, os.PathLike)):
+        raise TypeError(f"out must be a folder path (str or os.PathLike) or None, not {type(out).__name__}")
+    _check_int(threads, "threads", 1)
+    _check_int(n_workers, "n_workers", 1)
+    _check_int(max_chunks, "max_chunks", 0)
+    if isinstance(wait, bool) or not isinstance(wait, (int, float)) or not math.isfinite(wait) or wait < 0:
+        raise ValueError(f"wait must be a finite number of seconds >= 0, got {wait!r}")
+    if not isinstance(progress, bool):
+        raise TypeError(f"progress must be True or False, not {type(progress).__name__}")
+    _check_dask(dask)
 
 
 def scan(
@@ -350,6 +712,7 @@ def scan(
     dask=None,
     n_workers: int | None = None,
     max_chunks: int | None = None,
+    wait: float = 0.0,
     **options,
 ):
     """Throw the die from every IC of an IC space (summaries only).
@@ -362,7 +725,8 @@ def scan(
         are converted to the preset's), or a full :class:`ScanDefinition`.
     out
         A folder: the scan is written there as a Parquet dataset, chunk by
-        chunk, resuming whatever a previous run of the same scan finished.
+        chunk, resuming whatever a previous run of the same scan finished
+        (after verifying those chunks' checksums).
         None: nothing is written and the whole rolls table is returned.
     config, **options
         The configuration: a Config, or the keyword options of
@@ -377,15 +741,36 @@ def scan(
         None: run here.  True: on a new local Dask cluster (``n_workers``
         processes of one thread); a scheduler address or a
         ``dask.distributed.Client``: on that cluster.  Results are identical.
+        An address is connected to (within ``DASK_CONNECT_TIMEOUT_S``)
+        before anything is written.
     max_chunks
-        Compute at most this many chunks in this run (a size knob; the
+        Compute at most this many chunks in this run (>= 0; a size knob; the
         folder stays resumable).
+    wait
+        Seconds to wait for another scan writing into ``out`` (it holds the
+        folder's lock) before refusing with :class:`ScanBusyError`.
 
     Returns
     -------
     pyarrow.Table (``out`` is None: sorted by ``ic_id``) or :class:`ScanReport`.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A bad argument (named), before anything is computed or written.
+    ScanMismatchError, FileExistsError
+        ``out`` holds another scan, or files that are not a scan.
+    ScanBusyError
+        Another scan is writing into ``out``.
+    SchedulerError
+        The Dask scheduler cannot be reached or is not one.
+    dicetrace.sinks._common.OutputError
+        ``out`` cannot be created or written (the message names it); on a
+        full disk the chunks finished so far are kept.
     """
     defn = _definition(space, config, chunk, options)
+    _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask)
+    _check_space_finite(defn)
     t0 = time.perf_counter()
     if out is None:
         tables = [t for _, t in iter_scan(defn, threads=threads, dask=dask, n_workers=n_workers)]
@@ -394,11 +779,35 @@ def scan(
             table = table.sort_by("ic_id")
         return _with_metadata(table, {"dicetrace_version": _version(), "scan": defn.to_dict(),
                                       "config": defn.config.as_dict(), "l_convention": defn.config.preset.l_convention})
-    folder = Path(out)
+    folder = output_folder(out, what="scan folder")
+    if folder.is_dir():
+        _check_manifest(folder, defn)  # refuse another scan's folder at once, without waiting for its lock
+    client, closers = (None, [])
+    if dask:
+        client, closers = _open_dask(dask, n_workers)
+    try:
+        created = make_folders(folder)
+        try:
+            with _FolderLock(folder, float(wait)):
+                return _run_into(folder, defn, created, t0, threads=threads, progress=progress, client=client,
+                                 max_chunks=max_chunks)
+        except BaseException:
+            if created and not (folder / MANIFEST).exists():  # refused before anything was written: leave no folder
+                remove_quietly(folder / LOCK)
+                from dicetrace.sinks._common import remove_folders
+
+                remove_folders(created)
+            raise
+    finally:
+        for x in closers:
+            x.close()
+
+
+def _run_into(folder: Path, defn: ScanDefinition, created, t0: float, *, threads, progress, client, max_chunks):
     done = prepare_folder(folder, defn)
-    todo = [c for c in range(defn.n_chunks) if c not in done]
+    todo: Iterable[int] = (c for c in range(defn.n_chunks) if c not in done)
     if max_chunks is not None:
-        todo = todo[: max(0, int(max_chunks))]
+        todo = itertools.islice(todo, max_chunks)
     ics_done = sum(stop - start for start, stop in map(defn.chunk_range, done))
     bar = _Progress(progress, defn.size, int(ics_done), f"scan {folder.name}")
     computed = 0
@@ -415,16 +824,22 @@ def scan(
             ics_done += rows
             bar.advance(rows, int(ics_done))
 
+    chunks = _iter_dask(defn, todo, client, threads) if client is not None else (
+        (c, compute_chunk(defn, c, threads=threads)) for c in todo
+    )
     try:
         # A writer thread encodes and writes chunk c while the kernel (which
         # releases the GIL) computes chunk c+1.  On an interrupt the chunks
         # already computed are still written (the pool's exit waits for them).
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="dicetrace-scan-writer") as writer:
-            for c, table in iter_scan(defn, chunks=todo, threads=threads, dask=dask, n_workers=n_workers):
+            for c, table in chunks:
                 pending.append((writer.submit(write_chunk, folder, defn, c, table), table.num_rows))
                 settle(block=len(pending) > 1)
             settle(block=True)
     finally:
+        close = getattr(chunks, "close", None)
+        if close is not None:
+            close()
         bar.close()
     return ScanReport(
         path=folder,
@@ -435,3 +850,117 @@ def scan(
         wall_s=time.perf_counter() - t0,
         ics_computed=ics_now,
     )
+
+
+# -- estimating -------------------------------------------------------------------------------
+
+
+#: Calibration: ICs sampled across the space, and the steps each may take.
+CALIBRATION_ICS = 48
+CALIBRATION_STEPS = 20_000
+#: Slowest step of any integrator, s (a pessimistic bound used to skip calibrating tiny scans).
+SLOWEST_STEP_S = 2e-6
+
+
+@dataclass(frozen=True)
+class ScanEstimate:
+    """What a scan run would cost, before it starts (:func:`estimate_scan`).
+
+    ``seconds`` is the estimated wall time of this run on ``threads``
+    threads (None when the run is too small to be worth timing: at most
+    ``seconds_bound``); ``upper`` says the estimate assumes that the sampled
+    throws which had not ended within the calibration's steps run to the
+    time cap.  ``bytes`` is the estimated size on disk of the new chunks.
+    """
+
+    n_ics: int
+    n_chunks: int
+    chunks_todo: int
+    ics_todo: int
+    bytes: int
+    free_bytes: int | None
+    chunk_memory: int
+    threads: int
+    seconds: float | None
+    seconds_bound: float
+    upper: bool = False
+
+    def describe(self) -> str:
+        t = self.seconds if self.seconds is not None else self.seconds_bound
+        when = f"{'at most ' if self.seconds is None or self.upper else 'about '}{human_seconds(t)}"
+        free = "" if self.free_bytes is None else f", {human_bytes(self.free_bytes)} free"
+        return (f"{self.ics_todo:,} ICs in {self.chunks_todo:,} chunks to compute (of {self.n_ics:,}): "
+                f"{when} on {self.threads} thread(s), about {human_bytes(self.bytes)} on disk{free}")
+
+
+def human_seconds(s: float) -> str:
+    if s < 90:
+        return f"{s:.0f} s"
+    if s < 5400:
+        return f"{s / 60:.0f} min"
+    if s < 2 * 86400:
+        return f"{s / 3600:.1f} h"
+    if s < 2 * 365 * 86400:
+        return f"{s / 86400:.0f} days"
+    return f"{s / (365.25 * 86400):.3g} years"
+
+
+def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None, max_chunks: int | None = None,
+                  calibrate: bool = True) -> ScanEstimate:
+    """Estimate a scan run (time, disk, memory per chunk) before starting it.
+
+    Counts the chunks ``out`` already holds (by name; nothing is verified or
+    written), then, unless the run is certainly short, times up to
+    ``CALIBRATION_ICS`` ICs spread over the space with the scan's
+    configuration, each limited to ``CALIBRATION_STEPS`` steps (a throw not
+    ended by then is counted at the full time cap: the estimate is then an
+    upper one).
+    """
+    import numba
+
+    if not isinstance(defn, ScanDefinition):
+        raise TypeError(f"defn must be a ScanDefinition, not {type(defn).__name__}")
+    _check_int(threads, "threads", 1)
+    _check_int(max_chunks, "max_chunks", 0)
+    n_done = 0
+    if out is not None and Path(out).is_dir() and (Path(out) / MANIFEST).exists():
+        n_done = sum(1 for c in chunk_files(out) if c < defn.n_chunks)
+    chunks_todo = defn.n_chunks - n_done
+    if max_chunks is not None:
+        chunks_todo = min(chunks_todo, max_chunks)
+    ics_todo = min(defn.size, chunks_todo * defn.chunk)  # at most: the last chunk may be short
+    nthreads = threads or numba.get_num_threads()
+    max_steps = defn.config.numerics.max_steps
+    bound = ics_todo * max_steps * SLOWEST_STEP_S / nthreads
+    free = free_bytes(_existing_parent(Path(out) if out is not None else Path.cwd()))
+    est = ScanEstimate(
+        n_ics=defn.size, n_chunks=defn.n_chunks, chunks_todo=chunks_todo, ics_todo=ics_todo,
+        bytes=ics_todo * BYTES_PER_IC + chunks_todo * BYTES_PER_CHUNK, free_bytes=free, chunk_memory=min(defn.chunk, defn.size) * MEMORY_PER_IC,
+        threads=nthreads, seconds=None, seconds_bound=bound,
+    )
+    if not calibrate or bound <= 30.0 or ics_todo == 0:
+        return est
+    n = min(CALIBRATION_ICS, defn.size)
+    ids = sorted({int(round(v)) for v in np.linspace(0, defn.size - 1, n)})
+    ics = np.concatenate([defn.space.block(i, i + 1).ics for i in ids]).reshape(-1, 6)
+    num = defn.config.numerics
+    cal_steps = min(max_steps, CALIBRATION_STEPS)
+    cal = replace(defn.config, numerics=replace(num, t_max_s=min(num.t_max_s, cal_steps * num.dt_s)))
+    conv = defn.space.slice.l_convention
+    simulate_batch(ics[:1], config=replace(cal, numerics=replace(num, t_max_s=num.dt_s)), l_convention=conv,
+                   threads=1)  # load the compiled kernel before timing
+    t = time.perf_counter()
+    res = simulate_batch(ics, config=cal, l_convention=conv, threads=1)
+    wall = time.perf_counter() - t
+    steps = res.steps.astype(np.float64)
+    capped = (steps >= cal.numerics.max_steps) & (cal.numerics.max_steps < max_steps)
+    full = np.where(capped, float(max_steps), steps)
+    per_ic = wall / len(ids) * (full.sum() / max(steps.sum(), 1.0))
+    return replace(est, seconds=ics_todo * per_ic / nthreads, upper=bool(capped.any()))
+
+
+def _existing_parent(p: Path) -> Path:
+    p = p.absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
