@@ -1,4 +1,12 @@
-"""Shared CLI plumbing: one-line errors with exit code 2, IC parsing, atomic writes."""
+"""Shared CLI plumbing: one-line errors with exit code 2, IC parsing, checked outputs.
+
+Every failure a user can cause ends as exactly one line on stderr,
+``dicetrace: error: ...`` naming the option or path, with exit code 2, and
+nothing written.  Warnings of the libraries underneath are held back while
+a command runs: printed (one line each) when it succeeds, dropped when it
+fails (the error line says what went wrong).  dicetrace's own notices
+(a damaged scan chunk recomputed) are printed at once.
+"""
 
 from __future__ import annotations
 
@@ -6,12 +14,16 @@ import contextlib
 import math
 import os
 import sys
-import tempfile
+import warnings
 from pathlib import Path
 
 import typer
 
 EXIT_BAD_INPUT = 2
+EXIT_INTERNAL = 70  # EX_SOFTWARE: a defect, not the user's input
+
+#: Set to 1 to let an unexpected exception through with its traceback (for reporting a defect).
+DEBUG_ENV = "DICETRACE_DEBUG"
 
 
 class BadInput(Exception):
@@ -21,6 +33,11 @@ class BadInput(Exception):
 def fail(message: str) -> None:
     """Raise :class:`BadInput` (caught by :func:`run_app`)."""
     raise BadInput(message)
+
+
+def one_line(text) -> str:
+    """``text`` as one line (line breaks become spaces)."""
+    return " ".join(str(text).replace("\r", "\n").split("\n")).strip()
 
 
 def _click_exceptions():
@@ -39,31 +56,94 @@ def _click_exceptions():
     return tuple(usage), tuple(cexc), tuple(exits)
 
 
-def run_app(app: typer.Typer) -> None:
-    """Run the typer app; bad input → ``dicetrace: error: ...`` and exit 2."""
-    usage, cexc, exits = _click_exceptions()
+def _immediate(category) -> bool:
+    """dicetrace's own notices are shown as they happen."""
     try:
-        rc = app(standalone_mode=False)
-    except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate
-        print(f"dicetrace: error: {e}", file=sys.stderr)
-        sys.exit(EXIT_BAD_INPUT)
-    except usage as e:
-        if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed
-            sys.exit(0)
-        print(f"dicetrace: error: {e.format_message()}", file=sys.stderr)
-        sys.exit(EXIT_BAD_INPUT)
-    except exits as e:
-        sys.exit(getattr(e, "exit_code", 0))
-    except cexc as e:
-        print(f"dicetrace: error: {e.format_message()}", file=sys.stderr)
-        sys.exit(getattr(e, "exit_code", 1) or 1)
-    except (typer.Abort, KeyboardInterrupt):
-        print("dicetrace: interrupted", file=sys.stderr)
-        sys.exit(130)
-    except OSError as e:
-        where = f": {e.filename}" if e.filename else ""
-        print(f"dicetrace: error: {e.strerror or e}{where}", file=sys.stderr)
-        sys.exit(EXIT_BAD_INPUT)
+        from dicetrace.scan.runner import ScanWarning
+    except ImportError:  # pragma: no cover
+        return False
+    return issubclass(category, ScanWarning)
+
+
+def _print_err(line: str) -> None:
+    if sys.stderr is not None:
+        try:
+            print(line, file=sys.stderr, flush=True)
+        except (OSError, ValueError):
+            pass
+
+
+def _silence_stdout() -> None:
+    """After a failed write to stdout: point fd 1 at /dev/null so that the interpreter's exit flush is quiet."""
+    with contextlib.suppress(Exception):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+        os.close(devnull)
+
+
+def _flush_stdout() -> None:
+    if sys.stdout is not None:
+        sys.stdout.flush()
+
+
+def run_app(app: typer.Typer) -> None:
+    """Run the typer app; bad input → ``dicetrace: error: ...`` (one line) and exit 2."""
+    usage, cexc, exits = _click_exceptions()
+    held: list[str] = []
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = f"dicetrace: warning: {one_line(message)}"
+        if _immediate(category):
+            _print_err(text)
+        elif text not in held:
+            held.append(text)
+
+    def error(msg, code=EXIT_BAD_INPUT):
+        with contextlib.suppress(Exception):
+            _flush_stdout()
+        _print_err(f"dicetrace: error: {one_line(msg)}")
+        sys.exit(code)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        warnings.showwarning = show
+        try:
+            rc = app(standalone_mode=False)
+            try:
+                _flush_stdout()
+            except OSError as e:  # stdout is a full device, a closed pipe, ...
+                _silence_stdout()
+                raise BadInput(f"cannot write standard output: {e.strerror or e}") from None
+        except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate (and OutputError)
+            error(e)
+        except usage as e:
+            if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed
+                sys.exit(0)
+            error(e.format_message())
+        except exits as e:
+            sys.exit(getattr(e, "exit_code", 0))
+        except cexc as e:
+            error(e.format_message(), getattr(e, "exit_code", 1) or 1)
+        except (typer.Abort, KeyboardInterrupt):
+            _print_err("dicetrace: interrupted")
+            sys.exit(130)
+        except OSError as e:
+            if isinstance(e, BrokenPipeError):
+                _silence_stdout()
+                error(f"cannot write standard output: {e.strerror or e}")
+            where = f": {e.filename}" if e.filename else ""
+            error(f"{e.strerror or e}{where}")
+        except MemoryError as e:
+            error(f"out of memory{': ' + str(e) if str(e) else ''}: use a smaller input (fewer ICs, a larger --dt, a shorter --t-max)")
+        except SystemExit:
+            raise
+        except Exception as e:  # a defect: one line, and the way to see its traceback
+            if os.environ.get(DEBUG_ENV):
+                raise
+            error(f"internal error ({type(e).__name__}: {one_line(e)[:300]}); run with {DEBUG_ENV}=1 for the "
+                  "traceback and please report it", EXIT_INTERNAL)
+    for text in held:
+        _print_err(text)
     sys.exit(rc if isinstance(rc, int) else 0)
 
 
@@ -82,38 +162,46 @@ def parse_floats(text: str, n: int | None, what: str) -> list[float]:
     return vals
 
 
-def check_writable_file(path: Path) -> Path:
-    """Fail (exit 2) unless ``path``'s folder exists or can be made, and is writable."""
-    path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
+def output_file(path, option: str, *, suffix: str | None = None, allow_stdout: bool = True, expected_bytes=None):
+    """The checked :class:`~dicetrace.sinks._common.Destination` of an output option, or a one-line failure.
+
+    Checked before any work: the folder exists or can be made and is
+    writable (probed), the path is no folder, ``suffix`` is there for a
+    regular file; a character device, a FIFO or ``-`` (standard output)
+    are written directly.  Nothing is created.
+    """
+    from dicetrace.sinks._common import OutputError, destination
+
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        fail(f"cannot create output folder {str(parent)!r}: {e.strerror}")
-    if path.is_dir():
-        fail(f"output path {str(path)!r} is a folder, expected a file")
-    if not os.access(parent, os.W_OK):
-        fail(f"output folder {str(parent)!r} is not writable")
-    return path
+        return destination(path, what=option, suffix=suffix, allow_stdout=allow_stdout, expected_bytes=expected_bytes)
+    except OutputError as e:
+        fail(str(e))
+
+
+def output_dir(path, option: str, *, expected_bytes=None) -> Path:
+    """An output folder option checked before any work (exists or can be made; writable), or a one-line failure."""
+    from dicetrace.sinks._common import OutputError, output_folder
+
+    try:
+        return output_folder(path, what=option, expected_bytes=expected_bytes)
+    except OutputError as e:
+        fail(str(e))
+
+
+def check_writable_file(path: Path) -> Path:
+    """Fail (exit 2) unless ``path`` can be written (see :func:`output_file`); nothing is created."""
+    output_file(path, "output", allow_stdout=False)
+    return Path(path)
 
 
 @contextlib.contextmanager
 def atomic_path(path: Path):
-    """Yield a temporary path beside ``path``; rename it over ``path`` on success only.
+    """Yield a temporary path for ``path``; put it in place on success only (see ``dicetrace.sinks._common.staged``).
 
     Nothing is left behind on failure, and an existing file is untouched
     until the new one is complete.
     """
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    tmp = Path(tmp)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual mode
-    try:
+    from dicetrace.sinks._common import staged
+
+    with staged(path) as tmp:
         yield tmp
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()

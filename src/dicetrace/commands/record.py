@@ -26,7 +26,7 @@ import typer
 
 import numpy as np
 
-from dicetrace.commands._common import fail, parse_floats
+from dicetrace.commands._common import fail, output_dir, parse_floats
 from dicetrace.commands.simulate import (
     AT_HELP,
     DT_HELP,
@@ -77,16 +77,38 @@ def ic_label(ic, coords, desc: dict) -> str:
 
 
 def check_output_folder(path: Path) -> Path:
-    """Fail (exit 2) unless ``path`` is, or can be made, a writable folder."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        fail(f"--parquet {str(path)!r} exists and is not a folder")
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        fail(f"cannot create folder {str(path)!r}: {e.strerror}")
-    check_output_file(path / "rolls.parquet")
+    """Fail (exit 2) unless ``path`` is, or can be made, a writable folder whose table files can be written.
+
+    Nothing is created: the folder is made when the tables are written.
+    """
+    path = output_dir(path, "--parquet")
+    for name in ("rolls", "contacts", "trajectory"):
+        dest = check_output_file(path / f"{name}.parquet", "--parquet")
+        if dest.kind != "file":
+            fail(f"--parquet {str(path)!r}: {name}.parquet is not a regular file")
     return path
+
+
+#: Peak memory of ``record`` per step of the throw, in units of its trace arrays (the trace, the
+#: recording's per-step arrays while logging, the encoded recording).
+RECORD_MEMORY_FACTOR = 8.0
+
+
+def check_record_size(cfg) -> None:
+    """Refuse, before running, a throw whose recording could exceed the available memory.
+
+    The worst case is a throw that runs to the time cap: max_steps + 1 rows.
+    """
+    from dicetrace.simulate import Record, available_memory, trace_bytes
+    from dicetrace.sinks._common import human_bytes
+
+    steps = cfg.numerics.max_steps
+    need = trace_bytes(steps + 1, Record(states=True, energy=True)) * RECORD_MEMORY_FACTOR
+    avail = available_memory()
+    if avail is not None and need > avail:
+        fail(f"--dt {fmt_num(cfg.numerics.dt_s)} / --t-max {fmt_num(cfg.numerics.t_max_s)}: a throw may run to the "
+             f"time cap, {steps:,} steps, whose recording needs up to {human_bytes(need)} of memory, more than the "
+             f"{human_bytes(avail)} available: use a larger --dt or a shorter --t-max")
 
 
 def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
@@ -109,7 +131,7 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
         the_ic, cfg, row = ic_at(folder, coords)
         slice_name = scan_definition(folder).space.slice.name
     except (ValueError, KeyError, OSError) as e:
-        fail(f"--scan {str(folder)!r}: {e}")
+        fail(f"--scan {str(folder)!r} --at {at}: {e}")
     ndim = len(coords)
     exact = np.array([row[a] for a in "xyz"[:ndim]], dtype=np.float64)
     desc = {"kind": "scan", "slice": slice_name, "scan": str(folder), "ic_id": int(row["ic_id"])}
@@ -131,7 +153,8 @@ def register(app: typer.Typer) -> None:
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
         out: Optional[Path] = typer.Option(
-            None, "--out", help="Output .rrd file (default: recordings/<name>.rrd, the name encoding the IC)."
+            None, "--out", help="Output .rrd file (default: recordings/<name>.rrd, the name encoding the IC); "
+            "a character device or FIFO is written directly, '-' is standard output."
         ),
         parquet: Optional[Path] = typer.Option(
             None, "--parquet", help="Also write rolls.parquet, contacts.parquet and trajectory.parquet into this folder."
@@ -154,35 +177,46 @@ def register(app: typer.Typer) -> None:
         name = default_name(the_ic, coords, desc, cfg)
         if out is None:
             out = DEFAULT_FOLDER / f"{name}.rrd"
-        if out.suffix != ".rrd":
-            fail(f"--out {str(out)!r} must end in .rrd")
-        check_output_file(out)
+        dest = check_output_file(out, "--out", suffix=".rrd")
         if parquet is not None:
             check_output_folder(parquet)
+        check_record_size(cfg)
 
         from dicetrace.simulate import Record, simulate
 
         roll = simulate(the_ic, config=cfg, record=Record(states=True, energy=True))
         label = ic_label(the_ic, coords, desc)
 
-        from dicetrace.sinks.rerun import write_rrd
+        from dicetrace.sinks._common import Staging
+        from dicetrace.sinks.rerun import encode_rrd_of
 
-        write_rrd(roll, out, name=name, ic_label=label)
-        written = [str(out)]
-        if parquet is not None:
-            from dicetrace.sinks.parquet import write_tables
+        # Everything is staged first and put in place together: a failure (a full
+        # disk) leaves neither a half-written file nor a recording without its tables.
+        with Staging() as staging:
+            data = encode_rrd_of(roll, name=name, ic_label=label)
+            tmp = staging.path(dest)
+            try:
+                tmp.write_bytes(data)
+            except OSError as e:
+                raise staging.fail(dest, e) from None
+            written = [dest.label if dest.kind == "stdout" else str(out)]
+            if parquet is not None:
+                from dicetrace.sinks.parquet import write_tables
 
-            meta = {"ic_label": label, **{k: v for k, v in desc.items() if k != "kind"}}
-            ids = [desc["ic_id"]] if "ic_id" in desc else None
-            coords2 = None if coords is None else coords[None, :]
-            paths = write_tables(parquet, roll, coords=coords2, ic_ids=ids, metadata=meta)
-            written.append(f"{parquet}{os.sep} ({', '.join(p.name for p in paths.values())})")
+                meta = {"ic_label": label, **{k: v for k, v in desc.items() if k != "kind"}}
+                ids = [desc["ic_id"]] if "ic_id" in desc else None
+                coords2 = None if coords is None else coords[None, :]
+                paths = write_tables(parquet, roll, coords=coords2, ic_ids=ids, metadata=meta, staging=staging)
+                written.append(f"{parquet}{os.sep} ({', '.join(p.name for p in paths.values())})")
 
         outcome = roll.outcome if roll.outcome >= 0 else "-1 (not settled)"
-        print(
+        summary = (
             f"outcome {outcome}  status {roll.status}  steps {roll.steps}  t_settle_s {roll.t_settle_s:.6g}  "
             f"contact_sequence {roll.contact_sequence}  wrote {' '.join(written)}"
         )
+        # the recording itself may be on stdout: the summary then goes to stderr
+        stream = sys.stderr if dest.kind == "stdout" or sys.stdout is None else sys.stdout
+        print(summary, file=stream)
         if roll.status.failed:
             print(
                 f"dicetrace: numerical failure: status {roll.status} after {roll.steps} steps "

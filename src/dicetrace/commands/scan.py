@@ -15,8 +15,15 @@ written chunk by chunk: re-running the same command resumes; a different
 definition against the folder is refused.  ``--png`` draws the outcome map,
 ``--rrd`` writes the interactive scan map for the Rerun viewer.
 
-Exit codes: 0 done; 2 bad input (or a folder holding another scan); 130
-interrupted (re-run to resume).
+Every option and output (``--out``, ``--png``, ``--rrd``) is checked before
+any work; a large run says its estimated time and disk first, refuses what
+the disk cannot hold, and asks for ``--yes`` beyond
+``MAX_UNCONFIRMED_S``.  One writer per folder: a second scan into a folder
+being written waits ``--wait`` seconds for it, then refuses.
+
+Exit codes: 0 done; 1 with ``--strict`` when an IC ended in a numerical
+failure (non_finite, blow_up); 2 bad input (or a folder holding another
+scan, or being written by one); 130 interrupted (re-run to resume).
 """
 
 from __future__ import annotations
@@ -29,8 +36,8 @@ from typing import List, Optional
 import numpy as np
 import typer
 
-from dicetrace.commands._common import fail, parse_floats
-from dicetrace.commands.simulate import INTEGRATOR_HELP, TOL_HELP
+from dicetrace.commands._common import fail, output_dir, output_file, parse_floats
+from dicetrace.commands.simulate import EXIT_NUMERICAL_FAILURE, INTEGRATOR_HELP, TOL_HELP, fmt_num
 
 SLICE_HELP = "Slice of IC space: seed (the writeup's 2-D), seed3 (3-D), seed-ortho, seed3-ortho (Gram–Schmidt)."
 WINDOW_HELP = (
@@ -38,6 +45,11 @@ WINDOW_HELP = (
     "or x0,x1,y0,y1[,z0,z1]."
 )
 RES_HELP = "Grid points per axis: N (every axis), NX,NY or NX,NY,NZ (the program's formula x0+(p-1)/(n-1)(x1-x0))."
+#: A run estimated to take longer than this (s) needs --yes.
+MAX_UNCONFIRMED_S = 3600.0
+#: A run estimated to take longer than this (s), or to write more than LARGE_SCAN_BYTES, says so first.
+LARGE_SCAN_S = 60.0
+LARGE_SCAN_BYTES = 1 << 30
 
 
 def _parse_res(text: str, ndim: int) -> tuple[int, ...]:
@@ -46,6 +58,8 @@ def _parse_res(text: str, ndim: int) -> tuple[int, ...]:
         vals = [int(p) for p in parts]
     except ValueError:
         fail(f"--res must be integers N or NX,NY[,NZ], got {text!r}")
+    if any(v > 10**30 for v in vals):
+        fail(f"--res {text!r}: far too many points")
     if len(vals) == 1:
         vals = vals * ndim
     if len(vals) != ndim:
@@ -87,37 +101,64 @@ def build_slice(slice_name: str, origin: Optional[str], dirs: Optional[List[str]
         try:
             return Slice("custom", tuple(o), tuple(tuple(d) for d in ds))
         except ValueError as e:
-            fail(str(e))
+            fail(f"--dir: {e}")
     if slice_name not in SLICES:
-        fail(f"unknown slice {slice_name!r} (choose from {', '.join(SLICES)})")
+        fail(f"--slice: unknown slice {slice_name!r} (choose from {', '.join(SLICES)})")
     return SLICES[slice_name]
 
 
+def _window(text: str, option: str, ndim: int, z: Optional[str]):
+    """Window ranges of ``--window``/``--box`` (with ``--z``), or a one-line failure naming the option."""
+    from dicetrace.ics import get_window
+
+    zr = parse_floats(z, 2, "--z") if z is not None else None
+    try:
+        return get_window(text, ndim, zr)
+    except ValueError as e:
+        msg = str(e)
+        opt = "--z" if ("z range" in msg and zr is None) or (zr is not None and "z range" in msg) else option
+        fail(f"{opt}: {msg}" + ("" if repr(text) in msg or opt == "--z" else f" (got {text!r})"))
+
+
 def build_space(sl, window, z, res, sample, n, box, seed, points):
-    """The IC space from the options (grid, sample or points), or a one-line failure."""
-    from dicetrace.ics import Grid, Points, Sample, get_window
+    """The IC space from the options (grid, sample or points), or a one-line failure naming the option."""
+    from dicetrace.ics import SAMPLE_METHODS, Grid, Points, Sample
 
     given = [name for name, v in (("--window/--res", window or res), ("--sample", sample), ("--points", points)) if v]
     if len(given) > 1:
         fail(f"give one IC space: {' or '.join(given)}, not several")
-    try:
-        if points is not None:
+    if points is not None:
+        try:
             return Points(sl, _read_points(points, sl.ndim))
-        if sample is not None:
-            if n is None:
-                fail("--sample needs --n N (how many ICs)")
-            if box is None:
-                fail("--sample needs --box x0,x1,y0,y1[,z0,z1] (or a window name)")
-            zr = parse_floats(z, 2, "--z") if z is not None else None
-            return Sample(sl, get_window(box, sl.ndim, zr), n, sample, seed)
-        if window is None:
-            fail("give --window NAME or x0,x1,y0,y1[,z0,z1] (with --res), or --sample, or --points")
-        if res is None:
-            fail("--window needs --res N (points per axis), e.g. --res 400 or --res 200,200,50")
-        zr = parse_floats(z, 2, "--z") if z is not None else None
-        return Grid(sl, get_window(window, sl.ndim, zr), _parse_res(res, sl.ndim))
+        except ValueError as e:
+            fail(f"--points {str(points)!r}: {e}")
+    if sample is not None:
+        if sample not in SAMPLE_METHODS:
+            fail(f"--sample: unknown sample method {sample!r} (choose from {', '.join(SAMPLE_METHODS)})")
+        if n is None:
+            fail("--sample needs --n N (how many ICs)")
+        if box is None:
+            fail("--sample needs --box x0,x1,y0,y1[,z0,z1] (or a window name)")
+        if n < 1:
+            fail(f"--n: the sample size must be >= 1, got {n}")
+        if seed < 0:
+            fail(f"--seed must be an integer >= 0, got {seed}")
+        rng = _window(box, "--box", sl.ndim, z)
+        try:
+            return Sample(sl, rng, n, sample, seed)
+        except ValueError as e:
+            msg = str(e)
+            fail(f"{'--seed' if 'seed' in msg else '--n'}: {msg}")
+    if window is None:
+        fail("give --window NAME or x0,x1,y0,y1[,z0,z1] (with --res), or --sample, or --points")
+    if res is None:
+        fail("--window needs --res N (points per axis), e.g. --res 400 or --res 200,200,50")
+    rng = _window(window, "--window", sl.ndim, z)
+    shape = _parse_res(res, sl.ndim)
+    try:
+        return Grid(sl, rng, shape)
     except ValueError as e:
-        fail(str(e))
+        fail(f"--res {res}: {e}")
 
 
 def parse_overrides(preset_name: str, items: List[str]) -> dict:
@@ -163,6 +204,53 @@ def _existing_chunk(out: Path) -> int | None:
         return None
 
 
+def _status_summary(out: Path, quiet: bool) -> bool:
+    """Print the outcome and status counts of a finished scan (the failure line even when quiet); True if any IC failed."""
+    from dicetrace.scan.read import outcome_counts, status_counts
+    from dicetrace.status import Status
+
+    statuses = status_counts(out)
+    total = sum(statuses.values())
+    if not total:
+        return False
+    if not quiet:
+        counts = outcome_counts(out)
+        names = {-1: "not settled", 0: "undefined"}
+        parts = [f"{names.get(v, f'face {v}')}: {c / total:.1%}" for v, c in counts.items()]
+        print("outcomes: " + ", ".join(parts), file=sys.stderr)
+        print("statuses: " + ", ".join(f"{k}: {c:,} ({c / total:.1%})" for k, c in
+                                       sorted(statuses.items(), key=lambda kv: -kv[1])), file=sys.stderr)
+    failed = {k: c for k, c in statuses.items() if Status.from_label(k).failed}
+    if failed:
+        first = Status.from_label(max(failed, key=failed.get))
+        detail = ", ".join(f"{k}: {c:,}" for k, c in sorted(failed.items()))
+        print(f"dicetrace: numerical failure: {sum(failed.values()):,} of {total:,} ICs failed ({detail}): "
+              f"{first.advice}", file=sys.stderr)
+    return bool(failed)
+
+
+def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers) -> None:
+    """Estimate the run; refuse what the disk cannot hold or (without --yes) what takes too long; say it when large."""
+    from dicetrace.scan.runner import estimate_scan
+    from dicetrace.scan.runner import human_seconds
+    from dicetrace.simulate import available_memory
+    from dicetrace.sinks._common import human_bytes
+
+    est = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
+    avail = available_memory()
+    if avail is not None and est.chunk_memory * 2 > avail:
+        fail(f"--chunk {defn.chunk:,}: one chunk needs about {human_bytes(est.chunk_memory)} of memory, "
+             f"{human_bytes(avail)} available: use a smaller --chunk")
+    if est.free_bytes is not None and est.bytes > est.free_bytes:
+        fail(f"--out {str(out)!r}: this run writes about {human_bytes(est.bytes)} ({est.ics_todo:,} ICs), "
+             f"only {human_bytes(est.free_bytes)} free there: free space, or scan in parts with --max-chunks N")
+    if est.seconds is not None and est.seconds > MAX_UNCONFIRMED_S and not yes:
+        fail(f"this scan would take {est.describe()}, more than {human_seconds(MAX_UNCONFIRMED_S)}: "
+             "confirm with --yes, or scan in parts with --max-chunks N (re-run to resume)")
+    if not quiet and ((est.seconds or 0) > LARGE_SCAN_S or est.bytes > LARGE_SCAN_BYTES):
+        print(f"dicetrace: scan: {est.describe()}", file=sys.stderr)
+
+
 def register(app: typer.Typer) -> None:
     @app.command("scan")
     def scan_cmd(
@@ -192,13 +280,22 @@ def register(app: typer.Typer) -> None:
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the chunks on the Dask scheduler at ADDRESS."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes of the --dask cluster (default: cores)."),
         max_chunks: Optional[int] = typer.Option(None, "--max-chunks", help="Stop after this many new chunks (resumable)."),
-        rrd: Optional[Path] = typer.Option(None, "--rrd", help="Also write the scan map for the Rerun viewer (.rrd)."),
-        png: Optional[Path] = typer.Option(None, "--png", help="Also draw the outcome map (2-D grid scans) into a PNG."),
+        rrd: Optional[Path] = typer.Option(None, "--rrd", help="Also write the scan map for the Rerun viewer (.rrd; "
+                                           "a device or FIFO directly; '-': stdout)."),
+        png: Optional[Path] = typer.Option(None, "--png", help="Also draw the outcome map (2-D grid scans) into a PNG "
+                                           "(.png; a device or FIFO directly; '-': stdout)."),
+        wait: float = typer.Option(0.0, "--wait", help="Seconds to wait for another scan writing into --out (default 0: refuse at once)."),
+        yes: bool = typer.Option(False, "--yes", "-y", help=f"Run even when estimated to take over {MAX_UNCONFIRMED_S / 3600:g} h."),
+        strict: bool = typer.Option(False, "--strict", help="Exit 1 when any IC ends in a numerical failure (non_finite, blow_up)."),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
     ) -> None:
         """Scan a slice (grid), a sample or a list of points of IC space; one row per IC."""
+        import math
+
         from dicetrace.commands.simulate import build_config
-        from dicetrace.scan import DEFAULT_CHUNK, ScanDefinition, ScanMismatchError, outcome_counts, scan
+        from dicetrace.scan import DEFAULT_CHUNK, ScanDefinition, ScanMismatchError, scan
+        from dicetrace.scan.runner import SchedulerError, ScanBusyError
+        from dicetrace.scan.runner import _check_manifest, check_scheduler_address
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
@@ -207,49 +304,77 @@ def register(app: typer.Typer) -> None:
             fail(f"--chunk must be >= 1, got {chunk}")
         if threads is not None and threads < 1:
             fail(f"--threads must be >= 1, got {threads}")
+        if workers is not None and workers < 1:
+            fail(f"--workers must be >= 1, got {workers}")
+        if max_chunks is not None and max_chunks < 0:
+            fail(f"--max-chunks must be >= 0, got {max_chunks}")
+        if not math.isfinite(wait) or wait < 0:
+            fail(f"--wait must be a number of seconds >= 0, got {fmt_num(wait)}")
         if dask and scheduler:
             fail("give --dask (a local cluster) or --scheduler ADDRESS, not both")
+        if workers is not None and not dask:
+            fail("--workers sets the size of the --dask cluster: add --dask")
+        if scheduler is not None:
+            try:
+                check_scheduler_address(scheduler)
+            except ValueError as e:
+                fail(f"--scheduler: {e}")
         if png is not None and (space.kind != "grid" or space.ndim < 2):
             fail("--png draws 2-D and 3-D grid scans only (use --rrd for samples, points and 1-D slices)")
+        # every output is checked before any work
+        out_dir = output_dir(out, "--out")
+        png_dest = output_file(png, "--png", suffix=".png") if png is not None else None
+        rrd_dest = output_file(rrd, "--rrd", suffix=".rrd") if rrd is not None else None
+        if png_dest is not None and rrd_dest is not None and png_dest.kind == rrd_dest.kind == "stdout":
+            fail("--png - and --rrd -: only one output can go to standard output")
         if chunk is None:  # resuming: keep the folder's chunk size
             chunk = _existing_chunk(out) or DEFAULT_CHUNK
-        defn = ScanDefinition(space, cfg, chunk)
-        if out.exists() and not out.is_dir():
-            fail(f"--out {str(out)!r} is a file, expected a folder")
+        try:
+            defn = ScanDefinition(space, cfg, chunk)
+        except ValueError as e:
+            opt = "--chunk" if "chunk" in str(e) else {"grid": f"--res {res}", "sample": "--n"}.get(space.kind, "--points")
+            fail(f"{opt}: {e}")
+        try:
+            if out_dir.is_dir():
+                _check_manifest(out_dir, defn)
+        except ScanMismatchError as e:
+            fail(str(e))
+        _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None)
         try:
             report = scan(
-                defn, out, threads=threads, progress=not quiet,
-                dask=scheduler or (True if dask else None), n_workers=workers, max_chunks=max_chunks,
+                defn, out_dir, threads=threads, progress=not quiet and sys.stderr.isatty(),
+                dask=scheduler or (True if dask else None), n_workers=workers, max_chunks=max_chunks, wait=wait,
             )
-        except (ScanMismatchError, FileExistsError) as e:
+        except (ScanMismatchError, FileExistsError, ScanBusyError) as e:
             fail(str(e))
+        except SchedulerError as e:
+            fail(f"--scheduler {scheduler}: {e}" if scheduler else f"--dask: {e}")
         except KeyboardInterrupt:
             print(f"dicetrace: interrupted; finished chunks are kept in {str(out)!r}: re-run the same command to resume",
                   file=sys.stderr)
             raise
+        done = report.chunks_skipped + report.chunks_computed
         if not quiet:
-            done = report.chunks_skipped + report.chunks_computed
-            msg = (f"{report.n_ics:,} ICs in {report.n_chunks} chunks → {out}  "
-                   f"({report.chunks_computed} computed, {report.chunks_skipped} already there; "
+            msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out}  "
+                   f"({report.chunks_computed:,} computed, {report.chunks_skipped:,} already there; "
                    f"{report.ics_computed:,} ICs in {report.wall_s:.1f} s, {report.rate_ics_s:,.0f} ICs/s)")
             print(msg, file=sys.stderr)
             if done < report.n_chunks:
-                print(f"{report.n_chunks - done} chunks left: re-run the same command to finish", file=sys.stderr)
-            else:
-                counts = outcome_counts(out)
-                total = sum(counts.values())
-                names = {-1: "not settled", 0: "undefined"}
-                parts = [f"{names.get(v, f'face {v}')}: {c / total:.1%}" for v, c in counts.items()]
-                print("outcomes: " + ", ".join(parts), file=sys.stderr)
-        if png is not None:
-            from dicetrace.scan.maps import outcome_png
+                print(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish", file=sys.stderr)
+        failed = _status_summary(out_dir, quiet)
+        if png_dest is not None or rrd_dest is not None:
+            from dicetrace.scan.maps import outcome_png, write_scan_rrd
+            from dicetrace.sinks._common import Staging
 
-            outcome_png(out, png)
+            with Staging() as staging:  # both maps, or neither
+                if png_dest is not None:
+                    outcome_png(out_dir, png_dest, staging=staging)
+                if rrd_dest is not None:
+                    write_scan_rrd(out_dir, rrd_dest, staging=staging)
             if not quiet:
-                print(f"outcome map → {png}", file=sys.stderr)
-        if rrd is not None:
-            from dicetrace.scan.maps import write_scan_rrd
-
-            write_scan_rrd(out, rrd)
-            if not quiet:
-                print(f"scan map → {rrd} (open with: rerun {rrd})", file=sys.stderr)
+                if png_dest is not None:
+                    print(f"outcome map → {png}", file=sys.stderr)
+                if rrd_dest is not None:
+                    print(f"scan map → {rrd} (open with: rerun {rrd})", file=sys.stderr)
+        if failed and strict:
+            sys.exit(EXIT_NUMERICAL_FAILURE)

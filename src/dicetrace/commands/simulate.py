@@ -26,7 +26,7 @@ from typing import Optional
 import numpy as np
 import typer
 
-from dicetrace.commands._common import atomic_path, check_writable_file, fail, parse_floats
+from dicetrace.commands._common import fail, output_file, parse_floats
 from dicetrace.status import Status
 
 FORMATS = ("table", "csv", "json")
@@ -83,49 +83,65 @@ def build_config(
     ``--dt auto`` picks the step from the final model (the preset with
     ``overrides`` applied) and the fastest first impact of ``ics`` (see
     ``dicetrace.params.auto_dt``), or refuses.  Values are validated where
-    they enter: numbers here, everything else by ``make_config``.
+    they enter: numbers here, everything else by ``make_config``; every
+    message names the option(s) at fault.  ``--tol`` with a fixed-step
+    integrator is refused (it would have no effect).
     """
-    from dicetrace.params import impact_speed_cm_s, make_config
+    from dicetrace.params import INTEGRATORS, TOL_MIN, impact_speed_cm_s, make_config
 
     base = preset_or_fail(preset)
     overrides = dict(overrides or {})
+    if integrator is not None and integrator not in INTEGRATORS:
+        fail(f"--integrator: unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+    try:
+        model = base.with_(**overrides) if overrides else base
+    except (ValueError, TypeError) as e:
+        fail(f"--set: {e}")
     v_impact = None
+    dt_text = dt
     if dt is not None and dt.strip().lower() == "auto":
         dt = "auto"
         if ics is not None:
-            try:
-                v_impact = impact_speed_cm_s(ics, base.with_(**overrides))
-            except (ValueError, TypeError) as e:
-                fail(f"--set: {e}")
+            with np.errstate(all="ignore"):
+                v_impact = impact_speed_cm_s(ics, model)
+            if not math.isfinite(v_impact):
+                fail("--dt auto: the ICs are too fast to bound their impact speed")
     else:
         dt = parse_positive(dt, "--dt", "the time step in s, or 'auto'")
     t_max = parse_positive(t_max, "--t-max", "the time cap in s")
     tol = parse_positive(tol, "--tol", "the local error tolerance of contact-adaptive")
+    integ = integrator or model.integrator
+    if tol is not None and not TOL_MIN <= tol < 1:
+        fail(f"--tol: tolerance tol must be a number in [{TOL_MIN:g}, 1), got {fmt_num(tol)}")
+    if tol is not None and not INTEGRATORS[integ].adaptive:
+        fail(f"--tol {fmt_num(tol)} applies only to --integrator contact-adaptive (its error-controlled sub-steps); "
+             f"{integ} has fixed steps: drop --tol")
     try:
         return make_config(base, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol, **overrides)
     except (ValueError, TypeError) as e:
-        opt = "--integrator" if "integrator" in str(e) else "--dt" if "dt" in str(e) else "--tol" if "tol" in str(e) else None
-        fail(f"{opt}: {e}" if opt else str(e))
+        msg = str(e)
+        if "time cap / dt" in msg or "longer than the time cap" in msg:
+            fail(f"--t-max {t_max_text(t_max)} with --dt {dt_text}: {msg}")
+        if msg.startswith("dt auto"):
+            fail(f"--dt auto: {msg[len('dt auto: '):]}" + (f" (--t-max {t_max_text(t_max)})" if t_max else ""))
+        for needle, opt in (("integrator", "--integrator"), ("time step dt", "--dt"), ("time cap t_max", "--t-max"),
+                            ("tol", "--tol")):
+            if needle in msg:
+                fail(f"{opt}: {msg}")
+        fail(f"--set: {msg}" if overrides else f"--preset {preset}: {msg}")
 
 
-def check_output_file(path: Path) -> Path:
-    """Fail (exit 2) unless a file can really be created beside ``path`` (probed, then removed).
+def t_max_text(t_max) -> str:
+    return "60 (the default)" if t_max is None else fmt_num(t_max)
+
+
+def check_output_file(path, option: str = "--out", suffix: str | None = None):
+    """The checked output Destination of ``option`` (see ``_common.output_file``), or a one-line failure.
 
     ``os.access`` says yes to root everywhere, even on read-only file systems;
-    creating the temporary file is the real test.  An existing ``path`` is untouched.
+    creating a probe file is the real test.  An existing ``path`` is untouched.
     """
-    from dicetrace.sinks._common import remove_quietly, temp_path_beside
-
-    path = check_writable_file(Path(path))
-    probe = temp_path_beside(path)
-    try:
-        with open(probe, "xb"):
-            pass
-    except OSError as e:
-        fail(f"cannot write into folder {str(path.parent)!r}: {e.strerror}")
-    finally:
-        remove_quietly(probe)
-    return path
+    return output_file(path, option, suffix=suffix)
 
 
 def get_slice(name: str | None, ndim: int | None = None):
@@ -137,16 +153,16 @@ def get_slice(name: str | None, ndim: int | None = None):
     from dicetrace.ics import SLICES
 
     if name not in SLICES:
-        fail(f"unknown slice {name!r} (choose from {', '.join(SLICES)})")
+        fail(f"--slice: unknown slice {name!r} (choose from {', '.join(SLICES)})")
     sl = SLICES[name]
     if ndim is not None and sl.ndim != ndim:
         if name == "seed" and ndim == 3 and "seed3" in SLICES:
             return SLICES["seed3"]
-        fail(f"slice {name!r} is {sl.ndim}-D: give {sl.ndim} coordinates ({','.join('XYZ'[: sl.ndim])}), got {ndim}")
+        fail(f"--at: slice {name!r} is {sl.ndim}-D: give {sl.ndim} coordinates ({','.join('XYZ'[: sl.ndim])}), got {ndim}")
     return sl
 
 
-def slice_ics(name: str, coords: np.ndarray, l_convention: str) -> np.ndarray:
+def slice_ics(name: str, coords: np.ndarray, l_convention: str, what: str = "--at") -> np.ndarray:
     """ICs (m, 6) of slice ``name`` at coordinates (m, ndim), in the preset's L convention.
 
     The seed slices give the 2019 program's L; a preset that takes the
@@ -154,9 +170,18 @@ def slice_ics(name: str, coords: np.ndarray, l_convention: str) -> np.ndarray:
     """
     from dicetrace.params import convert_l
 
+    from dicetrace.ics import IC_FIELDS
+
     coords = np.asarray(coords, dtype=np.float64)
     sl = get_slice(name, coords.shape[1])
-    ics = np.asarray(sl.ics(coords), dtype=np.float64).reshape(-1, 6)
+    with np.errstate(all="ignore"):  # overflow shows as a non-finite IC, refused below in one line
+        ics = np.asarray(sl.ics(coords), dtype=np.float64).reshape(-1, 6)
+    bad = ~np.isfinite(ics).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        at = ",".join(fmt_num(v) for v in coords[i])
+        comps = ", ".join(f for f, ok in zip(IC_FIELDS, np.isfinite(ics[i])) if not ok)
+        fail(f"{what} {at}: slice {name!r} gives a non-finite IC there ({comps}): the coordinates are too large")
     return convert_l(ics, sl.l_convention, l_convention)
 
 
@@ -254,7 +279,7 @@ def read_ics_csv(path: Path, slice_name: str | None, l_convention: str):
     coords = vals[:, len(want) :] if coord_cols else None
     if has_ic:
         return vals[:, : len(want)], coords
-    return slice_ics(slice_name, coords, l_convention), coords
+    return slice_ics(slice_name, coords, l_convention, what=f"IC file {str(path)!r}, a row at"), coords
 
 
 def run_ics(ics: np.ndarray, cfg):
@@ -336,34 +361,21 @@ def _strip_trailing(text: str) -> str:
     return "\n".join(line.rstrip() for line in text.splitlines()) + "\n"
 
 
-def emit(names, rows, fmt: str, out: Path | None, *, meta: dict) -> None:
-    """Print the rows, or write them atomically to ``out``."""
+def emit(names, rows, fmt: str, out, *, meta: dict) -> None:
+    """Print the rows, or write them to ``out`` (a checked Destination or a path; atomically for a regular file)."""
+    from dicetrace.sinks._common import STDOUT, write_bytes
+
     buf = io.StringIO()
     render(names, rows, fmt, buf, meta=meta)
     text = buf.getvalue()
     if fmt == "table":
         text = _strip_trailing(text)
-    if out is None:
+    if out is None or str(getattr(out, "given", out)) == STDOUT:
         if fmt == "table" and sys.stdout.isatty():
             render(names, rows, fmt, sys.stdout, meta=meta)  # rich fits the terminal
-        else:
-            sys.stdout.write(text)
-        return
-    with atomic_path(out) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-    _fix_mode(out)
-
-
-def _fix_mode(path: Path) -> None:
-    """Give a file written through a temporary file the usual permissions (umask)."""
-    import os
-
-    mask = os.umask(0)
-    os.umask(mask)
-    try:
-        os.chmod(path, 0o666 & ~mask)
-    except OSError:
-        pass
+            return
+        out = STDOUT
+    write_bytes(out, text.encode("utf-8"), what="--out")
 
 
 def report_failures(statuses, what: str = "IC") -> bool:
@@ -400,7 +412,10 @@ def register(app: typer.Typer) -> None:
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
         fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json."),
-        out: Optional[Path] = typer.Option(None, "--out", help="Write the output to this file (atomically) instead of stdout."),
+        out: Optional[Path] = typer.Option(
+            None, "--out", help="Write the output to this file (atomically; a device or FIFO directly; '-': stdout) "
+            "instead of stdout."
+        ),
     ) -> None:
         """Throw the die from one or many ICs; print outcome, steps, t_settle_s, status and contact sequence per IC.
 
@@ -408,6 +423,12 @@ def register(app: typer.Typer) -> None:
         """
         if fmt not in FORMATS:
             fail(f"unknown --format {fmt!r} (choose from {', '.join(FORMATS)})")
+        if out is None:
+            from dicetrace.sinks._common import STDOUT, _stdout_open
+
+            if not _stdout_open():
+                fail("standard output is closed: give --out FILE")
+        dest = check_output_file(out if out is not None else STDOUT, "--out")
         conv = preset_or_fail(preset).l_convention
         if ics is not None:
             if ic is not None or at is not None:
@@ -420,8 +441,6 @@ def register(app: typer.Typer) -> None:
             coords = None if c is None else c[None, :]
             source = desc
         cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr, tol=tol)
-        if out is not None:
-            check_output_file(out)
 
         batch = run_ics(ic_arr, cfg)
         names, rows = result_rows(batch, coords)
@@ -432,6 +451,6 @@ def register(app: typer.Typer) -> None:
             "config": cfg.as_dict(),
             "source": {**source, **({"slice": slice_name} if slice_name else {})},
         }
-        emit(names, rows, fmt, out, meta=meta)
+        emit(names, rows, fmt, dest, meta=meta)
         if report_failures(batch.status):
             sys.exit(EXIT_NUMERICAL_FAILURE)  # (typer.Exit is swallowed outside standalone mode)
