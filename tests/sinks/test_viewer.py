@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytestmark = pytest.mark.viewer
+pytestmark = [pytest.mark.viewer, pytest.mark.slow]
 
 RERUN_CLI = Path(sys.executable).parent / "rerun"
 XVFB = shutil.which("xvfb-run")
