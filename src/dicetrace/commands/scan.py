@@ -295,7 +295,7 @@ def register(app: typer.Typer) -> None:
         from dicetrace.commands.simulate import build_config
         from dicetrace.scan import DEFAULT_CHUNK, ScanDefinition, ScanMismatchError, scan
         from dicetrace.scan.runner import SchedulerError, ScanBusyError
-        from dicetrace.scan.runner import _check_manifest, check_scheduler_address
+        from dicetrace.scan.runner import _check_empty, _check_manifest, _check_space_finite, check_scheduler_address
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
@@ -335,10 +335,15 @@ def register(app: typer.Typer) -> None:
             opt = "--chunk" if "chunk" in str(e) else {"grid": f"--res {res}", "sample": "--n"}.get(space.kind, "--points")
             fail(f"{opt}: {e}")
         try:
-            if out_dir.is_dir():
-                _check_manifest(out_dir, defn)
-        except ScanMismatchError as e:
-            fail(str(e))
+            _check_space_finite(defn)
+        except ValueError as e:
+            where = {"grid": "--window", "sample": "--box"}.get(space.kind, "--points")
+            fail(f"{where}: {e}")
+        try:
+            if out_dir.is_dir() and not _check_manifest(out_dir, defn):
+                _check_empty(out_dir)
+        except (ScanMismatchError, FileExistsError) as e:
+            fail(f"--out: {e}")
         _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None)
         try:
             report = scan(

@@ -44,7 +44,15 @@ from dicetrace.ics import Grid, Points, Sample
 from dicetrace.params import Config, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, describe_differences
 from dicetrace.simulate import DEFAULT_CAP, simulate_batch
-from dicetrace.sinks._common import OutputError, free_bytes, human_bytes, make_folders, output_folder, remove_quietly
+from dicetrace.sinks._common import (
+    OutputError,
+    free_bytes,
+    human_bytes,
+    make_folders,
+    output_folder,
+    remove_folders,
+    remove_quietly,
+)
 from dicetrace.tables import rolls_table
 
 MANIFEST = "_scan.json"
@@ -282,6 +290,14 @@ def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
     return True
 
 
+def _check_empty(folder: Path) -> None:
+    """FileExistsError unless ``folder`` (holding no manifest) has no data files (hidden files do not count)."""
+    if any(not p.name.startswith(".") for p in folder.iterdir()):
+        raise FileExistsError(
+            f"{str(folder)!r} is not empty and holds no dicetrace scan ({MANIFEST} missing): use another folder"
+        )
+
+
 def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     """Create or check the scan folder; return the chunks already finished (and verified).
 
@@ -296,11 +312,7 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     if not _check_manifest(folder, defn):
-        data = [p for p in folder.iterdir() if not p.name.startswith(".")]
-        if data:
-            raise FileExistsError(
-                f"{str(folder)!r} is not empty and holds no dicetrace scan ({MANIFEST} missing): use another folder"
-            )
+        _check_empty(folder)
         manifest = {
             "format": defn.to_dict()["format"],
             "dicetrace_version": _version(),
@@ -343,17 +355,15 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
     path = folder / part_name(c)
     tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
     try:
-        pq.write_table(
-            _with_metadata(table, chunk_metadata(defn, c)),
-            tmp,
-            compression="zstd",
-            use_dictionary=DICTIONARY_COLUMNS,  # high-cardinality columns gain nothing and cost time
-        )
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        with open(tmp, "wb") as f:  # our own handle: closed on any error (a full disk), never left to the GC
+            pq.write_table(
+                _with_metadata(table, chunk_metadata(defn, c)),
+                f,
+                compression="zstd",
+                use_dictionary=DICTIONARY_COLUMNS,  # high-cardinality columns gain nothing and cost time
+            )
+            f.flush()
+            os.fsync(f.fileno())
         digest, size = file_sha256(tmp)
         _append_chunk_log(folder, {"chunk": c, "file": path.name, "rows": table.num_rows, "bytes": size,
                                    "sha256": digest})
@@ -602,14 +612,15 @@ def _client_within(Client, address: str, left: float, timeout: float):
     return box["client"]
 
 
-def _open_dask(dask, n_workers, timeout: float = DASK_CONNECT_TIMEOUT_S):
-    """(client, closers) for ``dask``: True (a LocalCluster), an address, or a Client."""
+def _open_dask(dask, n_workers, timeout: float | None = None):
+    """(client, closers) for ``dask``: True (a LocalCluster), an address (within ``timeout``, default
+    ``DASK_CONNECT_TIMEOUT_S``), or a Client."""
     from dask.distributed import Client, LocalCluster
 
     if isinstance(dask, Client):
         return dask, []
     if isinstance(dask, str):
-        client = _connect(dask, timeout)
+        client = _connect(dask, DASK_CONNECT_TIMEOUT_S if timeout is None else timeout)
         return client, [client]
     try:
         cluster = LocalCluster(
@@ -780,22 +791,22 @@ def scan(
         return _with_metadata(table, {"dicetrace_version": _version(), "scan": defn.to_dict(),
                                       "config": defn.config.as_dict(), "l_convention": defn.config.preset.l_convention})
     folder = output_folder(out, what="scan folder")
-    if folder.is_dir():
-        _check_manifest(folder, defn)  # refuse another scan's folder at once, without waiting for its lock
+    if folder.is_dir() and not _check_manifest(folder, defn):  # refuse at once, without waiting for a lock
+        _check_empty(folder)
     client, closers = (None, [])
     if dask:
         client, closers = _open_dask(dask, n_workers)
     try:
         created = make_folders(folder)
+        had_lock = (folder / LOCK).exists()
         try:
             with _FolderLock(folder, float(wait)):
                 return _run_into(folder, defn, created, t0, threads=threads, progress=progress, client=client,
                                  max_chunks=max_chunks)
         except BaseException:
-            if created and not (folder / MANIFEST).exists():  # refused before anything was written: leave no folder
-                remove_quietly(folder / LOCK)
-                from dicetrace.sinks._common import remove_folders
-
+            if not (folder / MANIFEST).exists():  # refused before anything was written: leave nothing behind
+                if not had_lock:
+                    remove_quietly(folder / LOCK)
                 remove_folders(created)
             raise
     finally:

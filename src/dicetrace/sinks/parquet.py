@@ -97,7 +97,8 @@ def write_tables(
                 raise OutputError(f"{dest.label}: Parquet tables are written as regular files")
             tmp = st.path(dest)
             try:
-                pq.write_table(table, tmp, compression="zstd")
+                with open(tmp, "wb") as f:  # closed on any error (a full disk), never left to the GC
+                    pq.write_table(table, f, compression="zstd")
             except OSError as e:
                 raise st.fail(dest, e) from None
             finals[name] = final

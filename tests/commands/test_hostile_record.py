@@ -1,0 +1,319 @@
+"""``dicetrace record`` against a hostile user: one line, exit 2, nothing touched; devices, FIFOs, full disks.
+
+In-process runs (the console script's ``run_app``) in a folder snapshotted
+before and after (names, types, bytes, modes, link targets).  A recording
+that could not fit in memory is refused before it is computed; a full disk
+leaves neither half a recording nor a recording without its tables.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import stat
+import subprocess
+import threading
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+IC = "14.08,11.46,9.87,13.8,122.8,15.5"
+
+
+def snapshot(root: Path) -> dict:
+    """Everything under ``root``: type, bytes, mode and link target of each entry (symlinks not followed)."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            st_ = p.lstat()
+            rel = str(p.relative_to(root))
+            if stat.S_ISLNK(st_.st_mode):
+                out[rel] = ("link", os.readlink(p))
+            elif stat.S_ISDIR(st_.st_mode):
+                out[rel] = ("dir", stat.S_IMODE(st_.st_mode))
+            elif stat.S_ISREG(st_.st_mode):
+                out[rel] = ("file", p.read_bytes(), stat.S_IMODE(st_.st_mode))
+            else:
+                out[rel] = ("special", stat.S_IFMT(st_.st_mode), st_.st_rdev)
+    return out
+
+
+@pytest.fixture(scope="module")
+def scan_dir(tmp_path_factory) -> Path:
+    from dicetrace.ics import Grid
+    from dicetrace.scan import scan
+
+    d = tmp_path_factory.mktemp("scans") / "home3"
+    scan(Grid("seed", "home", 3), d)
+    return d
+
+
+@pytest.fixture
+def work(tmp_path, scan_dir) -> Path:
+    (tmp_path / "afile").write_text("not a folder")
+    (tmp_path / "adir.rrd").mkdir()
+    (tmp_path / "existing.rrd").write_bytes(b"an old recording")
+    (tmp_path / "loop.rrd").symlink_to("loop.rrd")
+    pq = tmp_path / "pq"
+    pq.mkdir()
+    (pq / "rolls.parquet").mkdir()  # a folder where a table file goes
+    (tmp_path / "scan").symlink_to(scan_dir)
+    return tmp_path
+
+
+def case(args, *names):
+    return pytest.param(list(args), names, id=" ".join(args) or "no-args")
+
+
+AT = ["--slice", "seed", "--at", "1.65,3.9"]
+BAD = [
+    # outputs, checked before the throw is computed (items 1, 2)
+    case([*AT, "--out", "map"], "--out", "'map'", ".rrd"),
+    case([*AT, "--out", "x.rrd.txt"], "--out", ".rrd"),
+    case([*AT, "--out", "adir.rrd"], "--out", "'adir.rrd'", "folder"),
+    case([*AT, "--out", "afile/x.rrd"], "--out", "'afile'"),
+    case([*AT, "--out", "/proc/x.rrd"], "--out", "'/proc'"),
+    case([*AT, "--out", "/proc/a/b/x.rrd"], "--out", "'/proc'"),
+    case([*AT, "--out", "loop.rrd"], "--out", "'loop.rrd'"),
+    case([*AT, "--out", ""], "--out"),
+    case([*AT, "--out", "ok.rrd", "--parquet", "afile"], "--parquet", "'afile'"),
+    case([*AT, "--out", "ok.rrd", "--parquet", "afile/sub"], "--parquet", "'afile'"),
+    case([*AT, "--out", "ok.rrd", "--parquet", "/proc/pq"], "--parquet", "'/proc"),
+    case([*AT, "--out", "ok.rrd", "--parquet", "pq"], "--parquet", "rolls.parquet", "folder"),
+    case([*AT, "--out", "-", "--parquet", "afile"], "--parquet", "'afile'"),
+    # sizes: a recording that cannot fit in memory is refused before it is computed (item 3)
+    case([*AT, "--dt", "1e-9"], "--dt", "--t-max", "memory"),
+    case(["--ic", IC, "--dt", "1e-7", "--t-max", "1000"], "--dt", "--t-max", "memory"),
+    case([*AT, "--dt", "1e-12"], "--t-max", "--dt", "too large"),
+    case([*AT, "--dt", "2", "--t-max", "1"], "--dt", "--t-max", "longer than the time cap"),
+    case([*AT, "--dt", "auto", "--t-max", "1e9"], "--dt auto", "time cap"),
+    case([*AT, "--dt", "auto", "--integrator", "forward-euler", "--t-max", "600"], "--dt auto", "forward-euler"),
+    # silent acceptance (item 9)
+    case([*AT, "--tol", "1e-5"], "--tol", "contact-adaptive"),
+    case([*AT, "--integrator", "verlet", "--tol", "1e-6"], "--tol", "verlet"),
+    case([*AT, "--preset", "physical", "--integrator", "magic"], "--integrator", "'magic'"),
+    case([*AT, "--preset", "Physical"], "--preset", "'Physical'"),
+    # ICs
+    case(["--slice", "seed", "--at", "1e308,1e308"], "--at", "non-finite"),
+    case(["--slice", "seed", "--at", "1"], "--at", "X,Y"),
+    case(["--slice", "seed", "--at", "1,2,3,4"], "--at", "got 4"),
+    case(["--slice", "nope", "--at", "1,2"], "--slice", "'nope'"),
+    case(["--ic", "1e300,1e300,1e300,1e300,1e300,1e300", "--dt", "auto"], "--dt auto"),
+    case(["--ic", "1,2,3,4,5"], "--ic", "6 comma-separated"),
+    # --scan: the point and the folder are named, numbers shown plainly (not np.float64(100.0))
+    case(["--scan", "nowhere", "--at", "0.05,0.05"], "--scan", "'nowhere'"),
+    case(["--scan", "afile", "--at", "0.05,0.05"], "--scan", "'afile'"),
+    case(["--scan", "scan", "--at", "100,100"], "--scan", "--at", "(100, 100)"),
+    case(["--scan", "scan", "--at", "0.05,0.05,0.05"], "--scan", "2-D"),
+    case(["--scan", "scan", "--at", "nan,1"], "--at", "non-finite"),
+    case(["--scan", "scan", "--at", "0.05,0.05", "--dt", "0.01"], "--scan", "--dt"),
+    case(["--scan", "scan", "--at", "0.05,0.05", "--ic", IC], "--scan", "--ic"),
+    # an existing recording is not touched by a refusal
+    case(["--ic", "1,2,nan,4,5,6", "--out", "existing.rrd"], "--ic", "non-finite"),
+    case([*AT, "--dt", "0", "--out", "existing.rrd"], "--dt", "'0'"),
+]
+
+
+@pytest.mark.parametrize("args,names", BAD)
+def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(work, dicetrace_cli, assert_one_line_error,
+                                                                          args, names):
+    before = snapshot(work)
+    res = dicetrace_cli("record", *args, cwd=work)
+    line = assert_one_line_error(res, *names)
+    assert "np.float64" not in line and "Warning" not in res.stderr
+    assert snapshot(work) == before
+
+
+def test_the_memory_refusal_comes_before_any_work(work, dicetrace_cli, monkeypatch):
+    """record --dt 1e-9 used to run for hours and then ask for 149 GiB: now nothing is simulated at all."""
+    import dicetrace.simulate as sim
+
+    def boom(*a, **k):
+        raise AssertionError("simulate ran")
+
+    monkeypatch.setattr(sim, "simulate", boom)
+    res = dicetrace_cli("record", *AT, "--dt", "1e-9", cwd=work)
+    assert res.returncode == 2 and "TiB" in res.stderr
+
+
+def test_simulate_refuses_a_trace_beyond_memory_before_allocating(monkeypatch):
+    """The API's own net: the exact trace size (known after the summary run) against the available memory."""
+    import dicetrace.simulate as sim
+    from dicetrace.ics import seed_slice
+
+    monkeypatch.setattr(sim, "available_memory", lambda: 1000)
+    with pytest.raises(ValueError, match=r"record: the trace of 540 steps .* more than the"):
+        sim.simulate(seed_slice(1.65, 3.9), record=sim.Record())
+
+
+# -- devices, FIFOs, symlinks, '-' (item 1) ------------------------------------------------------------------
+
+
+@pytest.fixture
+def device(tmp_path, request):
+    """A character device node in tmp_path with the numbers of /dev/<name> (root only; the real /dev is only stat'ed)."""
+    name = request.param
+    node = tmp_path / f"{name}dev"
+    try:
+        os.mknod(node, stat.S_IFCHR | 0o666, os.stat(f"/dev/{name}").st_rdev)
+    except (OSError, PermissionError) as e:
+        pytest.skip(f"cannot make a device node here: {e}")
+    yield node
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+
+
+@pytest.mark.parametrize("device", ["null"], indirect=True)
+def test_a_character_device_is_written_not_replaced(device, dicetrace_cli):
+    res = dicetrace_cli("record", *AT, "--out", str(device), cwd=device.parent)
+    assert res.returncode == 0, res.stderr
+    assert stat.S_ISCHR(os.lstat(device).st_mode)
+    assert sorted(p.name for p in device.parent.iterdir()) == ["nulldev"]
+
+
+@pytest.mark.parametrize("device", ["full"], indirect=True)
+def test_a_full_device_is_one_line_exit_2(device, dicetrace_cli, assert_one_line_error):
+    """The issue's 'record onto a full disk: File-writer thread shut down prematurely' traceback."""
+    res = dicetrace_cli("record", *AT, "--out", str(device), cwd=device.parent)
+    assert_one_line_error(res, f"'{device}'", "No space left on device")
+    assert stat.S_ISCHR(os.lstat(device).st_mode)
+
+
+def test_a_fifo_gets_the_whole_recording(tmp_path, dicetrace_cli):
+    from rerun.chunk import RrdReader
+
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    box: dict = {}
+
+    def reader():
+        with open(fifo, "rb") as f:
+            box["data"] = f.read()
+
+    t = threading.Thread(target=reader, daemon=True)
+    t.start()
+    res = dicetrace_cli("record", *AT, "--out", str(fifo), cwd=tmp_path)
+    t.join(30)
+    assert res.returncode == 0, res.stderr
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
+    copy = tmp_path / "copy.rrd"
+    copy.write_bytes(box["data"])
+    assert len(RrdReader(str(copy)).recordings()) == 1
+
+
+def test_a_symlink_is_followed_to_its_target(tmp_path, dicetrace_cli):
+    (tmp_path / "real.rrd").write_bytes(b"old")
+    (tmp_path / "latest.rrd").symlink_to("real.rrd")
+    res = dicetrace_cli("record", *AT, "--out", "latest.rrd", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert (tmp_path / "latest.rrd").is_symlink() and (tmp_path / "real.rrd").read_bytes()[:4] == b"RRF2"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["latest.rrd", "real.rrd"]
+
+
+def test_dash_puts_the_recording_on_stdout_and_the_summary_on_stderr(tmp_path, monkeypatch, capsys):
+    import io
+    import sys
+
+    from dicetrace.cli import app
+    from dicetrace.commands._common import run_app
+
+    out = io.TextIOWrapper(io.BytesIO(), encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "stdout", out)
+    monkeypatch.setattr(sys, "argv", ["dicetrace", "record", *AT, "--out", "-"])
+    with pytest.raises(SystemExit) as exc:
+        run_app(app)
+    assert exc.value.code == 0
+    out.flush()
+    data = out.buffer.getvalue()
+    assert data[:4] == b"RRF2" and b"RRF2FOOT" in data[-16:]  # a whole recording, footer included
+    assert "wrote standard output" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- a full disk: nothing half-written, an existing output kept, no hang ---------------------------------------
+
+
+@pytest.fixture
+def full_disk(tmp_path, monkeypatch):
+    """A folder on a full 64 KiB tmpfs holding an old recording (as root), else one where writes fail with ENOSPC."""
+    d = tmp_path / "full"
+    d.mkdir()
+    mounted = os.geteuid() == 0 and subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)], capture_output=True).returncode == 0
+    (d / "existing.rrd").write_bytes(b"an old recording")
+    if not mounted:
+        import dicetrace.sinks._common as common
+
+        real = common._fsync
+
+        def enospc(path):
+            if d in Path(path).parents:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return real(path)
+
+        monkeypatch.setattr(common, "_fsync", enospc)
+    yield d
+    if mounted and subprocess.run(["umount", str(d)], capture_output=True).returncode != 0:
+        subprocess.run(["umount", "-l", str(d)], check=False, capture_output=True)  # detach: never left mounted
+
+
+def test_a_full_disk_keeps_the_old_recording_and_writes_no_tables(full_disk, dicetrace_cli, assert_one_line_error):
+    before = snapshot(full_disk)
+    res = dicetrace_cli("record", *AT, "--out", str(full_disk / "existing.rrd"), "--parquet", str(full_disk / "pq"),
+                        cwd=full_disk)
+    assert_one_line_error(res, "No space left on device")
+    assert snapshot(full_disk) == before  # the old recording whole, no tables, no pq/ folder, no temporary
+
+
+def test_tables_that_do_not_fit_take_the_recording_with_them(tmp_path, full_disk, dicetrace_cli, assert_one_line_error):
+    """The .rrd fits elsewhere, the tables do not: neither is put in place."""
+    res = dicetrace_cli("record", *AT, "--out", str(tmp_path / "r.rrd"), "--parquet", str(full_disk / "pq"),
+                        cwd=tmp_path)
+    assert_one_line_error(res, "No space left on device")
+    assert not (tmp_path / "r.rrd").exists() and not (full_disk / "pq").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full"]
+
+
+# -- property ----------------------------------------------------------------------------------------------------
+
+_VALUES = {
+    "--ic": [IC, "1,2,3,4,5,6", "1,2,3", "nan,1,2,3,4,5", ""],
+    "--slice": ["seed", "seed3", "moon"],
+    "--at": ["1.65,3.9", "0.05,0.05,0.01", "1", "1e308,1e308", "x"],
+    "--preset": ["seed", "physical", "moon"],
+    "--integrator": ["semi-implicit-euler", "rk4", "contact-adaptive", "magic"],
+    "--dt": ["0.001", "0.002", "auto", "0", "-1", "nan", "2", "1e-9", "fast"],
+    "--t-max": ["0.3", "1", "0", "-1", "inf", "1e12"],
+    "--tol": ["1e-6", "0", "1", "x"],
+    "--out": ["out.rrd", "sub/out.rrd", "out.txt", "adir.rrd", "afile/x.rrd", "/proc/x.rrd", "loop.rrd"],
+    "--parquet": ["pqout", "afile", "pq", "/proc/pq"],
+    "--scan": ["scan", "nowhere", "afile"],
+}
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.dictionaries(st.sampled_from(sorted(_VALUES)), st.integers(0, 99), max_size=5))
+def test_random_options_never_trace_back(work, dicetrace_cli, opts):
+    import shutil
+
+    args = []
+    for opt, i in sorted(opts.items()):
+        args += [opt, _VALUES[opt][i % len(_VALUES[opt])]]
+    given_ = dict(zip(args[::2], args[1::2]))
+    for name in ("out.rrd", "sub/out.rrd"):
+        (work / name).unlink(missing_ok=True)
+    shutil.rmtree(work / "pqout", ignore_errors=True)
+    res = dicetrace_cli("record", *args, cwd=work)
+    assert "Traceback" not in res.stderr and "internal error" not in res.stderr, (args, res.stderr)
+    assert res.returncode in (0, 1, 2), (args, res.returncode, res.stderr)
+    if res.returncode == 2:
+        (line,) = res.stderr.strip().splitlines()
+        assert line.startswith("dicetrace: error: ")
+    else:
+        if given_.get("--out"):
+            assert (work / given_["--out"]).is_file(), (args, res.stderr)
+        if given_.get("--parquet"):
+            assert (work / given_["--parquet"] / "rolls.parquet").is_file(), (args, res.stderr)

@@ -1,0 +1,268 @@
+"""Scan folders are safe: one writer at a time, checksummed chunks, exact sizes, nothing left by a refusal.
+
+* Concurrent writers: the folder's lock (filelock) makes a second scan wait
+  (``wait``) or refuse in one line, touching nothing of the first, not even
+  its in-progress temporary file; two real concurrent scans end cleanly with
+  a dataset bit-identical to a single run.
+* Corruption: a chunk damaged after it was written (footer intact) is
+  recomputed on resume (with a warning naming it) and named by ``read_scan``.
+* Sizes: exact Python ints, refused beyond what a scan can number.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from dicetrace.ics import Grid, Points, Sample
+from dicetrace.params import make_config
+from dicetrace.scan import MANIFEST, ScanDefinition, ScanMismatchError, read_scan, scan
+from dicetrace.scan.read import label_grid, outcome_counts, status_counts
+from dicetrace.scan.runner import (
+    CHUNK_LOG,
+    LOCK,
+    CorruptChunkError,
+    ScanBusyError,
+    ScanWarning,
+    read_chunk_log,
+)
+
+HOME5 = Grid("seed", "home", 5)
+
+
+def _data(table) -> pa.Table:
+    df = table.to_pandas() if isinstance(table, pa.Table) else table
+    return pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False).replace_schema_metadata(None)
+
+
+@pytest.fixture(scope="module")
+def home5() -> pa.Table:
+    return scan(HOME5, chunk=5)
+
+
+def _flip_middle(path: Path) -> None:
+    """Flip bytes in the middle of a Parquet file (the footer stays intact: the file still opens)."""
+    b = bytearray(path.read_bytes())
+    i = len(b) // 2
+    for k in range(i, i + 8):
+        b[k] ^= 0xFF
+    path.write_bytes(bytes(b))
+
+
+# -- one writer at a time --------------------------------------------------------------------------------------
+
+
+def _hold_lock(folder: Path):
+    """Hold the folder's writer lock as a running scan would (a separate lock: flock conflicts within a process too)."""
+    from filelock import FileLock
+
+    lock = FileLock(str(folder / LOCK), thread_local=False)  # released by a timer thread below
+    lock.acquire(timeout=0)
+    return lock
+
+
+def test_a_second_writer_refuses_at_once_and_touches_nothing(tmp_path):
+    out = tmp_path / "s"
+    r = scan(HOME5, out, chunk=5, max_chunks=2)
+    assert r.chunks_computed == 2
+    in_progress = out / ".part-000002.parquet.4242-running.tmp"  # the running scan's chunk being written
+    in_progress.write_bytes(b"PAR1 half written")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    lock = _hold_lock(out)
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(ScanBusyError, match=r"another dicetrace scan is writing into .*waited 0 s"):
+            scan(HOME5, out, chunk=5)
+        with pytest.raises(ScanBusyError, match="waited 0.4 s"):
+            scan(HOME5, out, chunk=5, wait=0.4)
+        assert 0.35 < time.monotonic() - t0 < 5
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # the running scan's files untouched
+    finally:
+        lock.release()
+    r = scan(HOME5, out, chunk=5, wait=1.0)  # the first is gone: its temporary is a leftover now, and removed
+    assert (r.chunks_skipped, r.chunks_computed) == (2, 3) and not in_progress.exists()
+
+
+def test_the_cli_waits_for_the_writer_then_resumes(tmp_path, dicetrace_cli, assert_one_line_error):
+    import threading
+
+    out = tmp_path / "s"
+    args = ["scan", "--window", "home", "--res", "5", "--chunk", "5", "--out", str(out), "-q"]
+    scan(HOME5, out, chunk=5, max_chunks=1)
+    lock = _hold_lock(out)
+    try:
+        assert_one_line_error(dicetrace_cli(*args, cwd=tmp_path), "--wait", "another dicetrace scan", f"'{out}'")
+    finally:
+        timer = threading.Timer(0.5, lock.release)  # the "other scan" ends half a second into our wait
+        timer.start()
+    res = dicetrace_cli(*args, "--wait", "30", cwd=tmp_path)
+    timer.join()
+    assert res.returncode == 0, res.stderr
+    assert len(read_scan(out)) == 25
+
+
+def test_a_refusal_leaves_no_lock_file_in_a_folder_it_did_not_make(tmp_path):
+    other = tmp_path / "notascan"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    with pytest.raises(FileExistsError):
+        scan(HOME5, other)
+    assert sorted(p.name for p in other.iterdir()) == ["notes.txt"]
+    with pytest.raises(ValueError, match="max_chunks"):
+        scan(HOME5, tmp_path / "new", max_chunks=-1)
+    assert not (tmp_path / "new").exists()
+
+
+def _cli_scan(out: Path, res: str):
+    return subprocess.Popen(
+        [sys.executable, "-m", "dicetrace.cli", "scan", "--window", "0,1,0,1", "--res", res, "--chunk", "40",
+         "--threads", "1", "--dt", "5e-4", "--out", str(out), "-q", "--wait", "300"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+
+
+@pytest.mark.slow
+def test_two_concurrent_scans_end_cleanly_with_the_single_run_dataset(tmp_path):
+    """Same definition twice at once: one computes, the other waits and finds it done; both exit 0.
+    Another definition meanwhile: refused in one line (exit 2).  The dataset is bit-identical to a single run."""
+    out = tmp_path / "s"
+    a, b = _cli_scan(out, "20"), _cli_scan(out, "20")
+    while not (out / MANIFEST).exists() and a.poll() is None and b.poll() is None:
+        time.sleep(0.02)
+    with pytest.raises(ScanMismatchError, match="different scan"):  # another definition, meanwhile: refused at once
+        scan(Grid("seed", ((0.0, 1.0), (0.0, 1.0)), 21), out, chunk=40, dt_s=5e-4)
+    results = [p.communicate(timeout=300) + (p.returncode,) for p in (a, b)]
+    (_, ea, ra), (_, eb, rb) = results
+    assert (ra, rb) == (0, 0), (ea, eb)
+    assert "Traceback" not in ea + eb
+    df = read_scan(out)
+    assert (df["ic_id"] == np.arange(400)).all()
+    want = scan(Grid("seed", ((0.0, 1.0), (0.0, 1.0)), 20), chunk=400, dt_s=5e-4)
+    assert _data(df).equals(_data(want))
+    assert not list(out.glob(".*.tmp"))
+
+
+# -- checksums -------------------------------------------------------------------------------------------------------
+
+
+def test_each_chunk_is_logged_with_its_checksum(tmp_path):
+    import hashlib
+
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=10)
+    log = read_chunk_log(out)
+    assert sorted(log) == [0, 1, 2]
+    for c, e in log.items():
+        p = out / e["file"]
+        assert e["sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() and e["bytes"] == p.stat().st_size
+        assert e["rows"] == (10 if c < 2 else 5)
+    assert json.loads((out / MANIFEST).read_text())["chunk_log"] == CHUNK_LOG
+
+
+def test_a_corrupted_chunk_is_named_on_read_and_recomputed_on_resume(tmp_path, home5):
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=5)
+    bad = out / "part-000002.parquet"
+    _flip_middle(bad)
+    for reader in (read_scan, label_grid, outcome_counts, status_counts):
+        with pytest.raises(CorruptChunkError, match=r"part-000002\.parquet.*SHA-256"):
+            reader(out)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = scan(HOME5, out, chunk=5)
+    assert (r.chunks_skipped, r.chunks_computed) == (4, 1)
+    msgs = [str(w.message) for w in caught if issubclass(w.category, ScanWarning)]
+    assert len(msgs) == 1 and "part-000002.parquet" in msgs[0] and "recomputing" in msgs[0]
+    assert _data(read_scan(out)).equals(_data(home5))  # bit-identical again
+
+
+def test_the_cli_says_it_recomputes_a_damaged_chunk(tmp_path, dicetrace_cli, home5):
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=5)
+    _flip_middle(out / "part-000000.parquet")
+    args = ["scan", "--window", "home", "--res", "5", "--chunk", "5", "--out", str(out), "-q"]
+    res = dicetrace_cli(*args, cwd=tmp_path)
+    assert res.returncode == 0
+    (line,) = res.stderr.strip().splitlines()
+    assert line.startswith("dicetrace: warning: scan chunk") and "part-000000.parquet" in line
+    assert _data(read_scan(out)).equals(_data(home5))
+    res = dicetrace_cli("record", "--scan", str(out), "--at", "0.05,0.05", "--out", str(tmp_path / "r.rrd"), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+
+
+def test_record_from_a_corrupted_scan_names_the_chunk(tmp_path, dicetrace_cli, assert_one_line_error):
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=5)
+    _flip_middle(out / "part-000001.parquet")
+    res = dicetrace_cli("record", "--scan", str(out), "--at", "0.05,0.05", "--out", str(tmp_path / "r.rrd"), cwd=tmp_path)
+    assert_one_line_error(res, "--scan", "part-000001.parquet", "damaged")
+    assert not (tmp_path / "r.rrd").exists()
+
+
+def test_a_folder_without_a_chunk_log_is_adopted_and_garbage_is_refused(tmp_path, home5):
+    """Folders written before checksums: whole chunks are adopted (logged), undecodable ones recomputed."""
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=5)
+    (out / CHUNK_LOG).unlink()
+    (out / "part-000003.parquet").write_bytes(b"PAR1 this is no Parquet file PAR1")
+    with pytest.raises(CorruptChunkError, match=r"part-000003\.parquet"):
+        read_scan(out)  # no checksum to compare: the decoding error names the file
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = scan(HOME5, out, chunk=5)
+    assert (r.chunks_skipped, r.chunks_computed) == (4, 1)
+    assert any("part-000003.parquet" in str(w.message) for w in caught)
+    assert sorted(read_chunk_log(out)) == [0, 1, 2, 3, 4]
+    assert _data(read_scan(out)).equals(_data(home5))
+
+
+def test_a_torn_chunk_log_line_is_ignored(tmp_path, home5):
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=5, max_chunks=3)
+    with open(out / CHUNK_LOG, "a") as f:
+        f.write('{"chunk": 3, "file": "part-0000')  # a write killed half way
+    r = scan(HOME5, out, chunk=5)
+    assert (r.chunks_skipped, r.chunks_computed) == (3, 2)
+    assert _data(read_scan(out)).equals(_data(home5))
+
+
+# -- sizes ---------------------------------------------------------------------------------------------------------
+
+
+def test_sizes_are_exact_and_refused_beyond_what_a_scan_can_number():
+    assert Grid("seed", "home", 10**10).size == 10**20
+    assert Grid("seed3", ((0, 1), (0, 1), (0, 1)), (3000, 3000, 3000)).size == 27 * 10**9
+    cfg = make_config()
+    with pytest.raises(ValueError, match="100,000,000,000,000,000,000 ICs.*int64"):
+        ScanDefinition(Grid("seed", "home", 10**10), cfg)
+    with pytest.raises(ValueError, match="int32"):
+        ScanDefinition(Grid("seed", "home", (2**31, 1)), cfg)
+    d = ScanDefinition(Grid("seed", "home", 10**5), cfg)
+    assert (d.size, d.n_chunks) == (10**10, -(-(10**10) // 8192))
+    assert isinstance(d.size, int) and d.chunk_range(d.n_chunks - 1)[1] == 10**10
+    with pytest.raises(ValueError, match="2\\*\\*30"):
+        Sample("seed", "home", 2**30 + 1, "sobol")
+    assert Sample("seed", "home", 2**40, "random").size == 2**40
+
+
+def test_a_huge_scan_folder_is_prepared_without_visiting_every_chunk(tmp_path):
+    """10¹⁰ ICs (1.2·10⁶ chunks): max_chunks=0 writes the manifest and returns at once (no loop over all chunks)."""
+    t0 = time.perf_counter()
+    r = scan(Grid("seed", "home", 10**5), tmp_path / "s", max_chunks=0)
+    assert time.perf_counter() - t0 < 5
+    man = json.loads((tmp_path / "s" / MANIFEST).read_text())
+    assert man["n_ics"] == 10**10 and r.chunks_computed == 0 and not r.complete
+
+
+def test_a_scan_of_points_that_overflow_is_refused_before_writing(tmp_path):
+    with pytest.raises(ValueError, match="non-finite ICs"):
+        scan(Points("seed", [(0.05, 0.05), (1e308, 1e308)]), tmp_path / "s")
+    assert not (tmp_path / "s").exists()
