@@ -104,8 +104,7 @@ def run_app(app: typer.Typer) -> None:
         _print_err(f"dicetrace: error: {one_line(msg)}")
         sys.exit(code)
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("default")
+    with warnings.catch_warnings():  # the filters stay as they are; only how a warning is shown changes
         warnings.showwarning = show
         try:
             rc = app(standalone_mode=False)

@@ -247,6 +247,29 @@ def chunk_files(folder) -> dict[int, Path]:
     return dict(sorted(out.items()))
 
 
+#: Files this process has hashed (or written), by path: (size, mtime_ns, sha256).  A file whose size and
+#: modification time have not changed since is not hashed again (a scan's summary, map and recording
+#: each read the folder); another process always hashes afresh.
+_HASHED: dict[str, tuple[int, int, str]] = {}
+
+
+def _remember(path: Path, digest: str) -> None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return
+    _HASHED[str(Path(path).absolute())] = (st.st_size, st.st_mtime_ns, digest)
+
+
+def _known_digest(path: Path) -> str | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    hit = _HASHED.get(str(Path(path).absolute()))
+    return hit[2] if hit is not None and hit[:2] == (st.st_size, st.st_mtime_ns) else None
+
+
 def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
     """Why chunk file ``path`` is not the finished chunk its log ``entry`` describes (None: it is).
 
@@ -254,14 +277,17 @@ def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
     file must decode completely and hold ``rows`` rows.
     """
     if entry is not None:
+        if entry.get("rows") != rows:
+            return f"it holds {entry.get('rows')} rows, the chunk has {rows}"
+        if _known_digest(path) == entry.get("sha256"):
+            return None
         try:
             digest, size = file_sha256(path)
         except OSError as e:
             return f"unreadable ({e.strerror or e})"
         if size != entry.get("bytes") or digest != entry.get("sha256"):
             return f"its SHA-256 differs from the one recorded in {CHUNK_LOG}"
-        if entry.get("rows") != rows:
-            return f"it holds {entry.get('rows')} rows, the chunk has {rows}"
+        _remember(path, digest)
         return None
     try:
         n = pq.read_table(path).num_rows
@@ -368,6 +394,7 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
         _append_chunk_log(folder, {"chunk": c, "file": path.name, "rows": table.num_rows, "bytes": size,
                                    "sha256": digest})
         os.replace(tmp, path)
+        _remember(path, digest)
     except OSError as e:
         if isinstance(e, OutputError):
             raise
