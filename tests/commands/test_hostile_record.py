@@ -84,6 +84,8 @@ BAD = [
     case([*AT, "--out", "ok.rrd", "--parquet", "/proc/pq"], "--parquet", "'/proc"),
     case([*AT, "--out", "ok.rrd", "--parquet", "pq"], "--parquet", "rolls.parquet", "folder"),
     case([*AT, "--out", "-", "--parquet", "afile"], "--parquet", "'afile'"),
+    case([*AT, "--out", "same.rrd", "--parquet", "same.rrd"], "--out", "--parquet", "same path"),
+    case([*AT, "--out", "/dev/null/x.rrd"], "--out", "'/dev/null'", "not a folder"),
     # sizes: a recording that cannot fit in memory is refused before it is computed (item 3)
     case([*AT, "--dt", "1e-9"], "--dt", "--t-max", "memory"),
     case(["--ic", IC, "--dt", "1e-7", "--t-max", "1000"], "--dt", "--t-max", "memory"),

@@ -136,6 +136,7 @@ BAD = [
     case([*HOME3, "--scheduler", "tcp://x y"], "--scheduler", "'tcp://x y'"),
     case([*HOME3, "--scheduler", "tcp://127.0.0.1:99999"], "--scheduler", "99999"),
     case([*HOME3, "--scheduler", "http://127.0.0.1:8786"], "--scheduler", "http"),
+    case([*HOME3, "--scheduler", "127.0.0.1"], "--scheduler", "needs a port"),
     case([*HOME3, "--scheduler", "tcp://127.0.0.1:{refused}"], "--scheduler", "refused"),
     case([*HOME3, "--workers", "2"], "--workers", "--dask"),
     case([*HOME3, "--dask", "--workers", "0"], "--workers", ">= 1"),

@@ -80,6 +80,7 @@ BAD = [
     case(["--ic", IC, "--dt", "2", "--t-max", "1"], "--dt", "--t-max", "longer than the time cap"),
     case(["--ic", IC, "--dt", "1e-300"], "--t-max", "--dt", "too large"),
     case(["--ic", IC, "--t-max", "1e300"], "--t-max", "--dt", "too large"),
+    case(["--ic", IC, "--t-max", "1e-300"], "--t-max", "--dt 0.001 (the default)", "longer than the time cap"),
     case(["--ic", IC, "--dt", "0x10"], "--dt", "'0x10'"),
     case(["--ic", IC, "--dt", " "], "--dt"),
     case(["--ic", IC, "--dt", "-0"], "--dt", "'-0'"),

@@ -180,6 +180,8 @@ def register(app: typer.Typer) -> None:
         dest = check_output_file(out, "--out", suffix=".rrd")
         if parquet is not None:
             check_output_folder(parquet)
+            if dest.target is not None and os.path.realpath(parquet) == os.path.realpath(dest.target):
+                fail(f"--out {str(out)!r} and --parquet {str(parquet)!r} are the same path")
         check_record_size(cfg)
 
         from dicetrace.simulate import Record, simulate

@@ -121,7 +121,7 @@ def build_config(
     except (ValueError, TypeError) as e:
         msg = str(e)
         if "time cap / dt" in msg or "longer than the time cap" in msg:
-            fail(f"--t-max {t_max_text(t_max)} with --dt {dt_text}: {msg}")
+            fail(f"--t-max {t_max_text(t_max)} with --dt {dt_text or '0.001 (the default)'}: {msg}")
         if msg.startswith("dt auto"):
             fail(f"--dt auto: {msg[len('dt auto: '):]}" + (f" (--t-max {t_max_text(t_max)})" if t_max else ""))
         for needle, opt in (("integrator", "--integrator"), ("time step dt", "--dt"), ("time cap t_max", "--t-max"),

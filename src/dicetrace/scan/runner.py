@@ -562,12 +562,11 @@ def check_scheduler_address(address: str) -> tuple[str, str, int | None]:
         host, _, port_text = rest.rpartition(":") if ":" in rest else (rest, "", "")
     if not host:
         raise bad
-    port = None
-    if port_text:
-        if not port_text.isdigit() or not 0 < int(port_text) < 65536:
-            raise bad
-        port = int(port_text)
-    return scheme, host, port
+    if not port_text:
+        raise ValueError(f"scheduler address {address!r} needs a port (e.g. {scheme}://{host}:8786)")
+    if not port_text.isdigit() or not 0 < int(port_text) < 65536:
+        raise bad
+    return scheme, host, int(port_text)
 
 
 def _connect(address: str, timeout: float):

@@ -377,6 +377,7 @@ class Staging:
         return tmp
 
     def commit(self) -> None:
+        ok = False
         try:
             for dest, tmp in self._items:
                 if dest.kind == "file":
@@ -387,8 +388,9 @@ class Staging:
                     _usual_mode(dest.target)
                 else:
                     self._guard(dest, _copy_file_to, tmp, dest)
+            ok = True
         finally:
-            self._cleanup(keep_folders=True)
+            self._cleanup(keep_folders=ok)  # on failure: the folders made for the outputs go too, where empty
 
     def discard(self) -> None:
         self._cleanup(keep_folders=False)
