@@ -96,6 +96,8 @@ CALLS = [
     call(lambda: estimate_scan(G), TypeError, "defn must be a ScanDefinition", "estimate_scan(Grid)"),
     call(lambda: scan(Points("seed", [(1e308, 1e308)])), ValueError, "non-finite ICs", "overflowing points"),
     call(lambda: read_scan(42), TypeError, "folder", "read_scan(42)"),
+    call(lambda: simulate(IC, record=Record(states="no")), TypeError, "Record(states=...)", "Record(states='no')"),
+    call(lambda: simulate_batch([["a"] * 6]), ValueError, "initial conditions must be numbers", "ics of strings"),
 ]
 
 
@@ -126,6 +128,17 @@ def test_output_errors_are_value_errors_and_os_errors(tmp_path):
     with pytest.raises(OutputError, match=r"is a folder"):
         write_rrd(roll, tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile"]
+
+
+def test_an_unknown_column_is_a_value_error_not_a_corrupt_chunk(tmp_path):
+    from dicetrace.scan.read import label_grid
+
+    scan(G, tmp_path / "s")
+    with pytest.raises(ValueError, match="unknown column.*'nope'") as info:
+        label_grid(tmp_path / "s", column="nope")
+    assert "damaged" not in str(info.value) and "cannot be read" not in str(info.value)
+    with pytest.raises(ValueError, match="unknown column"):
+        read_scan(tmp_path / "s", columns=["outcome", "bogus"])
 
 
 def test_sizes_are_exact():

@@ -64,7 +64,10 @@ def validate_ic(ic) -> np.ndarray:
 
 def validate_ics(ics) -> np.ndarray:
     """(m, 6) float64 array of finite ICs, or ValueError."""
-    a = np.asarray(ics, dtype=np.float64)
+    try:
+        a = np.asarray(ics, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"initial conditions must be numbers, an (m, 6) array ({' '.join(str(e).split())})") from None
     if a.ndim == 1:
         a = a.reshape(1, -1)
     if a.ndim != 2 or a.shape[1] != 6:

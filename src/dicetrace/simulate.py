@@ -52,6 +52,10 @@ class Record:
     forces: bool = False
 
     def __post_init__(self) -> None:
+        for name in ("states", "energy", "forces"):
+            v = getattr(self, name)
+            if not isinstance(v, (bool, np.bool_)):
+                raise TypeError(f"Record({name}=...) must be True or False, got {v!r}")
         if not (self.states or self.energy or self.forces):
             raise ValueError("Record() asks for nothing: request states, energy or forces, or pass record=None")
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.dataset as pads
+import pyarrow.parquet as pq
 
 from dicetrace.ics import Grid
 from dicetrace.scan.definition import ScanDefinition
@@ -77,14 +78,26 @@ def verified_chunk_files(folder, manifest: dict | None = None) -> list[str]:
     return files
 
 
+def _check_columns(columns) -> None:
+    from dicetrace.tables import GRID_ROLLS_SCHEMA
+
+    if columns is None:
+        return
+    if isinstance(columns, str) or not all(isinstance(c, str) for c in columns):
+        raise TypeError(f"columns must be a list of column names, got {columns!r}")
+    unknown = [c for c in columns if c not in GRID_ROLLS_SCHEMA.names]
+    if unknown:
+        raise ValueError(f"unknown column(s) {', '.join(map(repr, unknown))} (a scan has {', '.join(GRID_ROLLS_SCHEMA.names)})")
+
+
 def _dataset_table(files: list[str], columns, filter=None) -> pa.Table:
     """Read chunk files; a file that fails to decode is named in the error."""
     try:
         return pads.dataset(files, format="parquet").to_table(columns=columns, filter=filter)
     except (pa.ArrowException, OSError, ValueError):
-        for f in files:  # find the culprit
+        for f in files:  # find the culprit: a file that does not decode as a whole
             try:
-                pads.dataset([f], format="parquet").to_table(columns=columns, filter=filter)
+                pq.read_table(f)
             except (pa.ArrowException, OSError, ValueError) as e:
                 raise CorruptChunkError(
                     f"scan chunk {f!r} cannot be read ({type(e).__name__}: {' '.join(str(e).split())[:160]})"
@@ -100,6 +113,7 @@ def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
     :class:`CorruptChunkError` naming the file.
     """
     folder = _folder_of(folder)
+    _check_columns(columns)
     manifest = read_manifest(folder)
     files = verified_chunk_files(folder, manifest)
     cols = None if columns is None else list(dict.fromkeys(["ic_id", *columns]))
@@ -116,7 +130,7 @@ def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
 
 
 def _column_counts(folder, column: str) -> dict:
-    files = verified_chunk_files(folder)
+    files = verified_chunk_files(_folder_of(folder))
     counts: dict = {}
     if not files:
         return counts
