@@ -116,7 +116,7 @@ def _window(text: str, option: str, ndim: int, z: Optional[str]):
         return get_window(text, ndim, zr)
     except ValueError as e:
         msg = str(e)
-        opt = "--z" if ("z range" in msg and zr is None) or (zr is not None and "z range" in msg) else option
+        opt = "--z" if "z range" in msg else option
         fail(f"{opt}: {msg}" + ("" if repr(text) in msg or opt == "--z" else f" (got {text!r})"))
 
 
