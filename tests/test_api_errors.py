@@ -18,7 +18,8 @@ import pytest
 from dicetrace.ics import Grid, Points, Sample, seed_slice
 from dicetrace.params import Numerics, Preset, make_config, resolve_config
 from dicetrace.scan import ScanDefinition, read_scan, scan
-from dicetrace.scan.runner import estimate_scan, iter_scan
+from dicetrace.scan.estimate import estimate_scan
+from dicetrace.scan.runner import iter_scan
 from dicetrace.simulate import Record, simulate, simulate_batch
 from dicetrace.sinks._common import OutputError
 

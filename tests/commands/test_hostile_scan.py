@@ -14,7 +14,6 @@ import os
 import socket
 import stat
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -228,7 +227,7 @@ def test_estimate_scan_numbers(tmp_path):
     from dicetrace.ics import Grid
     from dicetrace.params import make_config
     from dicetrace.scan import ScanDefinition
-    from dicetrace.scan.runner import BYTES_PER_CHUNK, BYTES_PER_IC, estimate_scan
+    from dicetrace.scan.estimate import BYTES_PER_CHUNK, BYTES_PER_IC, estimate_scan
 
     defn = ScanDefinition(Grid("seed", "home", 100), make_config(), 1000)
     est = estimate_scan(defn, tmp_path / "new", threads=2)
@@ -274,9 +273,9 @@ def _server(reply: bytes | None):
 def test_a_server_that_is_not_a_dask_scheduler_is_one_line_within_the_bound(tmp_path, dicetrace_cli,
                                                                            assert_one_line_error, monkeypatch, reply):
     pytest.importorskip("dask.distributed")
-    import dicetrace.scan.runner as runner
+    import dicetrace.scan.dask as scan_dask
 
-    monkeypatch.setattr(runner, "DASK_CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(scan_dask, "DASK_CONNECT_TIMEOUT_S", 1.0)
     srv, held = _server(reply)
     try:
         t0 = time.monotonic()
@@ -367,12 +366,12 @@ def test_maps_onto_a_full_disk_are_one_line_and_keep_the_old_maps(tmp_path, tmpf
 def test_chunks_onto_a_full_disk_are_one_line_and_resume_afterwards(tmp_path, tmpfs, dicetrace_cli,
                                                                     assert_one_line_error, monkeypatch):
     """The estimate would refuse; with it fooled, the writes themselves hit ENOSPC: one line, finished chunks kept."""
-    import dicetrace.scan.runner as runner
+    import dicetrace.scan.estimate as estimate
     from dicetrace.ics import Grid
     from dicetrace.scan import read_scan, scan
 
-    monkeypatch.setattr(runner, "BYTES_PER_IC", 0)
-    monkeypatch.setattr(runner, "BYTES_PER_CHUNK", 0)
+    monkeypatch.setattr(estimate, "BYTES_PER_IC", 0)
+    monkeypatch.setattr(estimate, "BYTES_PER_CHUNK", 0)
     args = ["--window", "home", "--res", "9", "--chunk", "3", "-q"]
     res = dicetrace_cli("scan", *args, "--out", str(tmpfs / "s"), cwd=tmp_path)
     line = assert_one_line_error(res, "No space left on device", "part-")

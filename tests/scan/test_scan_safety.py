@@ -26,7 +26,7 @@ from dicetrace.ics import Grid, Points, Sample
 from dicetrace.params import make_config
 from dicetrace.scan import MANIFEST, ScanDefinition, ScanMismatchError, read_scan, scan
 from dicetrace.scan.read import label_grid, outcome_counts, status_counts
-from dicetrace.scan.runner import (
+from dicetrace.scan.folder import (
     CHUNK_LOG,
     LOCK,
     CorruptChunkError,

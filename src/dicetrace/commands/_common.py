@@ -59,7 +59,7 @@ def _click_exceptions():
 def _immediate(category) -> bool:
     """dicetrace's own notices are shown as they happen."""
     try:
-        from dicetrace.scan.runner import ScanWarning
+        from dicetrace.scan.folder import ScanWarning
     except ImportError:  # pragma: no cover
         return False
     return issubclass(category, ScanWarning)

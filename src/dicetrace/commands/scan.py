@@ -231,8 +231,8 @@ def _status_summary(out: Path, quiet: bool) -> bool:
 
 def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers) -> None:
     """Estimate the run; refuse what the disk cannot hold or (without --yes) what takes too long; say it when large."""
-    from dicetrace.scan.runner import estimate_scan
-    from dicetrace.scan.runner import human_seconds
+    from dicetrace.scan.estimate import estimate_scan
+    from dicetrace.scan.estimate import human_seconds
     from dicetrace.simulate import available_memory
     from dicetrace.sinks._common import human_bytes
 
@@ -294,8 +294,10 @@ def register(app: typer.Typer) -> None:
 
         from dicetrace.commands.simulate import build_config
         from dicetrace.scan import DEFAULT_CHUNK, ScanDefinition, ScanMismatchError, scan
-        from dicetrace.scan.runner import SchedulerError, ScanBusyError
-        from dicetrace.scan.runner import _check_empty, _check_manifest, _check_space_finite, check_scheduler_address
+        from dicetrace.scan.dask import SchedulerError
+        from dicetrace.scan.folder import ScanBusyError
+        from dicetrace.scan.dask import check_scheduler_address
+        from dicetrace.scan.folder import _check_empty, _check_manifest, _check_space_finite
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)

@@ -21,20 +21,27 @@ from dicetrace.scan.read import (
     read_scan_table,
     scan_definition,
 )
-from dicetrace.scan.runner import (
+from dicetrace.scan.estimate import ScanEstimate, estimate_scan
+from dicetrace.scan.folder import (
     MANIFEST,
+    CorruptChunkError,
+    ScanBusyError,
     ScanMismatchError,
-    ScanReport,
+    ScanWarning,
     compute_chunk,
-    iter_scan,
     prepare_folder,
     read_manifest,
-    scan,
     write_chunk,
 )
+from dicetrace.scan.runner import ScanReport, iter_scan, scan
 from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
 
 __all__ = [
+    "CorruptChunkError",
+    "ScanBusyError",
+    "ScanEstimate",
+    "ScanWarning",
+    "estimate_scan",
     "DEFAULT_CHUNK",
     "MANIFEST",
     "MISSING",

@@ -19,7 +19,7 @@ import pyarrow.parquet as pq
 
 from dicetrace.ics import Grid
 from dicetrace.scan.definition import ScanDefinition
-from dicetrace.scan.runner import (
+from dicetrace.scan.folder import (
     METADATA_KEY,
     CorruptChunkError,
     chunk_files,

@@ -1,0 +1,137 @@
+"""What a scan will cost before it starts: time (by calibration), disk and chunk memory."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from dicetrace.scan.definition import ScanDefinition
+from dicetrace.simulate import simulate_batch
+from dicetrace.sinks._common import free_bytes, human_bytes
+
+from dicetrace.scan.folder import MANIFEST, _check_int, chunk_files
+
+#: Bytes on disk per IC, a round upper estimate (measured 80–110 on the writeup's windows).
+BYTES_PER_IC = 128
+#: Bytes on disk per chunk file beyond its rows (Parquet footer, the definition in its metadata; measured ~11 KiB).
+BYTES_PER_CHUNK = 16 * 1024
+#: Memory per IC of a chunk in flight, bytes (contact-set buffers, summaries, the Arrow table).
+MEMORY_PER_IC = 1024
+
+
+# -- estimating -------------------------------------------------------------------------------
+
+
+#: Calibration: ICs sampled across the space, and the steps each may take.
+CALIBRATION_ICS = 48
+CALIBRATION_STEPS = 20_000
+#: Slowest step of any integrator, s (a pessimistic bound used to skip calibrating tiny scans).
+SLOWEST_STEP_S = 2e-6
+
+
+@dataclass(frozen=True)
+class ScanEstimate:
+    """What a scan run would cost, before it starts (:func:`estimate_scan`).
+
+    ``seconds`` is the estimated wall time of this run on ``threads``
+    threads (None when the run is too small to be worth timing: at most
+    ``seconds_bound``); ``upper`` says the estimate assumes that the sampled
+    throws which had not ended within the calibration's steps run to the
+    time cap.  ``bytes`` is the estimated size on disk of the new chunks.
+    """
+
+    n_ics: int
+    n_chunks: int
+    chunks_todo: int
+    ics_todo: int
+    bytes: int
+    free_bytes: int | None
+    chunk_memory: int
+    threads: int
+    seconds: float | None
+    seconds_bound: float
+    upper: bool = False
+
+    def describe(self) -> str:
+        t = self.seconds if self.seconds is not None else self.seconds_bound
+        when = f"{'at most ' if self.seconds is None or self.upper else 'about '}{human_seconds(t)}"
+        free = "" if self.free_bytes is None else f", {human_bytes(self.free_bytes)} free"
+        return (f"{self.ics_todo:,} ICs in {self.chunks_todo:,} chunks to compute (of {self.n_ics:,}): "
+                f"{when} on {self.threads} thread(s), about {human_bytes(self.bytes)} on disk{free}")
+
+
+def human_seconds(s: float) -> str:
+    if s < 90:
+        return f"{s:.0f} s"
+    if s < 5400:
+        return f"{s / 60:.0f} min"
+    if s < 2 * 86400:
+        return f"{s / 3600:.1f} h"
+    if s < 2 * 365 * 86400:
+        return f"{s / 86400:.0f} days"
+    return f"{s / (365.25 * 86400):.3g} years"
+
+
+def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None, max_chunks: int | None = None,
+                  calibrate: bool = True) -> ScanEstimate:
+    """Estimate a scan run (time, disk, memory per chunk) before starting it.
+
+    Counts the chunks ``out`` already holds (by name; nothing is verified or
+    written), then, unless the run is certainly short, times up to
+    ``CALIBRATION_ICS`` ICs spread over the space with the scan's
+    configuration, each limited to ``CALIBRATION_STEPS`` steps (a throw not
+    ended by then is counted at the full time cap: the estimate is then an
+    upper one).
+    """
+    import numba
+
+    if not isinstance(defn, ScanDefinition):
+        raise TypeError(f"defn must be a ScanDefinition, not {type(defn).__name__}")
+    _check_int(threads, "threads", 1)
+    _check_int(max_chunks, "max_chunks", 0)
+    n_done = 0
+    if out is not None and Path(out).is_dir() and (Path(out) / MANIFEST).exists():
+        n_done = sum(1 for c in chunk_files(out) if c < defn.n_chunks)
+    chunks_todo = defn.n_chunks - n_done
+    if max_chunks is not None:
+        chunks_todo = min(chunks_todo, max_chunks)
+    ics_todo = min(defn.size, chunks_todo * defn.chunk)  # at most: the last chunk may be short
+    nthreads = threads or numba.get_num_threads()
+    max_steps = defn.config.numerics.max_steps
+    bound = ics_todo * max_steps * SLOWEST_STEP_S / nthreads
+    free = free_bytes(_existing_parent(Path(out) if out is not None else Path.cwd()))
+    est = ScanEstimate(
+        n_ics=defn.size, n_chunks=defn.n_chunks, chunks_todo=chunks_todo, ics_todo=ics_todo,
+        bytes=ics_todo * BYTES_PER_IC + chunks_todo * BYTES_PER_CHUNK, free_bytes=free, chunk_memory=min(defn.chunk, defn.size) * MEMORY_PER_IC,
+        threads=nthreads, seconds=None, seconds_bound=bound,
+    )
+    if not calibrate or bound <= 30.0 or ics_todo == 0:
+        return est
+    n = min(CALIBRATION_ICS, defn.size)
+    ids = sorted({int(round(v)) for v in np.linspace(0, defn.size - 1, n)})
+    ics = np.concatenate([defn.space.block(i, i + 1).ics for i in ids]).reshape(-1, 6)
+    num = defn.config.numerics
+    cal_steps = min(max_steps, CALIBRATION_STEPS)
+    cal = replace(defn.config, numerics=replace(num, t_max_s=min(num.t_max_s, cal_steps * num.dt_s)))
+    conv = defn.space.slice.l_convention
+    simulate_batch(ics[:1], config=replace(cal, numerics=replace(num, t_max_s=num.dt_s)), l_convention=conv,
+                   threads=1)  # load the compiled kernel before timing
+    t = time.perf_counter()
+    res = simulate_batch(ics, config=cal, l_convention=conv, threads=1)
+    wall = time.perf_counter() - t
+    steps = res.steps.astype(np.float64)
+    capped = (steps >= cal.numerics.max_steps) & (cal.numerics.max_steps < max_steps)
+    full = np.where(capped, float(max_steps), steps)
+    per_ic = wall / len(ids) * (full.sum() / max(steps.sum(), 1.0))
+    return replace(est, seconds=ics_todo * per_ic / nthreads, upper=bool(capped.any()))
+
+
+def _existing_parent(p: Path) -> Path:
+    p = p.absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+

@@ -1,0 +1,409 @@
+"""The scan dataset folder: manifest, chunk files, their checksum log, and the writer's lock.
+
+A scan folder holds ``_scan.json`` (the manifest: the scan definition, the
+dicetrace version), one Parquet file per finished chunk,
+``part-NNNNNN.parquet``, and the manifest's chunk log ``_scan.chunks.jsonl``
+(one line per finished chunk: its file, rows, size and SHA-256).  Each chunk
+is written under a hidden temporary name, its checksum logged, and then
+renamed.  So a Ctrl-C or a kill loses at most the chunks in flight; running
+the same scan again verifies the finished chunks against their checksums
+(recomputing, with a :class:`ScanWarning`, any that are damaged), skips the
+good ones and ends with exactly one row per IC.  A different definition
+against an existing folder is refused (:class:`ScanMismatchError`), never
+mixed in.  One writer at a time: a scan holds the folder's lock
+(``.dicetrace-scan.lock``, via ``filelock``) while it writes; a second one
+waits at most ``wait`` seconds, then refuses (:class:`ScanBusyError`),
+touching nothing.
+
+The folder is a plain Parquet dataset: ``pandas.read_parquet(folder)`` reads
+it (files whose names start with ``_`` or ``.`` are not data).
+"""
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import os
+import re
+import time
+import uuid
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from dicetrace.ics import Grid, Sample
+from dicetrace.scan.definition import ScanDefinition, describe_differences
+from dicetrace.simulate import DEFAULT_CAP, simulate_batch
+from dicetrace.sinks._common import OutputError, remove_quietly
+from dicetrace.tables import rolls_table
+
+MANIFEST = "_scan.json"
+#: The manifest's chunk log: one JSON line per finished chunk (file, rows, bytes, sha256).
+CHUNK_LOG = "_scan.chunks.jsonl"
+#: The folder's writer lock (held by the one scan writing into it).
+LOCK = ".dicetrace-scan.lock"
+METADATA_KEY = b"dicetrace"
+DICTIONARY_COLUMNS = ["preset", "integrator", "status", "outcome", "dt_s", "k"]
+_PART = re.compile(r"^part-(\d{6,})\.parquet$")
+
+
+class ScanMismatchError(ValueError):
+    """The folder holds a scan with a different definition."""
+
+
+class ScanBusyError(RuntimeError):
+    """Another scan holds the folder's writer lock."""
+
+
+class CorruptChunkError(ValueError):
+    """A chunk file does not match the checksum recorded when it was written (the message names the file)."""
+
+
+class ScanWarning(UserWarning):
+    """Something a scan repaired on the way (a damaged chunk recomputed)."""
+
+
+def part_name(c: int) -> str:
+    return f"part-{c:06d}.parquet"
+
+
+def _version() -> str:
+    import dicetrace
+
+    return dicetrace.__version__
+
+
+# -- checking arguments -------------------------------------------------------------------------
+
+
+def _check_int(value, name: str, lo: int, *, none: bool = True) -> int | None:
+    if value is None and none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+        more = " or None" if none else ""
+        raise ValueError(f"{name} must be an integer >= {lo}{more}, got {value!r}")
+    return int(value)
+
+
+def _check_space_finite(defn: ScanDefinition) -> None:
+    """Refuse a space whose ICs overflow: the corners of a window or box (an IC is affine in its coordinates), or every point."""
+    space = defn.space
+    if isinstance(space, (Grid, Sample)):
+        box = space.window if isinstance(space, Grid) else space.box
+        coords = np.array(list(itertools.product(*box)), dtype=np.float64)
+    else:
+        coords = np.array(space.coords, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        ics = np.asarray(space.slice.ics(coords), dtype=np.float64).reshape(-1, 6)
+    bad = ~np.isfinite(ics).all(axis=1)
+    if bad.any():
+        at = ", ".join(f"{float(v):g}" for v in coords[int(np.argmax(bad))])
+        where = "window" if isinstance(space, Grid) else "box" if isinstance(space, Sample) else "points"
+        raise ValueError(f"the scan's {where} gives non-finite ICs (at {at} on slice {space.slice.name!r}): "
+                         "its coordinates are too large")
+
+
+# -- computing one chunk ----------------------------------------------------------------------
+
+
+def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, cap: int = DEFAULT_CAP) -> pa.Table:
+    """The rolls table of chunk ``c`` of a scan (no metadata).
+
+    ``threads``: numba threads for this chunk (None: numba's current setting).
+    The rows do not depend on it, nor on the chunk size: every IC is the
+    serial kernel's result for that IC.
+    """
+    start, stop = defn.chunk_range(c)
+    blk = defn.space.block(start, stop)
+    batch = simulate_batch(
+        blk.ics, config=defn.config, l_convention=defn.space.slice.l_convention, threads=threads, cap=cap
+    )
+    return rolls_table(batch, coords=blk.coords, ic_ids=blk.ic_id, index=blk.index)
+
+
+def _chunk_task(defn_dict: dict, c: int, threads: int | None) -> tuple[int, pa.Table]:
+    """A Dask task: chunk ``c`` of the scan ``defn_dict`` (module level: sent by reference)."""
+    return c, compute_chunk(ScanDefinition.from_dict(defn_dict), c, threads=threads)
+
+
+def chunk_metadata(defn: ScanDefinition, c: int) -> dict:
+    start, stop = defn.chunk_range(c)
+    return {
+        "dicetrace_version": _version(),
+        "scan": defn.to_dict(),
+        "config": defn.config.as_dict(),
+        "l_convention": defn.config.preset.l_convention,
+        "chunk_index": c,
+        "ic_range": [start, stop],
+    }
+
+
+def _with_metadata(table: pa.Table, meta: dict) -> pa.Table:
+    md = dict(table.schema.metadata or {})
+    md[METADATA_KEY] = json.dumps(meta, sort_keys=True).encode()
+    return table.replace_schema_metadata(md)
+
+
+# -- the dataset folder ----------------------------------------------------------------------
+
+
+def read_manifest(folder) -> dict:
+    p = Path(folder) / MANIFEST
+    if not p.is_file():
+        raise FileNotFoundError(f"{str(folder)!r} is not a dicetrace scan folder (no {MANIFEST})")
+    try:
+        return json.loads(p.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{str(p)!r}: unreadable scan manifest ({' '.join(str(e).split())})") from None
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "w") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def file_sha256(path) -> tuple[str, int]:
+    """(SHA-256 hex digest, size in bytes) of a file."""
+    with open(path, "rb") as f:
+        digest = hashlib.file_digest(f, "sha256")
+        size = f.tell()
+    return digest.hexdigest(), size
+
+
+def read_chunk_log(folder) -> dict[int, dict]:
+    """The chunk log of a scan folder: chunk index → its last entry (file, rows, bytes, sha256).
+
+    A torn last line (a write killed half way) is skipped: that chunk's
+    file was never renamed into place.
+    """
+    entries: dict[int, dict] = {}
+    try:
+        with open(Path(folder) / CHUNK_LOG) as f:
+            for line in f:
+                try:
+                    e = json.loads(line)
+                    entries[int(e["chunk"])] = e
+                except (ValueError, KeyError, TypeError):
+                    continue
+    except FileNotFoundError:
+        pass
+    return entries
+
+
+def _append_chunk_log(folder: Path, entry: dict) -> None:
+    with open(folder / CHUNK_LOG, "a") as f:
+        f.write(json.dumps(entry, sort_keys=True) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def chunk_files(folder) -> dict[int, Path]:
+    """Chunk index → path of every ``part-NNNNNN.parquet`` in ``folder`` (one listing, any number of chunks)."""
+    folder = Path(folder)
+    out = {}
+    with os.scandir(folder) as it:
+        for e in it:
+            m = _PART.match(e.name)
+            if m:
+                out[int(m.group(1))] = folder / e.name
+    return dict(sorted(out.items()))
+
+
+#: Files this process has hashed (or written), by path: (size, mtime_ns, sha256).  A file whose size and
+#: modification time have not changed since is not hashed again (a scan's summary, map and recording
+#: each read the folder); another process always hashes afresh.
+_HASHED: dict[str, tuple[int, int, str]] = {}
+
+
+def _remember(path: Path, digest: str) -> None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return
+    _HASHED[str(Path(path).absolute())] = (st.st_size, st.st_mtime_ns, digest)
+
+
+def _known_digest(path: Path) -> str | None:
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    hit = _HASHED.get(str(Path(path).absolute()))
+    return hit[2] if hit is not None and hit[:2] == (st.st_size, st.st_mtime_ns) else None
+
+
+def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
+    """Why chunk file ``path`` is not the finished chunk its log ``entry`` describes (None: it is).
+
+    Without a log entry (a folder written before checksums were logged) the
+    file must decode completely and hold ``rows`` rows.
+    """
+    if entry is not None:
+        if entry.get("rows") != rows:
+            return f"it holds {entry.get('rows')} rows, the chunk has {rows}"
+        if _known_digest(path) == entry.get("sha256"):
+            return None
+        try:
+            digest, size = file_sha256(path)
+        except OSError as e:
+            return f"unreadable ({e.strerror or e})"
+        if size != entry.get("bytes") or digest != entry.get("sha256"):
+            return f"its SHA-256 differs from the one recorded in {CHUNK_LOG}"
+        _remember(path, digest)
+        return None
+    try:
+        n = pq.read_table(path).num_rows
+    except Exception as e:  # noqa: BLE001 - any decoding error means "not a finished chunk"
+        return f"it does not decode ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
+    return None if n == rows else f"it holds {n} rows, the chunk has {rows}"
+
+
+def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
+    """True if ``folder`` holds this scan's manifest, False if none; ScanMismatchError if another scan's."""
+    mpath = folder / MANIFEST
+    if not mpath.exists():
+        return False
+    try:
+        have = json.loads(mpath.read_text())["definition"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest {MANIFEST} ({e})") from None
+    want = defn.to_dict()
+    if json.dumps(have, sort_keys=True) != json.dumps(want, sort_keys=True):
+        diffs = describe_differences(have, want)
+        shown = "; ".join(diffs[:4]) + (f"; and {len(diffs) - 4} more" if len(diffs) > 4 else "")
+        raise ScanMismatchError(
+            f"{str(folder)!r} holds a different scan ({shown}). "
+            "Use another --out folder, or delete this one to start over."
+        )
+    return True
+
+
+def _check_empty(folder: Path) -> None:
+    """FileExistsError unless ``folder`` (holding no manifest) has no data files (hidden files do not count)."""
+    if any(not p.name.startswith(".") for p in folder.iterdir()):
+        raise FileExistsError(
+            f"{str(folder)!r} is not empty and holds no dicetrace scan ({MANIFEST} missing): use another folder"
+        )
+
+
+def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
+    """Create or check the scan folder; return the chunks already finished (and verified).
+
+    Call it holding the folder's lock (:func:`scan` does).  Raises
+    :class:`ScanMismatchError` when the folder holds another scan, and
+    FileExistsError when it holds files that are not a dicetrace scan.
+    Leftover temporary files of interrupted writes are removed.  Every
+    finished chunk is checked against its logged checksum; a damaged one
+    (or one with the wrong number of rows) is deleted, to be recomputed,
+    with a :class:`ScanWarning` naming it.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if not _check_manifest(folder, defn):
+        _check_empty(folder)
+        manifest = {
+            "format": defn.to_dict()["format"],
+            "dicetrace_version": _version(),
+            "definition": defn.to_dict(),
+            "n_ics": defn.size,
+            "n_chunks": defn.n_chunks,
+            "chunk_log": CHUNK_LOG,
+            "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        }
+        _atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True))
+    for p in folder.glob(".part-*.tmp"):
+        p.unlink(missing_ok=True)
+    log = read_chunk_log(folder)
+    done = set()
+    for c, p in chunk_files(folder).items():
+        if c >= defn.n_chunks:
+            continue
+        start, stop = defn.chunk_range(c)
+        why = verify_chunk(p, log.get(c), stop - start)
+        if why is None:
+            if c not in log:  # adopt a chunk of a folder written before checksums were logged
+                digest, size = file_sha256(p)
+                _append_chunk_log(folder, {"chunk": c, "file": p.name, "rows": stop - start, "bytes": size,
+                                           "sha256": digest})
+            done.add(c)
+        else:
+            warnings.warn(f"scan chunk {str(p)!r} is damaged ({why}): recomputing it", ScanWarning, stacklevel=3)
+            p.unlink(missing_ok=True)
+    return done
+
+
+def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
+    """Write chunk ``c`` atomically (temporary name, checksum logged, then rename).
+
+    A write that fails (say, on a full disk) leaves no temporary file and
+    raises :class:`~dicetrace.sinks._common.OutputError` naming the chunk;
+    the chunks finished before are kept.
+    """
+    folder = Path(folder)
+    path = folder / part_name(c)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "wb") as f:  # our own handle: closed on any error (a full disk), never left to the GC
+            pq.write_table(
+                _with_metadata(table, chunk_metadata(defn, c)),
+                f,
+                compression="zstd",
+                use_dictionary=DICTIONARY_COLUMNS,  # high-cardinality columns gain nothing and cost time
+            )
+            f.flush()
+            os.fsync(f.fileno())
+        digest, size = file_sha256(tmp)
+        _append_chunk_log(folder, {"chunk": c, "file": path.name, "rows": table.num_rows, "bytes": size,
+                                   "sha256": digest})
+        os.replace(tmp, path)
+        _remember(path, digest)
+    except OSError as e:
+        if isinstance(e, OutputError):
+            raise
+        reason = os.strerror(e.errno) if e.errno else " ".join(str(e).split())
+        raise OutputError(
+            f"cannot write scan chunk {str(path)!r}: {reason} (the finished chunks are kept: "
+            "free space and re-run the same scan to resume)"
+        ) from None
+    finally:
+        remove_quietly(tmp)
+    return path
+
+
+class _FolderLock:
+    """The folder's writer lock (``filelock``); refuses in one line after ``wait`` seconds."""
+
+    def __init__(self, folder: Path, wait: float):
+        from filelock import FileLock
+
+        self.folder, self.wait = folder, wait
+        self.lock = FileLock(str(folder / LOCK), timeout=wait)
+
+    def __enter__(self):
+        from filelock import Timeout
+
+        try:
+            self.lock.acquire()
+        except Timeout:
+            raise ScanBusyError(
+                f"another dicetrace scan is writing into {str(self.folder)!r} (it holds {LOCK}); "
+                f"waited {self.wait:g} s: let it finish (then re-run: finished chunks are skipped), "
+                "or wait for it (--wait SECONDS)"
+            ) from None
+        return self
+
+    def __exit__(self, *exc):
+        self.lock.release()
+
+
