@@ -10,10 +10,6 @@ import pytest
 
 from dicetrace.ics import seed_slice
 from dicetrace.params import (
-    AUTO_DT_FE_GAIN,
-    AUTO_DT_MAX_S,
-    AUTO_DT_MAX_STEPS,
-    AUTO_DT_SAFETY,
     INTEGRATORS,
     KERNEL_L_CONVENTION,
     NODE_SIGNS,
@@ -21,15 +17,13 @@ from dicetrace.params import (
     Config,
     Numerics,
     Preset,
-    auto_dt,
     convert_l,
     get_integrator,
     get_preset,
-    impact_speed_cm_s,
     make_config,
     resolve_config,
-    stiff_rates,
 )
+from dicetrace.stepsize import AUTO_DT_FE_GAIN, AUTO_DT_MAX_S, AUTO_DT_MAX_STEPS, AUTO_DT_SAFETY, auto_dt, impact_speed_cm_s, stiff_rates
 
 NUMERIC_PRESET_FIELDS = ("k", "gamma", "mu", "g", "half_side_cm", "z0_cm", "v_reg_cm_s")
 

@@ -174,7 +174,8 @@ def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(work, 
 
 
 def test_dt_auto_is_chosen_for_the_overridden_stiffness(tmp_path, dicetrace_cli):
-    from dicetrace.params import auto_dt, get_preset
+    from dicetrace.params import get_preset
+    from dicetrace.stepsize import auto_dt
     from dicetrace.scan.read import read_scan, scan_definition
 
     res = dicetrace_cli("scan", *HOME3, "--dt", "auto", "--set", "k=5e7", "--t-max", "2", "--out", "s", "-q",

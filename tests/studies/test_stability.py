@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from dicetrace.params import INTEGRATORS, auto_dt, get_preset, impact_speed_cm_s, make_config
+from dicetrace.params import INTEGRATORS, get_preset, make_config
+from dicetrace.stepsize import auto_dt, impact_speed_cm_s
 from dicetrace.simulate import simulate, simulate_batch
 from dicetrace.status import LABELS
 

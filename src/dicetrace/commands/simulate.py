@@ -87,7 +87,8 @@ def build_config(
     message names the option(s) at fault.  ``--tol`` with a fixed-step
     integrator is refused (it would have no effect).
     """
-    from dicetrace.params import INTEGRATORS, TOL_MIN, impact_speed_cm_s, make_config
+    from dicetrace.params import INTEGRATORS, TOL_MIN, make_config
+    from dicetrace.stepsize import impact_speed_cm_s
 
     base = preset_or_fail(preset)
     overrides = dict(overrides or {})

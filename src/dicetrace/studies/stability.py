@@ -16,7 +16,8 @@ import math
 import numpy as np
 
 from dicetrace.ics import SEED_SLICE
-from dicetrace.params import INTEGRATORS, Config, Numerics, auto_dt, convert_l, get_preset, impact_speed_cm_s
+from dicetrace.params import INTEGRATORS, Config, Numerics, convert_l, get_preset
+from dicetrace.stepsize import auto_dt, impact_speed_cm_s
 from dicetrace.status import Status
 from dicetrace.studies.accuracy import PRESETS, check_integrators
 from dicetrace.studies.text import fmt
