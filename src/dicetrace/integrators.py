@@ -22,8 +22,10 @@ class IntegratorSpec:
     name
         The name users type (``--integrator``, ``integrator=``).
     kernel_id
-        The integer the numba kernels dispatch on (part of the kernel ABI:
-        ``dicetrace.core.integrators`` compiles one step per id).
+        The integer that names it to the numba kernels (part of the kernel ABI).
+    scheme
+        The module of ``dicetrace.core.schemes`` whose ``step`` it runs
+        (``dicetrace.core.loop`` compiles one run loop per scheme).
     order
         Classical order of accuracy on smooth segments.
     stability_bound
@@ -54,6 +56,7 @@ class IntegratorSpec:
     stability_bound: float
     summary: str
     color: str
+    scheme: str
     study_dt_s: tuple[float, ...]
     quick_dt_s: tuple[float, ...]
     substepped: bool = False
@@ -70,27 +73,32 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
     for s in (
         IntegratorSpec(
             "semi-implicit-euler", 0, 1, 2.0, "the 2019 program's scheme (default for seed)", "tab:blue",
+            scheme="semi_implicit_euler",
             study_dt_s=(1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5, 1.5625e-5, 7.8125e-6),
             quick_dt_s=(1e-3, 2.5e-4),
         ),
         IntegratorSpec(
             "forward-euler", 1, 1, 0.0, "textbook forward Euler (what the writeup says it used)", "tab:red",
+            scheme="forward_euler",
             study_dt_s=(1e-3, 2.5e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5),
             quick_dt_s=(1e-4, 5e-5),
         ),
         IntegratorSpec(
             "verlet", 2, 2, 2.0, "velocity Verlet", "tab:green",
+            scheme="verlet",
             study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
             quick_dt_s=(1e-3, 2.5e-4),
         ),
         IntegratorSpec(
             "rk4", 3, 4, _RK4_BOUND, "classical Runge-Kutta on the Lie group (commutator-free)", "tab:purple",
+            scheme="rk4",
             study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
             quick_dt_s=(1e-3, 2.5e-4),
         ),
         IntegratorSpec(
             "contact-substep", 4, 4, _RK4_BOUND,
             "contact-aware RK4: exact free flight, kink-aligned sub-steps in contact", "tab:orange",
+            scheme="contact_substep",
             study_dt_s=(8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4),
             quick_dt_s=(2e-3, 1e-3),
             substepped=True,
@@ -98,6 +106,7 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
         IntegratorSpec(
             "contact-adaptive", 5, 4, _RK4_BOUND,
             "contact-substep with error-controlled sub-steps (tolerance tol; default for physical)", "tab:brown",
+            scheme="contact_substep",
             study_dt_s=(1e-3,),
             quick_dt_s=(1e-3,),
             substepped=True,
