@@ -91,21 +91,21 @@ class KernelParams(NamedTuple):
     the named constants above, never with literals.
     """
 
-    k: float  # ground stiffness per node mass, 1/s²
-    gamma: float  # damping coefficient, s/cm
-    mu: float  # friction coefficient
-    g: float  # gravity along z, cm/s² (negative)
-    half: float  # half side of the cube, cm
-    inertia: float  # isotropic moment of inertia, node-mass·cm²
-    z0: float  # initial height of the centre of mass, cm
-    dt: float  # time step, s
-    max_steps: float  # time cap as a number of steps
-    e_stop: float  # stop-test energy threshold, node-mass·cm²/s² above e_rest
-    e_rest: float  # energy of the die lying on a face (subtracted in the stop-test energy)
-    friction_mode: int  # FRICTION_SPECTRAL or FRICTION_PER_NODE
-    clamp_normal: bool  # True: normal force clamped at zero; False: signed (program)
-    energy_mode: int  # ENERGY_POINT_MASS or ENERGY_RIGID
-    v_reg: float  # friction regularisation speed, cm/s (per-node mode)
+    k: float  # ground stiffness per node mass, 1/s² (Preset.k)
+    gamma: float  # damping coefficient, s/cm (Preset.gamma)
+    mu: float  # friction coefficient (Preset.mu)
+    g: float  # gravity along z, cm/s², negative (Preset.g)
+    half_side_cm: float  # half side of the cube, cm (Preset.half_side_cm)
+    inertia: float  # isotropic moment of inertia, node-mass·cm² (Preset.inertia)
+    z0_cm: float  # initial height of the centre of mass, cm (Preset.z0_cm)
+    dt_s: float  # time step, s (Numerics.dt_s)
+    max_steps: float  # time cap as a number of steps (Numerics.max_steps)
+    e_stop: float  # stop-test threshold, node-mass·cm²/s² above e_rest (Preset.e_stop)
+    e_rest: float  # energy of the die lying on a face, node-mass·cm²/s² (Preset.e_rest)
+    friction_mode: int  # FRICTION_SPECTRAL or FRICTION_PER_NODE (Preset.friction)
+    clamp_normal: bool  # True: normal force clamped at zero; False: signed, the program (Preset.clamp_normal)
+    energy_mode: int  # ENERGY_POINT_MASS or ENERGY_RIGID (Preset.energy)
+    v_reg_cm_s: float  # friction regularisation speed, cm/s, per-node law (Preset.v_reg_cm_s)
     blowup_rel: float  # blow-up if E_dyn - E_rest > (1+rel)·(E0 - E_rest) + abs
     blowup_abs: float
     substeps: float  # sub-steps per step while in contact (contact-substep)
@@ -365,17 +365,17 @@ class Config:
             gamma=float(p.gamma),
             mu=float(p.mu),
             g=float(p.g),
-            half=float(p.half_side_cm),
+            half_side_cm=float(p.half_side_cm),
             inertia=float(p.inertia),
-            z0=float(p.z0_cm),
-            dt=float(n.dt_s),
+            z0_cm=float(p.z0_cm),
+            dt_s=float(n.dt_s),
             max_steps=float(n.max_steps),
             e_stop=float(p.e_stop),
             e_rest=float(p.e_rest),
             friction_mode=FRICTION_SPECTRAL if p.friction == "spectral" else FRICTION_PER_NODE,
             clamp_normal=bool(p.clamp_normal),
             energy_mode=ENERGY_POINT_MASS if p.energy == "point-mass" else ENERGY_RIGID,
-            v_reg=float(p.v_reg_cm_s),
+            v_reg_cm_s=float(p.v_reg_cm_s),
             blowup_rel=BLOWUP_REL,
             blowup_abs=BLOWUP_ABS_FRACTION * p.e_rest,
             substeps=1.0 if n.spec.adaptive else float(n.substeps),

@@ -64,7 +64,7 @@ def run(integ, kp, h, t_end, X0, U0, L0):
     U = np.array(U0, float)
     L = np.array(L0, float)
     off = np.empty((8, 3))
-    init_offsets(kp.half, off)
+    init_offsets(kp.half_side_cm, off)
     zmin = np.full(8, np.inf)
     zmax = np.full(8, -np.inf)
     n = int(round(t_end / h))

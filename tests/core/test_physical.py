@@ -94,7 +94,7 @@ def test_friction_per_node_on_the_clamped_force():
         assert P[k] == pytest.approx(p, rel=1e-15)
         s = math.hypot(uk[k, 0], uk[k, 1])
         fxy = F[k, :2]
-        assert np.linalg.norm(fxy) == pytest.approx(kp.mu * p * s / math.hypot(s, kp.v_reg), rel=1e-12)
+        assert np.linalg.norm(fxy) == pytest.approx(kp.mu * p * s / math.hypot(s, kp.v_reg_cm_s), rel=1e-12)
         if p > 0:
             assert np.dot(fxy, uk[k, :2]) < 0  # opposes the node's own slip
             assert np.linalg.norm(fxy) <= kp.mu * p

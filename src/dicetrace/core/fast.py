@@ -235,7 +235,7 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     -------
     (status, steps, outcome, nsets), as ``loop.run_roll``.
     """
-    h = kp.dt
+    h = kp.dt_s
     inertia = kp.inertia
     g8 = kp.g * 8.0
     k_ = kp.k
@@ -243,16 +243,16 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     mu = kp.mu
     clamp = kp.clamp_normal
     spectral = kp.friction_mode == FRICTION_SPECTRAL
-    vr2 = kp.v_reg * kp.v_reg
+    vr2 = kp.v_reg_cm_s * kp.v_reg_cm_s
     e_stop = kp.e_stop
     e_rest = kp.e_rest
     mg = -kp.g
-    half2 = kp.half * kp.half
+    half2 = kp.half_side_cm * kp.half_side_cm
 
     # --- initial state (run_roll's prologue) ---
     X0 = 0.0
     X1 = 0.0
-    X2 = kp.z0
+    X2 = kp.z0_cm
     U0 = ic[0]
     U1 = ic[1]
     U2 = ic[2]

@@ -48,7 +48,7 @@ def roll_summary_cs(ic, off0, kp, sets, set_steps):
 
     X[0] = 0.0
     X[1] = 0.0
-    X[2] = kp.z0
+    X[2] = kp.z0_cm
     for j in range(3):
         U[j] = ic[j]
         L[j] = ic[3 + j]
@@ -69,11 +69,11 @@ def roll_summary_cs(ic, off0, kp, sets, set_steps):
     e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
     point_mass = kp.energy_mode == ENERGY_POINT_MASS
 
-    h = kp.dt
+    h = kp.dt_s
     maxn = int(kp.max_steps)
     status = Status.TIME_CAP
     n = 0
-    half2 = kp.half * kp.half
+    half2 = kp.half_side_cm * kp.half_side_cm
     while n < maxn:
         n += 1
         contact, mask = step_contact_substep(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)

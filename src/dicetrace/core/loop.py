@@ -150,7 +150,7 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
 
     X[0] = 0.0
     X[1] = 0.0
-    X[2] = kp.z0
+    X[2] = kp.z0_cm
     for j in range(3):
         U[j] = ic[j]
         L[j] = ic[3 + j]
@@ -174,11 +174,11 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
     if tracing:
         _write_trace(0, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
 
-    h = kp.dt
+    h = kp.dt_s
     maxn = int(kp.max_steps)
     status = Status.TIME_CAP
     n = 0
-    half2 = kp.half * kp.half
+    half2 = kp.half_side_cm * kp.half_side_cm
     while n < maxn:
         n += 1
         contact, mask = step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)

@@ -199,7 +199,7 @@ def _friction_forces(uk, kp, F, P):
                 F[k, 0] = -mu * (P[k] * (uk[k, 0] / sig))
                 F[k, 1] = -mu * (P[k] * (uk[k, 1] / sig))
     else:
-        vr2 = kp.v_reg * kp.v_reg
+        vr2 = kp.v_reg_cm_s * kp.v_reg_cm_s
         for k in range(8):
             if P[k] == 0.0:
                 F[k, 0] = 0.0

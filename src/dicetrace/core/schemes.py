@@ -319,7 +319,7 @@ def free_flight_safe(X, U, W, off, kp, h):
         zlo = zmid
     if kp.g > 0.0:  # convexity fails: bound the vertex too
         zlo -= 0.5 * kp.g * h * h
-    r = CIRCUM * kp.half
+    r = CIRCUM * kp.half_side_cm
     low = 0.0
     for k in range(8):
         if off[k, 2] < low:
@@ -652,7 +652,7 @@ def friction_rate(z, uk, P, kp):
         for k in range(8):
             if z[k] < 0.0 and P[k] > 0.0:
                 s = math.sqrt(uk[k, 0] * uk[k, 0] + uk[k, 1] * uk[k, 1])
-                s = max(s, kp.v_reg)
+                s = max(s, kp.v_reg_cm_s)
                 r = kp.mu * P[k] * INV_MASS_NODE / s
                 if r > lam:
                     lam = r
@@ -743,8 +743,8 @@ def step_contact_substep(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact):
     hmax = h / max(kp.substeps, 1.0)
     adaptive = kp.tol > 0.0
     h0 = ADAPT_H0 / math.sqrt(kp.k)
-    rn = CIRCUM * kp.half
-    vfloor = math.sqrt(abs(kp.g) * kp.half)
+    rn = CIRCUM * kp.half_side_cm
+    vfloor = math.sqrt(abs(kp.g) * kp.half_side_cm)
     # the state lives in the scratch array during the step (see cf4)
     S = np.empty((S_ROWS, 3))
     Xn = S[11]
@@ -864,7 +864,7 @@ def step_contact_substep(X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact):
                 + rn * math.sqrt(Ln[0] * Ln[0] + Ln[1] * Ln[1] + Ln[2] * Ln[2]) / I
                 + vfloor
             )
-            err = max(ex / kp.half, (eu + rn * el) / vs) / kp.tol
+            err = max(ex / kp.half_side_cm, (eu + rn * el) / vs) / kp.tol
             # 0.9·err^(-1/4), by two square roots (libm's pow cost 3 % of a physical throw)
             fac = ADAPT_FAC_MAX if err == 0.0 else ADAPT_SAFETY / math.sqrt(math.sqrt(err))
             if err > 1.0 and hs > ADAPT_HMIN * h:
