@@ -3,7 +3,7 @@
 A contact set is an 8-bit mask, bit k = node k+1 at or below the ground
 (absolute z ≤ 0).  The sequence starts with the empty set; after every step
 from the second one on, up to and including the stopping step, the current
-set is appended when it differs from the last recorded one (DESIGN.md §2).
+set is appended when it differs from the last recorded one (docs/model.md §8).
 The same ``record_set`` serves the simulator's loop and
 ``contact_sets_from_heights`` (used on hand-built height series in tests).
 """

@@ -9,7 +9,7 @@ stop-test energy); ``tests/test_kernel_speed_equivalence.py`` holds it to the
 general loop and to a frozen golden set.
 
 Why it is faster (every item keeps the arithmetic of ``model`` and
-``integrators`` operation for operation, see DESIGN.md section 2):
+``integrators`` operation for operation, see docs/model.md §5.5):
 
 * **Mirror symmetry.**  Node 8−k is node k+1 reflected through the centre
   (``off[7-k] == -off[k]`` at the start), and every operation that moves an

@@ -11,7 +11,7 @@ Arrays (node index k = 0..7 is node k+1 of the docs):
 ``uk`` (8, 3) node velocities, cm/s; ``z`` (8,) absolute node heights, cm;
 ``F`` (8, 3) contact forces, node-mass·cm/s².
 
-The arithmetic order follows DESIGN.md section 2 ("bit-level arithmetic"):
+The arithmetic order follows docs/model.md §5.5 ("bit-level arithmetic"):
 sequential sums node 1 → 8, no fused multiply-add, the program's Rodrigues
 form.  Do not "simplify" an expression here without running
 ``tests/core/test_reference.py``.
@@ -151,7 +151,7 @@ def contact_forces(z, uk, kp, F, P):
     in the program (``clamp_normal = 0``), clamped at 0 otherwise.  Friction:
     program (spectral): F_xy = −μ·(P_k·(u_xy,k/σ)), σ the largest singular
     value of the 8×2 horizontal-velocity matrix (closed form via its 2×2 Gram
-    matrix; see DESIGN.md on LAPACK's last bits); per-node (physical):
+    matrix; see docs/model.md §5.5 on LAPACK's last bits); per-node (physical):
     F_xy = −μ·P_k·u_xy,k / sqrt(|u_xy,k|² + v_reg²).
     """
     k_ = kp.k
