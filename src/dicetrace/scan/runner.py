@@ -1,22 +1,9 @@
-"""Run a scan: chunks of ICs through the batch kernel, streamed to Parquet.
+"""Run a scan: chunks of ICs through the batch kernel, streamed into a scan folder.
 
-A scan folder holds ``_scan.json`` (the manifest: the scan definition, the
-dicetrace version), one Parquet file per finished chunk,
-``part-NNNNNN.parquet``, and the manifest's chunk log ``_scan.chunks.jsonl``
-(one line per finished chunk: its file, rows, size and SHA-256).  Each chunk
-is written under a hidden temporary name, its checksum logged, and then
-renamed.  So a Ctrl-C or a kill loses at most the chunks in flight; running
-the same scan again verifies the finished chunks against their checksums
-(recomputing, with a :class:`ScanWarning`, any that are damaged), skips the
-good ones and ends with exactly one row per IC.  A different definition
-against an existing folder is refused (:class:`ScanMismatchError`), never
-mixed in.  One writer at a time: a scan holds the folder's lock
-(``.dicetrace-scan.lock``, via ``filelock``) while it writes; a second one
-waits at most ``wait`` seconds, then refuses (:class:`ScanBusyError`),
-touching nothing.
-
-The folder is a plain Parquet dataset: ``pandas.read_parquet(folder)`` reads
-it (files whose names start with ``_`` or ``.`` are not data).
+``scan`` runs or resumes a scan (in memory, locally or on Dask) and
+``iter_scan`` streams its chunk tables; what the folder holds and how it
+survives a kill, damage and a second writer is described in
+:mod:`dicetrace.scan.folder`.
 """
 from __future__ import annotations
 
