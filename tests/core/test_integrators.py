@@ -1,6 +1,6 @@
 """Every integrator against analytic answers: convergence orders, the bouncing node, rigidity.
 
-The order tests step the real kernels (``core.integrators.step``) with a
+The order tests step the real kernels (each scheme's ``step``) with a
 small driver that, unlike the program's loop, evaluates the forces at the
 initial state (the loop starts with zero forces, which would spoil the order
 of a segment that starts in contact).  The "single node" is the die dropped
@@ -22,9 +22,10 @@ import pytest
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
-from dicetrace.core.integrators import step
+from dicetrace.core.forces import eval_forces
 from dicetrace.core.model import init_offsets
-from dicetrace.core.schemes import finish
+from dicetrace.core.schemes import step_of
+from dicetrace.core.state import new_states
 from dicetrace.params import INTEGRATORS, Config, Numerics, Preset, make_config
 
 ALL = tuple(INTEGRATORS)
@@ -33,24 +34,31 @@ BY_DT = tuple(i for i in INTEGRATORS if i != "contact-adaptive")
 
 
 @numba.njit(cache=False)
-def _drive(integ, kp, h, nstep, X, U, L, off, zmin, zmax):
-    """Step ``nstep`` times from (X, U, L, off) in place; track each node's height range."""
-    W = L / kp.inertia
-    F = np.zeros((8, 3))
-    uk = np.zeros((8, 3))
-    z = np.zeros(8)
-    P = np.zeros(8)
-    R = np.zeros((3, 3))
-    Rh = np.array([-1.0, 0.0, 0.0])
-    contact, mask = finish(X, U, W, off, kp, F, uk, z, P)
+def _drive(step, kp, h, nstep, S, zmin, zmax):
+    """Step ``nstep`` times from the state S[0] in place; track each node's height range."""
+    st = S[0]
+    contact, mask = eval_forces(st, kp)
     for _ in range(nstep):
-        contact, mask = step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
-        if mask < 0:
-            return False
+        contact, mask = step(st, kp, h, contact)
         for k in range(8):
-            zmin[k] = min(zmin[k], z[k])
-            zmax[k] = max(zmax[k], z[k])
+            zmin[k] = min(zmin[k], st.z[k])
+            zmax[k] = max(zmax[k], st.z[k])
     return True
+
+
+def state(kp, X0, U0, L0, off=None):
+    """A (1,) state record at (X0, U0, L0) with the program's offsets (or ``off``)."""
+    S = new_states(1)
+    S["X"][0] = X0
+    S["U"][0] = U0
+    S["L"][0] = L0
+    S["W"][0] = np.asarray(L0, float) / kp.inertia
+    if off is None:
+        init_offsets(kp.half_side_cm, S["off"][0])
+    else:
+        S["off"][0] = off
+    S["rot_h"] = -1.0
+    return S
 
 
 def kparams(substeps: int = 8, integrator: str = "semi-implicit-euler", tol: float = 1e-7, **preset):
@@ -60,17 +68,14 @@ def kparams(substeps: int = 8, integrator: str = "semi-implicit-euler", tol: flo
 
 def run(integ, kp, h, t_end, X0, U0, L0):
     """State after t_end (a multiple of h): X, U, L, offsets, node z ranges."""
-    X = np.array(X0, float)
-    U = np.array(U0, float)
-    L = np.array(L0, float)
-    off = np.empty((8, 3))
-    init_offsets(kp.half_side_cm, off)
+    S = state(kp, X0, U0, L0)
     zmin = np.full(8, np.inf)
     zmax = np.full(8, -np.inf)
     n = int(round(t_end / h))
     assert abs(n * h - t_end) < 1e-12 * t_end
-    assert _drive(INTEGRATORS[integ].kernel_id, kp, h, n, X, U, L, off, zmin, zmax)
-    return X, U, L, off, zmin, zmax
+    assert _drive(step_of(INTEGRATORS[integ]), kp, h, n, S, zmin, zmax)
+    st = S[0]
+    return st["X"].copy(), st["U"].copy(), st["L"].copy(), st["off"].copy(), zmin, zmax
 
 
 def slopes(hs, errs):
@@ -79,26 +84,16 @@ def slopes(hs, errs):
 
 
 def test_every_table_row_has_a_compiled_step():
-    """Each row of the integrator table dispatches to a real step: one free-flight
-    step of every kernel id moves the die along the exact parabola (an id without a
-    step returns the impossible mask -1)."""
+    """Each row of the integrator table names a scheme with a real step: one free-flight
+    step of every row's step function moves the die along the exact parabola."""
     cfg = make_config("seed")
     kp = cfg.kernel_params()
     for name, spec in INTEGRATORS.items():
-        X = np.array([0.0, 0.0, 15.0])
-        U = np.array([10.0, -5.0, 30.0])
-        L = np.zeros(3)
-        W = np.zeros(3)
-        off = cfg.initial_offsets().copy()
-        F = np.zeros((8, 3))
-        uk = np.zeros((8, 3))
-        z = np.zeros(8)
-        P = np.zeros(8)
-        R = np.zeros((3, 3))
-        Rh = np.array([-1.0, 0.0, 0.0])
+        S = state(kp, [0.0, 0.0, 15.0], [10.0, -5.0, 30.0], np.zeros(3), cfg.initial_offsets())
         h = 1e-3
-        contact, mask = step(spec.kernel_id, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, False)
+        contact, mask = step_of(spec)(S[0], kp, h, False)
         assert mask == 0 and not contact, name
+        X = S[0]["X"]
         exact = 15.0 + 30.0 * h + 0.5 * kp.g * h * h
         np.testing.assert_allclose(X[:2], [10.0 * h, -5.0 * h], rtol=0, atol=1e-15, err_msg=name)
         # exact for the order >= 2 schemes (free flight is a parabola); the
@@ -292,14 +287,15 @@ def test_rigidity(integ, preset):
 @pytest.mark.parametrize("integ_name", ["contact-substep", "contact-adaptive"])
 @pytest.mark.parametrize("preset", ["seed", "physical"])
 def test_contact_substep_fast_path_identical(preset, integ_name):
-    """``fast_substep.roll_summary_cs`` (what ``run_roll``/``run_batch`` run for
-    contact-substep summaries) equals ``run_roll_general`` bit for bit: status,
-    steps, outcome and the whole contact-set sequence, on tilted and flat starts."""
-    from dicetrace.core import fast_substep, loop
+    """The summary loop of contact-substep (what ``run_roll``/``run_batch`` run for
+    its summaries: the run loop compiled without trace code) equals the tracing loop
+    ``run_roll_general`` bit for bit: status, steps, outcome and the whole
+    contact-set sequence, on tilted and flat starts."""
+    from dicetrace.core import loop
+    from dicetrace.core.state import new_states
     from dicetrace.ics import seed_slice
     from dicetrace.params import make_config
 
-    assert fast_substep.E_BOUND_MARGIN == loop.E_BOUND_MARGIN
     rng = np.random.default_rng(3)
     cfg = make_config(preset, integrator=integ_name, dt_s=2e-3, t_max_s=10.0, tol=1e-6)
     kp = cfg.kernel_params()
@@ -318,7 +314,7 @@ def test_contact_substep_fast_path_identical(preset, integ_name):
             ic = np.asarray(ic, float)
             a = (np.zeros(256, np.uint8), np.zeros(256, np.int32))
             b = (np.zeros(256, np.uint8), np.zeros(256, np.int32))
-            ra = fast_substep.roll_summary_cs(ic, off0, kp, *a)
+            ra = loop.roll_kernel(integ, False)(ic, off0, kp, new_states(1), *a, e0, e1, e2)
             rb = loop.run_roll_general(ic, off0, kp, integ, *b, e0, e1, e2)
             rc = loop.run_roll(ic, off0, kp, integ, *a, e0, e1, e2)
             assert ra == rb == rc

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from dicetrace.core.model import contact_forces
+from dicetrace.core.forces import contact_forces
 from dicetrace.ics import seed_slice
 from dicetrace.params import Config, Numerics, get_preset
 from dicetrace.simulate import Record, simulate, simulate_batch

@@ -1,21 +1,32 @@
-"""The one jit decorator: every compiler option of dicetrace lives here.
+"""The one jit decorator, the on-disk cache and compile-time specialisation.
 
-``DICETRACE_CACHE=0`` turns numba's on-disk cache off (it is on by default:
-a new process then loads compiled kernels in ~0.05 s instead of compiling).
-No fast-math: the `seed` preset must reproduce the 2019 program bit for bit,
-so contraction into fused multiply-adds and re-association are not allowed.
+Every compiler option of dicetrace lives here.  ``DICETRACE_CACHE=0`` turns
+numba's on-disk cache off (it is on by default: a new process then loads
+compiled kernels in ~0.05 s instead of compiling).  No fast-math: the
+`seed` preset must reproduce the 2019 program bit for bit (docs/model.md
+§5.5), so contraction into fused multiply-adds and re-association are not
+allowed.
 
 numba's cache checks only the source file of the cached function, so a
 kernel in ``loop.py`` would keep running old code after ``fast.py`` or
 ``model.py`` changed.  ``_CoreCacheLocator`` stamps every cached kernel of
-``dicetrace.core`` with a digest of all of ``core/*.py`` instead, so any
-change there recompiles them.
+``dicetrace.core`` (subpackages included) with a digest of all of
+``core/**/*.py`` and of the constants of the bottom layers that kernels
+compile in (the integrator table, the status codes, the mode constants and
+the field order of ``KernelParams``), so any change there recompiles them.
+
+:func:`specialise` makes compile-time variants of one Python source: a copy
+of a function whose named globals are replaced.  numba freezes globals as
+compile-time constants, so each copy compiles to its own kernel (a step
+function called directly, a dead branch removed) and is cached under its
+own name.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+import types
 from pathlib import Path
 
 import numba
@@ -25,11 +36,31 @@ CACHE = os.environ.get("DICETRACE_CACHE", "1") not in ("0", "false", "no")
 _CORE_DIR = Path(__file__).resolve().parent
 
 
+def _baked_constants() -> bytes:
+    """The bottom-layer values that kernels compile in as constants."""
+    from dicetrace import params
+    from dicetrace.integrators import INTEGRATORS
+    from dicetrace.status import Status
+
+    rows = [(s.name, s.kernel_id, s.scheme) for s in INTEGRATORS.values()]
+    statuses = [(s.name, int(s)) for s in Status]
+    modes = [
+        params.FRICTION_SPECTRAL,
+        params.FRICTION_PER_NODE,
+        params.ENERGY_POINT_MASS,
+        params.ENERGY_RIGID,
+        params.NODE_SIGNS.tobytes().hex(),
+        params.KernelParams._fields,
+    ]
+    return repr((rows, statuses, modes)).encode()
+
+
 def _core_digest() -> str:
     h = hashlib.sha256()
-    for path in sorted(_CORE_DIR.glob("*.py")):
-        h.update(path.name.encode())
+    for path in sorted(_CORE_DIR.rglob("*.py")):
+        h.update(path.relative_to(_CORE_DIR).as_posix().encode())
         h.update(path.read_bytes())
+    h.update(_baked_constants())
     return h.hexdigest()
 
 
@@ -47,7 +78,7 @@ def _install_core_locator() -> None:
         @classmethod
         def from_function(cls, py_func, py_file):
             try:
-                if Path(py_file).resolve().parent != _CORE_DIR:
+                if not Path(py_file).resolve().is_relative_to(_CORE_DIR):
                     return None
             except OSError:
                 return None
@@ -77,3 +108,24 @@ def jit(fn=None, **extra):
 def jit_parallel(fn):
     """``jit`` with ``parallel=True`` for ``prange`` batch kernels."""
     return numba.njit(**_OPTIONS, parallel=True)(fn)
+
+
+def specialise(template, name: str, doc: str | None = None, **constants):
+    """A copy of the plain function ``template`` named ``name``, with the given globals replaced.
+
+    The copy keeps the template's code and module (so its cache files sit
+    beside the template's, under ``name``); only the globals named in
+    ``constants`` differ, and numba compiles them in as constants.  Wrap the
+    result in :func:`jit` or :func:`jit_parallel`.
+    """
+    missing = [k for k in constants if k not in template.__code__.co_names]
+    if missing:
+        raise ValueError(f"{template.__name__} reads no global named {', '.join(missing)}")
+    env = dict(template.__globals__)
+    env.update(constants)
+    code = template.__code__.replace(co_name=name, co_qualname=name)
+    fn = types.FunctionType(code, env, name, template.__defaults__)
+    fn.__qualname__ = name
+    fn.__module__ = template.__module__
+    fn.__doc__ = template.__doc__ if doc is None else doc
+    return fn

@@ -1,11 +1,14 @@
-"""Contact-set sequence extraction (the writeup's "ground contact event sequence").
+"""The contact-set sequence (docs/model.md §8): recording it step by step, or from a height series.
+
+The writeup calls it the "ground contact event sequence".
 
 A contact set is an 8-bit mask, bit k = node k+1 at or below the ground
 (absolute z ≤ 0).  The sequence starts with the empty set; after every step
 from the second one on, up to and including the stopping step, the current
 set is appended when it differs from the last recorded one (docs/model.md §8).
-The same ``record_set`` serves the simulator's loop and
-``contact_sets_from_heights`` (used on hand-built height series in tests).
+The same ``record_set`` serves the run loop, the specialised seed kernel
+(``core.fast``) and ``contact_sets_from_heights`` (used on hand-built
+height series in tests).
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ from __future__ import annotations
 from dicetrace.core._jit import jit
 
 
-@jit
+@jit(inline="always")
 def record_set(n, mask, last_mask, sets, set_steps, nsets):
     """Append ``mask`` seen at step ``n`` if it is new.
 

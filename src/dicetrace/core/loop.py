@@ -1,10 +1,27 @@
-"""Run a throw to rest: the summary path, the trace path and the batch.
+"""The run loop of a throw, written once and compiled per (scheme, trace or summary).
 
-``run_roll`` is the single loop behind everything: the summary of a throw
-(status, steps, outcome, contact-set sequence) is always produced; the
-per-step channels are written only into the trace arrays that the caller
-passes with rows (zero-row arrays mean "not requested": nothing is computed
-for them, and the compiled signature never changes).
+``_roll`` is the one loop: it steps the state until the stop test fires
+(docs/model.md §5.3, §7) or the run fails (§10), records the contact-set
+sequence (§8) and, in its tracing variant, the per-step channels.  It is
+never called itself: :func:`roll_kernel` specialises it at compile time
+(``_jit.specialise``) on the step function of one scheme (``core.schemes``,
+named by the integrator table) and on whether it may trace, so each
+compiled loop calls its step directly and a summary loop has no trace code.
+Kernels are built on first use: a command that runs one integrator compiles
+(or loads from the cache) that integrator's loops only.
+
+The entry points take an integrator's kernel id (``IntegratorSpec.kernel_id``):
+
+``run_roll``
+    one throw; the summary (all trace arrays with zero rows) runs the
+    summary loop, which hands configurations with a specialised kernel
+    (``core.fast`` for the program's scheme) to it; otherwise the tracing loop.
+``run_batch``
+    many throws in parallel (``prange``), summaries only.
+``run_roll_general``
+    the tracing loop of any integrator, chosen at run time, callable from
+    numba (tests and benchmarks compare the specialised paths with it).  It
+    compiles every integrator's loop.
 
 Trace layouts (row n = state after n steps, row 0 the initial state):
 ``tr_state`` (n+1, 33): X(3), U(3), L(3) (program convention), offsets (8×3);
@@ -20,19 +37,11 @@ import math
 import numpy as np
 from numba import prange
 
-from dicetrace.core._jit import jit, jit_parallel
-from dicetrace.core.contacts import record_set
-from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
-from dicetrace.core.fast_substep import roll_summary_cs
-from dicetrace.core.integrators import CONTACT_ADAPTIVE, CONTACT_SUBSTEP, SEMI_IMPLICIT_EULER, step
-from dicetrace.core.model import (
-    energy_dynamic,
-    energy_parts,
-    energy_stop,
-    face_up,
-    node_heights,
-    node_velocities,
-)
+from dicetrace.core._jit import jit, jit_parallel, specialise
+from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_velocities
+from dicetrace.core.schemes import scheme_module
+from dicetrace.core.state import STATE, after_step, init_state, new_states, state_finite
+from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import ENERGY_POINT_MASS
 from dicetrace.status import Status
 
@@ -40,79 +49,60 @@ STATE_COLS = 33
 FORCE_COLS = 24
 ENERGY_COLS = 6
 
-# Relative safety margin of the free-flight energy bound (see run_roll).  The
+# Relative safety margin of the free-flight energy bound (see _roll).  The
 # bound is exact for a perfect cube; 1e-7 also covers offsets that drift from
 # one over 10⁶ steps and tilted starts built from a rotation matrix accurate
-# to 1e-9 (simulate.initial_offsets accepts that much).  The margin only
+# to 1e-9 (Config.initial_offsets accepts that much).  The margin only
 # decides when the exact energy is evaluated, never the result.
 E_BOUND_MARGIN = 1e-7
 
+#: ICs per work item of ``run_batch`` (a few ms of work: scheduling is free).
+BATCH_BLOCK = 16
+
 
 @jit
-def _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf):
+def _write_trace(n, st, kp, tr_state, tr_force, tr_energy):
     if tr_state.shape[0] > n:
         for j in range(3):
-            tr_state[n, j] = X[j]
-            tr_state[n, 3 + j] = U[j]
-            tr_state[n, 6 + j] = L[j]
+            tr_state[n, j] = st.X[j]
+            tr_state[n, 3 + j] = st.U[j]
+            tr_state[n, 6 + j] = st.L[j]
         for k in range(8):
             for j in range(3):
-                tr_state[n, 9 + 3 * k + j] = off[k, j]
+                tr_state[n, 9 + 3 * k + j] = st.off[k, j]
     if tr_force.shape[0] > n:
         for k in range(8):
             for j in range(3):
-                tr_force[n, 3 * k + j] = F[k, j]
+                tr_force[n, 3 * k + j] = st.F[k, j]
     if tr_energy.shape[0] > n:
-        node_velocities(U, off, W[0], W[1], W[2], uk)
+        U = st.U
+        W = st.W
+        node_velocities(U[0], U[1], U[2], W[0], W[1], W[2], st.off, st.uk)
         if kp.energy_mode == ENERGY_POINT_MASS:
-            tr_energy[n, 0] = energy_stop(uk, z, P, kp)
-        energy_parts(U, W[0], W[1], W[2], z, kp, e_buf)
+            tr_energy[n, 0] = energy_stop(st.uk, st.z, st.P, kp)
+        parts = energy_parts(U[0], U[1], U[2], W[0], W[1], W[2], st.z, kp)
         if kp.energy_mode != ENERGY_POINT_MASS:
-            tr_energy[n, 0] = e_buf[4] - kp.e_rest
+            tr_energy[n, 0] = parts[4] - kp.e_rest
         for j in range(5):
-            tr_energy[n, 1 + j] = e_buf[j]
+            tr_energy[n, 1 + j] = parts[j]
 
 
 @jit
-def use_fast_path(integ, kp, off0):
-    """Whether ``fast.roll_summary_sie`` computes this configuration's summaries.
-
-    It covers the 2019 program's integrator (semi-implicit Euler) with the
-    point-mass stop-test energy, either friction law and either normal-force
-    rule (the ``seed`` preset and its parameter variations), from
-    mirror-symmetric initial offsets (any start built as ±half·R is).
-    """
-    return integ == SEMI_IMPLICIT_EULER and kp.energy_mode == ENERGY_POINT_MASS and mirror_symmetric(off0)
+def _never(kp, off0):
+    return False
 
 
 @jit
-def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
+def _no_kernel(ic, off0, kp, sets, set_steps):
+    return Status.NON_FINITE, 0, -1, 0
+
+
+def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
     """Integrate one throw from ``ic`` until it settles (or fails).
 
-    The summary path (all trace arrays with zero rows) of configurations
-    that ``use_fast_path`` accepts runs the specialised kernel
-    ``fast.roll_summary_sie``, bit-identical to ``run_roll_general``;
-    the summary path of ``contact-substep`` runs ``fast_substep.roll_summary_cs``
-    (the same loop without trace branches or step dispatch, bit-identical);
-    everything else runs ``run_roll_general``.  Arguments and results are
-    those of ``run_roll_general``.
-    """
-    tracing = tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0
-    if not tracing and use_fast_path(integ, kp, off0):
-        off = np.empty((8, 3))
-        F = np.empty((8, 3))
-        uk = np.empty((8, 3))
-        z = np.empty(8)
-        P = np.empty(8)
-        return roll_summary_sie(ic, off0, kp, sets, set_steps, off, F, uk, z, P)
-    if not tracing and (integ == CONTACT_SUBSTEP or integ == CONTACT_ADAPTIVE):
-        return roll_summary_cs(ic, off0, kp, sets, set_steps)
-    return run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
-
-
-@jit
-def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
-    """Integrate one throw from ``ic`` until it settles (or fails): the general loop.
+    Compiled per scheme (the global ``STEP``) and per ``TRACE``; see the
+    module docstring.  A summary variant hands the throw to the scheme's
+    specialised kernel ``FAST`` where ``FAST_APPLIES(kp, off0)``.
 
     Parameters
     ----------
@@ -120,14 +110,15 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
         U (cm/s) and L (program convention, node-mass·cm²/s).
     off0 : (8, 3) float64
         Initial node offsets from the centre of mass, cm (the program: ±half
-        on each axis, ``model.init_offsets``); a rotated cube starts tilted.
+        on each axis); a rotated cube starts tilted.
     kp : KernelParams
-    integ : int
-        Integrator id.
+    S : (1,) ``core.state.STATE``
+        The throw's state (scratch, overwritten).
     sets, set_steps : (cap,) uint8, (cap,) int32
         Output: the contact-set sequence (bit k = node k+1 at or below the
         ground) and the step at which each set was first seen.
     tr_state, tr_force, tr_energy : float64 arrays with 0 or n+1 rows
+        (ignored by a summary variant).
 
     Returns
     -------
@@ -135,30 +126,16 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
         outcome is the face 1..6, 0 when the top four nodes are no face, and
         -1 unless the status is SETTLED.
     """
-    X = np.empty(3)
-    U = np.empty(3)
-    L = np.empty(3)
-    W = np.empty(3)
-    off = np.empty((8, 3))
-    F = np.zeros((8, 3))
-    uk = np.zeros((8, 3))
-    z = np.empty(8)
-    P = np.zeros(8)
-    R = np.zeros((3, 3))
-    Rh = np.array([-1.0, 0.0, 0.0])
-    e_buf = np.zeros(5)
-
-    X[0] = 0.0
-    X[1] = 0.0
-    X[2] = kp.z0_cm
-    for j in range(3):
-        U[j] = ic[j]
-        L[j] = ic[3 + j]
-        W[j] = L[j] / kp.inertia
-    for k in range(8):
-        for j in range(3):
-            off[k, j] = off0[k, j]
-    contact, mask0 = node_heights(X[2], off, z)
+    st = S[0]
+    if not TRACE and FAST_APPLIES(kp, off0):
+        return FAST(ic, off0, kp, sets, set_steps)
+    init_state(st, ic, off0, kp)
+    X = st.X
+    U = st.U
+    L = st.L
+    W = st.W
+    off = st.off
+    z = st.z
     contact = False  # forces are zero before the first step (program)
 
     sets[0] = 0
@@ -167,12 +144,12 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
     last_mask = 0
 
     e_rest = kp.e_rest
-    e0 = energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest
+    e0 = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
     e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
     point_mass = kp.energy_mode == ENERGY_POINT_MASS
-    tracing = tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0
+    tracing = TRACE and (tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0)
     if tracing:
-        _write_trace(0, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
+        _write_trace(0, st, kp, tr_state, tr_force, tr_energy)
 
     h = kp.dt_s
     maxn = int(kp.max_steps)
@@ -181,25 +158,16 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
     half2 = kp.half_side_cm * kp.half_side_cm
     while n < maxn:
         n += 1
-        contact, mask = step(integ, X, U, L, W, off, F, uk, z, P, R, Rh, kp, h, contact)
-        if mask < 0:
-            status = Status.NON_FINITE
-            break
-        if not (
-            math.isfinite(X[2] + U[0] + U[1] + U[2])
-            and math.isfinite(L[0] + L[1] + L[2] + off[0, 0] + off[7, 2])
-        ):
-            status = Status.NON_FINITE
-            break
-        nsets, last_mask, ok = record_set(n, mask, last_mask, sets, set_steps, nsets)
-        if not ok:
-            status = Status.BUFFER_FULL
+        contact, mask = STEP(st, kp, h, contact)
+        finite = state_finite(X[2], U[0], U[1], U[2], L[0], L[1], L[2], off[0, 0], off[7, 2])
+        ended, status, nsets, last_mask = after_step(finite, n, mask, last_mask, sets, set_steps, nsets)
+        if ended:
             break
         if contact:
-            if energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest > e_blow:
+            if energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest > e_blow:
                 status = Status.BLOW_UP
                 if tracing:  # the state is finite: keep it for inspection
-                    _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
+                    _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
                 break
         # Stop test.  In free flight (no contact) the point-mass energy is
         # bounded below cheaply: Σ|u_k|² = 8|U|² + 16·h²|ω|² + rounding, so the
@@ -218,14 +186,14 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
                 need = e_approx - margin <= kp.e_stop
             if need:
                 if not contact:
-                    node_velocities(U, off, W[0], W[1], W[2], uk)
-                e = energy_stop(uk, z, P, kp)
+                    node_velocities(U[0], U[1], U[2], W[0], W[1], W[2], off, st.uk)
+                e = energy_stop(st.uk, z, st.P, kp)
             else:
                 e = kp.e_stop + 1.0
         else:
-            e = energy_dynamic(U, W[0], W[1], W[2], z, kp) - e_rest
+            e = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
         if tracing:
-            _write_trace(n, X, U, L, off, F, uk, z, P, W, kp, tr_state, tr_force, tr_energy, e_buf)
+            _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
         if not math.isfinite(e):
             status = Status.NON_FINITE
             break
@@ -236,49 +204,134 @@ def run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, t
     return status, n, outcome, nsets
 
 
-#: ICs per work item of ``run_batch`` (a few ms of work: scheduling is free).
-BATCH_BLOCK = 16
-
-
-@jit_parallel
-def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
+def _batch(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps):
     """``run_roll`` over many ICs in parallel (prange), summary path only.
 
-    ``off0`` (8, 3) are the initial node offsets shared by all ICs.
+    Compiled per scheme: ``ROLL`` its summary loop, ``FAST``/``FAST_APPLIES``
+    the scheme's specialised kernel (decided once per call here).
+
     ``sets``/``set_steps`` are (m·cap,) with IC i owning [i·cap, (i+1)·cap).
-    The ICs are cut into blocks of ``BATCH_BLOCK``; each block owns its
-    scratch arrays (allocated here once per call, never shared by two
-    threads), and every IC runs the very same serial code from a fresh
-    state, so results are bit-identical to a loop of ``run_roll`` whatever
-    the number of threads, the scheduling or the caller's chunking.
+    The ICs are cut into blocks of ``BATCH_BLOCK``; block b owns the state
+    ``states[b]`` (never shared by two threads), and every IC runs the very
+    same serial code from a fresh state, so results are bit-identical to a
+    loop of ``run_roll`` whatever the number of threads, the scheduling or
+    the caller's chunking.
     """
     m = ics.shape[0]
     nblk = (m + BATCH_BLOCK - 1) // BATCH_BLOCK
-    fast = use_fast_path(integ, kp, off0)
-    s_off = np.empty((nblk, 8, 3))
-    s_F = np.empty((nblk, 8, 3))
-    s_uk = np.empty((nblk, 8, 3))
-    s_z = np.empty((nblk, 8))
-    s_P = np.empty((nblk, 8))
+    fast = FAST_APPLIES(kp, off0)
     e0 = np.zeros((0, STATE_COLS))
     e1 = np.zeros((0, FORCE_COLS))
     e2 = np.zeros((0, ENERGY_COLS))
     for b in prange(nblk):
         i0 = b * BATCH_BLOCK
         i1 = min(m, i0 + BATCH_BLOCK)
+        S = states[b : b + 1]
         for i in range(i0, i1):
-            if fast:
-                s, n, o, ns = roll_summary_sie(
-                    ics[i], off0, kp, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap],
-                    s_off[b], s_F[b], s_uk[b], s_z[b], s_P[b],
-                )
-            elif integ == CONTACT_SUBSTEP or integ == CONTACT_ADAPTIVE:
-                s, n, o, ns = roll_summary_cs(ics[i], off0, kp, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap])
+            if fast:  # what ROLL would do, without the call through it
+                s, n, o, ns = FAST(ics[i], off0, kp, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap])
             else:
-                s, n, o, ns = run_roll_general(
-                    ics[i], off0, kp, integ, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], e0, e1, e2
-                )
+                s, n, o, ns = ROLL(ics[i], off0, kp, S, sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], e0, e1, e2)
             status[i] = s
             steps[i] = n
             outcome[i] = o
             nsets[i] = ns
+
+
+_SPECS_BY_ID = {s.kernel_id: s for s in INTEGRATORS.values()}
+_KERNELS: dict = {}
+
+
+def _spec(integ: int):
+    try:
+        return _SPECS_BY_ID[int(integ)]
+    except KeyError:
+        raise ValueError(f"no integrator has kernel id {integ!r} (see dicetrace.integrators.INTEGRATORS)") from None
+
+
+def _fast_summary(mod, trace: bool):
+    """(applies, kernel) of a scheme's specialised summary kernel; never for a tracing loop."""
+    if trace or not hasattr(mod, "fast_summary"):
+        return _never, _no_kernel
+    return mod.fast_summary()
+
+
+def roll_kernel(integ: int, trace: bool):
+    """The run loop of integrator ``integ`` (kernel id), tracing or summary only (built on first use).
+
+    Called as ``kernel(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)``
+    (see ``_roll``).  Integrators that share a scheme share the kernel.
+    """
+    scheme = _spec(integ).scheme
+    key = ("roll", scheme, bool(trace))
+    if key not in _KERNELS:
+        mod = scheme_module(_spec(integ))
+        applies, fast = _fast_summary(mod, trace)
+        name = f"roll_{scheme}_{'trace' if trace else 'summary'}"
+        _KERNELS[key] = jit(
+            specialise(_roll, name, STEP=mod.step, TRACE=bool(trace), FAST_APPLIES=applies, FAST=fast)
+        )
+    return _KERNELS[key]
+
+
+def batch_kernel(integ: int):
+    """The parallel batch kernel of integrator ``integ`` (kernel id), built on first use (see ``_batch``)."""
+    scheme = _spec(integ).scheme
+    key = ("batch", scheme)
+    if key not in _KERNELS:
+        applies, fast = _fast_summary(scheme_module(_spec(integ)), False)
+        _KERNELS[key] = jit_parallel(
+            specialise(_batch, f"batch_{scheme}", ROLL=roll_kernel(integ, False), FAST_APPLIES=applies, FAST=fast)
+        )
+    return _KERNELS[key]
+
+
+def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
+    """Integrate one throw with integrator ``integ`` (kernel id); see ``_roll``.
+
+    The trace arrays (float64, 0 or n+1 rows) choose the kernel: all empty,
+    the summary loop; otherwise the tracing loop, which writes the channels
+    that have rows.
+    """
+    trace = tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0
+    return roll_kernel(integ, trace)(ic, off0, kp, new_states(1), sets, set_steps, tr_state, tr_force, tr_energy)
+
+
+def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
+    """Summaries of many throws with integrator ``integ`` (kernel id), in parallel; see ``_batch``.
+
+    ``off0`` (8, 3) are the initial node offsets shared by all ICs; outputs
+    are written in place.
+    """
+    states = new_states(max(1, (len(ics) + BATCH_BLOCK - 1) // BATCH_BLOCK))
+    batch_kernel(integ)(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps)
+
+
+def _link(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
+    """One link of ``run_roll_general``: this integrator's tracing loop, or the next link."""
+    if integ == KERNEL_ID:
+        S = np.zeros(1, dtype=STATE)
+        return ROLL(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)
+    return NEXT(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)
+
+
+@jit
+def _unknown_integrator(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
+    """The end of the chain: no integrator has this id (reported as a non-finite first step)."""
+    sets[0] = 0
+    set_steps[0] = 0
+    return Status.NON_FINITE, 1, -1, 1
+
+
+def _general_chain():
+    fn = _unknown_integrator
+    for spec in sorted(INTEGRATORS.values(), key=lambda s: -s.kernel_id):
+        name = f"run_roll_general_{spec.name.replace('-', '_')}"
+        fn = jit(specialise(_link, name, KERNEL_ID=spec.kernel_id, ROLL=roll_kernel(spec.kernel_id, True), NEXT=fn))
+    return fn
+
+
+#: ``run_roll_general(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy)``:
+#: the tracing loop of integrator ``integ``, chosen at run time (a chain of
+#: specialised links, one per row of the integrator table); returns as ``_roll``.
+run_roll_general = _general_chain()

@@ -1,0 +1,300 @@
+"""Contact-aware RK4 (``contact-substep``) and its error-controlled form (``contact-adaptive``).
+
+docs/model.md §9.  A step in which no node can reach the ground (a cheap
+bound: the CM height is concave in t) is the exact free flight.  Otherwise
+the step is split into RK4 sub-steps (``rk4.cf4``) of at most dt /
+``kp.substeps``, shortened further where the friction law is stiff (μ·P /
+v_reg per unit effective mass; stability), and every node that enters or
+leaves the ground inside a sub-step is located by the cubic Hermite
+interpolant of its height and the sub-step is cut there, so the kink of the
+penalty force (F ∝ max(0, −z)) always falls on a sub-step boundary.
+Without that cut a kink costs RK4 its order (local error O(k·u·h²) per
+contact change); with it RK4 keeps order 4 on the bouncing-node test.
+
+``contact-adaptive`` (``kp.tol > 0``): the same step with error-controlled
+sub-steps of at most dt.  RK4 with its last stage and the derivative at the
+new state (first same as last: it is the next sub-step's first stage, so
+the estimate costs no extra force evaluation) gives an embedded order-3
+solution (weights 1/6, 1/3, 1/3, 0, 1/6; it satisfies the four order-3
+conditions), hence the local error estimate h/6·(k₄ − k₅) for X, U and L.
+The norm is the largest of |e_X|/half and (|e_U| + √3·half·|e_L|/I) / v,
+v = |U| + √3·half·|ω| + √(|g|·half), over ``tol``; a sub-step with norm > 1
+is rejected and the next one is h·max(0.2, 0.9·norm^(−1/4)), at most 4·h
+(Hairer, Nørsett & Wanner, *Solving ODEs I*, II.4).  Each impact starts
+from ω·h = 0.1 (ω = √k).  The kink cuts, the exact free flight and the
+friction bound stay as in contact-substep; the accepted step is order 4.
+The proposed sub-step is carried from one step to the next in ``st.h_next``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from dicetrace.core._jit import jit
+from dicetrace.core.forces import eval_forces, wrench_at
+from dicetrace.core.free_flight import (
+    CIRCUM,
+    free_advance,
+    free_flight,
+    free_flight_safe,
+    free_min_height,
+    locate_entry,
+)
+from dicetrace.core.schemes.rk4 import accept_substep, begin_substeps, cf4, end_substeps
+from dicetrace.params import FRICTION_SPECTRAL
+
+#: Largest RK4 sub-step for the friction law, in units of 1/λ_f (λ_f the
+#: friction law's stiffness per unit effective mass; RK4 is stable to 2.78).
+FRICTION_THETA = 1.0
+#: Largest inverse effective mass of a node along the ground, 1/8 + 3·3/16 ...
+#: bounded by 1/8 + |r|²/I with |r|² = 3 half², I = 16/3 half²: 11/16.
+INV_MASS_NODE = 11.0 / 16.0
+#: A sub-step is never cut shorter than this fraction of itself (a node that
+#: sits on the ground to rounding would otherwise be chased forever).
+MIN_CUT = 1e-6
+#: Error control of ``contact-adaptive`` (kp.tol > 0): first sub-step of an
+#: impact as ω·h with ω = √k; safety factor and bounds of the step-size ratio
+#: (standard values, Hairer, Nørsett & Wanner I, II.4); no sub-step is
+#: rejected below ADAPT_HMIN·dt.
+ADAPT_H0 = 0.1
+ADAPT_SAFETY = 0.9
+ADAPT_FAC_MIN = 0.2
+ADAPT_FAC_MAX = 4.0
+ADAPT_HMIN = 1e-9
+#: Most sub-steps in one macro step (a safety valve: beyond it the state is
+#: set to NaN, which the loop reports as ``non_finite``).
+MAX_SUBSTEPS = 100000
+
+
+@jit
+def hermite_root(z0, v0, z1, v1, h):
+    """First root in (0, 1) of the cubic Hermite interpolant of a height.
+
+    z0, z1: heights at the ends of a step of length h; v0, v1: their time
+    derivatives.  Returns the fraction θ, or -1 when the interpolant has no
+    sign change (then the caller cuts at the linear estimate).
+    """
+    # p(θ) = h00 z0 + h10 h v0 + h01 z1 + h11 h v1
+    # bracketed Newton/bisection on [0, 1]
+    lo = 0.0
+    hi = 1.0
+    plo = z0
+    if plo == 0.0:
+        return 0.0
+    # locate a sign change on a coarse grid first (the cubic may dip and return)
+    prev_t = 0.0
+    prev_p = z0
+    found = False
+    for i in range(1, 9):
+        t = i / 8.0
+        t2 = t * t
+        t3 = t2 * t
+        p = (2 * t3 - 3 * t2 + 1) * z0 + (t3 - 2 * t2 + t) * h * v0 + (-2 * t3 + 3 * t2) * z1 + (t3 - t2) * h * v1
+        if (p < 0.0) != (prev_p < 0.0):
+            lo = prev_t
+            hi = t
+            plo = prev_p
+            found = True
+            break
+        prev_t = t
+        prev_p = p
+    if not found:
+        return -1.0
+    for it in range(60):
+        t = 0.5 * (lo + hi)
+        t2 = t * t
+        t3 = t2 * t
+        p = (2 * t3 - 3 * t2 + 1) * z0 + (t3 - 2 * t2 + t) * h * v0 + (-2 * t3 + 3 * t2) * z1 + (t3 - t2) * h * v1
+        if (p < 0.0) == (plo < 0.0):
+            lo = t
+            plo = p
+        else:
+            hi = t
+        if hi - lo < 1e-15:
+            break
+    return 0.5 * (lo + hi)
+
+
+@jit(inline="always")
+def friction_rate(z, uk, P, kp):
+    """Stiffness of the friction law near the current state, 1/s.
+
+    Per unit effective mass (at most 11/16 per node mass): μ·P_k / max(|u_xy,k|,
+    v_reg) for the per-node law.  0 for the program's law: −μ·P_k·u_k/σ is
+    discontinuous where σ → 0 (no smooth stiffness to resolve), and every
+    scheme chatters there with an amplitude ~ h·μ·P as the program does.
+    """
+    lam = 0.0
+    if kp.friction_mode == FRICTION_SPECTRAL:
+        return lam
+    for k in range(8):
+        if z[k] < 0.0 and P[k] > 0.0:
+            s = math.sqrt(uk[k, 0] * uk[k, 0] + uk[k, 1] * uk[k, 1])
+            s = max(s, kp.v_reg_cm_s)
+            r = kp.mu * P[k] * INV_MASS_NODE / s
+            if r > lam:
+                lam = r
+    return lam
+
+
+@jit
+def step(st, kp, h, contact):
+    """One contact-aware step of ``st`` (the contract of ``core.schemes``).
+
+    Free flight (no node below the ground) is integrated exactly, in pieces
+    of at most dt / ``substeps`` near the ground; the moment the lowest node
+    reaches the ground is found on the exact free-flight trajectory.  From
+    there on, RK4 sub-steps of at most dt / ``substeps`` (shorter where the
+    friction law is stiff, see :func:`friction_rate`), each cut where a node
+    enters or leaves the ground (root of the cubic Hermite interpolant of its
+    height), until no node is below the ground.  Order 4 in dt at fixed
+    ``substeps``; error-controlled sub-steps with ``kp.tol > 0``.
+    """
+    W = st.W
+    if not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
+        free_flight(st, kp, h)
+        return eval_forces(st, kp)
+    I = kp.inertia
+    hmax = h / max(kp.substeps, 1.0)
+    adaptive = kp.tol > 0.0
+    h0 = ADAPT_H0 / math.sqrt(kp.k)
+    rn = CIRCUM * kp.half_side_cm
+    vfloor = math.sqrt(abs(kp.g) * kp.half_side_cm)
+    # the state lives in the sub-step start during the step (see rk4.cf4)
+    begin_substeps(st)
+    Xn = st.new_X
+    Un = st.new_U
+    Ln = st.new_L
+    offn = st.new_off
+    Xw = st.sub_X
+    Uw = st.sub_U
+    Lw = st.sub_L
+    offw = st.sub_off
+    F = st.F
+    uk = st.uk
+    z = st.z
+    P = st.P
+    st.rot_h = -1.0  # ω changes: the cached free-flight rotation is stale
+    t = 0.0
+    nsub = 0
+    entering = False
+    cached = False
+    c5 = False
+    g0 = g1 = g2 = q0 = q1 = q2 = 0.0
+    while t < h and nsub < MAX_SUBSTEPS:
+        nsub += 1
+        rest = h - t
+        if cached:
+            # the accepted sub-step's last force evaluation is this one's first
+            cached = False
+            below = c5
+            f0 = g0
+            f1 = g1
+            f2 = g2
+            t0 = q0
+            t1 = q1
+            t2 = q2
+        else:
+            below, f0, f1, f2, t0, t1, t2 = wrench_at(Xw[2], Uw[0], Uw[1], Uw[2], W[0], W[1], W[2], offw, kp, F, uk, z, P)
+        if not below and not entering:
+            # free flight, exact, until the end of the step or the next entry
+            if free_flight_safe(Xw, Uw, W, offw, kp, rest):
+                free_advance(Xw, Uw, W, offw, kp, rest)
+                t = h
+                break
+            hs = hmax
+            last = False
+            if hs >= rest * (1.0 - 1e-12):
+                hs = rest
+                last = True
+            m1 = free_min_height(Xw, Uw, W, offw, kp, hs)
+            if m1 >= 0.0:
+                free_advance(Xw, Uw, W, offw, kp, hs)
+                t = h if last else t + hs
+                continue
+            tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)
+            free_advance(Xw, Uw, W, offw, kp, tau)
+            t = t + tau
+            entering = True
+            if adaptive and (st.h_next <= 0.0 or st.h_next > h0):
+                st.h_next = h0  # an impact starts: the step the controller starts from
+            continue
+        entering = False
+        hs = hmax
+        if adaptive:
+            if st.h_next <= 0.0:
+                st.h_next = h0
+            if st.h_next < hs:
+                hs = st.h_next
+        limited = hs < st.h_next
+        lam = friction_rate(z, uk, P, kp)
+        if lam * hs > FRICTION_THETA:
+            hs = FRICTION_THETA / lam
+            limited = True
+        last = False
+        if hs >= rest * (1.0 - 1e-12):
+            hs = rest
+            last = True
+            limited = True
+        cf4(st, kp, hs, f0, f1, f2, t0, t1, t2)
+        # nodes that changed side within the sub-step: cut at the first crossing
+        cut = 2.0
+        for k in range(8):
+            zs = Xw[2] + offw[k, 2]
+            ze = Xn[2] + offn[k, 2]
+            if (zs < 0.0) != (ze < 0.0) and zs != 0.0:
+                # u_z = U_z + (x × ω)_z at both ends
+                vs = Uw[2] + (offw[k, 0] * (Lw[1] / I) - offw[k, 1] * (Lw[0] / I))
+                ve = Un[2] + (offn[k, 0] * (Ln[1] / I) - offn[k, 1] * (Ln[0] / I))
+                th = hermite_root(zs, vs, ze, ve, hs)
+                if th < 0.0:
+                    th = zs / (zs - ze)
+                if th < cut:
+                    cut = th
+        if cut < 1.0 and cut * hs > MIN_CUT * hmax:
+            hs = cut * hs
+            last = False
+            limited = True
+            cf4(st, kp, hs, f0, f1, f2, t0, t1, t2)
+        if adaptive:
+            # embedded order-3 estimate (FSAL): y4 - y3 = h/6·(k4 - k5), k5 the
+            # derivative at the new state; scaled by the die's size and speed
+            c5, g0, g1, g2, q0, q1, q2 = wrench_at(
+                Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P
+            )
+            u4 = st.stage4_u
+            a4 = st.stage4_a
+            t4 = st.stage4_t
+            h6 = hs / 6.0
+            ex = h6 * math.sqrt((u4[0] - Un[0]) ** 2 + (u4[1] - Un[1]) ** 2 + (u4[2] - Un[2]) ** 2)
+            d0 = a4[0] - g0 / 8.0
+            d1 = a4[1] - g1 / 8.0
+            d2 = a4[2] - (g2 / 8.0 + kp.g)
+            eu = h6 * math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            el = (h6 / I) * math.sqrt((t4[0] - q0) ** 2 + (t4[1] - q1) ** 2 + (t4[2] - q2) ** 2)
+            vs = (
+                math.sqrt(Un[0] * Un[0] + Un[1] * Un[1] + Un[2] * Un[2])
+                + rn * math.sqrt(Ln[0] * Ln[0] + Ln[1] * Ln[1] + Ln[2] * Ln[2]) / I
+                + vfloor
+            )
+            err = max(ex / kp.half_side_cm, (eu + rn * el) / vs) / kp.tol
+            # 0.9·err^(-1/4), by two square roots (libm's pow cost 3 % of a physical throw)
+            fac = ADAPT_FAC_MAX if err == 0.0 else ADAPT_SAFETY / math.sqrt(math.sqrt(err))
+            if err > 1.0 and hs > ADAPT_HMIN * h:
+                st.h_next = hs * max(ADAPT_FAC_MIN, fac)
+                nsub += 1
+                # the scratch now holds the rejected candidate's forces: redo the start
+                continue
+            hn = hs * min(ADAPT_FAC_MAX, fac)
+            if limited and hn < st.h_next:
+                hn = st.h_next
+            st.h_next = hn
+            cached = True
+        accept_substep(st, kp)
+        t = h if last else t + hs
+    if t < h:
+        # the sub-step budget ran out before the end of the step: never return a
+        # silently shorter step; the loop reports the NaN as "non_finite"
+        Xw[2] = math.nan
+    end_substeps(st, kp)
+    return eval_forces(st, kp)

@@ -1,0 +1,46 @@
+"""The 2019 program's step, semi-implicit Euler (docs/model.md §5.1), bit-faithful.
+
+U ← U + (ΣF + 8g)/8·h; X ← X + U·h; L ← L + τ·h; ω = L/I; the offsets turn
+by the exact rotation for ω·h; the forces are evaluated at the new state.
+While no node touched the ground the forces are exactly zero, so the sums
+are skipped and L, ω and the rotation matrix are reused (``st.rot_h``).
+Its summaries run the specialised kernel ``core.fast`` where that applies.
+"""
+
+from __future__ import annotations
+
+from dicetrace.core._jit import jit
+from dicetrace.core.forces import eval_forces, step_wrench
+from dicetrace.core.rotation import turn_by_omega
+from dicetrace.core.state import set_angular_momentum
+
+
+
+def fast_summary():
+    """The specialised summary kernel of this scheme, ``core.fast`` (``(applies, kernel)``)."""
+    from dicetrace.core.fast import applies, roll_summary_sie
+
+    return applies, roll_summary_sie
+
+
+@jit(inline="always")
+def program_kick_drift(U0, U1, U2, X0, X1, X2, s0, s1, s2, kp, h):
+    """The program's velocity and position update: U += (ΣF + (0, 0, 8g))/8·h, then X += U·h."""
+    U0 = U0 + (s0 + 0.0) / 8.0 * h
+    U1 = U1 + (s1 + 0.0) / 8.0 * h
+    U2 = U2 + (s2 + kp.g * 8.0) / 8.0 * h
+    return U0, U1, U2, X0 + U0 * h, X1 + U1 * h, X2 + U2 * h
+
+
+@jit
+def step(st, kp, h, contact):
+    """One program step of ``st`` (the contract of ``core.schemes``)."""
+    X = st.X
+    U = st.U
+    L = st.L
+    s0, s1, s2, t0, t1, t2 = step_wrench(st, contact, False)
+    U[0], U[1], U[2], X[0], X[1], X[2] = program_kick_drift(U[0], U[1], U[2], X[0], X[1], X[2], s0, s1, s2, kp, h)
+    if contact:
+        set_angular_momentum(st, L[0] + t0 * h, L[1] + t1 * h, L[2] + t2 * h, kp)
+    turn_by_omega(st, h)
+    return eval_forces(st, kp)

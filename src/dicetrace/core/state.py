@@ -1,0 +1,138 @@
+"""The state of one throw: a numpy record that every kernel passes by reference.
+
+One ``STATE`` record holds everything a step reads and writes, by name
+(docs/model.md §5.1): the centre of mass X and its velocity U (cm, cm/s),
+the angular momentum L and ω = L / I (program convention, docs/model.md §4),
+the node offsets ``off`` (8, 3), the contact forces ``F`` (8, 3) and normal
+forces ``P`` (8,) of the last force evaluation with the node velocities
+``uk`` (8, 3) and heights ``z`` (8,) they were computed from, and what a
+scheme keeps from one step to the next:
+
+``R``, ``rot_h``, ``rot_ok``
+    the cached program rotation (docs/model.md §5.2) for the step ``rot_h``
+    (-1: none), and whether it turns at all (ω ≠ 0);
+``h_next``
+    contact-adaptive's proposed sub-step, s (0: none yet);
+``sub_*``, ``new_*``, ``stage_off``, ``stage4_*``
+    the work area of the RK4 schemes: the state at the start of a sub-step
+    and at its end, the offsets of an RK4 stage and the derivatives of
+    stage 4 (for the embedded error estimate).
+
+A record costs no reference counting when it crosses a call (numba passes
+a pointer; its fields are views without a reference count), unlike the
+dozen separate arrays it replaces.  Kernels take the record as ``st``;
+loops take a (1,) ``STATE`` array and index it, so that its owner is alive
+for the whole call.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dicetrace.core._jit import jit
+from dicetrace.core.contacts import record_set
+from dicetrace.status import Status
+
+_F8 = np.float64
+
+STATE = np.dtype(
+    [
+        ("X", _F8, 3),
+        ("U", _F8, 3),
+        ("L", _F8, 3),
+        ("W", _F8, 3),
+        ("off", _F8, (8, 3)),
+        ("F", _F8, (8, 3)),
+        ("uk", _F8, (8, 3)),
+        ("z", _F8, 8),
+        ("P", _F8, 8),
+        ("R", _F8, 9),
+        ("rot_h", _F8),
+        ("rot_ok", np.bool_),
+        ("h_next", _F8),
+        ("sub_X", _F8, 3),
+        ("sub_U", _F8, 3),
+        ("sub_L", _F8, 3),
+        ("sub_off", _F8, (8, 3)),
+        ("new_X", _F8, 3),
+        ("new_U", _F8, 3),
+        ("new_L", _F8, 3),
+        ("new_off", _F8, (8, 3)),
+        ("stage_off", _F8, (8, 3)),
+        ("stage4_u", _F8, 3),
+        ("stage4_a", _F8, 3),
+        ("stage4_t", _F8, 3),
+    ],
+    align=True,
+)
+
+
+def new_states(n: int = 1) -> np.ndarray:
+    """``n`` zeroed state records (the scratch that a loop or a batch block owns)."""
+    return np.zeros(n, dtype=STATE)
+
+
+@jit(inline="always")
+def start_nodes(off0, Xz, off, F, uk, z, P):
+    """Offsets ``off0``, zero forces and node velocities, heights for the CM height Xz."""
+    for k in range(8):
+        for j in range(3):
+            off[k, j] = off0[k, j]
+            F[k, j] = 0.0
+            uk[k, j] = 0.0
+        z[k] = Xz + off[k, 2]
+        P[k] = 0.0
+
+
+@jit
+def init_state(st, ic, off0, kp):
+    """The program's start (docs/model.md §5.1): CM at (0, 0, z0), U and L from ``ic``,
+    offsets ``off0``, zero forces and node velocities, heights, no cached rotation."""
+    st.X[0] = 0.0
+    st.X[1] = 0.0
+    st.X[2] = kp.z0_cm
+    for j in range(3):
+        st.U[j] = ic[j]
+        st.L[j] = ic[3 + j]
+        st.W[j] = st.L[j] / kp.inertia
+    start_nodes(off0, st.X[2], st.off, st.F, st.uk, st.z, st.P)
+    st.rot_h = -1.0
+    st.rot_ok = False
+    st.h_next = 0.0
+
+
+@jit(inline="always")
+def set_angular_momentum(st, l0, l1, l2, kp):
+    """L ← (l0, l1, l2) and ω = L / I; the cached rotation (for the old ω) is dropped."""
+    st.L[0] = l0
+    st.L[1] = l1
+    st.L[2] = l2
+    st.W[0] = l0 / kp.inertia
+    st.W[1] = l1 / kp.inertia
+    st.W[2] = l2 / kp.inertia
+    st.rot_h = -1.0
+
+
+@jit(inline="always")
+def state_finite(Xz, U0, U1, U2, L0, L1, L2, x1x, x8z):
+    """The run loop's non-finite test (docs/model.md §10): X_z + ΣU and ΣL + x_1,x + x_8,z are finite."""
+    return math.isfinite(Xz + U0 + U1 + U2) and math.isfinite(L0 + L1 + L2 + x1x + x8z)
+
+
+@jit(inline="always")
+def after_step(finite, n, mask, last_mask, sets, set_steps, nsets):
+    """The checks that end a run after step n (docs/model.md §10, §8), shared by the run loop and ``core.fast``.
+
+    ``finite``: :func:`state_finite` of the new state.  Records the contact
+    set ``mask`` (``contacts.record_set``).  Returns (ended, status, nsets,
+    last_mask): ``ended`` with NON_FINITE or BUFFER_FULL; otherwise status is
+    TIME_CAP, how a run that goes on to the cap ends.
+    """
+    if not finite:
+        return True, Status.NON_FINITE, nsets, last_mask
+    nsets, last_mask, ok = record_set(n, mask, last_mask, sets, set_steps, nsets)
+    if not ok:
+        return True, Status.BUFFER_FULL, nsets, last_mask
+    return False, Status.TIME_CAP, nsets, last_mask
