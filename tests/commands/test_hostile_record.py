@@ -11,7 +11,6 @@ from __future__ import annotations
 import errno
 import os
 import stat
-import subprocess
 import threading
 from pathlib import Path
 
@@ -22,23 +21,6 @@ from hypothesis import strategies as st
 IC = "14.08,11.46,9.87,13.8,122.8,15.5"
 
 
-def snapshot(root: Path) -> dict:
-    """Everything under ``root``: type, bytes, mode and link target of each entry (symlinks not followed)."""
-    out = {}
-    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
-        for name in dirnames + filenames:
-            p = Path(dirpath) / name
-            st_ = p.lstat()
-            rel = str(p.relative_to(root))
-            if stat.S_ISLNK(st_.st_mode):
-                out[rel] = ("link", os.readlink(p))
-            elif stat.S_ISDIR(st_.st_mode):
-                out[rel] = ("dir", stat.S_IMODE(st_.st_mode))
-            elif stat.S_ISREG(st_.st_mode):
-                out[rel] = ("file", p.read_bytes(), stat.S_IMODE(st_.st_mode))
-            else:
-                out[rel] = ("special", stat.S_IFMT(st_.st_mode), st_.st_rdev)
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -120,7 +102,7 @@ BAD = [
 
 
 @pytest.mark.parametrize("args,names", BAD)
-def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(work, dicetrace_cli, assert_one_line_error,
+def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(snapshot, work, dicetrace_cli, assert_one_line_error,
                                                                           args, names):
     before = snapshot(work)
     res = dicetrace_cli("record", *args, cwd=work)
@@ -239,12 +221,11 @@ def test_dash_puts_the_recording_on_stdout_and_the_summary_on_stderr(tmp_path, m
 
 
 @pytest.fixture
-def full_disk(tmp_path, monkeypatch):
+def full_disk(tmp_path, monkeypatch, mount_small_tmpfs):
     """A folder on a full 64 KiB tmpfs holding an old recording (as root), else one where writes fail with ENOSPC."""
     d = tmp_path / "full"
     d.mkdir()
-    mounted = os.geteuid() == 0 and subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)], capture_output=True).returncode == 0
+    mounted = mount_small_tmpfs(d)
     (d / "existing.rrd").write_bytes(b"an old recording")
     if not mounted:
         import dicetrace.sinks._common as common
@@ -257,12 +238,10 @@ def full_disk(tmp_path, monkeypatch):
             return real(path)
 
         monkeypatch.setattr(common, "_fsync", enospc)
-    yield d
-    if mounted and subprocess.run(["umount", str(d)], capture_output=True).returncode != 0:
-        subprocess.run(["umount", "-l", str(d)], check=False, capture_output=True)  # detach: never left mounted
+    return d
 
 
-def test_a_full_disk_keeps_the_old_recording_and_writes_no_tables(full_disk, dicetrace_cli, assert_one_line_error):
+def test_a_full_disk_keeps_the_old_recording_and_writes_no_tables(snapshot, full_disk, dicetrace_cli, assert_one_line_error):
     before = snapshot(full_disk)
     res = dicetrace_cli("record", *AT, "--out", str(full_disk / "existing.rrd"), "--parquet", str(full_disk / "pq"),
                         cwd=full_disk)

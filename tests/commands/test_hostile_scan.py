@@ -13,7 +13,6 @@ import json
 import os
 import socket
 import stat
-import subprocess
 import threading
 import time
 from pathlib import Path
@@ -24,23 +23,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 
-def snapshot(root: Path) -> dict:
-    """Everything under ``root``: type, bytes, mode and link target of each entry (symlinks not followed)."""
-    out = {}
-    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
-        for name in dirnames + filenames:
-            p = Path(dirpath) / name
-            st_ = p.lstat()
-            rel = str(p.relative_to(root))
-            if stat.S_ISLNK(st_.st_mode):
-                out[rel] = ("link", os.readlink(p))
-            elif stat.S_ISDIR(st_.st_mode):
-                out[rel] = ("dir", stat.S_IMODE(st_.st_mode))
-            elif stat.S_ISREG(st_.st_mode):
-                out[rel] = ("file", p.read_bytes(), stat.S_IMODE(st_.st_mode))
-            else:
-                out[rel] = ("special", stat.S_IFMT(st_.st_mode), st_.st_rdev)
-    return out
 
 
 HOME3 = ["--window", "home", "--res", "3"]
@@ -154,7 +136,7 @@ BAD = [
 
 
 @pytest.mark.parametrize("args,names,out", BAD)
-def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(work, dicetrace_cli, assert_one_line_error,
+def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(snapshot, work, dicetrace_cli, assert_one_line_error,
                                                                           args, names, out, monkeypatch):
     import dicetrace.scan.runner as runner
 
@@ -320,42 +302,20 @@ def test_maps_go_to_a_fifo_and_through_a_symlink(tmp_path, dicetrace_cli):
 # -- a full disk: --png, --rrd, the chunks ---------------------------------------------------------------------------
 
 
-def _fill(folder: Path) -> None:
-    """Fill ``folder``'s file system to the last byte."""
-    with open(folder / "filler", "wb", buffering=0) as f:
-        try:
-            while True:
-                f.write(b"\0" * 4096)
-        except OSError:
-            pass
-
-
 @pytest.fixture
-def tmpfs(tmp_path):
-    """A 64 KiB tmpfs folder (root only: mount; unmounted in teardown)."""
+def tmpfs(tmp_path, mount_small_tmpfs):
+    """A 64 KiB tmpfs folder (root only; unmounted in teardown)."""
     d = tmp_path / "small"
     d.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)],
-                                           capture_output=True).returncode != 0:
+    if not mount_small_tmpfs(d):
         pytest.skip("needs root to mount a small tmpfs (the injected-ENOSPC variants cover the rest)")
-    yield d
-    _unmount(d)
+    return d
 
 
-def _unmount(d: Path) -> None:
-    """Unmount, retrying after a garbage collection (a handle still open), else detach lazily: never left mounted."""
-    import gc
-
-    if subprocess.run(["umount", str(d)], capture_output=True).returncode != 0:
-        gc.collect()
-        if subprocess.run(["umount", str(d)], capture_output=True).returncode != 0:
-            subprocess.run(["umount", "-l", str(d)], check=False, capture_output=True)
-
-
-def test_maps_onto_a_full_disk_are_one_line_and_keep_the_old_maps(tmp_path, tmpfs, dicetrace_cli, assert_one_line_error):
+def test_maps_onto_a_full_disk_are_one_line_and_keep_the_old_maps(snapshot, fill_fs, tmp_path, tmpfs, dicetrace_cli, assert_one_line_error):
     (tmpfs / "m.png").write_bytes(b"old map")
     (tmpfs / "m.rrd").write_bytes(b"old scan map")
-    _fill(tmpfs)
+    fill_fs(tmpfs)
     before = snapshot(tmpfs)
     res = dicetrace_cli("scan", *HOME3, "--out", "s", "--png", str(tmpfs / "m.png"), "--rrd", str(tmpfs / "m.rrd"), "-q",
                         cwd=tmp_path)
@@ -394,9 +354,9 @@ def test_chunks_onto_a_full_disk_are_one_line_and_resume_afterwards(tmp_path, tm
     assert df.drop(columns=[]).reset_index(drop=True).equals(want.reset_index(drop=True))
 
 
-def test_rrd_onto_a_full_disk_does_not_hang(tmp_path, tmpfs, dicetrace_cli):
+def test_rrd_onto_a_full_disk_does_not_hang(tmp_path, tmpfs, fill_fs, dicetrace_cli):
     """The issue's hang (rerun's writer stuck on a full disk, a .m.rrd.tmp left): run with a deadline."""
-    _fill(tmpfs)
+    fill_fs(tmpfs)
     box: dict = {}
     t = threading.Thread(target=lambda: box.setdefault("res", dicetrace_cli(
         "scan", *HOME3, "--out", str(tmp_path / "s"), "--rrd", str(tmpfs / "m.rrd"), "-q", cwd=tmp_path)), daemon=True)

@@ -27,23 +27,6 @@ from hypothesis import strategies as st
 IC = "14.08,11.46,9.87,13.8,122.8,15.5"  # the issue's IC (settles in 527 steps)
 
 
-def snapshot(root: Path) -> dict:
-    """Everything under ``root``: type, bytes, mode and link target of each entry (symlinks not followed)."""
-    out = {}
-    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
-        for name in dirnames + filenames:
-            p = Path(dirpath) / name
-            st_ = p.lstat()
-            rel = str(p.relative_to(root))
-            if stat.S_ISLNK(st_.st_mode):
-                out[rel] = ("link", os.readlink(p))
-            elif stat.S_ISDIR(st_.st_mode):
-                out[rel] = ("dir", stat.S_IMODE(st_.st_mode))
-            elif stat.S_ISREG(st_.st_mode):
-                out[rel] = ("file", p.read_bytes(), stat.S_IMODE(st_.st_mode))
-            else:
-                out[rel] = ("special", stat.S_IFMT(st_.st_mode), st_.st_rdev)
-    return out
 
 
 @pytest.fixture
@@ -118,7 +101,7 @@ BAD = [
 
 
 @pytest.mark.parametrize("args,names", BAD)
-def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(work, dicetrace_cli, assert_one_line_error,
+def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(snapshot, work, dicetrace_cli, assert_one_line_error,
                                                                           args, names):
     before = snapshot(work)
     res = dicetrace_cli("simulate", *args, cwd=work)
@@ -279,22 +262,13 @@ def test_a_closed_standard_output_in_a_real_process(tmp_path):
 
 
 @pytest.fixture
-def full_disk(tmp_path, monkeypatch):
+def full_disk(tmp_path, monkeypatch, mount_small_tmpfs, fill_fs):
     """A folder on a full file system: a 64 KiB tmpfs, filled up (as root), else every write there fails with ENOSPC."""
     d = tmp_path / "full"
     d.mkdir()
-    mounted = False
-    if os.geteuid() == 0:
-        mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(d)],
-                                 capture_output=True).returncode == 0
-    if mounted:
+    if mount_small_tmpfs(d):
         (d / "existing.csv").write_text("keep me\n")
-        try:
-            with open(d / "filler", "wb", buffering=0) as f:
-                while True:
-                    f.write(b"\0" * 4096)
-        except OSError as e:
-            assert e.errno == errno.ENOSPC
+        fill_fs(d)
     else:  # inject: any write through the checked destinations in that folder fails like a full disk
         import dicetrace.sinks._common as common
 
@@ -307,12 +281,10 @@ def full_disk(tmp_path, monkeypatch):
             return real(path)
 
         monkeypatch.setattr(common, "_fsync", enospc)
-    yield d
-    if mounted and subprocess.run(["umount", str(d)], capture_output=True).returncode != 0:
-        subprocess.run(["umount", "-l", str(d)], check=False, capture_output=True)  # detach: never left mounted
+    return d
 
 
-def test_a_full_disk_is_one_line_and_keeps_the_existing_output(full_disk, dicetrace_cli, assert_one_line_error):
+def test_a_full_disk_is_one_line_and_keeps_the_existing_output(snapshot, full_disk, dicetrace_cli, assert_one_line_error):
     before = snapshot(full_disk)
     res = dicetrace_cli("simulate", "--ics", str(Path(__file__).parents[1] / "data" / "reference" / "writeup_points.csv"),
                         "--slice", "seed", "--format", "json", "--out", str(full_disk / "existing.csv"), cwd=full_disk)
