@@ -62,7 +62,7 @@ def test_batch_is_bit_identical_to_single_throws_whatever_the_buffer(cap, thread
     ],
 )
 def test_batch_is_bit_identical_to_single_throws_for_other_kernels_and_endings(options):
-    ics = _ics(6, seed=3)
+    ics = _ics(20, seed=3)  # more than one work item: the batch kernel, not the one-by-one path
     batch = simulate_batch(ics, cap=2, **options)
     statuses = set(batch.status)
     if "t_max_s" in options:
@@ -70,6 +70,25 @@ def test_batch_is_bit_identical_to_single_throws_for_other_kernels_and_endings(o
     if options.get("dt_s") == 0.01:
         assert statuses & {"blow_up", "non_finite"}
     assert_batch_equals_rows(batch, ics, **options)
+
+
+@pytest.mark.parametrize("preset", ["seed", "physical"])
+def test_small_batches_run_one_by_one_with_the_batch_kernels_results(preset):
+    """Up to BATCH_BLOCK ICs skip the batch kernel (one work item: one thread anyway); same bits."""
+    from dicetrace.core.loop import BATCH_BLOCK
+
+    ics = _ics(BATCH_BLOCK + 1, seed=5)
+    if preset == "physical":
+        ics[:, 3:] *= -1
+    whole = simulate_batch(ics, preset=preset, cap=4)  # the batch kernel (and its retries, one by one)
+    small = simulate_batch(ics[:BATCH_BLOCK], preset=preset, cap=4)
+    for name in ("outcome", "status_code", "steps"):
+        np.testing.assert_array_equal(getattr(small, name), getattr(whole, name)[:BATCH_BLOCK])
+    n = small.set_offsets[-1]
+    np.testing.assert_array_equal(small.set_offsets, whole.set_offsets[: BATCH_BLOCK + 1])
+    np.testing.assert_array_equal(small.sets, whole.sets[:n])
+    np.testing.assert_array_equal(small.set_steps, whole.set_steps[:n])
+    assert set(small.status) == {"settled"}
 
 
 def test_batch_l_convention_and_returned_ics():

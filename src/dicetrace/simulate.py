@@ -15,7 +15,7 @@ import numpy as np
 import numba
 
 from dicetrace.core.contacts import contact_sets_from_heights
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
+from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
 from dicetrace.ics import validate_ic, validate_ics
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
 from dicetrace.status import Status
@@ -422,8 +422,16 @@ class _Threads:
 
 
 def _run_batch(kin, cap: int, threads):
-    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC."""
+    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC.
+
+    Up to ``BATCH_BLOCK`` ICs (one work item of the batch kernel, so one
+    thread either way) run one by one through the single-throw loop instead:
+    the same results bit for bit, without compiling the batch kernel for
+    them (a first ``dicetrace simulate --ic`` compiles a third as much).
+    """
     m = len(kin.ics)
+    if m <= BATCH_BLOCK:
+        return _run_serial(kin, cap)
     out = (
         np.zeros(m, dtype=np.int8),
         np.zeros(m, dtype=np.int64),
@@ -437,6 +445,20 @@ def _run_batch(kin, cap: int, threads):
         with _Threads(threads), numba.parallel_chunksize(1):
             run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, status, steps, outcome, nsets, sets, set_steps)
     return out
+
+
+def _run_serial(kin, cap: int):
+    """``_run_batch``'s outputs from ``run_roll`` called IC by IC."""
+    m = len(kin.ics)
+    status, steps, outcome, nsets = (np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64))
+    sets, set_steps = np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32)
+    empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
+    for i in range(m):
+        status[i], steps[i], outcome[i], nsets[i] = run_roll(
+            kin.ics[i], kin.off0, kin.params, kin.integrator_id,
+            sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], *empty,
+        )
+    return status, steps, outcome, nsets, sets, set_steps
 
 
 def simulate_batch(

@@ -287,7 +287,7 @@ def test_rigidity(integ, preset):
 @pytest.mark.parametrize("integ_name", ["contact-substep", "contact-adaptive"])
 @pytest.mark.parametrize("preset", ["seed", "physical"])
 def test_contact_substep_fast_path_identical(preset, integ_name):
-    """The summary loop of contact-substep (what ``run_roll``/``run_batch`` run for
+    """The summary loop of contact-substep (what ``run_summary``/``run_batch`` run for
     its summaries: the run loop compiled without trace code) equals the tracing loop
     ``run_roll_general`` bit for bit: status, steps, outcome and the whole
     contact-set sequence, on tilted and flat starts."""

@@ -1,6 +1,6 @@
 """The fast summary kernel (core/fast.py) against the general loop and a frozen golden set.
 
-``run_roll`` sends the summary path of semi-implicit Euler with the
+``run_summary`` (the summary loop ``run_batch`` runs per IC) sends the summary path of semi-implicit Euler with the
 point-mass stop test (the ``seed`` preset) to ``fast.roll_summary_sie``;
 ``run_roll_general`` is the original loop it must reproduce bit for bit
 (status, steps, outcome, contact sets and their steps).  The golden file
@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 
 from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll, run_roll_general
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll, run_roll_general, run_summary
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 from dicetrace.simulate import Record, simulate, simulate_batch
@@ -48,6 +48,11 @@ def _serial(fn, ics, cfg, off0=None, integ=None):
         s, n, o, ns = fn(ic, off0, kp, integ, sets, steps, *EMPTY)
         out.append((int(s), int(n), int(o), sets[:ns].copy(), steps[:ns].copy()))
     return out
+
+
+def _summary(ic, off0, kp, integ, sets, set_steps, *_trace):
+    """``run_summary`` with ``run_roll``'s signature (the trace arrays, empty, are dropped)."""
+    return run_summary(ic, off0, kp, integ, sets, set_steps)
 
 
 def _assert_same(a, b):
@@ -79,7 +84,7 @@ def test_batch_matches_golden(golden):
 def test_serial_fast_path_matches_golden_and_general_loop(golden):
     cfg = make_config("seed")
     ics = golden["ics"][:400]
-    fast = _serial(run_roll, ics, cfg)
+    fast = _serial(_summary, ics, cfg)
     general = _serial(run_roll_general, ics, cfg)
     _assert_same(fast, general)
     off = golden["set_offsets"]
@@ -108,7 +113,7 @@ def test_fast_path_matches_general_loop_on_variants(label, kwargs):
     rng = np.random.default_rng(7)
     xy = rng.uniform(0.0, 20.0, size=(120, 2))
     ics = seed_slice(xy[:, 0], xy[:, 1])
-    fast = _serial(run_roll, ics, cfg)
+    fast = _serial(_summary, ics, cfg)
     _assert_same(fast, _serial(run_roll_general, ics, cfg))
     if "t_max_s" in kwargs:
         assert any(r[0] == 1 for r in fast), "expected some time-capped throws"
@@ -126,7 +131,7 @@ def test_fast_path_matches_general_loop_on_special_ics():
         [[0.0, 0.0, 0.0, 0.0, 100.0, 0.0], [0.0, 0.0, -50.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
          [-0.0, -0.0, 0.0, -0.0, 100.0, -0.0], [30.0, 0.0, 0.0, 0.0, 0.0, 250.0]],
     ])
-    _assert_same(_serial(run_roll, ics, cfg), _serial(run_roll_general, ics, cfg))
+    _assert_same(_serial(_summary, ics, cfg), _serial(run_roll_general, ics, cfg))
 
 
 def test_fast_path_from_a_tilted_start():
@@ -140,7 +145,7 @@ def test_fast_path_from_a_tilted_start():
     rng = np.random.default_rng(3)
     xy = rng.uniform(0.0, 20.0, size=(100, 2))
     ics = seed_slice(xy[:, 0], xy[:, 1])
-    _assert_same(_serial(run_roll, ics, cfg, off0), _serial(run_roll_general, ics, cfg, off0))
+    _assert_same(_serial(_summary, ics, cfg, off0), _serial(run_roll_general, ics, cfg, off0))
 
 
 def test_non_symmetric_start_falls_back_to_general_loop():
@@ -149,7 +154,7 @@ def test_non_symmetric_start_falls_back_to_general_loop():
     off0[0, 0] = np.nextafter(off0[0, 0], 0.0)
     assert not mirror_symmetric(off0)
     ics = seed_slice(np.array([1.65, 0.3]), np.array([3.9, 7.1]))
-    _assert_same(_serial(run_roll, ics, cfg, off0), _serial(run_roll_general, ics, cfg, off0))
+    _assert_same(_serial(_summary, ics, cfg, off0), _serial(run_roll_general, ics, cfg, off0))
 
 
 def test_buffer_full_is_reported_identically():
@@ -159,12 +164,13 @@ def test_buffer_full_is_reported_identically():
     ic = seed_slice(1.65, 3.9)  # 23 contact sets
     for cap in (1, 5, 23):
         res = []
-        for fn in (run_roll, run_roll_general):
+        for fn in (_summary, run_roll, run_roll_general):
             sets = np.zeros(cap, np.uint8)
             steps = np.zeros(cap, np.int32)
             res.append(fn(ic, off0, kp, 0, sets, steps, *EMPTY) + (sets.copy(), steps.copy()))
-        assert res[0][:4] == res[1][:4]
-        np.testing.assert_array_equal(res[0][4], res[1][4])
+        for other in res[1:]:
+            assert other[:4] == res[0][:4]
+            np.testing.assert_array_equal(other[4], res[0][4])
         assert res[0][0] == (4 if cap < 23 else 0)
 
 
@@ -228,3 +234,20 @@ def test_scratch_kernel_is_reentrant():
     first = roll_summary_sie(b, off0, kp, sets, steps)
     roll_summary_sie(a, off0, kp, sets, steps)
     assert roll_summary_sie(b, off0, kp, sets, steps) == first
+
+
+@pytest.mark.parametrize("integrator", ["semi-implicit-euler", "verlet"], ids=["fast kernel", "summary loop"])
+def test_an_overflowing_start_fails_at_the_same_step_on_every_path(integrator):
+    """|U| = 1e300: the stop energy overflows at the first step.  The summary loop's free-flight
+    energy bound is then NaN and must not skip the exact (infinite) energy: every path reports
+    non_finite at step 1 (the seed's point-mass stop test with Verlet has no specialised kernel,
+    so it runs the summary loop)."""
+    from dicetrace.params import INTEGRATORS
+
+    cfg = make_config("seed", integrator=integrator)
+    kp = cfg.kernel_params()
+    integ = INTEGRATORS[integrator].kernel_id
+    ic = np.array([1e300, 0, 0, 0, 0, 0])
+    res = [fn(ic, cfg.initial_offsets(), kp, integ, np.zeros(8, np.uint8), np.zeros(8, np.int32), *EMPTY)
+           for fn in (_summary, run_roll, run_roll_general)]
+    assert [tuple(map(int, r)) for r in res] == [(2, 1, -1, 1)] * 3  # NON_FINITE, 1 step, no outcome, 1 set

@@ -13,9 +13,14 @@ Kernels are built on first use: a command that runs one integrator compiles
 The entry points take an integrator's kernel id (``IntegratorSpec.kernel_id``):
 
 ``run_roll``
-    one throw; the summary (all trace arrays with zero rows) runs the
-    summary loop, which hands configurations with a specialised kernel
-    (``core.fast`` for the program's scheme) to it; otherwise the tracing loop.
+    one throw, through the tracing loop (with all trace arrays of zero rows
+    it writes nothing and returns the summary).  One throw never needs the
+    summary loop's speed, and the tracing loop is the cheaper compile: a
+    single throw (``simulate``, ``dicetrace record``) compiles that loop only.
+``run_summary``
+    one throw through the summary loop, which hands configurations with a
+    specialised kernel (``core.fast`` for the program's scheme) to it: what
+    ``run_batch`` runs per IC (tests and benchmarks call it one by one).
 ``run_batch``
     many throws in parallel (``prange``), summaries only.
 ``run_roll_general``
@@ -58,6 +63,8 @@ E_BOUND_MARGIN = 1e-7
 
 #: ICs per work item of ``run_batch`` (a few ms of work: scheduling is free).
 BATCH_BLOCK = 16
+
+_NO_ROWS = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
 
 
 @jit
@@ -136,12 +143,17 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
     W = st.W
     off = st.off
     z = st.z
-    contact = False  # forces are zero before the first step (program)
 
     sets[0] = 0
     set_steps[0] = 0
     nsets = 1
     last_mask = 0
+    # The program starts out of contact (forces are zero before the first
+    # step): the start's recorded set is empty.  Read from the array, not
+    # written as the constant False, so that the step compiles for a plain
+    # bool only, not also for the literal False (half a cold run's compile).
+    contact = sets[0] != 0
+    n = nsets - 1  # the start's row (0), likewise an int64, never the literal 0
 
     e_rest = kp.e_rest
     e0 = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
@@ -149,12 +161,11 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
     point_mass = kp.energy_mode == ENERGY_POINT_MASS
     tracing = TRACE and (tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0)
     if tracing:
-        _write_trace(0, st, kp, tr_state, tr_force, tr_energy)
+        _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
 
     h = kp.dt_s
     maxn = int(kp.max_steps)
     status = Status.TIME_CAP
-    n = 0
     half2 = kp.half_side_cm * kp.half_side_cm
     while n < maxn:
         n += 1
@@ -183,7 +194,7 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
                     sz += z[k]
                 e_approx = (0.5 * ke + (-kp.g) * sz) - e_rest
                 margin = E_BOUND_MARGIN * (0.5 * ke + abs(kp.g) * abs(sz) + e_rest) + 1e-9
-                need = e_approx - margin <= kp.e_stop
+                need = not (e_approx - margin > kp.e_stop)  # a NaN bound (overflow) needs the exact energy
             if need:
                 if not contact:
                     node_velocities(U[0], U[1], U[2], W[0], W[1], W[2], off, st.uk)
@@ -287,14 +298,18 @@ def batch_kernel(integ: int):
 
 
 def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
-    """Integrate one throw with integrator ``integ`` (kernel id); see ``_roll``.
+    """Integrate one throw with integrator ``integ`` (kernel id) in its tracing loop; see ``_roll``.
 
-    The trace arrays (float64, 0 or n+1 rows) choose the kernel: all empty,
-    the summary loop; otherwise the tracing loop, which writes the channels
-    that have rows.
+    The trace arrays (float64, 0 or n+1 rows) get the channels that have
+    rows; with none, only the summary is returned (the same arithmetic as
+    the summary loop: tracing writes, never steers).
     """
-    trace = tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0
-    return roll_kernel(integ, trace)(ic, off0, kp, new_states(1), sets, set_steps, tr_state, tr_force, tr_energy)
+    return roll_kernel(integ, True)(ic, off0, kp, new_states(1), sets, set_steps, tr_state, tr_force, tr_energy)
+
+
+def run_summary(ic, off0, kp, integ, sets, set_steps):
+    """One throw through integrator ``integ``'s summary loop (and its specialised kernel); see ``_roll``."""
+    return roll_kernel(integ, False)(ic, off0, kp, new_states(1), sets, set_steps, _NO_ROWS[0], _NO_ROWS[1], _NO_ROWS[2])
 
 
 def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
