@@ -19,6 +19,8 @@ from pathlib import Path
 
 import typer
 
+from dicetrace.commands._compiling import compile_notice
+
 EXIT_BAD_INPUT = 2
 EXIT_INTERNAL = 70  # EX_SOFTWARE: a defect, not the user's input
 
@@ -107,7 +109,8 @@ def run_app(app: typer.Typer) -> None:
     with warnings.catch_warnings():  # the filters stay as they are; only how a warning is shown changes
         warnings.showwarning = show
         try:
-            rc = app(standalone_mode=False)
+            with compile_notice():
+                rc = app(standalone_mode=False)
             try:
                 _flush_stdout()
             except OSError as e:  # stdout is a full device, a closed pipe, ...
