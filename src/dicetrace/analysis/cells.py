@@ -18,10 +18,10 @@ from collections.abc import Hashable, Iterable, Sequence
 
 import numpy as np
 import pandas as pd
-from scipy import ndimage, sparse
-from scipy.sparse import csgraph
+from scipy import ndimage
+from skimage import measure
 
-from ._grid import as_label_grid, encode_labels, neighbour_offsets, shifted_pair, structure
+from ._grid import as_label_grid, encode_labels, structure
 
 __all__ = ["label_cells", "cells_table", "same_cell", "slice_cell_components"]
 
@@ -49,44 +49,34 @@ def label_cells(
     ncells : int
     """
     arr = as_label_grid(grid)
-    codes, uniques = encode_labels(arr)
-    excl = set(exclude)
-    integer = arr.dtype.kind in "iub"
     structure(arr.ndim, connectivity)  # validates ``connectivity``
-    # nodes that get a cell: a known code (factorize gives -1 to missing values)
-    # whose label is not excluded
-    excl_codes = [lab if integer else i for i, lab in enumerate(uniques) if lab in excl]
-    valid = np.ones(arr.shape, dtype=bool) if integer else codes >= 0
-    if excl_codes:
-        valid &= ~np.isin(codes, excl_codes)
-    N = codes.size
+    excl = list(exclude)
+    if arr.dtype.kind in "iub":  # the labels are their own codes: no factorisation (a sort) needed
+        codes = arr.astype(np.int64, copy=False)
+        valid = ~np.isin(codes, np.array([e for e in excl if isinstance(e, (int, np.integer))], dtype=np.int64))
+    else:  # factorised; a missing value (code -1) gets no cell
+        codes, uniques = encode_labels(arr)
+        excl_set = set(excl)
+        excl_codes = [i for i, lab in enumerate(uniques) if lab in excl_set]
+        valid = (codes >= 0) & ~np.isin(codes, excl_codes)
     if not valid.any():
         return np.zeros(arr.shape, dtype=np.int64), 0
-    # one graph for all labels: an edge joins neighbouring valid nodes of equal code
-    itype = np.int32 if N < 2**31 else np.int64
-    node = np.arange(N, dtype=itype).reshape(arr.shape)
-    src, dst = [], []
-    for off in neighbour_offsets(arr.ndim, connectivity):
-        sa, sb = shifted_pair(codes, off)
-        eq = (codes[sa] == codes[sb]) & valid[sa]
-        src.append(node[sa][eq])
-        dst.append(node[sb][eq])
-    src = np.concatenate(src) if src else np.zeros(0, dtype=itype)
-    dst = np.concatenate(dst) if dst else np.zeros(0, dtype=itype)
-    graph = sparse.csr_matrix((np.ones(len(src), dtype=np.int8), (src, dst)), shape=(N, N))
-    _, comp = csgraph.connected_components(graph, directed=False)
-    vflat = valid.ravel()
-    comp_v = comp[vflat]
-    # renumber as before: label by label (sorted codes = sorted labels), and
-    # within a label in raster order of each cell's first node
-    _, first, inverse = np.unique(comp_v, return_index=True, return_inverse=True)
-    first_node = np.flatnonzero(vflat)[first]
-    order = np.lexsort((first_node, codes.ravel()[first_node]))
-    rank = np.empty(len(order), dtype=np.int64)
-    rank[order] = np.arange(1, len(order) + 1, dtype=np.int64)
-    flat_ids = np.zeros(N, dtype=np.int64)
-    flat_ids[vflat] = rank[inverse.ravel()]
-    return flat_ids.reshape(arr.shape), len(order)
+    # one pass of scikit-image's labelling: neighbours of equal value join; the
+    # background value (0 after the shift) marks the nodes without a cell
+    lo, hi = int(codes.min()), int(codes.max())
+    vals = (codes - lo + 1).astype(np.int32 if hi - lo < 2**31 - 2 else np.int64)  # int32: a faster labelling
+    vals[~valid] = 0
+    comp = measure.label(vals, background=0, connectivity=1 if connectivity == "face" else arr.ndim)
+    n = int(comp.max())
+    # renumber label by label (sorted codes = sorted labels), in raster order
+    # within a label: skimage numbers components in raster order of their first
+    # node, so a stable sort by label keeps that order
+    comp_code = np.zeros(n + 1, dtype=np.int64)
+    comp_code[comp.ravel()] = vals.ravel()
+    order = np.argsort(comp_code[1:], kind="stable")
+    rank = np.zeros(n + 1, dtype=np.int64)
+    rank[order + 1] = np.arange(1, n + 1, dtype=np.int64)
+    return rank[comp], n
 
 
 def _to_slice_units(centroid: np.ndarray, shape, extent) -> np.ndarray:
