@@ -192,3 +192,22 @@ def test_basin_entropy_newton_is_fractal():
     # the straight line never passes the criterion
     line = sample_grid(line_classify, UNIT, (300, 300))
     assert basin_entropy(line, 5).Sbb < math.log(2)
+
+
+def test_box_size_counts_nodes_in_every_function():
+    """A box of b nodes a side everywhere (Attractors.jl's meaning): closed boxes of 2 nodes are
+    the 2x2 windows, so on a 9x9 grid with one straight change 8 of the 64 hold two labels."""
+    from dicetrace.analysis.boundaries import _default_box_sizes
+
+    g = np.ones((9, 9), int)
+    g[:, 5:] = 2
+    assert boundary_box_fraction(g, 2) == 8 / 64
+    assert boundary_box_fraction(g, 3) == 4 / 16  # 3x3 windows at stride 2: 4x4 boxes, one column of them cut
+    with pytest.raises(ValueError, match="box_size"):
+        boundary_box_fraction(g, 1)
+    ue = uncertainty_exponent(g, box_sizes=[2, 3, 5], spacing=0.5)
+    np.testing.assert_allclose(ue.eps, [0.5, 1.0, 2.0])  # a closed box of b nodes spans b - 1 spacings
+    assert basin_entropy(g, 3).n_boxes == 9
+    assert box_counting_dimension(g == 2, box_sizes=[3, 2]).counts.tolist() == [6, 8]  # disjoint boxes of b nodes
+    sizes = _default_box_sizes((4000, 4000))
+    assert sizes[0] == 2 and sizes[-1] == 200 and len(sizes) <= 12 and np.all(np.diff(sizes) > 0)

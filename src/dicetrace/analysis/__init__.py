@@ -8,7 +8,7 @@ Plotting lives in :mod:`dicetrace.analysis.plot` (matplotlib imported lazily)
 and is not re-exported here.
 
 Vocabulary follows Attractors.jl (``group_features``, ``basins_fractions``,
-``basin_entropy``, ``uncertainty_exponent``).
+``basin_entropy``, ``uncertainty_exponent``, ``basins_fractal_test``).
 """
 
 from types import ModuleType as _ModuleType
@@ -19,6 +19,7 @@ from .boundaries import (
     fit_power_law, uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution,
 )
 from .cells import cells_table, label_cells, same_cell, slice_cell_components
+from .fractal_test import FractalTestResult, basins_fractal_test, smooth_boundary_sbb
 from .grouping import (
     UNDEFINED_LABEL, UNSETTLED_LABEL, AbstractGroupingConfig, GroupByContactSequence, GroupByOutcome,
     basins_fractions, basins_fractions_table, canonical_contact_sequence, contact_sequence_text,

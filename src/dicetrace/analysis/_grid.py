@@ -86,18 +86,19 @@ def boxes(arr: np.ndarray, box_size: int) -> np.ndarray:
 
 
 def closed_box_minmax(codes: np.ndarray, box_size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Min and max of the closed boxes of side ``box_size`` (nodes ``kb..(k+1)b``).
+    """Min and max of the closed boxes of ``box_size`` nodes a side (nodes ``k(b-1) .. k(b-1)+b-1``).
 
-    Neighbouring boxes share their faces, so every pair of neighbouring nodes
-    lies in some box: a label change between boxes is not missed. Boxes that
-    would reach past the grid are dropped.
+    Neighbouring boxes share their faces (a box of ``b`` nodes spans ``b - 1``
+    intervals), so every pair of neighbouring nodes lies in some box: a label
+    change between boxes is not missed.  Boxes that would reach past the grid
+    are dropped.
     """
     b = int(box_size)
-    if b < 1:
-        raise ValueError("box_size must be >= 1")
-    if any(n < b + 1 for n in codes.shape):
+    if b < 2:
+        raise ValueError("box_size must be >= 2 nodes (a closed box spans box_size - 1 intervals)")
+    if any(n < b for n in codes.shape):
         raise ValueError(f"box_size {b} too large for the grid {codes.shape}")
-    win = np.lib.stride_tricks.sliding_window_view(codes, (b + 1,) * codes.ndim)
-    win = win[tuple(slice(None, None, b) for _ in range(codes.ndim))]
+    win = np.lib.stride_tricks.sliding_window_view(codes, (b,) * codes.ndim)
+    win = win[tuple(slice(None, None, b - 1) for _ in range(codes.ndim))]
     axes = tuple(range(codes.ndim, 2 * codes.ndim))
     return win.min(axis=axes), win.max(axis=axes)
