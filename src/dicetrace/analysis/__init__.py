@@ -1,4 +1,4 @@
-"""Analysis of scan results: basins, cells, boundaries, Wada tests, settle times, vertices.
+"""Analysis of scan results: basins, cells, boundaries, Wada tests, settle times, vertices, Lyapunov and escape rates.
 
 Pure functions over rolls tables (one row per initial condition) and label
 grids (integer arrays indexed ``[i, j(, k)]``; labels 1..6 faces, 0 undefined,
@@ -19,12 +19,14 @@ from .boundaries import (
     fit_power_law, uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution,
 )
 from .cells import cells_table, label_cells, same_cell, slice_cell_components
+from .escape import EscapeRate, escape_rate, survival_function
 from .fractal_test import FractalTestResult, basins_fractal_test, smooth_boundary_sbb
 from .grouping import (
     UNDEFINED_LABEL, UNSETTLED_LABEL, AbstractGroupingConfig, GroupByContactSequence, GroupByOutcome,
     basins_fractions, basins_fractions_table, canonical_contact_sequence, contact_sequence_text,
     cube_node_permutations, group_features, parse_contact_sequence, permute_contact_sets, wilson_interval,
 )
+from .lyapunov import FiniteTimeLyapunov, LyapunovEstimate, finite_time_lyapunov, lyapunov_benettin
 from .repetition import find_periods, label_autocorrelation, periodic_cells_connected
 from .settle import (
     BoundaryBracket, SettleFit, bisect_boundary, edge_balance_rate, fit_settle_divergence, settle_profile,
