@@ -148,11 +148,11 @@ def test_resume_after_sigkill(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "dicetrace.cli", *args], stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE)
     t0 = time.time()
-    while len(list(out.glob("part-*.parquet"))) < 2 and proc.poll() is None and time.time() - t0 < 120:
+    while len(list(out.glob("rolls/part-*.parquet"))) < 2 and proc.poll() is None and time.time() - t0 < 120:
         time.sleep(0.01)
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    n_before = len(list(out.glob("part-*.parquet")))
+    n_before = len(list(out.glob("rolls/part-*.parquet")))
     assert 0 < n_before < 40, "the kill should land mid-scan"
     res = cli(*args)
     assert res.returncode == 0, res.stderr
@@ -284,7 +284,7 @@ def test_metadata_and_manifest(tmp_path):
     assert man["dicetrace_version"] == dicetrace.__version__ and man["n_ics"] == 16 and man["n_chunks"] == 2
     defn = ScanDefinition.from_dict(man["definition"])
     assert defn.config.preset.gamma == 0.01 and defn.space == Grid("seed", "home", 4)
-    meta = json.loads(pq.read_schema(out / "part-000001.parquet").metadata[b"dicetrace"])
+    meta = json.loads(pq.read_schema(out / "rolls" / "part-000001.parquet").metadata[b"dicetrace"])
     assert meta["scan"] == man["definition"] and meta["ic_range"] == [10, 16]
     assert meta["dicetrace_version"] == dicetrace.__version__
     assert len(pd.read_parquet(out)) == 16  # a plain Parquet dataset
