@@ -5,10 +5,11 @@ dicetrace version), the manifest's chunk log ``_scan.chunks.jsonl`` (one line
 per finished chunk: its file, rows, size and SHA-256), and the subfolder
 ``rolls/`` with one Parquet file per finished chunk, ``part-NNNNNN.parquet``
 and nothing else.  Each chunk is written under a hidden temporary name beside
-the manifest, its checksum logged, and then renamed into ``rolls/``.  So a Ctrl-C or a kill loses at most the chunks in flight; running
-the same scan again verifies the finished chunks against their checksums
-(recomputing, with a :class:`ScanWarning`, any that are damaged), skips the
-good ones and ends with exactly one row per IC.  A different definition
+the manifest, its checksum logged, and then renamed into ``rolls/``.  So a
+Ctrl-C or a kill loses at most the chunks in flight; running the same scan
+again verifies the finished chunks against their checksums (recomputing, with
+a :class:`ScanWarning`, any that are damaged), skips the good ones and ends
+with exactly one row per IC.  A different definition
 against an existing folder is refused (:class:`ScanMismatchError`), never
 mixed in.  One writer at a time: a scan holds the folder's lock
 (``.dicetrace-scan.lock``, via ``filelock``) while it writes; a second one
