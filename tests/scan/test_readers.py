@@ -114,3 +114,10 @@ def test_the_readme_reader_example_runs_as_written(tmp_path):
     res = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     assert "outcome" in res.stdout and len(pd.read_parquet(tmp_path / "scans/red-sea-40/rolls")) == 1600
+
+
+def test_the_scan_command_names_the_table_folder(tmp_path, dicetrace_cli):
+    res = dicetrace_cli("scan", "--window", "home", "--res", "4", "--out", "s", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert f"→ s (the table: {os.path.join('s', 'rolls')}/)" in res.stderr
+    assert len(pl.scan_parquet(tmp_path / "s" / "rolls").collect()) == 16

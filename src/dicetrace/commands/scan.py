@@ -363,7 +363,7 @@ def register(app: typer.Typer) -> None:
             raise
         done = report.chunks_skipped + report.chunks_computed
         if not quiet:
-            msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out}  "
+            msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (the table: {out / 'rolls'}/)  "
                    f"({report.chunks_computed:,} computed, {report.chunks_skipped:,} already there; "
                    f"{report.ics_computed:,} ICs in {report.wall_s:.1f} s, {report.rate_ics_s:,.0f} ICs/s)")
             print(msg, file=sys.stderr)
