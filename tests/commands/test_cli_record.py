@@ -60,6 +60,7 @@ def test_record_seed_slice_writes_rrd_and_parquet(tmp_path, dicetrace_cli):
     traj = pd.read_parquet(tmp_path / "pq" / "trajectory.parquet")
     assert len(traj) == 541
     assert sorted(p.name for p in (tmp_path / "pq").iterdir()) == [
+        "README-tables.txt",  # how to read each table; makes a folder-wide read refuse, not mix them
         "contacts.parquet",
         "rolls.parquet",
         "trajectory.parquet",

@@ -75,7 +75,7 @@ def test_a_second_writer_refuses_at_once_and_touches_nothing(tmp_path):
     assert r.chunks_computed == 2
     in_progress = out / ".part-000002.parquet.4242-running.tmp"  # the running scan's chunk being written
     in_progress.write_bytes(b"PAR1 half written")
-    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     lock = _hold_lock(out)
     try:
         t0 = time.monotonic()
@@ -84,7 +84,7 @@ def test_a_second_writer_refuses_at_once_and_touches_nothing(tmp_path):
         with pytest.raises(ScanBusyError, match="waited 0.4 s"):
             scan(HOME5, out, chunk=5, wait=0.4)
         assert 0.35 < time.monotonic() - t0 < 5
-        assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # the running scan's files untouched
+        assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before  # the running scan's files untouched
     finally:
         lock.release()
     r = scan(HOME5, out, chunk=5, wait=1.0)  # the first is gone: its temporary is a leftover now, and removed
@@ -170,7 +170,7 @@ def test_each_chunk_is_logged_with_its_checksum(tmp_path):
 def test_a_corrupted_chunk_is_named_on_read_and_recomputed_on_resume(tmp_path, home5):
     out = tmp_path / "s"
     scan(HOME5, out, chunk=5)
-    bad = out / "part-000002.parquet"
+    bad = out / "rolls" / "part-000002.parquet"
     _flip_middle(bad)
     for reader in (read_scan, label_grid, outcome_counts, status_counts):
         with pytest.raises(CorruptChunkError, match=r"part-000002\.parquet.*SHA-256"):
@@ -187,7 +187,7 @@ def test_a_corrupted_chunk_is_named_on_read_and_recomputed_on_resume(tmp_path, h
 def test_the_cli_says_it_recomputes_a_damaged_chunk(tmp_path, dicetrace_cli, home5):
     out = tmp_path / "s"
     scan(HOME5, out, chunk=5)
-    _flip_middle(out / "part-000000.parquet")
+    _flip_middle(out / "rolls" / "part-000000.parquet")
     args = ["scan", "--window", "home", "--res", "5", "--chunk", "5", "--out", str(out), "-q"]
     res = dicetrace_cli(*args, cwd=tmp_path)
     assert res.returncode == 0
@@ -201,7 +201,7 @@ def test_the_cli_says_it_recomputes_a_damaged_chunk(tmp_path, dicetrace_cli, hom
 def test_record_from_a_corrupted_scan_names_the_chunk(tmp_path, dicetrace_cli, assert_one_line_error):
     out = tmp_path / "s"
     scan(HOME5, out, chunk=5)
-    _flip_middle(out / "part-000001.parquet")
+    _flip_middle(out / "rolls" / "part-000001.parquet")
     res = dicetrace_cli("record", "--scan", str(out), "--at", "0.05,0.05", "--out", str(tmp_path / "r.rrd"), cwd=tmp_path)
     assert_one_line_error(res, "--scan", "part-000001.parquet", "damaged")
     assert not (tmp_path / "r.rrd").exists()
@@ -212,7 +212,7 @@ def test_a_folder_without_a_chunk_log_is_adopted_and_garbage_is_refused(tmp_path
     out = tmp_path / "s"
     scan(HOME5, out, chunk=5)
     (out / CHUNK_LOG).unlink()
-    (out / "part-000003.parquet").write_bytes(b"PAR1 this is no Parquet file PAR1")
+    (out / "rolls" / "part-000003.parquet").write_bytes(b"PAR1 this is no Parquet file PAR1")
     with pytest.raises(CorruptChunkError, match=r"part-000003\.parquet"):
         read_scan(out)  # no checksum to compare: the decoding error names the file
     with warnings.catch_warnings(record=True) as caught:

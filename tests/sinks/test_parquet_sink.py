@@ -34,10 +34,13 @@ def written(roll, tmp_path_factory):
     return d, paths
 
 
-def test_writes_three_files_and_nothing_else(written):
+def test_writes_three_files_and_the_note_and_nothing_else(written):
     d, paths = written
-    assert sorted(p.name for p in d.iterdir()) == ["contacts.parquet", "rolls.parquet", "trajectory.parquet"]
+    assert sorted(p.name for p in d.iterdir()) == [
+        "README-tables.txt", "contacts.parquet", "rolls.parquet", "trajectory.parquet"
+    ]
     assert set(paths) == {"rolls", "contacts", "trajectory"}
+    assert (d / sink.NOTE_NAME).read_text() == sink.NOTE_TEXT
 
 
 def test_schemas_are_the_declared_ones(written):

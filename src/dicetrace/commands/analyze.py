@@ -28,14 +28,33 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail
-from dicetrace.studies import WRITEUP_STUDIES, resolve
+from dicetrace.studies import LETTERS, TITLES, resolve
 from dicetrace.studies.outputs import default_out, prepare_out
+
+#: The studies as ``analyze --help`` lists them: letter, name, what it is about.
+STUDIES_HELP = "\n".join(f"  {letter}  {name:<11} {TITLES[name]}" for letter, name in LETTERS.items())
+
+
+def _help() -> str:
+    return f"""Run writeup studies (figures, numbers, REPORT.md) into ./dicetrace-results/analysis or --out.
+
+Name each study by its name or its letter (the prefix of its figures,
+figures/a_*.png ...), or give all:
+
+{STUDIES_HELP}
+
+The committed results in analysis/ are regenerated only by the full run
+`dicetrace analyze all --out analysis` (from the repository root); a --quick,
+--res or --seed run into analysis/ is refused. --report-only re-assembles
+OUT/REPORT.md from OUT/results/*.json.
+"""
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("analyze")
+    @app.command("analyze", help=_help())
     def analyze_cmd(
-        study: Optional[list[str]] = typer.Argument(None, help="Study name(s): " + ", ".join(WRITEUP_STUDIES) + ", a..i, or all."),
+        study: Optional[list[str]] = typer.Argument(None, help="Study names or letters (listed above), or all.",
+                                            metavar="STUDY"),
         quick: bool = typer.Option(False, "--quick", help="Small grids (the CI run: seconds per study)."),
         out: Optional[Path] = typer.Option(None, "--out", help="Output folder (figures/, results/, REPORT.md); "
                                            "default ./dicetrace-results/analysis. The committed results: --out analysis "
@@ -47,13 +66,6 @@ def register(app: typer.Typer) -> None:
         report_only: bool = typer.Option(False, "--report-only", help="Only re-assemble OUT/REPORT.md from "
                                          "OUT/results/*.json (no simulation)."),
     ) -> None:
-        """Run writeup studies (figures, numbers, REPORT.md) into ./dicetrace-results/analysis or --out.
-
-        The committed results in analysis/ are regenerated only by the full run
-        `dicetrace analyze all --out analysis` (from the repository root); a --quick,
-        --res or --seed run into analysis/ is refused. --report-only re-assembles
-        OUT/REPORT.md from OUT/results/*.json.
-        """
         from dicetrace.studies.context import DEFAULT_SEED, Options
 
         target = Path(out) if out is not None else default_out("analyze")

@@ -4,7 +4,9 @@ ICs come from ``--ic VX,VY,VZ,LX,LY,LZ``, from ``--slice seed --at X,Y[,Z]``,
 or from ``--ics FILE.csv`` (columns ``vx,vy,vz,Lx,Ly,Lz``, or ``x,y[,z]``
 with ``--slice seed``).  All ICs run in one parallel batch
 (``simulate_batch``).  Output: ``--format table`` (default), ``csv`` or
-``json``, on stdout or atomically into ``--out FILE``.
+``json``, on stdout or atomically into ``--out FILE``.  A file or pipe gets
+every row; a terminal gets the table drawn to fit it, and beyond ``TTY_ROWS``
+rows only the first ``TTY_HEAD``, the outcomes of all, and how to get them.
 
 Exit codes: 0 done; 1 some IC ended in a numerical failure (status
 ``non_finite`` or ``blow_up``: the rows are still printed); 2 bad input.
@@ -333,7 +335,64 @@ def result_rows(batch, coords) -> tuple[list[str], list[list]]:
     return names, rows
 
 
+#: Columns right-aligned in the table.
+_NUMERIC = frozenset({"ic_id", "x", "y", "z", "vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps", "t_settle_s"})
+#: On a terminal the table shows at most this many rows (drawn to fit it); beyond, the first TTY_HEAD rows,
+#: how many more there are, their outcomes, and how to get them all.
+TTY_ROWS = 60
+TTY_HEAD = 20
+
+
+def _cells(rows) -> list[list[str]]:
+    return [[fmt_num(v) if isinstance(v, float) else str(v) for v in r] for r in rows]
+
+
+def plain_table(names, rows) -> str:
+    """The table as fixed-width text: the columns of rich's borderless table, two spaces apart (any number of rows).
+
+    Numbers are right-aligned, text left-aligned, no trailing spaces; it
+    costs a string join per row (rich's layout engine took ~1 ms a row).
+    """
+    cells = _cells(rows)
+    widths = [len(n) for n in names]
+    for r in cells:
+        for j, v in enumerate(r):
+            if len(v) > widths[j]:
+                widths[j] = len(v)
+    right = [n in _NUMERIC for n in names]
+
+    def line(vals) -> str:
+        return "  ".join(v.rjust(w) if rj else v.ljust(w) for v, w, rj in zip(vals, widths, right)).rstrip()
+
+    return "".join(line(r) + "\n" for r in [list(names), *cells])
+
+
+def terminal_table(names, rows, stream) -> None:
+    """The table on a terminal: rich's, fitted to its width; beyond TTY_ROWS rows only the first, a count and a hint."""
+    from rich.console import Console
+    from rich.table import Table
+
+    shown = rows if len(rows) <= TTY_ROWS else rows[:TTY_HEAD]
+    table = Table(box=None, header_style="bold", pad_edge=False)
+    for n in names:
+        table.add_column(n, justify="right" if n in _NUMERIC else "left", overflow="fold")
+    for r in _cells(shown):
+        table.add_row(*r)
+    console = Console(file=stream, highlight=False)
+    console.print(table)
+    if len(shown) < len(rows):
+        j = names.index("outcome")
+        counts: dict = {}
+        for r in rows:
+            counts[r[j]] = counts.get(r[j], 0) + 1
+        faces = ", ".join(f"{'face ' + str(k) if k > 0 else 'undefined' if k == 0 else 'not settled'}: "
+                          f"{100 * v / len(rows):.1f}%" for k, v in sorted(counts.items(), key=lambda kv: (kv[0] <= 0, kv[0])))
+        console.print(f"… and {len(rows) - len(shown):,} more rows (outcomes of all {len(rows):,}: {faces}).\n"
+                      "All rows: --format csv or json, or --out FILE (the table, in full).", highlight=False, markup=False)
+
+
 def render(names, rows, fmt: str, stream, *, meta: dict) -> None:
+    """Every row, as ``fmt`` (table, csv or json), into a text stream."""
     if fmt == "csv":
         w = csv.writer(stream, lineterminator="\n")
         w.writerow(names)
@@ -344,39 +403,21 @@ def render(names, rows, fmt: str, stream, *, meta: dict) -> None:
         json.dump(doc, stream, indent=1)
         stream.write("\n")
     else:
-        from rich.console import Console
-        from rich.table import Table
-
-        table = Table(box=None, header_style="bold", pad_edge=False)
-        numeric = {"ic_id", "x", "y", "z", "vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps", "t_settle_s"}
-        for n in names:
-            table.add_column(n, justify="right" if n in numeric else "left", overflow="fold")
-        for r in rows:
-            table.add_row(*[fmt_num(v) if isinstance(v, float) else str(v) for v in r])
-        tty = stream.isatty() if hasattr(stream, "isatty") else False
-        console = Console(file=stream, width=None if tty else 100000, no_color=not tty, highlight=False, soft_wrap=False)
-        console.print(table)
-
-
-def _strip_trailing(text: str) -> str:
-    return "\n".join(line.rstrip() for line in text.splitlines()) + "\n"
+        stream.write(plain_table(names, rows))
 
 
 def emit(names, rows, fmt: str, out, *, meta: dict) -> None:
     """Print the rows, or write them to ``out`` (a checked Destination or a path; atomically for a regular file)."""
     from dicetrace.sinks._common import STDOUT, write_bytes
 
-    buf = io.StringIO()
-    render(names, rows, fmt, buf, meta=meta)
-    text = buf.getvalue()
-    if fmt == "table":
-        text = _strip_trailing(text)
     if out is None or str(getattr(out, "given", out)) == STDOUT:
         if fmt == "table" and sys.stdout.isatty():
-            render(names, rows, fmt, sys.stdout, meta=meta)  # rich fits the terminal
+            terminal_table(names, rows, sys.stdout)
             return
         out = STDOUT
-    write_bytes(out, text.encode("utf-8"), what="--out")
+    buf = io.StringIO()
+    render(names, rows, fmt, buf, meta=meta)
+    write_bytes(out, buf.getvalue().encode("utf-8"), what="--out")
 
 
 def report_failures(statuses, what: str = "IC") -> bool:
@@ -412,7 +453,9 @@ def register(app: typer.Typer) -> None:
         dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
-        fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json."),
+        fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json. On a terminal a table of more "
+                               f"than {TTY_ROWS} rows shows the first {TTY_HEAD} and the outcomes of all; a file "
+                               "or pipe gets every row."),
         out: Optional[Path] = typer.Option(
             None, "--out", help="Write the output to this file (atomically; a device or FIFO directly; '-': stdout) "
             "instead of stdout."

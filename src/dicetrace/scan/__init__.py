@@ -7,7 +7,9 @@
 
 See :func:`scan` (run or resume; in memory, locally or on Dask),
 :func:`iter_scan` (stream chunk tables), :func:`read_scan`,
-:func:`label_grid`, :func:`grid_axes` and :func:`ic_at`.
+:func:`label_grid`, :func:`grid_axes` and :func:`ic_at`.  Without dicetrace,
+point any Parquet reader at the folder's ``rolls/`` (:func:`rolls_dir`):
+``polars.scan_parquet("scans/red-sea/rolls/")``.
 """
 
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, config_from_dict
@@ -31,6 +33,7 @@ from dicetrace.scan.folder import (
     compute_chunk,
     prepare_folder,
     read_manifest,
+    rolls_dir,
     write_chunk,
 )
 from dicetrace.scan.runner import ScanReport, iter_scan, scan
@@ -46,6 +49,7 @@ __all__ = [
     "MANIFEST",
     "MISSING",
     "ROLLS_SCHEMA",
+    "rolls_dir",
     "ScanDefinition",
     "ScanMismatchError",
     "ScanReport",

@@ -1,22 +1,29 @@
 """The scan dataset folder: manifest, chunk files, their checksum log, and the writer's lock.
 
 A scan folder holds ``_scan.json`` (the manifest: the scan definition, the
-dicetrace version), one Parquet file per finished chunk,
-``part-NNNNNN.parquet``, and the manifest's chunk log ``_scan.chunks.jsonl``
-(one line per finished chunk: its file, rows, size and SHA-256).  Each chunk
-is written under a hidden temporary name, its checksum logged, and then
-renamed.  So a Ctrl-C or a kill loses at most the chunks in flight; running
-the same scan again verifies the finished chunks against their checksums
-(recomputing, with a :class:`ScanWarning`, any that are damaged), skips the
-good ones and ends with exactly one row per IC.  A different definition
+dicetrace version), the manifest's chunk log ``_scan.chunks.jsonl`` (one line
+per finished chunk: its file, rows, size and SHA-256), and the subfolder
+``rolls/`` with one Parquet file per finished chunk, ``part-NNNNNN.parquet``
+and nothing else.  Each chunk is written under a hidden temporary name beside
+the manifest, its checksum logged, and then renamed into ``rolls/``.  So a
+Ctrl-C or a kill loses at most the chunks in flight; running the same scan
+again verifies the finished chunks against their checksums (recomputing, with
+a :class:`ScanWarning`, any that are damaged), skips the good ones and ends
+with exactly one row per IC.  A different definition
 against an existing folder is refused (:class:`ScanMismatchError`), never
 mixed in.  One writer at a time: a scan holds the folder's lock
 (``.dicetrace-scan.lock``, via ``filelock``) while it writes; a second one
 waits at most ``wait`` seconds, then refuses (:class:`ScanBusyError`),
 touching nothing.
 
-The folder is a plain Parquet dataset: ``pandas.read_parquet(folder)`` reads
-it (files whose names start with ``_`` or ``.`` are not data).
+``rolls/`` is a plain Parquet dataset that every reader reads as it is,
+even while a scan writes into it: ``polars.scan_parquet("scan/rolls/")``,
+``pandas.read_parquet("scan/rolls")``, DuckDB's
+``read_parquet('scan/rolls/*.parquet')`` and ``pyarrow.dataset.dataset("scan/rolls")``
+(pandas and pyarrow also read the scan folder itself: they skip names starting
+with ``_`` or ``.``).  A folder written before ``rolls/`` existed (its parts
+beside the manifest) is still read; the next scan into it moves them into
+``rolls/``.
 """
 from __future__ import annotations
 
@@ -47,6 +54,8 @@ CHUNK_LOG = "_scan.chunks.jsonl"
 LOCK = ".dicetrace-scan.lock"
 METADATA_KEY = b"dicetrace"
 DICTIONARY_COLUMNS = ["preset", "integrator", "status", "outcome", "dt_s", "k"]
+#: The subfolder holding the rolls table: the chunk files, and nothing else.
+ROLLS_DIR = "rolls"
 _PART = re.compile(r"^part-(\d{6,})\.parquet$")
 
 
@@ -68,6 +77,11 @@ class ScanWarning(UserWarning):
 
 def part_name(c: int) -> str:
     return f"part-{c:06d}.parquet"
+
+
+def rolls_dir(folder) -> Path:
+    """The scan folder's Parquet dataset of rolls (``folder/rolls``): point any Parquet reader at it."""
+    return Path(folder) / ROLLS_DIR
 
 
 def _version() -> str:
@@ -201,6 +215,11 @@ def read_chunk_log(folder) -> dict[int, dict]:
     return entries
 
 
+def _log_name(folder: Path, path: Path) -> str:
+    """A chunk file's name in the chunk log: its path relative to the scan folder, with ``/``."""
+    return Path(path).relative_to(folder).as_posix()
+
+
 def _append_chunk_log(folder: Path, entry: dict) -> None:
     with open(folder / CHUNK_LOG, "a") as f:
         f.write(json.dumps(entry, sort_keys=True) + "\n")
@@ -208,16 +227,38 @@ def _append_chunk_log(folder: Path, entry: dict) -> None:
         os.fsync(f.fileno())
 
 
-def chunk_files(folder) -> dict[int, Path]:
-    """Chunk index → path of every ``part-NNNNNN.parquet`` in ``folder`` (one listing, any number of chunks)."""
-    folder = Path(folder)
+def _parts_in(folder: Path) -> dict[int, Path]:
     out = {}
-    with os.scandir(folder) as it:
-        for e in it:
-            m = _PART.match(e.name)
-            if m:
-                out[int(m.group(1))] = folder / e.name
+    try:
+        with os.scandir(folder) as it:
+            for e in it:
+                m = _PART.match(e.name)
+                if m:
+                    out[int(m.group(1))] = folder / e.name
+    except (FileNotFoundError, NotADirectoryError):
+        pass
+    return out
+
+
+def chunk_files(folder) -> dict[int, Path]:
+    """Chunk index → path of every ``part-NNNNNN.parquet`` in ``folder/rolls`` (one listing, any number of chunks).
+
+    A part left beside the manifest by an older dicetrace counts too, unless
+    ``rolls/`` holds the same chunk.
+    """
+    folder = Path(folder)
+    out = _parts_in(folder)
+    out.update(_parts_in(folder / ROLLS_DIR))
     return dict(sorted(out.items()))
+
+
+def _move_legacy_parts(folder: Path) -> None:
+    """Move the parts an older dicetrace wrote beside the manifest into ``rolls/`` (holding the lock)."""
+    rolls = folder / ROLLS_DIR
+    for c, p in _parts_in(folder).items():
+        target = rolls / p.name
+        if not target.exists():
+            os.replace(p, target)
 
 
 #: Files this process has hashed (or written), by path: (size, mtime_ns, sha256).  A file whose size and
@@ -322,6 +363,11 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
         _atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True))
+    rolls = folder / ROLLS_DIR
+    if rolls.exists() and not rolls.is_dir():
+        raise FileExistsError(f"{str(rolls)!r} is not a folder: the scan's rolls table goes there; move it away")
+    rolls.mkdir(exist_ok=True)
+    _move_legacy_parts(folder)
     for p in folder.glob(".part-*.tmp"):
         p.unlink(missing_ok=True)
     log = read_chunk_log(folder)
@@ -334,7 +380,7 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
         if why is None:
             if c not in log:  # adopt a chunk of a folder written before checksums were logged
                 digest, size = file_sha256(p)
-                _append_chunk_log(folder, {"chunk": c, "file": p.name, "rows": stop - start, "bytes": size,
+                _append_chunk_log(folder, {"chunk": c, "file": _log_name(folder, p), "rows": stop - start, "bytes": size,
                                            "sha256": digest})
             done.add(c)
         else:
@@ -351,8 +397,9 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
     the chunks finished before are kept.
     """
     folder = Path(folder)
-    path = folder / part_name(c)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+    path = folder / ROLLS_DIR / part_name(c)
+    # the temporary file lies beside the manifest: rolls/ only ever holds finished parts
+    tmp = folder / f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp"
     try:
         with open(tmp, "wb") as f:  # our own handle: closed on any error (a full disk), never left to the GC
             pq.write_table(
@@ -364,7 +411,7 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
             f.flush()
             os.fsync(f.fileno())
         digest, size = file_sha256(tmp)
-        _append_chunk_log(folder, {"chunk": c, "file": path.name, "rows": table.num_rows, "bytes": size,
+        _append_chunk_log(folder, {"chunk": c, "file": _log_name(folder, path), "rows": table.num_rows, "bytes": size,
                                    "sha256": digest})
         os.replace(tmp, path)
         _remember(path, digest)

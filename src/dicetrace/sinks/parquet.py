@@ -2,8 +2,17 @@
 
 The tables (columns, units, metadata) are defined in :mod:`dicetrace.tables`;
 this module writes them atomically into a folder as ``rolls.parquet``,
-``contacts.parquet`` and ``trajectory.parquet``, readable with plain
-``pandas.read_parquet`` (no dicetrace needed).
+``contacts.parquet`` and ``trajectory.parquet``, each one file that any
+reader reads on its own (``pd.read_parquet("out/rolls.parquet")``,
+``pl.read_parquet``, DuckDB's ``from 'out/rolls.parquet'``,
+``pyarrow.parquet.read_table``; no dicetrace needed).
+
+The folder is not one dataset: the three tables have different columns, and
+a reader given the folder would stack their rows into one frame.  So a
+plain-text note, ``README-tables.txt`` (:data:`NOTE_NAME`), is written
+beside them: it says how to read each table and, being no Parquet file,
+makes pandas, pyarrow.dataset and Polars refuse the folder, naming the note,
+instead of mixing it; DuckDB refuses the mixed columns of its glob.
 """
 
 from __future__ import annotations
@@ -31,6 +40,31 @@ from dicetrace.tables import (  # noqa: F401  (re-exported: the sink's public na
     rolls_table,
     trajectory_table,
 )
+
+
+#: The note written beside the tables (see the module docstring): a plain-text file, on purpose.
+NOTE_NAME = "README-tables.txt"
+
+NOTE_TEXT = """\
+This folder holds Parquet tables written by dicetrace, one file per table:
+
+  rolls.parquet       one row per initial condition: outcome, status, steps, contact sequence, ...
+  contacts.parquet    one row per node entering or leaving the ground
+  trajectory.parquet  one row per time step of one throw (when it was traced)
+
+Read each file on its own, for example:
+
+  pandas    pd.read_parquet("FOLDER/rolls.parquet")
+  polars    pl.read_parquet("FOLDER/rolls.parquet")
+  DuckDB    select * from 'FOLDER/rolls.parquet'
+  pyarrow   pyarrow.parquet.read_table("FOLDER/rolls.parquet")
+
+The folder itself is not one dataset: its tables have different columns, and a
+reader given the folder would stack their rows into one frame. This note is not
+a Parquet file, so pandas, pyarrow and Polars refuse the folder instead.
+Every table carries the run's configuration as JSON under the schema metadata
+key "dicetrace".
+"""
 
 
 # -- writing --------------------------------------------------------------------------------
@@ -61,7 +95,7 @@ def write_tables(
     metadata: Mapping | None = None,
     staging: Staging | None = None,
 ) -> dict[str, Path]:
-    """Write ``rolls.parquet``, ``contacts.parquet`` (and ``trajectory.parquet``) into ``directory``.
+    """Write ``rolls.parquet``, ``contacts.parquet`` (and ``trajectory.parquet``) into ``directory``, with the note.
 
     Give either a ``source`` (a Roll, Rolls or a BatchResult; see
     :func:`tables_for`) or ready ``tables`` (names from ``rolls``,
@@ -76,7 +110,7 @@ def write_tables(
     Returns
     -------
     dict
-        Table name → path written.
+        Table name → path written (the note, :data:`NOTE_NAME`, is not listed).
     """
     if (source is None) == (tables is None):
         raise ValueError("give either a source or tables")
@@ -102,6 +136,14 @@ def write_tables(
             except OSError as e:
                 raise st.fail(dest, e) from None
             finals[name] = final
+        note = destination(directory / NOTE_NAME, what="note")
+        if note.kind != "file":
+            raise OutputError(f"{note.label}: the note beside the tables is written as a regular file")
+        tmp = st.path(note)
+        try:
+            tmp.write_text(NOTE_TEXT)
+        except OSError as e:
+            raise st.fail(note, e) from None
         if own:
             st.commit()
     except BaseException:

@@ -24,6 +24,18 @@ from types import ModuleType
 WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation")
 #: Letter of each writeup study (its figures' prefix) -> name.
 LETTERS = dict(zip("abcdefghi", WRITEUP_STUDIES))
+#: What each writeup study is about (the first line of its module's docstring, after the name).
+TITLES = {
+    "cells": "the cell structure of the home window and the zoom ladder (writeup 4.1)",
+    "fractal": '"fractal" zoom series (writeup 5.3) and the measures of the boundaries',
+    "repetition": "period vectors, and one cell or many? (writeup 5.1)",
+    "topology": "the topology of throws in one cell (writeup 5.5)",
+    "damping": "damping and chaos (writeup 5.2)",
+    "vertices": "the vertex hunt (writeup 4.3 and 5.4)",
+    "settle": "settle time at cell borders (writeup 4.1–4.2 and 5.6)",
+    "wedge": "the ball–hill wedge (writeup 4.2 and appendix 8.1)",
+    "animation": "the third slice axis as time (writeup 6.1)",
+}
 #: The integrator studies (their own commands).
 INTEGRATOR_STUDIES = ("accuracy", "stability")
 #: Every study's name.
@@ -52,4 +64,4 @@ def study_module(name: str) -> ModuleType:
     return importlib.import_module(f"dicetrace.studies.{name}")
 
 
-__all__ = ["WRITEUP_STUDIES", "LETTERS", "INTEGRATOR_STUDIES", "STUDY_NAMES", "resolve", "study_module"]
+__all__ = ["WRITEUP_STUDIES", "LETTERS", "TITLES", "INTEGRATOR_STUDIES", "STUDY_NAMES", "resolve", "study_module"]
