@@ -101,21 +101,6 @@ def test_a_file_named_rolls_is_refused_not_overwritten(tmp_path):
     assert (out / ROLLS_DIR).read_text() == "mine"
 
 
-@pytest.mark.slow
-def test_the_readme_reader_example_runs_as_written(tmp_path):
-    """The README's block that reads a scan folder with each reader runs, from a clean folder."""
-    import re
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
-    (block,) = [b for b in re.findall(r"```python\n(.*?)```", readme, re.S) if "scan_parquet" in b]
-    res = subprocess.run([sys.executable, "-c", block], cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    assert res.returncode == 0, res.stderr
-    assert "outcome" in res.stdout and len(pd.read_parquet(tmp_path / "scans/red-sea-40/rolls")) == 1600
-
-
 def test_the_scan_command_names_the_table_folder(tmp_path, dicetrace_cli):
     res = dicetrace_cli("scan", "--window", "home", "--res", "4", "--out", "s", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
