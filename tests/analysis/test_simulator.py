@@ -173,3 +173,19 @@ def test_finite_time_lyapunov_of_a_throw_is_a_property_of_the_dynamics():
         assert fits[0].fit_range[0] == pytest.approx(0.001 if phase == "whole" else 0.176)
     with pytest.raises(ValueError, match="direction"):
         throw_lyapunov(ic, direction=np.zeros(6))
+
+
+def test_the_ftle_field_is_higher_on_cell_borders():
+    """Red-sea window, 30²: the throws at border nodes (outcome differs from a neighbour) part faster
+    than those inside cells (measured mean 18.8 vs 16.5 /s, one-sided Mann-Whitney p = 4e-9)."""
+    from scipy import stats
+
+    from dicetrace.analysis import boundary_mask
+    from dicetrace.analysis.simulator import ftle_on_slice
+
+    m = ftle_on_slice("red-sea", 30)
+    assert m.ftle.shape == m.outcome.shape == (30, 30) and np.isfinite(m.ftle).all()
+    border = boundary_mask(m.outcome)
+    assert 0.5 < border.mean() < 0.95
+    test = stats.mannwhitneyu(m.ftle[border], m.ftle[~border], alternative="greater")
+    assert test.pvalue < 1e-4 and np.median(m.ftle) > 0
