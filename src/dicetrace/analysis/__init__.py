@@ -18,6 +18,7 @@ from .boundaries import (
     boundary_box_fraction, boundary_dimension, boundary_fraction, boundary_mask, box_counting_dimension,
     fit_power_law, uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution,
 )
+from .agreement import Agreement, agreement
 from .cells import cells_table, label_cells, same_cell, slice_cell_components
 from .escape import EscapeRate, escape_rate, survival_function
 from .fractal_test import FractalTestResult, basins_fractal_test, smooth_boundary_sbb
