@@ -2,7 +2,7 @@
 
 Two kinds, both shipped in the package and run from any folder:
 
-- the nine **writeup studies** (``dicetrace analyze NAME|all``), one module
+- the **writeup studies** (the writeup's nine, and the transient-chaos study j) (``dicetrace analyze NAME|all``), one module
   each, ``compute(ctx)`` then ``render(computed, out)`` (see
   :mod:`dicetrace.studies.context`); :func:`dicetrace.studies.runner.run`
   runs them and :mod:`dicetrace.studies.report` assembles ``REPORT.md``;
@@ -20,10 +20,11 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..i).
-WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation")
+#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..j).
+WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation",
+                   "transient")
 #: Letter of each writeup study (its figures' prefix) -> name.
-LETTERS = dict(zip("abcdefghi", WRITEUP_STUDIES))
+LETTERS = dict(zip("abcdefghij", WRITEUP_STUDIES))
 #: What each writeup study is about (the first line of its module's docstring, after the name).
 TITLES = {
     "cells": "the cell structure of the home window and the zoom ladder (writeup 4.1)",
@@ -35,6 +36,7 @@ TITLES = {
     "settle": "settle time at cell borders (writeup 4.1–4.2 and 5.6)",
     "wedge": "the ball–hill wedge (writeup 4.2 and appendix 8.1)",
     "animation": "the third slice axis as time (writeup 6.1)",
+    "transient": "transient chaos of the discrete and the converged die: λ, κ and α, with convergence certificates",
 }
 #: The integrator studies (their own commands).
 INTEGRATOR_STUDIES = ("accuracy", "stability")
@@ -43,7 +45,7 @@ STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES
 
 
 def resolve(names) -> list[str]:
-    """Writeup study names from names, letters (a..i) or ``all`` (ValueError naming the choices)."""
+    """Writeup study names from names, letters (a..j) or ``all`` (ValueError naming the choices)."""
     out: list[str] = []
     for n in names or ("all",):
         key = str(n).strip().lower()
@@ -51,7 +53,7 @@ def resolve(names) -> list[str]:
             return list(WRITEUP_STUDIES)
         key = LETTERS.get(key, key)
         if key not in WRITEUP_STUDIES:
-            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..i)")
+            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..j)")
         if key not in out:
             out.append(key)
     return out
