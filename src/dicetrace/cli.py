@@ -17,7 +17,7 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
 )
 
-_COMMANDS = ("record", "simulate", "scan", "accuracy", "analyze")
+_COMMANDS = ("record", "simulate", "scan", "accuracy", "analyze", "explore")
 
 
 def _register() -> None:
