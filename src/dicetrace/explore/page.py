@@ -83,7 +83,7 @@ _TEMPLATE = r"""<!doctype html>
 <div id="main">
  <div>
   <div style="display:flex"><div id="ylab" class="ax"><span id="y1"></span><span>y</span><span id="y0"></span></div>
-   <div><div id="mapbox"><img id="map" alt="outcome map"><div id="sel"></div></div>
+   <div><div id="mapbox"><img id="map" alt="outcome map" draggable="false"><div id="sel"></div></div>
    <div id="xlab" class="ax"><span id="x0"></span><span>x</span><span id="x1"></span></div></div></div>
   <div id="info"></div>
  </div>
@@ -154,7 +154,7 @@ function toSlice(ev) {
 function zoomTo(x0, x1, y0, y1) { load({...view, window: [x0, x1, y0, y1].map(String).join(",")}, true); }
 
 let drag = null, hoverTimer = null;
-$("mapbox").addEventListener("mousedown", (ev) => { drag = {ev, p: toSlice(ev)}; });
+$("mapbox").addEventListener("mousedown", (ev) => { ev.preventDefault(); drag = {ev, p: toSlice(ev)}; });
 window.addEventListener("mouseup", (ev) => {
   if (!drag) return;
   const a = drag.p, b = toSlice(ev), start = drag.ev; drag = null; $("sel").style.display = "none";

@@ -1,0 +1,67 @@
+"""Time to the explorer's first map and to a refined 256×256 view after a zoom, on the red-sea window.
+
+Starts a real explorer (uvicorn on 127.0.0.1, a free port), warms the kernel
+with a 4×4 map (numba's compile or cache load is reported separately), then
+times over HTTP, as the page asks:
+
+* the first coarse map (64×64) and the refined 256×256 map of red sea,
+* after a zoom to red-sea-2: its coarse map and its refined 256×256 map.
+
+For ``--preset physical`` the preset's own integrator (contact-adaptive) is
+used unless ``--integrator`` says otherwise.
+
+Usage: ``python benchmarks/bench_explore.py [--preset seed] [--res 256] [--integrator NAME] [--threads N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+import urllib.request
+from urllib.parse import urlencode
+
+from dicetrace.explore import Explorer
+from dicetrace.ics import WINDOWS
+
+
+def _window(name: str) -> str:
+    (x0, x1), (y0, y1) = WINDOWS[name]
+    return f"{x0!r},{x1!r},{y0!r},{y1!r}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--preset", default="seed")
+    ap.add_argument("--integrator", default=None)
+    ap.add_argument("--res", type=int, default=256)
+    ap.add_argument("--threads", type=int, default=None)
+    a = ap.parse_args()
+    with Explorer(window="red-sea", res=a.res, preset=a.preset, integrator=a.integrator, threads=a.threads) as ex:
+        base = f"http://127.0.0.1:{ex.port}"
+
+        def fetch(window: str, pass_: str) -> float:
+            q = {"window": window, "res": a.res, "preset": a.preset, "pass": pass_, "client": "bench"}
+            if a.integrator:
+                q["integrator"] = a.integrator
+            t0 = time.perf_counter()
+            with urllib.request.urlopen(f"{base}/api/map.png?{urlencode(q)}", timeout=3600) as r:
+                r.read()
+                res = r.headers["X-Dicetrace-Res"]
+            dt = time.perf_counter() - t0
+            print(f"  {window:>32}  {pass_:6}  {res:>7}  {dt:7.3f} s")
+            return dt
+
+        t0 = time.perf_counter()
+        urllib.request.urlopen(f"{base}/api/map.png?res=4&preset={a.preset}", timeout=3600).read()
+        print(f"preset {a.preset}, {os.cpu_count()} CPUs; kernel compile or cache load {time.perf_counter() - t0:.2f} s")
+        first = fetch(_window("red-sea"), "coarse")
+        fine = fetch(_window("red-sea"), "fine")
+        zc = fetch(_window("red-sea-2"), "coarse")
+        zf = fetch(_window("red-sea-2"), "fine")
+        print(f"time to first map {first:.3f} s; refined {a.res}×{a.res} red sea {first + fine:.3f} s after the request; "
+              f"after a zoom: first image {zc:.3f} s, refined {zc + zf:.3f} s")
+
+
+if __name__ == "__main__":
+    main()
