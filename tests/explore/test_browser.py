@@ -14,12 +14,15 @@ from urllib.parse import parse_qs, urlparse
 import numpy as np
 import pytest
 
-from explore_helpers import RES as TEST_RES, WINDOW, scan_outcomes
+from explore_helpers import RES as TEST_RES, WINDOW as TEST_WINDOW, scan_outcomes
 
 pytestmark = pytest.mark.slow
 
 #: The map's resolution: the tests' small one, or a larger one for the README's screenshot.
-RES = 96 if os.environ.get("DICETRACE_SCREENSHOT") else TEST_RES
+SHOT = os.environ.get("DICETRACE_SCREENSHOT")
+RES = 128 if SHOT else TEST_RES
+#: The start window: the tests' small one, or all of red sea for the screenshot.
+WINDOW = "1.0,2.0,3.5,4.5" if SHOT else TEST_WINDOW
 
 CHROMIUM_CANDIDATES = ("chromium", "chromium-browser", "google-chrome")
 
@@ -100,7 +103,9 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path):
     _ready(page)
     zoom = _window_of(page)
     x0, x1, y0, y1 = map(float, zoom.split(","))
-    assert 1.4 < x0 < x1 < 1.56 and 3.95 < y0 < y1 < 4.25 and x1 - x0 < 0.1
+    a0, a1, b0, b1 = map(float, WINDOW.split(","))
+    assert a0 < x0 < x1 < a1 and b0 < y0 < y1 < b1
+    assert abs((x1 - x0) / (a1 - a0) - 0.5) < 0.05 and abs((y1 - y0) / (b1 - b0) - 0.5) < 0.05  # the box dragged
     np.testing.assert_array_equal(_map_outcomes(page), scan_outcomes(tmp_path, zoom, RES, name="zoom"))
 
     # hover, then click: the throw's details, and Rerun's viewer draws the die
@@ -119,9 +124,8 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path):
     img = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB")).astype(float)
     assert img.std() > 10, "the embedded Rerun viewer is blank"
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50
-    target = os.environ.get("DICETRACE_SCREENSHOT")
-    if target:
-        page.screenshot(path=target, full_page=True)
+    if SHOT:
+        page.screenshot(path=SHOT, full_page=True)
     assert not [e for e in errors if "rerun" not in e.lower()], errors
 
 
