@@ -115,6 +115,16 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path):
     page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
     info = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
     assert f"outcome {info['outcome']}" in page.inner_text("#info")
+    # shift-click a second point: both throws listed, with their divergence
+    page.keyboard.down("Shift")
+    page.mouse.click(box["x"] + box["width"] * 0.7, box["y"] + box["height"] * 0.3)
+    page.keyboard.up("Shift")
+    page.wait_for_function("JSON.parse(document.getElementById('info').dataset.throws || '[]').length === 2",
+                           timeout=60_000)
+    two = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)")
+    assert two[0] == info and two[1]["ic"] != info["ic"]
+    text = page.inner_text("#info")
+    assert "throw 2:" in text and "divergence: |ΔIC|" in text and f"outcomes {info['outcome']} vs {two[1]['outcome']}" in text
     page.wait_for_selector("#viewerbox canvas", timeout=120_000)
     page.wait_for_timeout(8000)  # the wasm viewer loads and draws the recording
     shot = page.locator("#viewerbox").screenshot()

@@ -191,7 +191,7 @@ async function hover(x, y) {
   if (!r.ok) { $("info").textContent = j.error; return; }
   $("info").dataset.hover = JSON.stringify(j);
   const picked = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n");
-  $("info").textContent = "hover: " + describe(j) + (picked ? "\n\n" + picked : "");
+  $("info").textContent = "hover: " + describe(j) + (picked ? "\n\n" + picked + compare() : "");
 }
 
 async function ensureViewer() {
