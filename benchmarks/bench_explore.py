@@ -1,7 +1,7 @@
 """Time to the explorer's first map and to a refined 256×256 view after a zoom, on the red-sea window.
 
-Starts a real explorer (uvicorn on 127.0.0.1, a free port), warms the kernel
-with a 4×4 map (numba's compile or cache load is reported separately), then
+Starts a real explorer (uvicorn on 127.0.0.1, a free port), warms the kernels
+with 4×4 and 8×8 maps (numba's compile or cache load is reported separately), then
 times over HTTP, as the page asks:
 
 * the first coarse map (64×64) and the refined 256×256 map of red sea,
@@ -53,7 +53,11 @@ def main() -> None:
             return dt
 
         t0 = time.perf_counter()
-        urllib.request.urlopen(f"{base}/api/map.png?res=4&preset={a.preset}", timeout=3600).read()
+        for warm in (4, 8):  # the single-throw path (up to 16 ICs) and the batch kernel
+            q = {"res": warm, "preset": a.preset, "window": "0,0.1,0,0.1"}
+            if a.integrator:
+                q["integrator"] = a.integrator
+            urllib.request.urlopen(f"{base}/api/map.png?{urlencode(q)}", timeout=3600).read()
         print(f"preset {a.preset}, {os.cpu_count()} CPUs; kernel compile or cache load {time.perf_counter() - t0:.2f} s")
         first = fetch(_window("red-sea"), "coarse")
         fine = fetch(_window("red-sea"), "fine")
