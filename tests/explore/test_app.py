@@ -155,3 +155,17 @@ def test_rerun_web_viewer_files_are_served(client):
     assert "re_viewer_bg.wasm" in r.text and "open_url" in r.text
     r = client.head("/rerun/re_viewer_bg.wasm")
     assert r.status_code == 200 and r.headers["content-type"] == "application/wasm"
+
+
+def test_seed3_map_is_the_scan_of_that_z_level(client, tmp_path):
+    from dicetrace.ics import Grid, get_window
+    from dicetrace.scan import label_grid, scan
+
+    r = client.get("/api/map.png", params={"slice": "seed3", "window": "home", "z": "0.03", "res": 8})
+    assert r.status_code == 200, r.text
+    scan(Grid("seed3", get_window("home") + ((0.03, 0.03),), (8, 8, 1)), tmp_path / "s3")
+    np.testing.assert_array_equal(png_outcomes(r.content), label_grid(tmp_path / "s3")[:, :, 0])
+    other = png_outcomes(client.get("/api/map.png", params={"slice": "seed3", "window": "home", "z": "0.09",
+                                                            "res": 8}).content)
+    scan(Grid("seed3", get_window("home") + ((0.09, 0.09),), (8, 8, 1)), tmp_path / "s3b")
+    np.testing.assert_array_equal(other, label_grid(tmp_path / "s3b")[:, :, 0])
