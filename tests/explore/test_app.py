@@ -43,6 +43,14 @@ def test_coarse_pass_is_the_quarter_resolution_grid(client, tmp_path):
     np.testing.assert_array_equal(png_outcomes(r.content), scan_outcomes(tmp_path, WINDOW, 8))
 
 
+def test_preview_pass_and_a_bad_pass(client, tmp_path):
+    r = client.get("/api/map.png", params={"window": WINDOW, "res": 64, "pass": "preview"})
+    assert r.headers["x-dicetrace-res"] == "4,4"
+    np.testing.assert_array_equal(png_outcomes(r.content), scan_outcomes(tmp_path, WINDOW, 4))
+    r = client.get("/api/map.png", params={"window": WINDOW, "res": RES, "pass": "sketch"})
+    assert r.status_code == 400 and r.json()["param"] == "pass"
+
+
 def test_hover_equals_simulate_of_that_ic(client):
     from dicetrace.ics import grid_axis, seed_slice
     from dicetrace.simulate import simulate

@@ -9,7 +9,7 @@ Endpoints::
 
     GET  /                      the page (its view in the URL query)
     GET  /api/view              the normalised view: its query, axes, limits
-    GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=coarse: 1/4 resolution)
+    GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: 1/16, 1/4 resolution)
     GET  /api/map.json          the same map's outcome labels, [i][j] with i along x
     GET  /api/hover?x=&y=       the nearest grid point's throw: coordinates, IC, outcome, steps, settle time, contacts
     GET  /api/throw.rrd?x=&y=   that throw as a Rerun recording (as ``dicetrace record`` writes it)
@@ -34,6 +34,8 @@ from starlette.routing import Route
 from dicetrace.explore.compute import Cancelled, Worker, scan_folder_for, throw_info, throw_rrd
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
 
+#: The passes of a view and their resolution divisors: the page asks for each in turn.
+PASSES = {"preview": 16, "coarse": 4, "fine": 1}
 #: Longest a hover or throw may take before the request gives up, s.
 THROW_TIMEOUT_S = 120.0
 
@@ -120,8 +122,11 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
 
     async def _map(request: Request):
         v = _view(request, default)
-        if request.query_params.get("pass", "fine") == "coarse":
-            v = v.coarse()
+        name = request.query_params.get("pass", "fine")
+        if name not in PASSES:
+            raise ViewError("pass", f"one of {', '.join(PASSES)}, got {name[:20]!r}")
+        if PASSES[name] > 1:
+            v = v.coarse(PASSES[name])
         client = request.query_params.get("client", "")[:64]
         fut = worker.submit_map(v, client)
         return await asyncio.wrap_future(fut)

@@ -1,8 +1,8 @@
 """The explorer's page: one HTML document with a small script (no framework) around the map PNG.
 
 The script keeps the view in the URL (``history.pushState``: the browser's
-back button and the page's back/reset walk the history of views), loads the
-coarse map and then the refined one (a newer view cancels the older on the
+back button and the page's back/reset walk the history of views), loads a
+preview (1/16 resolution), a coarse map (1/4) and then the refined one (a newer view cancels the older on the
 server), zooms on a dragged box or the mouse wheel, pans with the arrow
 buttons, shows hover info, and on click loads that throw into Rerun's web
 viewer beside the map (shift-click adds a second throw to compare).
@@ -119,8 +119,8 @@ async function load(q, push) {
   else history.replaceState(view, "", "?" + qs(view));
   fillControls();
   document.body.dataset.state = "computing";
-  for (const pass of ["coarse", "fine"]) {
-    setStatus(pass === "coarse" ? "computing a coarse map…" : "refining…", true);
+  for (const pass of ["preview", "coarse", "fine"]) {
+    setStatus(pass === "fine" ? "refining…" : `computing a ${pass} map…`, true);
     const t0 = performance.now();
     r = await fetch("/api/map.png?" + qs(view, {pass, client}));
     if (my !== seq) return;                      // a newer view took over
@@ -131,7 +131,7 @@ async function load(q, push) {
     $("map").dataset.pass = pass;
     $("map").dataset.res = r.headers.get("X-Dicetrace-Res");
     $("map").dataset.query = qs(view);
-    setStatus(`${pass} ${r.headers.get("X-Dicetrace-Res")} in ${((performance.now() - t0) / 1000).toFixed(2)} s`, pass === "coarse");
+    setStatus(`${pass} ${r.headers.get("X-Dicetrace-Res")} in ${((performance.now() - t0) / 1000).toFixed(2)} s`, pass !== "fine");
   }
   document.body.dataset.state = "ready";
 }
