@@ -66,9 +66,11 @@ def main() -> None:
         zp = fetch(_window("red-sea-2"), "preview")
         zc = fetch(_window("red-sea-2"), "coarse")
         zf = 0.0 if a.no_fine else fetch(_window("red-sea-2"), "fine")
-        print(f"red sea: first image {first:.3f} s, coarse {first + coarse:.3f} s, refined {a.res}×{a.res} "
-              f"{first + coarse + fine:.3f} s after the request; after a zoom to red-sea-2: first image {zp:.3f} s, "
-              f"coarse {zp + zc:.3f} s, refined {zp + zc + zf:.3f} s (the page asks for the three passes in turn)")
+        refined = "" if a.no_fine else f", refined {a.res}×{a.res} {first + coarse + fine:.3f} s"
+        zrefined = "" if a.no_fine else f", refined {zp + zc + zf:.3f} s"
+        print(f"red sea: first image {first:.3f} s, coarse {first + coarse:.3f} s{refined} after the request; "
+              f"after a zoom to red-sea-2: first image {zp:.3f} s, coarse {zp + zc:.3f} s{zrefined} "
+              "(the page asks for the passes in turn)")
 
 
 if __name__ == "__main__":
