@@ -146,3 +146,38 @@ def test_malformed_url_parameter_shows_an_error(browser, explorer):
     assert _ready_or_error
     text = page.inner_text("#error")
     assert "res" in text and "whole numbers" in text
+
+
+def test_back_and_reset_walk_the_history_of_views(browser, explorer, tmp_path):
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    page.goto(explorer.url)
+    _ready(page)
+    start = _window_of(page)
+    first = _map_outcomes(page)
+    box = page.locator("#mapbox").bounding_box()
+    for _ in range(2):  # two wheel zooms (×1/2 each) at the map's centre
+        before = page.url
+        page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        page.mouse.wheel(0, -100)
+        page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                               timeout=120_000)
+        _ready(page)
+    x0, x1, y0, y1 = map(float, _window_of(page).split(","))
+    a0, a1, b0, b1 = map(float, start.split(","))
+    assert abs((x1 - x0) / (a1 - a0) - 0.25) < 1e-9 and abs((y1 - y0) / (b1 - b0) - 0.25) < 1e-9
+    zoomed = _window_of(page)
+    np.testing.assert_array_equal(_map_outcomes(page), scan_outcomes(tmp_path, zoomed, RES, name="wheel"))
+    before = page.url
+    page.click("#back")
+    page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                           timeout=120_000)
+    _ready(page)
+    x0b, x1b, _, _ = map(float, _window_of(page).split(","))
+    assert abs((x1b - x0b) / (a1 - a0) - 0.5) < 1e-9  # one zoom back
+    before = page.url
+    page.click("#reset")
+    page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                           timeout=120_000)
+    _ready(page)
+    assert tuple(map(float, _window_of(page).split(","))) == (a0, a1, b0, b1)
+    np.testing.assert_array_equal(_map_outcomes(page), first)
