@@ -111,7 +111,7 @@ def test_a_newer_view_cancels_the_stale_map():
 
     w = Worker()
     try:
-        w.submit_map(View(res=(4, 4))).result()  # compiled
+        w.submit_map(View(res=(8, 8))).result()  # the batch kernel compiled (more than 16 ICs)
         stale = w.submit_map(View(res=(400, 400)), client="c")  # ~40 blocks of work
         time.sleep(0.2)
         new_view = View(window=parse_window(WINDOW), res=(RES, RES))
