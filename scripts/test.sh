@@ -10,6 +10,11 @@ if ! command -v xvfb-run >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 &
         xvfb xauth mesa-vulkan-drivers libgl1-mesa-dri libegl1 libxkbcommon-x11-0 >/dev/null) \
         || echo "note: could not install xvfb/mesa; the viewer test will be skipped"
 fi
+# Debian's chromium for the explorer's headless-browser tests (skipped where it is missing).
+if ! command -v chromium >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
+    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium >/dev/null) \
+        || echo "note: could not install chromium; the explorer's browser tests will be skipped"
+fi
 python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[test]"

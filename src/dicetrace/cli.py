@@ -83,7 +83,7 @@ def _root(
 ) -> None:
     pass
 
-_COMMANDS = ("record", "simulate", "scan", "accuracy", "analyze")
+_COMMANDS = ("record", "simulate", "scan", "accuracy", "analyze", "explore")
 
 
 def _register() -> None:

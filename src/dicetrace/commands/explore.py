@@ -1,0 +1,76 @@
+"""``dicetrace explore``: serve the live, zoomable outcome map on 127.0.0.1 and open it in the browser.
+
+Examples::
+
+    dicetrace explore                                   # the red-sea window of the seed slice
+    dicetrace explore --window 0.0197,0.0205,0.0177,0.0186 --res 256
+    dicetrace explore --slice seed3 --window home --z 0.02 --out scans/  # "save this view as a scan" writes under scans/
+    dicetrace explore --no-browser --port 8765          # print the URL only
+
+The view (window, resolution, preset, integrator, γ, dt, z) is in the page's
+URL, so a view can be shared and reopened.  Runs until interrupted (Ctrl-C).
+Exit code 2 on bad input (a bad option, a port in use), nothing served.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from dicetrace.commands._common import fail, output_dir
+from dicetrace.commands.simulate import INTEGRATOR_HELP, PRESET_HELP
+
+WINDOW_HELP = "Start window: a name (red-sea, home, party, green-island, ...) or x0,x1,y0,y1."
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("explore")
+    def explore_cmd(
+        slice_name: str = typer.Option("seed", "--slice", help="Slice: seed, seed3 (3-D, with --z), seed-ortho, seed3-ortho."),
+        window: str = typer.Option("red-sea", "--window", help=WINDOW_HELP),
+        z: Optional[float] = typer.Option(None, "--z", help="Third coordinate of a 3-D slice (default 0)."),
+        res: str = typer.Option("256", "--res", help="Map resolution: N or NX,NY (2 to 1024 per axis)."),
+        preset: str = typer.Option("seed", "--preset", help=PRESET_HELP),
+        integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
+        gamma: Optional[float] = typer.Option(None, "--gamma", help="Damping γ, s/cm (default: the preset's)."),
+        dt: Optional[float] = typer.Option(None, "--dt", help="Time step, s (default 0.001)."),
+        host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on (default 127.0.0.1: this machine only)."),
+        port: int = typer.Option(0, "--port", help="Port (default: a free one)."),
+        no_browser: bool = typer.Option(False, "--no-browser", help="Do not open a browser; print the URL only."),
+        out: Optional[Path] = typer.Option(
+            None, "--out", help="Folder that 'save this view as a scan' writes into (nothing is written anywhere else; "
+            "without it saving is off)."
+        ),
+        threads: Optional[int] = typer.Option(None, "--threads", help="numba threads per map (default: all)."),
+    ) -> None:
+        """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer."""
+        from dicetrace.explore.server import make_view, serve_forever
+        from dicetrace.explore.view import ViewError
+
+        try:
+            view = make_view(slice_name, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
+        except ViewError as e:
+            fail(f"--{e.param}: {e.message}")
+        if not 0 <= port <= 65535:
+            fail(f"--port must be in 0..65535, got {port}")
+        if threads is not None and threads < 1:
+            fail(f"--threads must be >= 1, got {threads}")
+        if out is not None:
+            out = output_dir(out, "--out")
+            out.mkdir(parents=True, exist_ok=True)
+
+        def ready(url: str) -> None:
+            print(f"dicetrace explore: serving {url}  (Ctrl-C to stop)", flush=True)
+            if not no_browser:
+                import webbrowser
+
+                webbrowser.open(url)
+
+        try:
+            serve_forever(view, host=host, port=port, out=out, threads=threads, on_ready=ready)
+        except OSError as e:
+            fail(f"--host {host} --port {port}: cannot listen there: {e.strerror or e}")
+        except KeyboardInterrupt:
+            pass

@@ -1,0 +1,41 @@
+"""``dicetrace explore``: a live, zoomable outcome map served to the browser, with each throw in Rerun's viewer.
+
+>>> from dicetrace.explore import Explorer
+>>> Explorer(window="red-sea")          # in Jupyter: the explorer in an IFrame  # doctest: +SKIP
+
+:class:`View` (what a map shows, from URL parameters), :func:`compute_map`
+(its outcomes through the batch kernel), :func:`create_app` (the ASGI app)
+and :class:`Explorer` (served from a background thread).
+"""
+
+from dicetrace.explore.compute import Cancelled, OutcomeMap, Worker, compute_map, throw_info, throw_rrd
+from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
+
+__all__ = [
+    "MAX_RES",
+    "MIN_RES",
+    "Cancelled",
+    "Explorer",
+    "OutcomeMap",
+    "View",
+    "ViewError",
+    "Worker",
+    "compute_map",
+    "create_app",
+    "make_view",
+    "throw_info",
+    "throw_rrd",
+    "view_from_query",
+]
+
+
+def __getattr__(name):  # the server stack (starlette, uvicorn) is imported only when asked for
+    if name == "create_app":
+        from dicetrace.explore.app import create_app
+
+        return create_app
+    if name in ("Explorer", "make_view"):
+        from dicetrace.explore import server
+
+        return getattr(server, name)
+    raise AttributeError(f"module 'dicetrace.explore' has no attribute {name!r}")

@@ -1,0 +1,250 @@
+"""The explorer's ASGI app (starlette): the page, the map as PNG or JSON, hover info, throws as .rrd, saved scans.
+
+Every endpoint reads the view from the query string (:mod:`dicetrace.explore.view`);
+bad input gets a 400 JSON ``{"error": ..., "param": ...}`` and the server goes on.
+Maps, throws and scans run on the :class:`~dicetrace.explore.compute.Worker`'s
+threads, so the event loop keeps answering while they compute.
+
+Endpoints::
+
+    GET  /                      the page (its view in the URL query)
+    GET  /api/view              the normalised view: its query, axes, limits
+    GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: 1/16, 1/4 resolution)
+    GET  /api/map.json          the same map's outcome labels, [i][j] with i along x
+    GET  /api/hover?x=&y=       the nearest grid point's throw: coordinates, IC, outcome, steps, settle time, contacts
+    GET  /api/throw.rrd?x=&y=   that throw as a Rerun recording (as ``dicetrace record`` writes it)
+    POST /api/save?name=        the view as a scan dataset (as ``dicetrace scan`` writes it) in the start-up folder
+    GET  /rerun/widget.js, /rerun/re_viewer_bg.wasm   Rerun's web viewer (shipped by rerun-notebook)
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+from starlette.applications import Starlette
+from starlette.requests import Request
+from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response
+from starlette.routing import Route
+
+from dicetrace.explore.compute import Cancelled, Worker, scan_folder_for, throw_info, throw_rrd
+from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
+
+#: The passes of a view and their resolution divisors: the page asks for each in turn.
+PASSES = {"preview": 16, "coarse": 4, "fine": 1}
+#: Longest a hover or throw may take before the request gives up, s.
+THROW_TIMEOUT_S = 120.0
+
+
+def outcome_rgb_table() -> np.ndarray:
+    """(8, 3) uint8: the colour of outcome -1..6 at row outcome + 1 (the scan map's colours)."""
+    from dicetrace.scan.maps import OUTCOME_RGB
+
+    t = np.zeros((8, 3), dtype=np.uint8)
+    for k, rgb in OUTCOME_RGB.items():
+        t[k + 1] = rgb
+    return t
+
+
+def map_png(outcome: np.ndarray) -> bytes:
+    """A PNG of an outcome grid [i, j] (i along x): one pixel per point, x to the right, y up."""
+    from PIL import Image
+
+    img = outcome_rgb_table()[np.asarray(outcome, dtype=np.int64).T[::-1] + 1]
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(img), "RGB").save(buf, format="PNG", compress_level=1)
+    return buf.getvalue()
+
+
+def outcome_from_rgb(img: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`map_png`'s colouring: an (ny, nx, 3) image back to outcomes [i, j] (-9: no outcome's colour)."""
+    table = outcome_rgb_table()
+    out = np.full(img.shape[:2], -9, dtype=np.int8)
+    for k in range(8):
+        out[(img[..., :3] == table[k]).all(axis=-1)] = k - 1
+    return out[::-1].T
+
+
+def _error(e: Exception, status: int = 400) -> JSONResponse:
+    param = getattr(e, "param", None)
+    return JSONResponse({"error": str(e), "param": param}, status_code=status)
+
+
+def _view(request: Request, default: View) -> View:
+    return view_from_query(request.query_params, default)
+
+
+def _point(request: Request, view: View) -> tuple[int, int]:
+    q = request.query_params
+    if "i" in q or "j" in q:
+        try:
+            i, j = int(q.get("i", "")), int(q.get("j", ""))
+        except ValueError:
+            raise ViewError("i,j", "pixel indices must be whole numbers") from None
+        nx, ny = view.res
+        if not (0 <= i < nx and 0 <= j < ny):
+            raise ViewError("i,j", f"pixel ({i}, {j}) outside the {nx}×{ny} map")
+        return i, j
+    from dicetrace.explore.view import _num
+
+    if "x" not in q or "y" not in q:
+        raise ViewError("x,y", "give the point's slice coordinates x and y (or pixel indices i and j)")
+    x, y = _num("x", q["x"]), _num("y", q["y"])
+    (x0, x1), (y0, y1) = view.window
+    if not (x0 <= x <= x1 and y0 <= y <= y1):
+        raise ViewError("x,y", f"({x!r}, {y!r}) is outside the window x {x0!r}..{x1!r}, y {y0!r}..{y1!r}")
+    return view.pixel(x, y)
+
+
+def create_app(default: View | None = None, *, out: Path | None = None, threads: int | None = None,
+               worker: Worker | None = None) -> Starlette:
+    """The explorer app; ``default`` is the view of a bare URL, ``out`` the only folder it may write scans into."""
+    from dicetrace.explore.page import page_html
+
+    default = default or View()
+    worker = worker or Worker(threads=threads)
+    out = None if out is None else Path(out).resolve()
+
+    async def page(request: Request) -> Response:
+        return HTMLResponse(page_html(default, can_save=out is not None))
+
+    async def view_info(request: Request) -> Response:
+        try:
+            v = _view(request, default)
+        except ViewError as e:
+            return _error(e)
+        return JSONResponse({"query": v.to_query(), "window": v.window, "res": v.res, "ndim": v.ndim,
+                             "limits": {"res": [MIN_RES, MAX_RES]}})
+
+    async def _map(request: Request):
+        v = _view(request, default)
+        name = request.query_params.get("pass", "fine")
+        if name not in PASSES:
+            raise ViewError("pass", f"one of {', '.join(PASSES)}, got {name[:20]!r}")
+        if PASSES[name] > 1:
+            v = v.coarse(PASSES[name])
+        client = request.query_params.get("client", "")[:64]
+        fut = worker.submit_map(v, client)
+        return await asyncio.wrap_future(fut)
+
+    async def map_png_ep(request: Request) -> Response:
+        try:
+            m = await _map(request)
+        except ViewError as e:
+            return _error(e)
+        except Cancelled:
+            return JSONResponse({"error": "superseded by a newer view", "param": None}, status_code=409)
+        png = await asyncio.to_thread(map_png, m.outcome)
+        headers = {"X-Dicetrace-Wall-S": f"{m.wall_s:.6f}", "X-Dicetrace-Res": f"{m.view.res[0]},{m.view.res[1]}",
+                   "X-Dicetrace-Counts": json.dumps(m.counts()), "Cache-Control": "no-store"}
+        return Response(png, media_type="image/png", headers=headers)
+
+    async def map_json_ep(request: Request) -> Response:
+        try:
+            m = await _map(request)
+        except ViewError as e:
+            return _error(e)
+        except Cancelled:
+            return JSONResponse({"error": "superseded by a newer view", "param": None}, status_code=409)
+        return JSONResponse({"query": m.view.to_query(), "xs": m.xs.tolist(), "ys": m.ys.tolist(),
+                             "outcome": m.outcome.tolist(), "steps": m.steps.tolist(),
+                             "counts": m.counts(), "wall_s": m.wall_s})
+
+    async def hover(request: Request) -> Response:
+        try:
+            v = _view(request, default)
+            i, j = _point(request, v)
+        except ViewError as e:
+            return _error(e)
+        info = await asyncio.wait_for(asyncio.wrap_future(worker.submit_throw(throw_info, v, i, j)), THROW_TIMEOUT_S)
+        return JSONResponse(info)
+
+    async def throw(request: Request) -> Response:
+        try:
+            v = _view(request, default)
+            i, j = _point(request, v)
+        except ViewError as e:
+            return _error(e)
+        name, data, summary = await asyncio.wait_for(
+            asyncio.wrap_future(worker.submit_throw(throw_rrd, v, i, j)), THROW_TIMEOUT_S)
+        headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"],
+                   "Access-Control-Allow-Origin": request.headers.get("origin", "") or "null"}
+        if request.query_params.get("download"):
+            headers["Content-Disposition"] = f'attachment; filename="{name}.rrd"'
+        return Response(data, media_type="application/octet-stream", headers=headers)
+
+    async def save(request: Request) -> Response:
+        if out is None:
+            return JSONResponse({"error": "saving is off: start the explorer with --out DIR (Explorer(out=...))",
+                                 "param": "name"}, status_code=403)
+        try:
+            v = _view(request, default)
+            name = request.query_params.get("name", "")
+            scan_folder_for(out, name)
+        except ViewError as e:
+            return _error(e)
+        try:
+            summary = await asyncio.wrap_future(worker.submit_scan(v, out, name))
+        except (ValueError, OSError) as e:  # a folder holding another scan, a full disk, ...
+            return _error(e, 409)
+        return JSONResponse(summary)
+
+    async def health(request: Request) -> Response:
+        return JSONResponse({"ok": True, "computed": worker.computed_count, "cancelled": worker.cancelled_count})
+
+    def asset(name: str, media: str):
+        async def ep(request: Request) -> Response:
+            path = rerun_asset(name)
+            if path is None:
+                return JSONResponse({"error": "Rerun's web viewer is not installed (pip install rerun-notebook)",
+                                     "param": None}, status_code=404)
+            return FileResponse(path, media_type=media)
+
+        return ep
+
+    async def on_error(request: Request, exc: Exception) -> Response:
+        return JSONResponse({"error": f"internal error: {type(exc).__name__}: {exc}", "param": None}, status_code=500)
+
+    routes = [
+        Route("/", page),
+        Route("/api/view", view_info),
+        Route("/api/map.png", map_png_ep),
+        Route("/api/map.json", map_json_ep),
+        Route("/api/hover", hover),
+        Route("/api/throw.rrd", throw),
+        Route("/api/save", save, methods=["POST"]),
+        Route("/api/health", health),
+        Route("/rerun/widget.js", asset("widget.js", "text/javascript")),
+        Route("/rerun/re_viewer_bg.wasm", asset("re_viewer_bg.wasm", "application/wasm")),
+        Route("/rerun/widget.css", asset("widget.css", "text/css")),
+    ]
+    @contextlib.asynccontextmanager
+    async def lifespan(app):
+        try:
+            yield
+        finally:
+            worker.shutdown()
+
+    app = Starlette(routes=routes, exception_handlers={Exception: on_error}, lifespan=lifespan)
+    app.state.worker = worker
+    app.state.default = default
+    app.state.out = out
+    return app
+
+
+def rerun_asset(name: str) -> Path | None:
+    """A file of Rerun's web viewer as the rerun-notebook package ships it (found without importing it)."""
+    import importlib.util
+
+    try:
+        spec = importlib.util.find_spec("rerun_notebook")
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    path = Path(list(spec.submodule_search_locations)[0]) / "static" / name
+    return path if path.is_file() else None

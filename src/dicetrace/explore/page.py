@@ -1,0 +1,260 @@
+"""The explorer's page: one HTML document with a small script (no framework) around the map PNG.
+
+The script keeps the view in the URL (``history.pushState``: the browser's
+back button and the page's back/reset walk the history of views), loads a
+preview (1/16 resolution), a coarse map (1/4) and then the refined one (a newer view cancels the older on the
+server), zooms on a dragged box or the mouse wheel, pans with the arrow
+buttons, shows hover info, and on click loads that throw into Rerun's web
+viewer beside the map (shift-click adds a second throw to compare).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+
+from dicetrace.explore.view import View
+
+
+def _options(names, selected) -> str:
+    return "".join(
+        f'<option value="{html.escape(n)}"{" selected" if n == selected else ""}>{html.escape(n)}</option>' for n in names
+    )
+
+
+def page_html(default: View, *, can_save: bool) -> str:
+    """The page; ``default`` is the view of a URL without parameters."""
+    from dicetrace.ics import SLICES
+    from dicetrace.integrators import INTEGRATORS
+    from dicetrace.params import PRESETS
+    from dicetrace.scan.maps import OUTCOME_NAMES, OUTCOME_RGB
+
+    legend = "".join(
+        f'<span class="key"><span class="sw" style="background:rgb{OUTCOME_RGB[o]}"></span>{html.escape(OUTCOME_NAMES[o])}</span>'
+        for o in (1, 2, 3, 4, 5, 6, 0, -1)
+    )
+    cfg = {"default": default.to_query(), "canSave": can_save}
+    return (
+        _TEMPLATE.replace("%LEGEND%", legend)
+        .replace("%SLICES%", _options(SLICES, default.slice))
+        .replace("%PRESETS%", _options(PRESETS, default.preset))
+        .replace("%INTEGRATORS%", '<option value="">(preset\'s)</option>' + _options(INTEGRATORS, default.integrator))
+        .replace("%CONFIG%", json.dumps(cfg))
+    )
+
+
+_TEMPLATE = r"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>dicetrace explore</title>
+<style>
+ body{font-family:system-ui,sans-serif;margin:8px;font-size:13px;color:#222}
+ #top{display:flex;gap:8px;flex-wrap:wrap;align-items:center;margin-bottom:6px}
+ #top label{white-space:nowrap} input.num{width:6em}
+ #main{display:flex;gap:10px;align-items:flex-start}
+ #mapbox{position:relative;width:512px;height:512px;border:1px solid #888;background:#ddd;cursor:crosshair;user-select:none}
+ #map{width:100%;height:100%;image-rendering:pixelated;display:block}
+ #sel{position:absolute;border:1px dashed #000;background:rgba(255,255,255,.25);display:none;pointer-events:none}
+ .ax{font-family:monospace;font-size:11px}
+ #xlab{display:flex;justify-content:space-between;width:514px}
+ #ylab{display:flex;flex-direction:column;justify-content:space-between;height:514px;text-align:right}
+ #error{color:#b00;font-weight:bold;white-space:pre-wrap}
+ #status{min-width:14em} .busy::before{content:"⏳ "}
+ .key{margin-right:8px;white-space:nowrap}.sw{display:inline-block;width:11px;height:11px;border:1px solid #555;margin-right:3px;vertical-align:middle}
+ #info{font-family:monospace;font-size:11px;white-space:pre;min-height:9em;border:1px solid #ccc;padding:4px;width:512px;overflow:auto}
+ #viewerbox{width:640px;height:560px;border:1px solid #888}
+</style></head><body>
+<div id="top">
+ <label>slice <select id="slice">%SLICES%</select></label>
+ <label>z <input id="z" class="num" placeholder="0"></label>
+ <label>preset <select id="preset">%PRESETS%</select></label>
+ <label>integrator <select id="integrator">%INTEGRATORS%</select></label>
+ <label>γ <input id="gamma" class="num" placeholder="preset's"></label>
+ <label>dt <input id="dt" class="num" placeholder="default"></label>
+ <label>res <input id="res" class="num"></label>
+ <button id="apply">apply</button>
+ <button id="back">back</button><button id="reset">reset</button>
+ <button id="zout">zoom out</button>
+ <button data-pan="-1,0">◀</button><button data-pan="1,0">▶</button><button data-pan="0,1">▲</button><button data-pan="0,-1">▼</button>
+ <span id="savebox"><input id="scanname" placeholder="scan name" size="10"><button id="save">save view as scan</button></span>
+ <a id="download" href="#" download>download this throw (.rrd)</a>
+ <span id="status"></span>
+</div>
+<div id="error" role="alert"></div>
+<div>%LEGEND% <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to add a second</span></div>
+<div id="main">
+ <div>
+  <div style="display:flex"><div id="ylab" class="ax"><span id="y1"></span><span>y</span><span id="y0"></span></div>
+   <div><div id="mapbox"><img id="map" alt="outcome map" draggable="false"><div id="sel"></div></div>
+   <div id="xlab" class="ax"><span id="x0"></span><span>x</span><span id="x1"></span></div></div></div>
+  <div id="info"></div>
+ </div>
+ <div id="viewerbox"></div>
+</div>
+<script type="module">
+const CFG = %CONFIG%;
+const $ = (id) => document.getElementById(id);
+const client = Math.random().toString(36).slice(2);
+let view = null;          // the current view's query (an object of strings)
+let window4 = null;       // [x0, x1, y0, y1] numbers
+let res = [256, 256];
+let seq = 0;              // the newest load; older responses are dropped
+let throws = [];          // the throws shown in the viewer: {x, y, info}
+let viewer = null;
+
+function readUrl() {
+  const q = Object.fromEntries(new URLSearchParams(location.search));
+  return Object.keys(q).length ? q : {...CFG.default};
+}
+function qs(q, extra) { return new URLSearchParams({...q, ...(extra || {})}).toString(); }
+function showError(msg) { $("error").textContent = msg || ""; }
+function setStatus(text, busy) { $("status").textContent = text; $("status").className = busy ? "busy" : ""; }
+
+async function load(q, push) {
+  const my = ++seq;
+  showError("");
+  let r = await fetch("/api/view?" + qs(q));
+  let j = await r.json();
+  if (!r.ok) { showError("Bad view parameter " + (j.param || "") + ": " + j.error); setStatus("", false); document.body.dataset.state = "error"; return; }
+  view = j.query; window4 = [j.window[0][0], j.window[0][1], j.window[1][0], j.window[1][1]]; res = j.res;
+  if (push) history.pushState(view, "", "?" + qs(view));
+  else history.replaceState(view, "", "?" + qs(view));
+  fillControls();
+  document.body.dataset.state = "computing";
+  for (const pass of ["preview", "coarse", "fine"]) {
+    setStatus(pass === "fine" ? "refining…" : `computing a ${pass} map…`, true);
+    const t0 = performance.now();
+    r = await fetch("/api/map.png?" + qs(view, {pass, client}));
+    if (my !== seq) return;                      // a newer view took over
+    if (r.status === 409) return;
+    if (!r.ok) { j = await r.json(); showError(j.error); setStatus("", false); document.body.dataset.state = "error"; return; }
+    const blob = await r.blob();
+    $("map").src = URL.createObjectURL(blob);
+    $("map").dataset.pass = pass;
+    $("map").dataset.res = r.headers.get("X-Dicetrace-Res");
+    $("map").dataset.query = qs(view);
+    setStatus(`${pass} ${r.headers.get("X-Dicetrace-Res")} in ${((performance.now() - t0) / 1000).toFixed(2)} s`, pass !== "fine");
+  }
+  document.body.dataset.state = "ready";
+}
+
+function fillControls() {
+  for (const k of ["slice", "preset", "integrator"]) $(k).value = view[k] || "";
+  for (const k of ["gamma", "dt", "z"]) $(k).value = view[k] || "";
+  $("res").value = view.res;
+  $("x0").textContent = fmt(window4[0]); $("x1").textContent = fmt(window4[1]);
+  $("y0").textContent = fmt(window4[2]); $("y1").textContent = fmt(window4[3]);
+  $("savebox").style.display = CFG.canSave ? "" : "none";
+}
+function fmt(v) { return Number(v).toPrecision(12).replace(/\.?0+$/, ""); }
+
+function toSlice(ev) {
+  const b = $("mapbox").getBoundingClientRect();
+  const fx = Math.min(Math.max((ev.clientX - b.left) / b.width, 0), 1), fy = Math.min(Math.max((ev.clientY - b.top) / b.height, 0), 1);
+  return [window4[0] + fx * (window4[1] - window4[0]), window4[3] - fy * (window4[3] - window4[2]), fx, fy];
+}
+function zoomTo(x0, x1, y0, y1) { load({...view, window: [x0, x1, y0, y1].map(String).join(",")}, true); }
+
+let drag = null, hoverTimer = null;
+$("mapbox").addEventListener("mousedown", (ev) => { ev.preventDefault(); drag = {ev, p: toSlice(ev)}; });
+window.addEventListener("mouseup", (ev) => {
+  if (!drag) return;
+  const a = drag.p, b = toSlice(ev), start = drag.ev; drag = null; $("sel").style.display = "none";
+  const moved = Math.abs(ev.clientX - start.clientX) + Math.abs(ev.clientY - start.clientY);
+  if (moved < 6) { pick(b[0], b[1], ev.shiftKey); return; }
+  zoomTo(Math.min(a[0], b[0]), Math.max(a[0], b[0]), Math.min(a[1], b[1]), Math.max(a[1], b[1]));
+});
+$("mapbox").addEventListener("mousemove", (ev) => {
+  if (drag) {
+    const bx = $("mapbox").getBoundingClientRect(), s = $("sel").style;
+    s.display = "block"; s.left = Math.min(drag.ev.clientX, ev.clientX) - bx.left + "px"; s.top = Math.min(drag.ev.clientY, ev.clientY) - bx.top + "px";
+    s.width = Math.abs(ev.clientX - drag.ev.clientX) + "px"; s.height = Math.abs(ev.clientY - drag.ev.clientY) + "px";
+    return;
+  }
+  clearTimeout(hoverTimer);
+  const p = toSlice(ev);
+  hoverTimer = setTimeout(() => hover(p[0], p[1]), 120);
+});
+$("mapbox").addEventListener("wheel", (ev) => {
+  ev.preventDefault();
+  const p = toSlice(ev), f = ev.deltaY < 0 ? 0.5 : 2;
+  const w = (window4[1] - window4[0]) * f, h = (window4[3] - window4[2]) * f;
+  zoomTo(p[0] - p[2] * w, p[0] + (1 - p[2]) * w, p[1] - (1 - p[3]) * h, p[1] + p[3] * h);
+}, {passive: false});
+
+function describe(j) {
+  const c = Object.entries(j.coords).map(([k, v]) => `${k} = ${v}`).join(", ");
+  const ic = Object.entries(j.ic).map(([k, v]) => `${k}=${v}`).join(" ");
+  return `${c}   (pixel ${j.i}, ${j.j})\nIC: ${ic}  [L: ${j.l_convention}]\noutcome ${j.outcome}  status ${j.status}  steps ${j.steps}  settle ${j.t_settle_s.toFixed(3)} s\ncontact sequence ${j.contact_sequence}`;
+}
+async function hover(x, y) {
+  const r = await fetch("/api/hover?" + qs(view, {x, y}));
+  const j = await r.json();
+  if (!r.ok) { $("info").textContent = j.error; return; }
+  $("info").dataset.hover = JSON.stringify(j);
+  const picked = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n");
+  $("info").textContent = "hover: " + describe(j) + (picked ? "\n\n" + picked + compare() : "");
+}
+
+async function ensureViewer() {
+  if (viewer) return viewer;
+  const mod = await import("/rerun/widget.js");
+  const handlers = {};
+  const box = $("viewerbox");
+  const model = {
+    get: (k) => ({_url: null, _panel_states: {top: "collapsed"}, _width: box.clientWidth, _height: box.clientHeight,
+                  _fallback_token: null, _theme: "light"})[k],
+    on: (ev, f) => { (handlers[ev] = handlers[ev] || []).push(f); },
+    send: (m) => { if (m === "ready") model.ready = true; },
+  };
+  mod.default.render({model, el: box});
+  for (let k = 0; k < 600 && !model.ready; k++) await new Promise((r) => setTimeout(r, 100));
+  viewer = {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
+            close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
+  return viewer;
+}
+async function pick(x, y, add) {
+  const r = await fetch("/api/hover?" + qs(view, {x, y}));
+  const info = await r.json();
+  if (!r.ok) { showError(info.error); return; }
+  const url = new URL("/api/throw.rrd?" + qs(view, {i: info.i, j: info.j}), location.href).href;
+  $("download").href = url + "&download=1";
+  const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
+  if (!add) { if (v) throws.forEach((t) => v.close(t.url)); throws = []; }
+  throws.push({x, y, info, url});
+  if (v) v.open(url);
+  $("info").dataset.throws = JSON.stringify(throws.map((t) => t.info));
+  $("info").textContent = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n") + compare();
+}
+function compare() {
+  if (throws.length < 2) return "";
+  const [a, b] = throws.slice(-2).map((t) => t.info);
+  const sa = a.contact_sequence.split("-"), sb = b.contact_sequence.split("-");
+  let k = 0; while (k < Math.min(sa.length, sb.length) && sa[k] === sb[k]) k++;
+  const d = Math.hypot(...Object.keys(a.ic).map((n) => a.ic[n] - b.ic[n]));
+  return `\n\ndivergence: |ΔIC| = ${d.toExponential(3)}; contact sequences agree for ${k} sets, then ` +
+         (k < Math.max(sa.length, sb.length) ? `${sa[k] || "(end)"} vs ${sb[k] || "(end)"}` : "never differ") +
+         `; outcomes ${a.outcome} vs ${b.outcome}`;
+}
+
+$("apply").onclick = () => {
+  const q = {...view};
+  for (const k of ["slice", "preset", "integrator", "gamma", "dt", "z", "res"]) { const v = $(k).value.trim(); if (v) q[k] = v; else delete q[k]; }
+  load(q, true);
+};
+$("back").onclick = () => history.back();
+$("reset").onclick = () => load({...CFG.default}, true);
+$("zout").onclick = () => { const w = window4[1] - window4[0], h = window4[3] - window4[2]; zoomTo(window4[0] - w / 2, window4[1] + w / 2, window4[2] - h / 2, window4[3] + h / 2); };
+document.querySelectorAll("[data-pan]").forEach((b) => b.onclick = () => {
+  const [dx, dy] = b.dataset.pan.split(",").map(Number), w = window4[1] - window4[0], h = window4[3] - window4[2];
+  zoomTo(window4[0] + dx * w / 4, window4[1] + dx * w / 4, window4[2] + dy * h / 4, window4[3] + dy * h / 4);
+});
+$("save").onclick = async () => {
+  setStatus("saving the scan…", true);
+  const r = await fetch("/api/save?" + qs(view, {name: $("scanname").value}), {method: "POST"});
+  const j = await r.json();
+  if (!r.ok) { showError(j.error); setStatus("", false); return; }
+  setStatus(`saved ${j.n_ics} ICs to ${j.path}`, false);
+};
+window.addEventListener("popstate", (ev) => load(ev.state || readUrl(), false));
+load(readUrl(), false);
+</script></body></html>
+"""

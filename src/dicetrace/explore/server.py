@@ -1,0 +1,156 @@
+"""Serving the explorer: uvicorn on a socket bound to 127.0.0.1, in the foreground or on a background thread (:class:`Explorer`).
+
+``Explorer`` is the notebook face: it starts the server on a free port in a
+thread, and displays as an IFrame of the page (``_repr_html_``), so
+``dicetrace.explore.Explorer(window="red-sea")`` as a cell's last line
+shows the explorer inside Jupyter.  ``stop()`` (or leaving a ``with``
+block) shuts it down and frees the port.
+"""
+
+from __future__ import annotations
+
+import html
+import socket
+import threading
+import time
+from pathlib import Path
+
+from dicetrace.explore.view import View, view_from_query
+
+#: The address the explorer listens on unless told otherwise.
+DEFAULT_HOST = "127.0.0.1"
+#: Longest wait for the server to come up, s.
+START_TIMEOUT_S = 30.0
+
+
+def bind_socket(host: str = DEFAULT_HOST, port: int = 0) -> socket.socket:
+    """A listening TCP socket on (host, port); port 0 picks a free one."""
+    fam = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(fam, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except OSError:
+        sock.close()
+        raise
+    sock.listen(128)
+    sock.set_inheritable(True)
+    return sock
+
+
+def make_server(app, sock: socket.socket):
+    import uvicorn
+
+    config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False)
+    return uvicorn.Server(config)
+
+
+def make_view(slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
+              gamma=None, dt=None, z=None) -> View:
+    """A :class:`View` from keyword options as the command line gives them (ViewError naming a bad one)."""
+    q = {"slice": slice, "preset": preset}
+    q["window"] = window if isinstance(window, str) else ",".join(repr(float(v)) for pair in window for v in pair)
+    for name, v in (("res", res), ("integrator", integrator), ("gamma", gamma), ("dt", dt), ("z", z)):
+        if v is not None:
+            q[name] = v if isinstance(v, str) else (",".join(map(str, v)) if isinstance(v, tuple) else str(v))
+    return view_from_query(q)
+
+
+class Explorer:
+    """The explorer served from a background thread (for Jupyter and scripts).
+
+    Parameters as :func:`make_view` (the start view), plus ``out`` (the only
+    folder "save this view as a scan" may write into; None: saving off),
+    ``host``/``port`` (default 127.0.0.1, a free port), ``threads`` (numba
+    threads per map), ``start`` (start now) and ``height`` (of the IFrame, px).
+    """
+
+    def __init__(self, slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
+                 gamma=None, dt=None, z=None, out=None, host: str = DEFAULT_HOST, port: int = 0,
+                 threads: int | None = None, start: bool = True, height: int = 900):
+        self.view = make_view(slice, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
+        self.out = None if out is None else Path(out)
+        self.host, self.port, self.threads, self.height = host, int(port), threads, int(height)
+        self._server = None
+        self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+        if start:
+            self.start()
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/?{self.view.query_string()}"
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self) -> "Explorer":
+        if self.running:
+            return self
+        from dicetrace.explore.app import create_app
+
+        self._sock = bind_socket(self.host, self.port)
+        self.port = self._sock.getsockname()[1]
+        self.app = create_app(self.view, out=self.out, threads=self.threads)
+        self._server = make_server(self.app, self._sock)
+        self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [self._sock]},
+                                        name="dicetrace-explore-server", daemon=True)
+        self._thread.start()
+        t0 = time.monotonic()
+        while not self._server.started:
+            if not self._thread.is_alive() or time.monotonic() - t0 > START_TIMEOUT_S:
+                self.stop()
+                raise RuntimeError(f"the explorer did not start on {self.host}:{self.port}")
+            time.sleep(0.02)
+        return self
+
+    def stop(self) -> None:
+        """Shut the server down (waits for it) and close its socket."""
+        if self._server is not None:
+            self._server.should_exit = True
+        if self._thread is not None:
+            self._thread.join(timeout=60)
+        if self._sock is not None:
+            self._sock.close()
+        self._server = self._thread = self._sock = None
+
+    def __enter__(self) -> "Explorer":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def __repr__(self) -> str:
+        state = "running at " + self.url if self.running else "stopped"
+        return f"Explorer({state})"
+
+    def _repr_html_(self) -> str:
+        if not self.running:
+            return f"<p>dicetrace explorer (stopped): {html.escape(repr(self.view))}</p>"
+        return (f'<iframe src="{html.escape(self.url)}" width="100%" height="{self.height}" '
+                f'style="border:0" title="dicetrace explore"></iframe>')
+
+
+def serve_forever(view: View, *, host: str = DEFAULT_HOST, port: int = 0, out=None, threads=None,
+                  on_ready=None) -> None:
+    """Serve the explorer in the foreground until interrupted; ``on_ready(url)`` is called once it listens."""
+    from dicetrace.explore.app import create_app
+
+    sock = bind_socket(host, port)
+    port = sock.getsockname()[1]
+    server = make_server(create_app(view, out=out, threads=threads), sock)
+    url = f"http://{host}:{port}/?{view.query_string()}"
+    if on_ready is not None:
+        def watch():
+            while not server.started and not server.should_exit:
+                time.sleep(0.02)
+            if server.started:
+                on_ready(url)
+
+        threading.Thread(target=watch, daemon=True).start()
+    try:
+        server.run(sockets=[sock])
+    finally:
+        sock.close()

@@ -1,0 +1,247 @@
+"""The explorer's view: what one map shows, parsed and validated from URL query parameters.
+
+A :class:`View` is a slice, a 2-D window of it (``x0,x1,y0,y1``; the third
+coordinate ``z`` of a 3-D slice is fixed per view), a resolution and a
+configuration (preset, integrator, damping γ, time step).  It round-trips
+through a URL query (:meth:`View.to_query` / :func:`view_from_query`), so a
+view can be shared and reopened.  Bad input raises :class:`ViewError`
+naming the parameter, never anything else.
+
+Zooming stops at the float64 limit of the slice coordinates: adjacent
+pixels must be at least ``MIN_ULPS_PER_PIXEL`` units in the last place apart
+(at x ≈ 1.5, ulp = 2.2e-16, so a 256-pixel window is at least ~2e-12 wide).
+Beyond that neighbouring pixels would be the same IC.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from urllib.parse import urlencode
+
+import numpy as np
+
+from dicetrace.ics import SLICES, WINDOWS, Grid, get_slice
+
+#: Largest resolution per axis (a 1024×1024 map is ~1M throws, ~10 s on 2 cores for ``seed``).
+MAX_RES = 1024
+#: Smallest resolution per axis.
+MIN_RES = 2
+DEFAULT_RES = 256
+#: Adjacent pixels at least this many units in the last place apart (the zoom limit).
+MIN_ULPS_PER_PIXEL = 8
+#: Largest |coordinate| of a window.
+MAX_COORD = 1e6
+#: Smallest and largest time step, s.
+DT_RANGE = (1e-7, 0.01)
+#: Smallest and largest damping γ, s/cm.
+GAMMA_RANGE = (0.0, 1.0)
+
+
+class ViewError(ValueError):
+    """A view parameter is malformed or out of range; ``param`` names it."""
+
+    def __init__(self, param: str, message: str):
+        super().__init__(f"{param}: {message}")
+        self.param = param
+        self.message = message
+
+
+@dataclass(frozen=True)
+class View:
+    """One map of the explorer.
+
+    ``window`` is ((x0, x1), (y0, y1)) in slice coordinates, ``res`` (nx, ny)
+    the grid points per axis (the program's formula, so a view is exactly a
+    ``dicetrace scan`` grid), ``z`` the third coordinate of a 3-D slice.
+    ``gamma`` and ``dt`` None mean the preset's and the default.
+    """
+
+    slice: str = "seed"
+    window: tuple[tuple[float, float], tuple[float, float]] = WINDOWS["red-sea"]
+    res: tuple[int, int] = (DEFAULT_RES, DEFAULT_RES)
+    preset: str = "seed"
+    integrator: str | None = None
+    gamma: float | None = None
+    dt: float | None = None
+    z: float | None = None
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    # -- derived -----------------------------------------------------------------------
+
+    @property
+    def ndim(self) -> int:
+        return SLICES[self.slice].ndim
+
+    def config(self):
+        """The :class:`~dicetrace.params.Config` of this view."""
+        from dicetrace.params import make_config
+
+        overrides = {} if self.gamma is None else {"gamma": self.gamma}
+        return make_config(self.preset, integrator=self.integrator, dt_s=self.dt, **overrides)
+
+    def grid(self, res: tuple[int, int] | None = None) -> Grid:
+        """The IC grid of this view (at ``res``, default the view's); a 3-D slice gets z0 = z1 = z, nz = 1."""
+        nx, ny = res or self.res
+        sl = get_slice(self.slice)
+        if sl.ndim == 3:
+            return Grid(sl, self.window + ((self.z, self.z),), (nx, ny, 1))
+        return Grid(sl, self.window, (nx, ny))
+
+    def coarse(self, factor: int = 4) -> "View":
+        """The same window at about 1/``factor`` of the resolution (the first, quick pass)."""
+        nx, ny = self.res
+        return replace(self, res=(max(MIN_RES, -(-nx // factor)), max(MIN_RES, -(-ny // factor))))
+
+    def zoomed(self, x0: float, x1: float, y0: float, y1: float) -> "View":
+        return replace(self, window=((float(x0), float(x1)), (float(y0), float(y1))))
+
+    def key(self) -> tuple:
+        """Hashable identity (what a cached map is keyed by)."""
+        return (self.slice, self.window, self.res, self.preset, self.integrator, self.gamma, self.dt, self.z)
+
+    def to_query(self) -> dict[str, str]:
+        """URL query parameters that :func:`view_from_query` turns back into this view."""
+        (x0, x1), (y0, y1) = self.window
+        q = {
+            "slice": self.slice,
+            "window": ",".join(repr(float(v)) for v in (x0, x1, y0, y1)),
+            "res": f"{self.res[0]},{self.res[1]}",
+            "preset": self.preset,
+        }
+        for name in ("integrator", "gamma", "dt", "z"):
+            v = getattr(self, name)
+            if v is not None:
+                q[name] = v if isinstance(v, str) else repr(float(v))
+        return q
+
+    def query_string(self) -> str:
+        return urlencode(self.to_query())
+
+    def pixel(self, x: float, y: float) -> tuple[int, int]:
+        """Grid indices (i, j) of the grid point nearest to slice coordinates (x, y)."""
+        out = []
+        for v, (lo, hi), n in zip((x, y), self.window, self.res):
+            t = (v - lo) / (hi - lo) * (n - 1)
+            out.append(int(min(max(round(t), 0), n - 1)))
+        return out[0], out[1]
+
+
+def _num(param: str, text) -> float:
+    try:
+        v = float(text)
+    except (TypeError, ValueError):
+        raise ViewError(param, f"must be a number, got {str(text)[:60]!r}") from None
+    if not math.isfinite(v):
+        raise ViewError(param, f"must be finite, got {text!r}")
+    return v
+
+
+def _validate(v: View) -> None:
+    from dicetrace.integrators import INTEGRATORS
+    from dicetrace.params import PRESETS
+
+    if v.slice not in SLICES:
+        raise ViewError("slice", f"unknown slice {v.slice!r} (choose from {', '.join(SLICES)})")
+    if v.preset not in PRESETS:
+        raise ViewError("preset", f"unknown preset {v.preset!r} (choose from {', '.join(PRESETS)})")
+    if v.integrator is not None and v.integrator not in INTEGRATORS:
+        raise ViewError("integrator", f"unknown integrator {v.integrator!r} (choose from {', '.join(INTEGRATORS)})")
+    if len(v.res) != 2 or any(isinstance(r, bool) or not isinstance(r, (int, np.integer)) for r in v.res):
+        raise ViewError("res", f"must be two whole numbers NX,NY, got {v.res!r}")
+    for r in v.res:
+        if not MIN_RES <= r <= MAX_RES:
+            raise ViewError("res", f"must be between {MIN_RES} and {MAX_RES} per axis, got {v.res[0]},{v.res[1]}")
+    for axis, (lo, hi), n in zip("xy", v.window, v.res):
+        for b in (lo, hi):
+            if not math.isfinite(b) or abs(b) > MAX_COORD:
+                raise ViewError("window", f"{axis} bounds must be finite numbers within ±{MAX_COORD:g}, got {lo!r}, {hi!r}")
+        if not hi > lo:
+            raise ViewError("window", f"the {axis} range must have {axis}1 > {axis}0 (zero or negative width), got {lo!r}, {hi!r}")
+        ulp = math.ulp(max(abs(lo), abs(hi)))
+        if (hi - lo) / (n - 1) < MIN_ULPS_PER_PIXEL * ulp:
+            raise ViewError(
+                "window",
+                f"the {axis} range {lo!r}..{hi!r} is at the float64 limit: {n} pixels need a width of at least "
+                f"{MIN_ULPS_PER_PIXEL * ulp * (n - 1):.3g} here (adjacent pixels {MIN_ULPS_PER_PIXEL} ulp apart)",
+            )
+    ndim = SLICES[v.slice].ndim
+    if ndim == 3 and v.z is None:
+        raise ViewError("z", f"the 3-D slice {v.slice!r} needs its third coordinate z")
+    if ndim != 3 and v.z is not None:
+        raise ViewError("z", f"the slice {v.slice!r} is 2-D: z applies only to a 3-D slice")
+    if v.z is not None and (not math.isfinite(v.z) or abs(v.z) > MAX_COORD):
+        raise ViewError("z", f"must be a finite number within ±{MAX_COORD:g}, got {v.z!r}")
+    if v.gamma is not None and not GAMMA_RANGE[0] <= v.gamma <= GAMMA_RANGE[1]:
+        raise ViewError("gamma", f"the damping γ must be in [{GAMMA_RANGE[0]:g}, {GAMMA_RANGE[1]:g}] s/cm, got {v.gamma!r}")
+    if v.dt is not None and not DT_RANGE[0] <= v.dt <= DT_RANGE[1]:
+        raise ViewError("dt", f"the time step must be in [{DT_RANGE[0]:g}, {DT_RANGE[1]:g}] s, got {v.dt!r}")
+    try:
+        v.config()
+    except (TypeError, ValueError) as e:
+        raise ViewError("preset", str(e)) from None
+
+
+def parse_window(text: str) -> tuple[tuple[float, float], tuple[float, float]]:
+    """A window from a name in ``WINDOWS`` or ``x0,x1,y0,y1`` (ViewError naming ``window``)."""
+    key = str(text).strip().lower().replace("_", "-")
+    if key in WINDOWS:
+        return WINDOWS[key]
+    parts = str(text).split(",")
+    if len(parts) != 4:
+        raise ViewError("window", f"a name ({', '.join(WINDOWS)}) or four numbers x0,x1,y0,y1, got {str(text)[:80]!r}")
+    x0, x1, y0, y1 = (_num("window", p) for p in parts)
+    return (x0, x1), (y0, y1)
+
+
+def parse_res(text: str) -> tuple[int, int]:
+    parts = str(text).split(",")
+    if len(parts) not in (1, 2):
+        raise ViewError("res", f"N or NX,NY, got {str(text)[:40]!r}")
+    vals = []
+    for p in parts:
+        p = p.strip()
+        if not p.isdigit() or len(p) > 7:
+            raise ViewError("res", f"must be whole numbers between {MIN_RES} and {MAX_RES}, got {str(text)[:40]!r}")
+        vals.append(int(p))
+    return (vals[0], vals[0]) if len(vals) == 1 else (vals[0], vals[1])
+
+
+#: The query parameters a view reads.
+VIEW_PARAMS = ("slice", "window", "res", "preset", "integrator", "gamma", "dt", "z")
+
+
+def view_from_query(q, default: View | None = None) -> View:
+    """A :class:`View` from URL query parameters (a mapping); absent ones keep ``default``'s.
+
+    Raises :class:`ViewError` naming the first bad parameter.
+    """
+    base = default or View()
+    kw = {}
+    if "slice" in q:
+        kw["slice"] = str(q["slice"])
+    if "window" in q:
+        kw["window"] = parse_window(q["window"])
+    if "res" in q:
+        kw["res"] = parse_res(q["res"])
+    if "preset" in q:
+        kw["preset"] = str(q["preset"])
+    for name in ("integrator",):
+        if name in q:
+            kw[name] = str(q[name]) or None
+    for name in ("gamma", "dt", "z"):
+        if name in q:
+            kw[name] = None if q[name] in ("", "default") else _num(name, q[name])
+    slice_name = kw.get("slice", base.slice)
+    if slice_name in SLICES and SLICES[slice_name].ndim == 3 and kw.get("z", base.z) is None and "z" not in q:
+        kw["z"] = 0.0
+    if slice_name in SLICES and SLICES[slice_name].ndim != 3 and "z" not in q:
+        kw["z"] = None
+    try:
+        return replace(base, **kw)
+    except ViewError:
+        raise
+    except (TypeError, ValueError) as e:  # pragma: no cover - every field is checked in _validate
+        raise ViewError("view", str(e)) from None

@@ -1,0 +1,33 @@
+"""Helpers of the explorer tests: a small view of the seed slice, map PNGs decoded, scans to compare with."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+#: A small window inside red sea (five or six faces at 16×16) and its resolution.
+WINDOW = "1.4,1.56,3.95,4.25"
+RES = 16
+
+
+def png_outcomes(content: bytes) -> np.ndarray:
+    """The outcome grid [i, j] of a map PNG (its colours decoded)."""
+    from PIL import Image
+
+    from dicetrace.explore.app import outcome_from_rgb
+
+    img = np.asarray(Image.open(io.BytesIO(content)).convert("RGB"))
+    out = outcome_from_rgb(img)
+    assert (out != -9).all(), "a pixel of the map has no outcome's colour"
+    return out
+
+
+def scan_outcomes(tmp_path, window: str, res, name: str = "scan", **options) -> np.ndarray:
+    """What ``dicetrace scan`` writes for that window and resolution, as a label grid."""
+    from dicetrace.ics import Grid, get_window
+    from dicetrace.scan import label_grid, scan
+
+    folder = tmp_path / name
+    scan(Grid("seed", get_window(window), res), folder, **options)
+    return label_grid(folder)

@@ -1,0 +1,179 @@
+"""The explorer app under starlette's TestClient: maps equal ``dicetrace scan``, hover equals ``simulate``, bad input is a 400."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from explore_helpers import RES, WINDOW, png_outcomes, scan_outcomes
+
+
+def test_page_serves_the_controls_and_the_view(client):
+    r = client.get("/")
+    assert r.status_code == 200 and "text/html" in r.headers["content-type"]
+    for part in ('id="map"', 'id="viewerbox"', "/rerun/widget.js", "save view as scan", 'id="back"', 'id="reset"'):
+        assert part in r.text
+    assert '"window": "1.4,1.56,3.95,4.25"' in r.text  # the start view, as URL parameters
+
+
+def test_map_colours_equal_dicetrace_scan(client, tmp_path):
+    expected = scan_outcomes(tmp_path, WINDOW, RES)
+    assert len(np.unique(expected)) >= 5  # a window worth comparing
+    r = client.get("/api/map.png", params={"window": WINDOW, "res": RES})
+    assert r.status_code == 200 and r.headers["content-type"] == "image/png"
+    got = png_outcomes(r.content)
+    assert got.shape == (RES, RES)
+    np.testing.assert_array_equal(got, expected)
+    j = client.get("/api/map.json", params={"window": WINDOW, "res": RES}).json()
+    np.testing.assert_array_equal(np.array(j["outcome"]), expected)
+
+
+def test_zoom_recomputes_the_new_window(client, tmp_path):
+    first = png_outcomes(client.get("/api/map.png", params={"window": WINDOW, "res": RES}).content)
+    zoom = "1.45,1.5,4.0,4.1"
+    expected = scan_outcomes(tmp_path, zoom, RES, name="zoom")
+    got = png_outcomes(client.get("/api/map.png", params={"window": zoom, "res": RES}).content)
+    np.testing.assert_array_equal(got, expected)
+    assert not np.array_equal(got, first)
+
+
+def test_coarse_pass_is_the_quarter_resolution_grid(client, tmp_path):
+    r = client.get("/api/map.png", params={"window": WINDOW, "res": 32, "pass": "coarse"})
+    assert r.headers["x-dicetrace-res"] == "8,8"
+    np.testing.assert_array_equal(png_outcomes(r.content), scan_outcomes(tmp_path, WINDOW, 8))
+
+
+def test_preview_pass_and_a_bad_pass(client, tmp_path):
+    r = client.get("/api/map.png", params={"window": WINDOW, "res": 64, "pass": "preview"})
+    assert r.headers["x-dicetrace-res"] == "4,4"
+    np.testing.assert_array_equal(png_outcomes(r.content), scan_outcomes(tmp_path, WINDOW, 4))
+    r = client.get("/api/map.png", params={"window": WINDOW, "res": RES, "pass": "sketch"})
+    assert r.status_code == 400 and r.json()["param"] == "pass"
+
+
+def test_hover_equals_simulate_of_that_ic(client):
+    from dicetrace.ics import grid_axis, seed_slice
+    from dicetrace.simulate import simulate
+
+    j = client.get("/api/hover", params={"window": WINDOW, "res": RES, "x": 1.47, "y": 4.19}).json()
+    xs, ys = grid_axis(1.4, 1.56, RES), grid_axis(3.95, 4.25, RES)
+    i, k = int(np.argmin(abs(xs - 1.47))), int(np.argmin(abs(ys - 4.19)))
+    assert (j["i"], j["j"]) == (i, k)
+    assert j["coords"] == {"x": xs[i], "y": ys[k]}
+    ic = seed_slice(xs[i], ys[k])
+    assert [j["ic"][n] for n in ("vx", "vy", "vz", "Lx", "Ly", "Lz")] == ic.tolist()
+    roll = simulate(ic)
+    assert (j["outcome"], j["status"], j["steps"], j["contact_sequence"]) == (
+        roll.outcome, roll.status.label, roll.steps, roll.contact_sequence)
+    assert j["t_settle_s"] == roll.t_settle_s
+    # the map's pixel there has that outcome
+    m = client.get("/api/map.json", params={"window": WINDOW, "res": RES}).json()
+    assert m["outcome"][i][k] == roll.outcome
+
+
+def test_hover_follows_the_configuration(client):
+    from dicetrace.explore.view import view_from_query
+    from dicetrace.explore.compute import point_ic
+    from dicetrace.simulate import simulate
+
+    q = {"window": WINDOW, "res": RES, "i": 3, "j": 5, "preset": "physical", "integrator": "semi-implicit-euler",
+         "gamma": "0.01"}
+    j = client.get("/api/hover", params=q).json()
+    v = view_from_query({k: str(val) for k, val in q.items()})
+    _, ic = point_ic(v, 3, 5)
+    roll = simulate(ic, config=v.config())
+    assert j["l_convention"] == "physical" and j["preset"] == "physical"
+    assert (j["outcome"], j["steps"], j["contact_sequence"]) == (roll.outcome, roll.steps, roll.contact_sequence)
+    assert roll.config.preset.gamma == 0.01
+
+
+def test_throw_rrd_is_the_record_recording_of_that_point(client, tmp_path):
+    from dicetrace.sinks.rerun import read_rrd_metadata
+
+    q = {"window": WINDOW, "res": RES, "x": 1.47, "y": 4.19}
+    hov = client.get("/api/hover", params=q).json()
+    r = client.get("/api/throw.rrd", params={**q, "download": 1})
+    assert r.status_code == 200
+    assert r.headers["x-dicetrace-outcome"] == str(hov["outcome"])
+    assert "attachment" in r.headers["content-disposition"] and ".rrd" in r.headers["content-disposition"]
+    path = tmp_path / "throw.rrd"
+    path.write_bytes(r.content)
+    meta = read_rrd_metadata(path)
+    assert meta["outcome"] == hov["outcome"] and meta["steps"] == hov["steps"]
+    assert meta["contact_sequence"] == hov["contact_sequence"]
+    assert list(meta["ic"]) == [hov["ic"][n] for n in ("vx", "vy", "vz", "Lx", "Ly", "Lz")]
+
+
+@pytest.mark.parametrize(
+    "path, params, param",
+    [
+        ("/api/map.png", {"res": "abc"}, "res"),
+        ("/api/map.png", {"res": "5000"}, "res"),
+        ("/api/map.png", {"window": "1,1,3,4"}, "window"),
+        ("/api/map.json", {"window": "garbage"}, "window"),
+        ("/api/map.png", {"slice": "nope"}, "slice"),
+        ("/api/map.png", {"gamma": "abc"}, "gamma"),
+        ("/api/view", {"dt": "-1"}, "dt"),
+        ("/api/hover", {"x": "1.45"}, "x,y"),
+        ("/api/hover", {"x": "9", "y": "4"}, "x,y"),
+        ("/api/hover", {"i": "99", "j": "0"}, "i,j"),
+        ("/api/throw.rrd", {"i": "a", "j": "0"}, "i,j"),
+    ],
+)
+def test_bad_parameters_get_a_400_naming_them(client, path, params, param):
+    r = client.get(path, params={"window": WINDOW, "res": RES, **params} if "window" not in params else {"res": RES, **params})
+    assert r.status_code == 400, r.text
+    body = r.json()
+    assert body["param"] == param and body["error"].startswith(param)
+    assert client.get("/api/health").json()["ok"] is True  # the server goes on
+
+
+def test_save_writes_the_scan_dataset_only_inside_the_chosen_folder(client, tmp_path):
+    from dicetrace.ics import Grid, get_window
+    from dicetrace.scan import label_grid, scan_definition
+
+    r = client.post("/api/save", params={"window": WINDOW, "res": RES, "name": "view-1"})
+    assert r.status_code == 200, r.text
+    folder = tmp_path / "saved" / "view-1"
+    assert r.json()["path"] == str(folder.resolve()) and r.json()["n_ics"] == RES * RES
+    defn = scan_definition(folder)
+    assert defn.space == Grid("seed", get_window(WINDOW), RES)
+    np.testing.assert_array_equal(label_grid(folder), scan_outcomes(tmp_path, WINDOW, RES))
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for bad in ("../escape", "/abs", ".hidden", "", "a/b", "x" * 70):
+        r = client.post("/api/save", params={"window": WINDOW, "res": RES, "name": bad})
+        assert r.status_code == 400 and r.json()["param"] == "name", bad
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    assert sorted(p.name for p in (tmp_path / "saved").iterdir()) == ["view-1"]
+
+
+def test_save_is_off_without_a_folder():
+    from starlette.testclient import TestClient
+
+    from dicetrace.explore import create_app
+
+    with TestClient(create_app()) as c:
+        r = c.post("/api/save", params={"res": 4, "name": "x"})
+        assert r.status_code == 403 and "--out" in r.json()["error"]
+
+
+def test_rerun_web_viewer_files_are_served(client):
+    r = client.get("/rerun/widget.js")
+    assert r.status_code == 200 and "javascript" in r.headers["content-type"]
+    assert "re_viewer_bg.wasm" in r.text and "open_url" in r.text
+    r = client.head("/rerun/re_viewer_bg.wasm")
+    assert r.status_code == 200 and r.headers["content-type"] == "application/wasm"
+
+
+def test_seed3_map_is_the_scan_of_that_z_level(client, tmp_path):
+    from dicetrace.ics import Grid, get_window
+    from dicetrace.scan import label_grid, scan
+
+    r = client.get("/api/map.png", params={"slice": "seed3", "window": "home", "z": "0.03", "res": 8})
+    assert r.status_code == 200, r.text
+    scan(Grid("seed3", get_window("home") + ((0.03, 0.03),), (8, 8, 1)), tmp_path / "s3")
+    np.testing.assert_array_equal(png_outcomes(r.content), label_grid(tmp_path / "s3")[:, :, 0])
+    other = png_outcomes(client.get("/api/map.png", params={"slice": "seed3", "window": "home", "z": "0.09",
+                                                            "res": 8}).content)
+    scan(Grid("seed3", get_window("home") + ((0.09, 0.09),), (8, 8, 1)), tmp_path / "s3b")
+    np.testing.assert_array_equal(other, label_grid(tmp_path / "s3b")[:, :, 0])

@@ -1,0 +1,183 @@
+"""The explorer in a real headless browser (Debian's chromium through Playwright).
+
+Skipped, with the reason, where Playwright or a chromium is missing.  With
+``DICETRACE_SCREENSHOT=PATH`` the zoomed view with a throw beside it is also
+saved there (the README's screenshot).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from urllib.parse import parse_qs, urlparse
+
+import numpy as np
+import pytest
+
+from explore_helpers import RES as TEST_RES, WINDOW as TEST_WINDOW, scan_outcomes
+
+pytestmark = pytest.mark.slow
+
+#: The map's resolution: the tests' small one, or a larger one for the README's screenshot.
+SHOT = os.environ.get("DICETRACE_SCREENSHOT")
+RES = 128 if SHOT else TEST_RES
+#: The start window: the tests' small one, or all of red sea for the screenshot.
+WINDOW = "1.0,2.0,3.5,4.5" if SHOT else TEST_WINDOW
+
+CHROMIUM_CANDIDATES = ("chromium", "chromium-browser", "google-chrome")
+
+
+def _chromium() -> str:
+    for name in CHROMIUM_CANDIDATES:
+        path = shutil.which(name)
+        if path:
+            return path
+    pytest.skip("no chromium on PATH (Debian: apt-get install chromium)")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    sync_api = pytest.importorskip("playwright.sync_api", reason="Playwright is not installed (pip install playwright)")
+    exe = _chromium()
+    with sync_api.sync_playwright() as p:
+        try:
+            b = p.chromium.launch(executable_path=exe, headless=True,
+                                  args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"])
+        except Exception as e:  # a chromium that cannot start here
+            pytest.skip(f"chromium {exe} does not start headless: {str(e).splitlines()[0]}")
+        yield b
+        b.close()
+
+
+@pytest.fixture
+def explorer(tmp_path):
+    from dicetrace.explore import Explorer
+
+    with Explorer(window=WINDOW, res=RES, out=tmp_path / "saved") as ex:
+        yield ex
+
+
+def _ready(page, timeout=120_000):
+    page.wait_for_function("document.body.dataset.state === 'ready' || document.body.dataset.state === 'error'",
+                           timeout=timeout)
+    assert page.evaluate("document.body.dataset.state") == "ready", page.inner_text("#error")
+
+
+def _map_outcomes(page) -> np.ndarray:
+    from dicetrace.explore.app import outcome_from_rgb
+
+    data = page.evaluate("""() => {
+        const img = document.getElementById('map');
+        const c = document.createElement('canvas'); c.width = img.naturalWidth; c.height = img.naturalHeight;
+        const g = c.getContext('2d'); g.drawImage(img, 0, 0);
+        return {w: c.width, h: c.height, px: Array.from(g.getImageData(0, 0, c.width, c.height).data)};
+    }""")
+    img = np.array(data["px"], dtype=np.uint8).reshape(data["h"], data["w"], 4)[..., :3]
+    out = outcome_from_rgb(img)
+    assert (out != -9).all()
+    return out
+
+
+def _window_of(page) -> str:
+    return parse_qs(urlparse(page.url).query)["window"][0]
+
+
+def test_page_map_zoom_and_throw(browser, explorer, tmp_path):
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    errors = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(explorer.url)
+    _ready(page)
+    np.testing.assert_array_equal(_map_outcomes(page), scan_outcomes(tmp_path, WINDOW, RES))
+
+    # drag a box over the middle of the map: the view zooms and the map is the new window's
+    box = page.locator("#mapbox").bounding_box()
+    before = page.url
+    page.mouse.move(box["x"] + box["width"] * 0.25, box["y"] + box["height"] * 0.25)
+    page.mouse.down()
+    page.mouse.move(box["x"] + box["width"] * 0.5, box["y"] + box["height"] * 0.5, steps=5)
+    page.mouse.move(box["x"] + box["width"] * 0.75, box["y"] + box["height"] * 0.75, steps=5)
+    page.mouse.up()
+    page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                           timeout=120_000)
+    _ready(page)
+    zoom = _window_of(page)
+    x0, x1, y0, y1 = map(float, zoom.split(","))
+    a0, a1, b0, b1 = map(float, WINDOW.split(","))
+    assert a0 < x0 < x1 < a1 and b0 < y0 < y1 < b1
+    assert abs((x1 - x0) / (a1 - a0) - 0.5) < 0.05 and abs((y1 - y0) / (b1 - b0) - 0.5) < 0.05  # the box dragged
+    np.testing.assert_array_equal(_map_outcomes(page), scan_outcomes(tmp_path, zoom, RES, name="zoom"))
+
+    # hover, then click: the throw's details, and Rerun's viewer draws the die
+    page.mouse.move(box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
+    page.wait_for_function("document.getElementById('info').textContent.startsWith('hover')", timeout=30_000)
+    page.mouse.click(box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
+    page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
+    info = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
+    assert f"outcome {info['outcome']}" in page.inner_text("#info")
+    # shift-click a second point: both throws listed, with their divergence
+    page.keyboard.down("Shift")
+    page.mouse.click(box["x"] + box["width"] * 0.7, box["y"] + box["height"] * 0.3)
+    page.keyboard.up("Shift")
+    page.wait_for_function("JSON.parse(document.getElementById('info').dataset.throws || '[]').length === 2",
+                           timeout=60_000)
+    two = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)")
+    assert two[0] == info and two[1]["ic"] != info["ic"]
+    text = page.inner_text("#info")
+    assert "throw 2:" in text and "divergence: |ΔIC|" in text and f"outcomes {info['outcome']} vs {two[1]['outcome']}" in text
+    page.wait_for_selector("#viewerbox canvas", timeout=120_000)
+    page.wait_for_timeout(8000)  # the wasm viewer loads and draws the recording
+    shot = page.locator("#viewerbox").screenshot()
+    from PIL import Image
+    import io
+
+    img = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB")).astype(float)
+    assert img.std() > 10, "the embedded Rerun viewer is blank"
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50
+    if SHOT:
+        page.screenshot(path=SHOT, full_page=True)
+    assert not [e for e in errors if "rerun" not in e.lower()], errors
+
+
+def test_malformed_url_parameter_shows_an_error(browser, explorer):
+    page = browser.new_page()
+    page.goto(explorer.url.split("?")[0] + "?res=abc")
+    _ready_or_error = page.wait_for_function("document.body.dataset.state === 'error'", timeout=60_000)
+    assert _ready_or_error
+    text = page.inner_text("#error")
+    assert "res" in text and "whole numbers" in text
+
+
+def test_back_and_reset_walk_the_history_of_views(browser, explorer, tmp_path):
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    page.goto(explorer.url)
+    _ready(page)
+    start = _window_of(page)
+    first = _map_outcomes(page)
+    box = page.locator("#mapbox").bounding_box()
+    for _ in range(2):  # two wheel zooms (×1/2 each) at the map's centre
+        before = page.url
+        page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+        page.mouse.wheel(0, -100)
+        page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                               timeout=120_000)
+        _ready(page)
+    x0, x1, y0, y1 = map(float, _window_of(page).split(","))
+    a0, a1, b0, b1 = map(float, start.split(","))
+    assert abs((x1 - x0) / (a1 - a0) - 0.25) < 1e-9 and abs((y1 - y0) / (b1 - b0) - 0.25) < 1e-9
+    zoomed = _window_of(page)
+    np.testing.assert_array_equal(_map_outcomes(page), scan_outcomes(tmp_path, zoomed, RES, name="wheel"))
+    before = page.url
+    page.click("#back")
+    page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                           timeout=120_000)
+    _ready(page)
+    x0b, x1b, _, _ = map(float, _window_of(page).split(","))
+    assert abs((x1b - x0b) / (a1 - a0) - 0.5) < 1e-9  # one zoom back
+    before = page.url
+    page.click("#reset")
+    page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                           timeout=120_000)
+    _ready(page)
+    assert tuple(map(float, _window_of(page).split(","))) == (a0, a1, b0, b1)
+    np.testing.assert_array_equal(_map_outcomes(page), first)

@@ -1,0 +1,168 @@
+"""The explorer served for real: uvicorn on 127.0.0.1, responsive while it computes, stale maps cancelled, the CLI."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+import threading
+import time
+import urllib.error
+import urllib.request
+
+import numpy as np
+import pytest
+
+from explore_helpers import RES, WINDOW, png_outcomes, scan_outcomes
+
+
+def get(url: str, timeout: float = 120.0):
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:
+            return r.status, dict(r.headers), r.read()
+    except urllib.error.HTTPError as e:
+        return e.code, dict(e.headers), e.read()
+
+
+def port_open(port: int) -> bool:
+    with socket.socket() as s:
+        s.settimeout(0.5)
+        return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_explorer_serves_on_localhost_and_stops(tmp_path):
+    from dicetrace.explore import Explorer
+
+    ex = Explorer(window=WINDOW, res=RES)
+    try:
+        assert ex.running and ex.url.startswith(f"http://127.0.0.1:{ex.port}/?")
+        html = ex._repr_html_()
+        assert "<iframe" in html and f"127.0.0.1:{ex.port}" in html
+        status, _, body = get(ex.url)
+        assert status == 200 and b'id="map"' in body
+        base = f"http://127.0.0.1:{ex.port}"
+        status, _, png = get(f"{base}/api/map.png?window={WINDOW}&res={RES}")
+        assert status == 200
+        np.testing.assert_array_equal(png_outcomes(png), scan_outcomes(tmp_path, WINDOW, RES))
+        status, _, body = get(f"{base}/api/map.png?res=0")
+        assert status == 400 and json.loads(body)["param"] == "res"
+        # bound to the loopback address only
+        conns = [c for c in _listening() if c[1] == ex.port]
+        assert conns and all(addr == "127.0.0.1" for addr, _ in conns)
+    finally:
+        ex.stop()
+    assert not ex.running and not port_open(ex.port)
+    assert "stopped" in ex._repr_html_()
+
+
+def _listening():
+    """(address, port) of this machine's listening IPv4 TCP sockets (/proc/net/tcp)."""
+    out = []
+    try:
+        lines = open("/proc/net/tcp").read().splitlines()[1:]
+    except OSError:
+        pytest.skip("no /proc/net/tcp")
+    for line in lines:
+        parts = line.split()
+        local, state = parts[1], parts[3]
+        if state != "0A":
+            continue
+        ip_hex, port_hex = local.split(":")
+        ip = socket.inet_ntoa(bytes.fromhex(ip_hex)[::-1])
+        out.append((ip, int(port_hex, 16)))
+    return out
+
+
+@pytest.mark.slow
+def test_server_answers_while_a_map_computes():
+    from dicetrace.explore import Explorer
+
+    with Explorer(window="red-sea", res=RES) as ex:
+        base = f"http://127.0.0.1:{ex.port}"
+        get(f"{base}/api/map.png?res=8")  # compiled and warm
+        big = {}
+
+        def compute():
+            t0 = time.perf_counter()
+            big["status"] = get(f"{base}/api/map.png?res=320&client=a")[0]
+            big["s"] = time.perf_counter() - t0
+
+        th = threading.Thread(target=compute)
+        th.start()
+        time.sleep(0.3)
+        lat = []
+        while th.is_alive() and len(lat) < 20:
+            t0 = time.perf_counter()
+            status, _, body = get(f"{base}/api/health", timeout=10)
+            lat.append(time.perf_counter() - t0)
+            assert status == 200 and json.loads(body)["ok"]
+            time.sleep(0.05)
+        th.join()
+        assert big["status"] == 200
+        assert lat, "the map finished before the server could be asked anything"
+        assert max(lat) < min(1.0, big["s"] / 2), (lat, big)
+
+
+def test_a_newer_view_cancels_the_stale_map():
+    from dicetrace.explore import Cancelled, View, Worker
+    from dicetrace.explore.view import parse_window
+
+    w = Worker()
+    try:
+        w.submit_map(View(res=(8, 8))).result()  # the batch kernel compiled (more than 16 ICs)
+        stale = w.submit_map(View(res=(400, 400)), client="c")  # ~40 blocks of work
+        time.sleep(0.2)
+        new_view = View(window=parse_window(WINDOW), res=(RES, RES))
+        t0 = time.perf_counter()
+        fresh = w.submit_map(new_view, client="c")
+        with pytest.raises(Cancelled):
+            stale.result(timeout=120)
+        m = fresh.result(timeout=120)
+        waited = time.perf_counter() - t0
+        assert w.cancelled_count == 1
+        assert m.view == new_view and m.outcome.shape == (RES, RES)
+        assert waited < 5.0  # the stale map stopped at a block boundary, far before its end
+        # another client's map is not cancelled by this one's
+        a = w.submit_map(View(res=(64, 64)), client="a")
+        b = w.submit_map(View(res=(32, 32)), client="b")
+        assert a.result(timeout=120).outcome.shape == (64, 64) and b.result(timeout=120).outcome.shape == (32, 32)
+        # the same view again is the cache's
+        again = w.submit_map(new_view, client="c")
+        assert again.done() and again.result() is m
+    finally:
+        w.shutdown()
+
+
+@pytest.mark.slow
+def test_cli_serves_until_interrupted(tmp_path):
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in [os.path.abspath("src"), os.environ.get("PYTHONPATH", "")] if p)}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--window", WINDOW, "--res", str(RES),
+         "--out", str(tmp_path / "scans")],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )
+    try:
+        line = proc.stdout.readline()
+        assert "serving http://127.0.0.1:" in line, (line, proc.stderr.read() if proc.poll() is not None else "")
+        url = line.split("serving ", 1)[1].split()[0]
+        status, _, body = get(url)
+        assert status == 200 and b"save view as scan" in body
+        base = url.split("/?")[0]
+        req = urllib.request.Request(f"{base}/api/save?window={WINDOW}&res=4&name=cli", method="POST")
+        with urllib.request.urlopen(req, timeout=120) as r:
+            assert r.status == 200
+        assert (tmp_path / "scans" / "cli" / "_scan.json").is_file()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def test_cli_refuses_bad_options_in_one_line(tmp_path):
+    from typer.testing import CliRunner
+
+    from dicetrace.cli import app
+
+    r = CliRunner().invoke(app, ["explore", "--no-browser", "--window", "1,1,3,4"])
+    assert r.exit_code != 0 and "x1 > x0" in str(r.exception or "") + (r.output or "")

@@ -1,0 +1,81 @@
+"""The explorer's view: URL parameters in, a validated View out, and back."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from dicetrace.explore.view import MAX_RES, View, ViewError, view_from_query
+from dicetrace.ics import WINDOWS
+
+
+def test_query_round_trip_keeps_every_field_exactly():
+    v = view_from_query({"window": "0.1,0.30000000000000004,1,2", "res": "40,30", "gamma": "0.01", "dt": "0.0005",
+                         "integrator": "rk4"})
+    assert v.window == ((0.1, 0.30000000000000004), (1.0, 2.0))
+    assert v.res == (40, 30) and v.gamma == 0.01 and v.dt == 0.0005 and v.integrator == "rk4"
+    assert view_from_query(v.to_query()) == v
+    cfg = v.config()
+    assert cfg.preset.gamma == 0.01 and cfg.numerics.dt_s == 0.0005 and cfg.numerics.integrator == "rk4"
+
+
+def test_named_window_and_defaults():
+    v = view_from_query({"window": "party"})
+    assert v.window == WINDOWS["party"] and v.slice == "seed" and v.z is None
+    g = v.grid()
+    assert g.res == v.res and g.window == WINDOWS["party"]
+
+
+def test_seed3_gets_its_z_and_a_flat_grid():
+    v = view_from_query({"slice": "seed3", "window": "home", "z": "0.02", "res": "8"})
+    g = v.grid()
+    assert g.res == (8, 8, 1) and g.window[2] == (0.02, 0.02)
+    assert view_from_query({"slice": "seed3", "window": "home"}).z == 0.0
+
+
+@pytest.mark.parametrize(
+    "query, param, words",
+    [
+        ({"res": "abc"}, "res", "whole numbers"),
+        ({"res": "100000"}, "res", f"between 2 and {MAX_RES}"),
+        ({"res": "1"}, "res", "between 2"),
+        ({"res": "3,4,5"}, "res", "NX,NY"),
+        ({"window": "1,1,2,3"}, "window", "zero or negative width"),
+        ({"window": "2,1,2,3"}, "window", "zero or negative width"),
+        ({"window": "1,2,3"}, "window", "four numbers"),
+        ({"window": "1,2,nan,4"}, "window", "finite"),
+        ({"window": "1,2,x,4"}, "window", "number"),
+        ({"window": "nowhere"}, "window", "a name"),
+        ({"window": "1.5,1.5000000000000004,3,4"}, "window", "float64 limit"),
+        ({"slice": "cube"}, "slice", "unknown slice"),
+        ({"preset": "wood"}, "preset", "unknown preset"),
+        ({"integrator": "leapfrog"}, "integrator", "unknown integrator"),
+        ({"gamma": "-1"}, "gamma", "damping"),
+        ({"dt": "1"}, "dt", "time step"),
+        ({"dt": "inf"}, "dt", "finite"),
+        ({"z": "0.1"}, "z", "2-D"),
+    ],
+)
+def test_bad_parameters_name_themselves(query, param, words):
+    with pytest.raises(ViewError) as ei:
+        view_from_query(query)
+    assert ei.value.param == param
+    assert words in str(ei.value)
+
+
+def test_zoom_limit_is_where_pixels_stay_distinct():
+    x = 1.5
+    ulp = math.ulp(x)
+    ok = View(window=((x, x + 8 * ulp * 15), (3.0, 4.0)), res=(16, 16))
+    xs = ok.grid().axes()[0]
+    assert len(set(xs.tolist())) == 16  # every pixel its own coordinate
+    with pytest.raises(ViewError, match="float64 limit"):
+        View(window=((x, x + 7 * ulp * 15), (3.0, 4.0)), res=(16, 16))
+
+
+def test_pixel_is_the_nearest_grid_point():
+    v = View(window=((0.0, 1.0), (0.0, 2.0)), res=(11, 5))
+    assert v.pixel(0.0, 0.0) == (0, 0)
+    assert v.pixel(0.31, 1.6) == (3, 3)
+    assert v.pixel(1.0, 2.0) == (10, 4)
