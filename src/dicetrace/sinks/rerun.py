@@ -139,12 +139,23 @@ def encode_rrd_of(
     if tr is None or tr.node_offsets is None or tr.energy is None:
         raise ValueError("write_rrd needs a roll with states and energy: simulate(..., record=Record(states=True, energy=True))")
 
+    return encode_rrd(roll_logger(roll, name=name, ic_label=ic_label, trail_every=trail_every), default_blueprint(roll),
+                      application_id=application_id)
+
+
+def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, trail_every: int | None = None):
+    """``log(rec)``: logs the whole recording of ``roll`` (name, property, data) into a stream.
+
+    The one logging path of both the file (:func:`encode_rrd_of`) and the
+    streaming sinks (:mod:`dicetrace.sinks.rerun_stream`): they carry the same content.
+    """
+
     def log(rec) -> None:
         rec.send_recording_name(name)
         rec.send_property("dicetrace", _rr().AnyValues(**metadata_values(roll, ic_label)))
         log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every)
 
-    return encode_rrd(log, default_blueprint(roll), application_id=application_id)
+    return log
 
 
 def _rr():
@@ -413,7 +424,7 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
         rec.log("contacts", rr.TextLog("no contact events", level="DEBUG"), static=True)
 
 
-def _log_trail(rec, rr, cm, steps, t_s, trail_every) -> None:
+def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_path", color=CM_COLOR) -> None:
     """The growing centre-of-mass line strip, updated every ``trail_every`` steps.
 
     Update u (at row r_u) holds the path sampled every ``trail_every`` rows up
@@ -438,9 +449,9 @@ def _log_trail(rec, rr, cm, steps, t_s, trail_every) -> None:
         if (nfull - 1) * every != r:
             pts = np.concatenate([pts, cm[r : r + 1]])
         strips.append(pts)
-    rec.log("world/cm_path", rr.LineStrips3D.from_fields(radii=[0.03], colors=[CM_COLOR]), static=True)
+    rec.log(entity, rr.LineStrips3D.from_fields(radii=[0.03], colors=[color]), static=True)
     rec.send_columns(
-        "world/cm_path",
+        entity,
         indexes=[rr.TimeColumn("step", sequence=steps[rows]), rr.TimeColumn("sim_time", duration=t_s[rows])],
         columns=rr.LineStrips3D.columns(strips=strips),
     )
