@@ -364,3 +364,76 @@ def test_default_blueprint_without_roll_has_the_same_views_and_no_camera(rrd, tm
     assert not [k for k in alone if k.endswith("/EyeControls3D")]
     assert [k for k in written if k.endswith("/EyeControls3D")]
     assert alone["/time_panel"] == written["/time_panel"]
+
+
+# -- compare recordings: several throws and their divergence -------------------------------------
+
+
+def _scalars(temporal: dict, entity: str) -> tuple[np.ndarray, np.ndarray]:
+    t = temporal[entity]
+    return np.asarray(t.column("step").to_pylist()), values(t, "Scalars:scalars")[:, 0]
+
+
+@pytest.fixture(scope="module")
+def nudged(roll, tmp_path_factory):
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd
+
+    eps = 1e-6
+    other = simulate(roll.ic * (1 + eps), record=Record(states=True, energy=True))
+    path = tmp_path_factory.mktemp("cmp") / "nudge.rrd"
+    path.write_bytes(encode_compare_rrd([roll, other], ["a", "b"]))
+    return eps, other, path
+
+
+def test_compare_recording_holds_each_throw_in_its_colour_and_the_divergence(roll, nudged):
+    eps, other, path = nudged
+    temporal, static = read_rrd(path), read_rrd(path, static=True)
+    colours = []
+    for k, r in enumerate((roll, other)):
+        body = temporal[f"/throws/{k}/body"]
+        centres = values(body, "Boxes3D:centers", 3)[:, 0]
+        # Rerun stores positions as float32; a throw that settled first keeps its last state
+        np.testing.assert_array_equal(centres[: r.steps + 1], r.trace.cm_pos[: r.steps + 1].astype(np.float32))
+        assert (centres[r.steps + 1 :] == centres[r.steps]).all()
+        colours.append(tuple(static[f"/throws/{k}/body"].column("Boxes3D:colors").to_pylist()[0]))
+        assert f"/throws/{k}/cm_path" in temporal and f"/throws/{k}/nodes" in temporal
+    assert colours[0] != colours[1]
+    steps, dist = _scalars(temporal, "/divergence/distance/1")
+    assert steps[0] == 0 and len(steps) == max(roll.steps, other.steps) + 1
+    # at t = 0 positions and orientations agree; U and L differ by exactly the nudge (relative)
+    assert dist[0] == pytest.approx(eps, rel=1e-8)
+    lsteps, logd = _scalars(temporal, "/divergence/log10/1")
+    np.testing.assert_allclose(logd, np.log10(dist[lsteps]))
+    # the position part against the two simulations directly, while both still run
+    n = min(roll.steps, other.steps) + 1
+    _, dpos = _scalars(temporal, "/divergence/position_cm/1")
+    np.testing.assert_allclose(dpos[:n], np.linalg.norm(roll.trace.cm_pos[:n] - other.trace.cm_pos[:n], axis=1))
+    # chaos: the red-sea throw's 1e-6 nudge changes its contact sequence, the states end far apart
+    assert roll.contact_sequence != other.contact_sequence
+    assert dist.max() > 1e4 * eps
+
+
+def test_identical_throws_have_exactly_zero_divergence(roll, tmp_path):
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd
+
+    twin = simulate(roll.ic.copy(), record=Record(states=True, energy=True))
+    path = tmp_path / "twins.rrd"
+    path.write_bytes(encode_compare_rrd([roll, twin], ["a", "a"]))
+    temporal = read_rrd(path)
+    _, dist = _scalars(temporal, "/divergence/distance/1")
+    assert len(dist) == roll.steps + 1 and (dist == 0).all()
+    assert "/divergence/log10/1" not in temporal  # log10(0): nothing to plot
+
+
+def test_compare_blueprint_shows_the_throws_and_the_log_divergence():
+    from dicetrace.sinks.rerun_compare import compare_blueprint
+
+    bp = compare_blueprint()
+    views = {type(v).__name__: v for v in _walk(bp.root_container)}
+    assert "Spatial3DView" in views and "TimeSeriesView" in views
+
+
+def _walk(node):
+    for c in getattr(node, "contents", []) or []:
+        yield c
+        yield from _walk(c)

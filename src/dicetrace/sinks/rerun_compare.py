@@ -45,7 +45,6 @@ def _padded(roll, n: int) -> dict:
         "cm": tr.cm_pos[take],
         "vel": tr.cm_vel[take],
         "L": tr.L[take],
-        "rot": tr.rotation[take],
         "off": tr.node_offsets[take],
         "quat": tr.quat_xyzw[take],
     }
@@ -56,12 +55,23 @@ def common_length(rolls) -> int:
     return max(int(np.flatnonzero(r.trace.written)[-1]) + 1 for r in rolls)
 
 
+def rotation_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+    """Angle (rad) of the rotation taking orientation ``qa`` to ``qb`` (quaternions xyzw, per row).
+
+    From the relative quaternion q = conj(qa)·qb as 2·atan2(|q_xyz|, |q_w|):
+    exactly 0 for equal inputs (an arccos of the trace would give ~1e-8).
+    """
+    va, wa = qa[:, :3], qa[:, 3]
+    vb, wb = qb[:, :3], qb[:, 3]
+    w = wa * wb + np.einsum("ni,ni->n", va, vb)
+    v = wa[:, None] * vb - wb[:, None] * va - np.cross(va, vb)
+    return 2.0 * np.arctan2(np.linalg.norm(v, axis=1), np.abs(w))
+
+
 def divergence(ref: dict, other: dict, *, side_cm: float, u0: float, l0: float) -> dict:
     """Distance of ``other`` from ``ref`` per row: ``distance`` (max norm, see the module docstring) and its parts."""
     dpos = np.linalg.norm(other["cm"] - ref["cm"], axis=1)
-    # angle of R_ref^T R_other: cos θ = (trace − 1) / 2
-    tr_ = np.einsum("nji,nji->n", ref["rot"], other["rot"])
-    ang = np.arccos(np.clip((tr_ - 1.0) / 2.0, -1.0, 1.0))
+    ang = rotation_angle(ref["quat"], other["quat"])
     dvel = np.linalg.norm(other["vel"] - ref["vel"], axis=1)
     dl = np.linalg.norm(other["L"] - ref["L"], axis=1)
     parts = np.stack([dpos / side_cm, ang, dvel / max(u0, 1e-300), dl / max(l0, 1e-300)])
