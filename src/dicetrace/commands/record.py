@@ -190,6 +190,9 @@ def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, w
         fail("--web-port needs --serve")
     if port is not None and mode not in ("spawn", "serve"):
         fail("--port needs --spawn or --serve (with --connect give --url)")
+    if mode == "spawn" and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        fail("--spawn needs a display to open the viewer on (DISPLAY and WAYLAND_DISPLAY are unset): use --serve "
+             "(web viewer) or --out FILE.rrd")
     check_port(port, "--port")
     check_port(web_port, "--web-port")
     return mode
