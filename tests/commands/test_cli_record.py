@@ -308,3 +308,33 @@ def test_serve_says_its_url_and_stops_after_serve_for(tmp_path):
     assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in lines[-1] or f":{grpc}/proxy" in lines[-1]
     assert list(tmp_path.iterdir()) == []  # no file unless --out/--save is given
     assert time.monotonic() - t0 < 240
+
+
+def test_channels_option_adds_forces_and_depths_and_the_default_stays_lean(tmp_path, dicetrace_cli):
+    lean, full = tmp_path / "lean.rrd", tmp_path / "full.rrd"
+    assert dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(lean), cwd=tmp_path).returncode == 0
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--channels", "forces,penetration",
+                        "--out", str(full), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "steps 540" in res.stdout  # asking for forces does not change the throw
+    a, b = set(read_rrd(lean)), set(read_rrd(full))
+    assert a < b
+    extra = b - a
+    assert {"/world/die/forces/normal", "/world/die/forces/friction"} <= extra
+    assert {f"/channels/penetration_cm/{k}" for k in range(1, 9)} <= extra
+    assert "/world/die/velocities" not in extra  # not asked for
+    assert lean.stat().st_size < full.stat().st_size
+
+
+def test_identical_ics_compared_through_the_cli_diverge_by_exactly_zero(tmp_path, dicetrace_cli):
+    from dicetrace.sinks.rerun import read_rrd
+
+    ic = "14.08,11.46,9.87,13.8,122.8,15.5"
+    out = tmp_path / "twins.rrd"
+    res = dicetrace_cli("record", "--ic", ic, "--ic", ic, "--out", str(out), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("throw 0:") == 1 and res.stdout.count("throw 1:") == 1
+    t = read_rrd(out)
+    assert {"/throws/0/body", "/throws/1/body", "/divergence/distance/1"} <= set(t)
+    dist = np.array([row[0] for row in t["/divergence/distance/1"].column("Scalars:scalars").to_pylist()])
+    assert len(dist) > 100 and (dist == 0).all()

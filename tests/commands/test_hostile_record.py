@@ -135,6 +135,9 @@ BAD = [
     case(["--ic", IC, "--ic", "1,2,3"], "--ic", "6 comma-separated"),
     case(["--ic", IC, "--ic", IC, *AT], "--ic", "--slice"),
     case(["--ic", IC, "--ic", IC, "--out", "existing.rrd", "--dt", "0"], "--dt", "'0'"),
+    case([*AT, "--channels", "forces,torque"], "--channels", "'torque'"),
+    case([*AT, "--channels", ","], "--channels"),
+    case([*AT, "--nudge", "1e-6", "--channels", "forces"], "--channels", "comparing"),
     # an existing recording is not touched by a refusal
     case(["--ic", "1,2,nan,4,5,6", "--out", "existing.rrd"], "--ic", "non-finite"),
     case([*AT, "--dt", "0", "--out", "existing.rrd"], "--dt", "'0'"),

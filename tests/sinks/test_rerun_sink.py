@@ -437,3 +437,73 @@ def _walk(node):
     for c in getattr(node, "contents", []) or []:
         yield c
         yield from _walk(c)
+
+
+# -- optional channels (record --channels) --------------------------------------------------------
+
+CHANNEL_ENTITIES = ("/world/die/forces/normal", "/world/die/forces/friction", "/world/die/velocities")
+
+
+@pytest.fixture(scope="module")
+def channelled(tmp_path_factory):
+    from dicetrace.sinks.rerun import default_blueprint, encode_rrd, roll_logger
+    from dicetrace.sinks.rerun_channels import CHANNELS
+
+    r = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True, forces=True))
+    path = tmp_path_factory.mktemp("ch") / "channels.rrd"
+    chans = frozenset(CHANNELS)
+    path.write_bytes(encode_rrd(roll_logger(r, name="ch", channels=chans), default_blueprint(r, chans)))
+    return r, path
+
+
+def test_the_default_recording_has_no_optional_channel(rrd):
+    temporal = read_rrd(rrd)
+    assert not [e for e in temporal if e in CHANNEL_ENTITIES or e.startswith("/channels")]
+    assert "force_arrow_cm_per_unit" not in read_rrd_metadata(rrd)
+
+
+def test_channels_hold_the_kernels_forces_depths_and_node_velocities(channelled):
+    r, path = channelled
+    temporal, meta = read_rrd(path), read_rrd_metadata(path)
+    tr = r.trace
+    nodes = tr.node_pos
+    scale = meta["force_arrow_cm_per_unit"]
+    for part, cols in (("normal", [2]), ("friction", [0, 1])):
+        t = temporal[f"/world/die/forces/{part}"]
+        steps = t.column("step").to_pylist()
+        assert steps == list(range(r.steps + 1))
+        vec = t.column("Arrows3D:vectors").to_pylist()
+        org = t.column("Arrows3D:origins").to_pylist()
+        n_arrows = 0
+        for s, v, o in zip(steps, vec, org):
+            contact = np.flatnonzero(nodes[s, :, 2] <= 0.0)
+            assert len(v) == len(contact)
+            n_arrows += len(v)
+            if len(v):
+                want = np.zeros((len(contact), 3))
+                want[:, cols] = tr.forces[s, contact][:, cols]
+                np.testing.assert_allclose(np.array(v) / scale, want, rtol=1e-6, atol=1e-6 * np.abs(tr.forces).max())
+                np.testing.assert_allclose(o, nodes[s, contact], rtol=1e-6, atol=1e-5)
+        assert n_arrows > 50  # node-steps in contact over the red-sea throw (87)
+    # the normal force pushes up while a node is below ground (at least once), and is 0 off the ground
+    fz = np.stack([values(temporal[f"/channels/force_normal/{k}"], "Scalars:scalars")[:, 0] for k in range(1, 9)], axis=1)
+    np.testing.assert_array_equal(fz, tr.forces[:, :, 2])
+    assert (fz[nodes[..., 2] > 0] == 0).all() and (fz > 0).any()
+    depth = np.stack([values(temporal[f"/channels/penetration_cm/{k}"], "Scalars:scalars")[:, 0] for k in range(1, 9)], axis=1)
+    np.testing.assert_array_equal(depth, np.maximum(0.0, -nodes[..., 2]))
+    assert depth.max() > 0
+    # node velocities against the traced node positions: finite differences in free flight (before the first impact)
+    vel = values(temporal["/world/die/velocities"], "Arrows3D:vectors", 3).reshape(-1, 8, 3) / meta["velocity_arrow_s"]
+    first = int(np.flatnonzero((nodes[..., 2] <= 0).any(axis=1))[0])
+    fd = (nodes[1:first] - nodes[: first - 1]) / r.dt_s
+    np.testing.assert_allclose(vel[1:first], fd, atol=0.01 * np.abs(fd).max())
+
+
+def test_channels_blueprint_plots_the_depths():
+    from dicetrace.sinks.rerun import default_blueprint
+
+    def origins(bp):
+        return {str(getattr(v, "origin", "")) for v in _walk(bp.root_container)}
+
+    assert "/channels/penetration_cm" in origins(default_blueprint(None, {"penetration"}))
+    assert "/channels/penetration_cm" not in origins(default_blueprint(None))

@@ -103,16 +103,16 @@ def check_output_folder(path: Path) -> Path:
 RECORD_MEMORY_FACTOR = 8.0
 
 
-def check_record_size(cfg) -> None:
-    """Refuse, before running, a throw whose recording could exceed the available memory.
+def check_record_size(cfg, n_throws: int = 1, forces: bool = False) -> None:
+    """Refuse, before running, throws whose recording could exceed the available memory.
 
-    The worst case is a throw that runs to the time cap: max_steps + 1 rows.
+    The worst case is throws that run to the time cap: max_steps + 1 rows each.
     """
     from dicetrace.simulate import Record, available_memory, trace_bytes
     from dicetrace.sinks._common import human_bytes
 
     steps = cfg.numerics.max_steps
-    need = trace_bytes(steps + 1, Record(states=True, energy=True)) * RECORD_MEMORY_FACTOR
+    need = trace_bytes(steps + 1, Record(states=True, energy=True, forces=forces)) * RECORD_MEMORY_FACTOR * n_throws
     avail = available_memory()
     if avail is not None and need > avail:
         fail(f"--dt {fmt_num(cfg.numerics.dt_s)} / --t-max {fmt_num(cfg.numerics.t_max_s)}: a throw may run to the "
@@ -241,6 +241,11 @@ def register(app: typer.Typer) -> None:
             None, "--port", help="With --spawn or --serve: the gRPC port [default: 9876]."
         ),
         web_port: Optional[int] = typer.Option(None, "--web-port", help="With --serve: the web viewer's port [default: 9090]."),
+        channels: Optional[str] = typer.Option(
+            None, "--channels", help="Optional channels, comma-separated (default: none, a lean recording): forces "
+            "(per-node normal and friction contact forces as arrows), penetration (depth per node below the ground), "
+            "velocities (node velocities as arrows), or all."
+        ),
         parquet: Optional[Path] = typer.Option(
             None, "--parquet", help="Also write rolls.parquet, contacts.parquet and trajectory.parquet into this folder."
         ),
@@ -260,6 +265,14 @@ def register(app: typer.Typer) -> None:
         serve_s = parse_seconds(serve_for, "--serve-for")
         eps = parse_nudge(nudge)
         comparing = len(ics) > 1 or eps is not None
+        from dicetrace.sinks.rerun_channels import parse_channels
+
+        try:
+            chans = parse_channels(channels)
+        except ValueError as e:
+            fail(f"--channels: {e}")
+        if comparing and chans:
+            fail("--channels records one throw: drop it when comparing throws (several --ic or --nudge)")
         if comparing and parquet is not None:
             fail("--parquet records one throw: drop it when comparing throws (several --ic or --nudge)")
         if scan is not None:
@@ -304,12 +317,12 @@ def register(app: typer.Typer) -> None:
             fail(str(e))
         except ValueError as e:
             fail(f"--url {url}: {e}")
-        for _ in all_ics:
-            check_record_size(cfg)
+        check_record_size(cfg, len(all_ics), "forces" in chans)
 
         from dicetrace.simulate import Record, simulate
 
-        rolls = [simulate(v, config=cfg, record=Record(states=True, energy=True)) for v in all_ics]
+        rec_what = Record(states=True, energy=True, forces="forces" in chans)
+        rolls = [simulate(v, config=cfg, record=rec_what) for v in all_ics]
         roll = rolls[0]
         label = labels[0]
 
@@ -320,7 +333,8 @@ def register(app: typer.Typer) -> None:
         else:
             from dicetrace.sinks.rerun import default_blueprint, roll_logger
 
-            log, blueprint = roll_logger(roll, name=name, ic_label=label), default_blueprint(roll)
+            log = roll_logger(roll, name=name, ic_label=label, channels=chans)
+            blueprint = default_blueprint(roll, chans)
 
         written = []
         if dest is not None:

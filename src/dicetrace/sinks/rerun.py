@@ -143,17 +143,24 @@ def encode_rrd_of(
                       application_id=application_id)
 
 
-def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, trail_every: int | None = None):
+def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, trail_every: int | None = None,
+                channels=frozenset()):
     """``log(rec)``: logs the whole recording of ``roll`` (name, property, data) into a stream.
 
     The one logging path of both the file (:func:`encode_rrd_of`) and the
     streaming sinks (:mod:`dicetrace.sinks.rerun_stream`): they carry the same content.
+    ``channels``: optional channels (:mod:`dicetrace.sinks.rerun_channels`).
     """
+    scales = {}
+    if channels:
+        from dicetrace.sinks.rerun_channels import arrow_scales
+
+        scales = arrow_scales(roll, channels)
 
     def log(rec) -> None:
         rec.send_recording_name(name)
-        rec.send_property("dicetrace", _rr().AnyValues(**metadata_values(roll, ic_label)))
-        log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every)
+        rec.send_property("dicetrace", _rr().AnyValues(**metadata_values(roll, ic_label), **scales))
+        log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every, channels=channels, scales=scales)
 
     return log
 
@@ -268,7 +275,8 @@ def event_texts(steps, nodes, entered) -> list[str]:
     return [f"step {int(s)}: node {int(n)} {'enters' if e else 'leaves'}" for s, n, e in zip(steps, nodes, entered)]
 
 
-def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None = None) -> None:
+def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None = None, channels=frozenset(),
+             scales=None) -> None:
     """Log one throw into an open recording stream (see the module docstring)."""
     import rerun as rr
 
@@ -422,6 +430,10 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
         )
     else:
         rec.log("contacts", rr.TextLog("no contact events", level="DEBUG"), static=True)
+    if channels:
+        from dicetrace.sinks.rerun_channels import arrow_scales, log_channels
+
+        log_channels(rec, roll, channels, rows, index, scales or arrow_scales(roll, channels))
 
 
 def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_path", color=CM_COLOR) -> None:
@@ -481,8 +493,8 @@ def _eye_for(cm: np.ndarray, half: float):
     return rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
 
 
-def default_blueprint(roll=None):
-    """3-D view of the world, energy plots, the contact log and the summary.
+def default_blueprint(roll=None, channels=()):
+    """3-D view of the world, energy plots, the contact log and the summary (and plots of scalar ``channels``).
 
     With a ``roll``, the 3-D camera frames its path.
     """
@@ -519,6 +531,7 @@ def default_blueprint(roll=None):
                 ),
             ),
             rrb.TextDocumentView(origin="/summary", name="summary"),
+            *_channel_views(channels),
         ),
         row_shares=[3, 2, 3],
     )
@@ -566,3 +579,11 @@ def read_rrd(path, *, static: bool = False) -> dict:
             t = t.sort_by("step")
         out[entity] = t
     return out
+
+
+def _channel_views(channels) -> list:
+    if not channels:
+        return []
+    from dicetrace.sinks.rerun_channels import channel_views
+
+    return channel_views(channels)
