@@ -230,7 +230,7 @@ def register(app: typer.Typer) -> None:
         ),
         url: Optional[str] = typer.Option(
             None, "--url", help="With --connect: its address, rerun+http://HOST:PORT/proxy or a port "
-            "[default: rerun+http://127.0.0.1:9876/proxy]."
+            "(default: rerun+http://127.0.0.1:9876/proxy, the SDK's default)."
         ),
         serve: bool = typer.Option(
             False, "--serve", help="Serve the recording over gRPC and the web viewer over HTTP (the URL is printed) "
@@ -238,9 +238,9 @@ def register(app: typer.Typer) -> None:
         ),
         serve_for: Optional[str] = typer.Option(None, "--serve-for", help="With --serve: stop after this many seconds."),
         port: Optional[int] = typer.Option(
-            None, "--port", help="With --spawn or --serve: the gRPC port [default: 9876]."
+            None, "--port", help="With --spawn or --serve: the gRPC port (default: 9876)."
         ),
-        web_port: Optional[int] = typer.Option(None, "--web-port", help="With --serve: the web viewer's port [default: 9090]."),
+        web_port: Optional[int] = typer.Option(None, "--web-port", help="With --serve: the web viewer's port (default: 9090)."),
         channels: Optional[str] = typer.Option(
             None, "--channels", help="Optional channels, comma-separated (default: none, a lean recording): forces "
             "(per-node normal and friction contact forces as arrows), penetration (depth per node below the ground), "

@@ -26,6 +26,12 @@ Entities (world frame: z up, cm):
 ``summary``                 text document: IC, configuration, outcome, status,
                             contact sequence
 
+Optional channels (forces, penetration depths, node velocities) are
+logged only when asked: :mod:`dicetrace.sinks.rerun_channels`.  The same
+``log(rec)`` (:func:`roll_logger`) feeds the file and the streaming sinks
+(:mod:`dicetrace.sinks.rerun_stream`); several throws compared:
+:mod:`dicetrace.sinks.rerun_compare`.
+
 The recording property ``dicetrace`` (``rec.send_property``) holds the
 version, the full configuration (JSON), the IC and the summary:
 :func:`read_rrd_metadata`.  Read a file back with ``rerun.chunk.RrdReader`` (needs only
