@@ -260,9 +260,9 @@ def test_connect_streams_the_same_content_and_blueprint_as_the_file(tmp_path, di
         wait_listening(port)
         out = tmp_path / "file.rrd"
         res = dicetrace_cli("record", *args, "--connect", "--url", f"rerun+http://127.0.0.1:{port}/proxy",
-                            "--out", str(out), cwd=tmp_path)
+                            "--save", str(out), cwd=tmp_path)  # --save: rerun's name for --out
         assert res.returncode == 0, res.stderr
-        assert f"sent to rerun+http://127.0.0.1:{port}/proxy" in res.stdout
+        assert f"wrote {out} sent to rerun+http://127.0.0.1:{port}/proxy" in res.stdout
     finally:
         server.send_signal(signal.SIGINT)
         try:
@@ -338,3 +338,33 @@ def test_identical_ics_compared_through_the_cli_diverge_by_exactly_zero(tmp_path
     assert {"/throws/0/body", "/throws/1/body", "/divergence/distance/1"} <= set(t)
     dist = np.array([row[0] for row in t["/divergence/distance/1"].column("Scalars:scalars").to_pylist()])
     assert len(dist) > 100 and (dist == 0).all()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not RERUN_CLI.exists(), reason="rerun CLI not installed")
+def test_spawn_streams_to_the_viewer_listening_on_its_port(tmp_path, dicetrace_cli, monkeypatch):
+    """--spawn reuses a viewer already listening on --port (the SDK's rule): here a gRPC server that saves what it gets."""
+    import signal
+
+    port = free_port()
+    got = tmp_path / "received.rrd"
+    server = subprocess.Popen(
+        [str(RERUN_CLI), "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(got)],
+        cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    try:
+        wait_listening(port)
+        monkeypatch.setenv("DISPLAY", ":0")  # no window opens: the server already holds the port
+        res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--spawn", "--port", str(port), cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+    finally:
+        server.send_signal(signal.SIGINT)
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait(timeout=10)
+    assert [p.name for p in tmp_path.iterdir()] == ["received.rrd"]  # no file sink asked for
+    out = tmp_path / "file.rrd"
+    assert dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), cwd=tmp_path).returncode == 0
+    assert decoded(got) == decoded(out)

@@ -398,7 +398,7 @@ def register(app: typer.Typer) -> None:
             print(
                 f"dicetrace: numerical failure: status {r.status} after {r.steps} steps "
                 f"(t = {r.t_settle_s:.6g} s): {r.status.advice}; "
-                f"the recording was still written for inspection: {out}",
+                f"the recording was still written for inspection: {' '.join(written)}",
                 file=sys.stderr,
             )
             sys.exit(EXIT_NUMERICAL_FAILURE)
