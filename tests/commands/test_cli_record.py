@@ -262,7 +262,7 @@ def test_connect_streams_the_same_content_and_blueprint_as_the_file(tmp_path, di
         res = dicetrace_cli("record", *args, "--connect", "--url", f"rerun+http://127.0.0.1:{port}/proxy",
                             "--save", str(out), cwd=tmp_path)  # --save: rerun's name for --out
         assert res.returncode == 0, res.stderr
-        assert f"wrote {out} sent to rerun+http://127.0.0.1:{port}/proxy" in res.stdout
+        assert f"wrote {out}  sent to rerun+http://127.0.0.1:{port}/proxy" in res.stdout
     finally:
         server.send_signal(signal.SIGINT)
         try:
@@ -368,3 +368,30 @@ def test_spawn_streams_to_the_viewer_listening_on_its_port(tmp_path, dicetrace_c
     out = tmp_path / "file.rrd"
     assert dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), cwd=tmp_path).returncode == 0
     assert decoded(got) == decoded(out)
+
+
+@pytest.mark.slow
+def test_serve_hosts_the_web_viewer_until_ctrl_c(tmp_path):
+    import signal
+    import urllib.request
+
+    grpc, web = free_port(), free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dicetrace.cli", "record", "--ic", "14.08,11.46,9.87,13.8,122.8,15.5", "--serve",
+         "--port", str(grpc), "--web-port", str(web)],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        first = proc.stdout.readline()  # printed once the recording is served
+        assert first.startswith(f"serving the web viewer at http://127.0.0.1:{web}/"), first + proc.stderr.read()
+        with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=10) as page:
+            assert page.status == 200 and b"<html" in page.read().lower()
+        wait_listening(grpc, 5)
+        proc.send_signal(signal.SIGINT)  # the user stops it
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 0, err
+    assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in out and "Traceback" not in err

@@ -362,6 +362,7 @@ def register(app: typer.Typer) -> None:
 
         # the recording itself may be on stdout: the summary then goes to stderr
         stream_out = sys.stderr if (dest is not None and dest.kind == "stdout") or sys.stdout is None else sys.stdout
+        sent = ""
         if mode is not None:
             from dicetrace.sinks.rerun_stream import Stream, wait_serving
 
@@ -374,7 +375,7 @@ def register(app: typer.Typer) -> None:
                 else:
                     web = st.serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT)
                 st.send(log)
-                written.append(f"sent to {st.grpc_url}")
+                sent = f"sent to {st.grpc_url}"
                 if mode == "serve":
                     until = "Ctrl-C" if serve_s is None else f"{serve_s:g} s have passed (or Ctrl-C)"
                     print(f"serving the web viewer at {web} (gRPC {st.grpc_url}) until {until}", file=stream_out, flush=True)
@@ -390,7 +391,7 @@ def register(app: typer.Typer) -> None:
             pre = f"throw {k}: " if comparing else ""
             outcomes.append(f"{pre}outcome {o}  status {r.status}  steps {r.steps}  t_settle_s {r.t_settle_s:.6g}  "
                             f"contact_sequence {r.contact_sequence}")
-        summary = "  |  ".join(outcomes) + f"  wrote {' '.join(written)}"
+        summary = "  |  ".join(outcomes) + (f"  wrote {' '.join(written)}" if written else "") + (f"  {sent}" if sent else "")
         print(summary, file=stream_out)
         failed = [r for r in rolls if r.status.failed]
         if failed:
@@ -398,7 +399,7 @@ def register(app: typer.Typer) -> None:
             print(
                 f"dicetrace: numerical failure: status {r.status} after {r.steps} steps "
                 f"(t = {r.t_settle_s:.6g} s): {r.status.advice}; "
-                f"the recording was still written for inspection: {' '.join(written)}",
+                f"the recording was still written for inspection: {' '.join(written + [sent]).strip()}",
                 file=sys.stderr,
             )
             sys.exit(EXIT_NUMERICAL_FAILURE)
