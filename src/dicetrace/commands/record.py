@@ -329,7 +329,7 @@ def register(app: typer.Typer) -> None:
         if comparing:
             from dicetrace.sinks.rerun_compare import compare_blueprint, compare_logger
 
-            log, blueprint = compare_logger(rolls, labels, name=name), compare_blueprint()
+            log, blueprint = compare_logger(rolls, labels, name=name), compare_blueprint(rolls)
         else:
             from dicetrace.sinks.rerun import default_blueprint, roll_logger
 

@@ -154,11 +154,19 @@ def log_compare(rec, rolls, labels) -> None:
             rec.send_columns(f"divergence/{key}/{k}", indexes=idx(steps, t_s), columns=rr.Scalars.columns(scalars=d[key]))
 
 
-def compare_blueprint():
-    """3-D view of all throws, the log10 divergence plot and the summary."""
+def compare_blueprint(rolls=None):
+    """3-D view of all throws, the log10 divergence plot and the summary.
+
+    With ``rolls``, the 3-D camera frames the paths of all of them.
+    """
     import rerun.blueprint as rrb
 
-    view3d = rrb.Spatial3DView(origin="/", contents=["/world/**", "/throws/**"], name="throws",
+    from dicetrace.sinks.rerun import _eye_for
+
+    eye = None
+    if rolls:
+        eye = _eye_for(np.concatenate([r.trace.cm_pos for r in rolls]), float(rolls[0].config.preset.half_side_cm))
+    view3d = rrb.Spatial3DView(origin="/", contents=["/world/**", "/throws/**"], name="throws", eye_controls=eye,
                                background=(250, 250, 250), line_grid=rrb.LineGrid3D(visible=False))
     div = rrb.TimeSeriesView(origin="/divergence/log10", name="log10 divergence from throw 0",
                              plot_legend=rrb.PlotLegend(corner="RightBottom"))
@@ -194,4 +202,4 @@ def encode_compare_rrd(rolls, labels, *, name: str = "dicetrace compare", applic
     """The bytes of the compare recording of ``rolls`` (throw 0 the reference)."""
     from dicetrace.sinks.rerun import encode_rrd
 
-    return encode_rrd(compare_logger(rolls, labels, name=name), compare_blueprint(), application_id=application_id)
+    return encode_rrd(compare_logger(rolls, labels, name=name), compare_blueprint(rolls), application_id=application_id)
