@@ -230,9 +230,13 @@ def wait_listening(port: int, timeout_s: float = 30.0) -> None:
 
 def decoded(path: Path, kind: str = "recording") -> dict:
     """Entity path → sorted rows of one store of ``path``: no row ids, no wall-clock start time; blueprints without timelines."""
+    import warnings
+
     from rerun.chunk import RrdReader
 
-    reader = RrdReader(str(path))
+    with warnings.catch_warnings():  # a gRPC server's --save writes no footer: rerun warns, and reads it all the same
+        warnings.filterwarnings("ignore", message="RRD file has no footer")
+        reader = RrdReader(str(path))
     stores = reader.recordings() if kind == "recording" else reader.blueprints()
     assert len(stores) == 1, stores
     out: dict[str, list] = {}
