@@ -200,3 +200,203 @@ def test_record_a_scanned_point_reproduces_its_row(tmp_path, dicetrace_cli):
     assert res.returncode == 2 and "Traceback" not in res.stderr and res.stdout == ""
     (line,) = res.stderr.strip().splitlines()
     assert line.startswith("dicetrace: error: --scan ") and "drop --preset, --dt" in line
+
+
+# -- streaming sinks: --connect to a real gRPC server, --serve ------------------------------------
+
+RERUN_CLI = Path(sys.executable).parent / "rerun"
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_listening(port: int, timeout_s: float = 30.0) -> None:
+    import socket
+    import time
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with socket.socket() as s:
+            s.settimeout(0.5)
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.2)
+    raise AssertionError(f"nothing listens on port {port} after {timeout_s} s")
+
+
+def decoded(path: Path, kind: str = "recording") -> dict:
+    """Entity path → sorted rows of one store of ``path``: no row ids, no wall-clock start time; blueprints without timelines."""
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    with warnings.catch_warnings():  # a gRPC server's --save writes no footer: rerun warns, and reads it all the same
+        warnings.filterwarnings("ignore", message="RRD file has no footer")
+        reader = RrdReader(str(path))
+    stores = reader.recordings() if kind == "recording" else reader.blueprints()
+    assert len(stores) == 1, stores
+    out: dict[str, list] = {}
+    for ch in reader.stream(store=stores[0]):
+        rb = ch.to_record_batch()
+        keep = [n for n in rb.schema.names if n not in ("rerun.controls.RowId", "RecordingInfo:start_time") and (kind == "recording" or ":" in n)]
+        rows = [r for r in rb.select(keep).to_pylist() if r]
+        out.setdefault(ch.entity_path, []).extend(repr(sorted(r.items())) for r in rows)
+    return {k: sorted(v) for k, v in out.items()}
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not RERUN_CLI.exists(), reason="rerun CLI not installed")
+@pytest.mark.parametrize("args", [("--slice", "seed", "--at", "1.65,3.9"), ("--slice", "seed", "--at", "1.65,3.9", "--nudge", "1e-6")])
+def test_connect_streams_the_same_content_and_blueprint_as_the_file(tmp_path, dicetrace_cli, args):
+    import signal
+
+    port = free_port()
+    got = tmp_path / "received.rrd"
+    server = subprocess.Popen(
+        [str(RERUN_CLI), "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(got)],
+        cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    )
+    try:
+        wait_listening(port)
+        out = tmp_path / "file.rrd"
+        res = dicetrace_cli("record", *args, "--connect", "--url", f"rerun+http://127.0.0.1:{port}/proxy",
+                            "--save", str(out), cwd=tmp_path)  # --save: rerun's name for --out
+        assert res.returncode == 0, res.stderr
+        assert f"wrote {out}  sent to rerun+http://127.0.0.1:{port}/proxy" in res.stdout
+    finally:
+        server.send_signal(signal.SIGINT)
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait(timeout=10)
+    sent, filed = decoded(got), decoded(out)
+    assert ("/world/ground" in sent) and len(sent) > 8 and sum(len(v) for v in sent.values()) > 1000
+    assert sent == filed
+    blueprint = decoded(got, "blueprint")
+    assert blueprint == decoded(out, "blueprint")
+    assert sum("ViewBlueprint:class_identifier" in row for rows in blueprint.values() for row in rows) >= 3
+
+
+def test_connect_to_nothing_is_one_line_exit_2(tmp_path, dicetrace_cli):
+    import time
+
+    port = free_port()  # closed again: nothing listens there
+    t0 = time.monotonic()
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--connect", "--url", str(port), cwd=tmp_path)
+    assert time.monotonic() - t0 < 10
+    assert res.returncode == 2 and "Traceback" not in res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--connect" in lines[0] and str(port) in lines[0], res.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_serve_says_its_url_and_stops_after_serve_for(tmp_path):
+    import time
+
+    grpc, web = free_port(), free_port()
+    t0 = time.monotonic()
+    res = subprocess.run(
+        [sys.executable, "-m", "dicetrace.cli", "record", "--ic", "14.08,11.46,9.87,13.8,122.8,15.5", "--serve",
+         "--port", str(grpc), "--web-port", str(web), "--serve-for", "1"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    lines = res.stdout.strip().splitlines()
+    assert lines[0].startswith(f"serving the web viewer at http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F")
+    assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in lines[-1] or f":{grpc}/proxy" in lines[-1]
+    assert list(tmp_path.iterdir()) == []  # no file unless --out/--save is given
+    assert time.monotonic() - t0 < 240
+
+
+def test_channels_option_adds_forces_and_depths_and_the_default_stays_lean(tmp_path, dicetrace_cli):
+    lean, full = tmp_path / "lean.rrd", tmp_path / "full.rrd"
+    assert dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(lean), cwd=tmp_path).returncode == 0
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--channels", "forces,penetration",
+                        "--out", str(full), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "steps 540" in res.stdout  # asking for forces does not change the throw
+    a, b = set(read_rrd(lean)), set(read_rrd(full))
+    assert a < b
+    extra = b - a
+    assert {"/world/die/forces/normal", "/world/die/forces/friction"} <= extra
+    assert {f"/channels/penetration_cm/{k}" for k in range(1, 9)} <= extra
+    assert "/world/die/velocities" not in extra  # not asked for
+    assert lean.stat().st_size < full.stat().st_size
+
+
+def test_identical_ics_compared_through_the_cli_diverge_by_exactly_zero(tmp_path, dicetrace_cli):
+    from dicetrace.sinks.rerun import read_rrd
+
+    ic = "14.08,11.46,9.87,13.8,122.8,15.5"
+    out = tmp_path / "twins.rrd"
+    res = dicetrace_cli("record", "--ic", ic, "--ic", ic, "--out", str(out), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("throw 0:") == 1 and res.stdout.count("throw 1:") == 1
+    t = read_rrd(out)
+    assert {"/throws/0/body", "/throws/1/body", "/divergence/distance/1"} <= set(t)
+    dist = np.array([row[0] for row in t["/divergence/distance/1"].column("Scalars:scalars").to_pylist()])
+    assert len(dist) > 100 and (dist == 0).all()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not RERUN_CLI.exists(), reason="rerun CLI not installed")
+def test_spawn_streams_to_the_viewer_listening_on_its_port(tmp_path, dicetrace_cli, monkeypatch):
+    """--spawn reuses a viewer already listening on --port (the SDK's rule): here a gRPC server that saves what it gets."""
+    import signal
+
+    port = free_port()
+    got = tmp_path / "received.rrd"
+    server = subprocess.Popen(
+        [str(RERUN_CLI), "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(got)],
+        cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    try:
+        wait_listening(port)
+        monkeypatch.setenv("DISPLAY", ":0")  # no window opens: the server already holds the port
+        res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--spawn", "--port", str(port), cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+    finally:
+        server.send_signal(signal.SIGINT)
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait(timeout=10)
+    assert [p.name for p in tmp_path.iterdir()] == ["received.rrd"]  # no file sink asked for
+    out = tmp_path / "file.rrd"
+    assert dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), cwd=tmp_path).returncode == 0
+    assert decoded(got) == decoded(out)
+
+
+@pytest.mark.slow
+def test_serve_hosts_the_web_viewer_until_ctrl_c(tmp_path):
+    import signal
+    import urllib.request
+
+    grpc, web = free_port(), free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dicetrace.cli", "record", "--ic", "14.08,11.46,9.87,13.8,122.8,15.5", "--serve",
+         "--port", str(grpc), "--web-port", str(web)],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        first = proc.stdout.readline()  # printed once the recording is served
+        assert first.startswith(f"serving the web viewer at http://127.0.0.1:{web}/"), first + proc.stderr.read()
+        with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=10) as page:
+            assert page.status == 200 and b"<html" in page.read().lower()
+        wait_listening(grpc, 5)
+        proc.send_signal(signal.SIGINT)  # the user stops it
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 0, err
+    assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in out and "Traceback" not in err

@@ -95,6 +95,31 @@ BAD = [
     case(["--scan", "scan", "--at", "nan,1"], "--at", "non-finite"),
     case(["--scan", "scan", "--at", "0.05,0.05", "--dt", "0.01"], "--scan", "--dt"),
     case(["--scan", "scan", "--at", "0.05,0.05", "--ic", IC], "--scan", "--ic"),
+    # sinks (--spawn, --connect, --serve) and compare options
+    case([*AT, "--spawn", "--serve"], "--spawn", "--serve", "at most one"),
+    case([*AT, "--spawn", "--port", "1"], "--spawn"),  # no display (unset below), or nothing listens
+    case([*AT, "--connect", "--serve"], "--connect", "--serve", "at most one"),
+    case([*AT, "--url", "9876"], "--url", "--connect"),
+    case([*AT, "--connect", "--url", "http://127.0.0.1:9876/proxy"], "--url", "scheme"),
+    case([*AT, "--connect", "--url", "rerun+http://127.0.0.1:9876/elsewhere"], "--url", "/proxy"),
+    case([*AT, "--connect", "--url", "rerun+http://127.0.0.1:99999/proxy"], "--url", "range"),
+    case([*AT, "--connect", "--url", "70000"], "--url", "range"),
+    case([*AT, "--connect", "--port", "9876"], "--port", "--url"),
+    case([*AT, "--serve-for", "3"], "--serve-for", "--serve"),
+    case([*AT, "--web-port", "9090"], "--web-port", "--serve"),
+    case([*AT, "--serve", "--serve-for", "-1"], "--serve-for", "'-1'"),
+    case([*AT, "--serve", "--serve-for", "soon"], "--serve-for", "'soon'"),
+    case([*AT, "--serve", "--port", "0"], "--port", "range"),
+    case([*AT, "--nudge", "big"], "--nudge", "'big'"),
+    case([*AT, "--nudge", "nan"], "--nudge", "'nan'"),
+    case([*AT, "--nudge", "1"], "--nudge", "(-1, 1)"),
+    case([*AT, "--nudge", "1e-6", "--parquet", "pq2"], "--parquet", "comparing"),
+    case(["--ic", IC, "--ic", "1,2,3"], "--ic", "6 comma-separated"),
+    case(["--ic", IC, "--ic", IC, *AT], "--ic", "--slice"),
+    case(["--ic", IC, "--ic", IC, "--out", "existing.rrd", "--dt", "0"], "--dt", "'0'"),
+    case([*AT, "--channels", "forces,torque"], "--channels", "'torque'"),
+    case([*AT, "--channels", ","], "--channels"),
+    case([*AT, "--nudge", "1e-6", "--channels", "forces"], "--channels", "comparing"),
     # an existing recording is not touched by a refusal
     case(["--ic", "1,2,nan,4,5,6", "--out", "existing.rrd"], "--ic", "non-finite"),
     case([*AT, "--dt", "0", "--out", "existing.rrd"], "--dt", "'0'"),
@@ -298,3 +323,23 @@ def test_random_options_never_trace_back(work, dicetrace_cli, opts):
             assert (work / given_["--out"]).is_file(), (args, res.stderr)
         if given_.get("--parquet"):
             assert (work / given_["--parquet"] / "rolls.parquet").is_file(), (args, res.stderr)
+
+
+@pytest.fixture(autouse=True)
+def _no_display(monkeypatch):
+    """No display for --spawn: it is refused before any work."""
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+
+
+def test_serve_on_a_taken_port_is_one_line_exit_2(work, dicetrace_cli, assert_one_line_error):
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("0.0.0.0", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        before = snapshot(work)
+        res = dicetrace_cli("record", *AT, "--serve", "--port", str(port), "--serve-for", "0", cwd=work)
+        assert_one_line_error(res, "--serve", str(port), "in use")
+        assert snapshot(work) == before

@@ -364,3 +364,146 @@ def test_default_blueprint_without_roll_has_the_same_views_and_no_camera(rrd, tm
     assert not [k for k in alone if k.endswith("/EyeControls3D")]
     assert [k for k in written if k.endswith("/EyeControls3D")]
     assert alone["/time_panel"] == written["/time_panel"]
+
+
+# -- compare recordings: several throws and their divergence -------------------------------------
+
+
+def _scalars(temporal: dict, entity: str) -> tuple[np.ndarray, np.ndarray]:
+    t = temporal[entity]
+    return np.asarray(t.column("step").to_pylist()), values(t, "Scalars:scalars")[:, 0]
+
+
+@pytest.fixture(scope="module")
+def nudged(roll, tmp_path_factory):
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd
+
+    eps = 1e-6
+    other = simulate(roll.ic * (1 + eps), record=Record(states=True, energy=True))
+    path = tmp_path_factory.mktemp("cmp") / "nudge.rrd"
+    path.write_bytes(encode_compare_rrd([roll, other], ["a", "b"]))
+    return eps, other, path
+
+
+def test_compare_recording_holds_each_throw_in_its_colour_and_the_divergence(roll, nudged):
+    eps, other, path = nudged
+    temporal, static = read_rrd(path), read_rrd(path, static=True)
+    colours = []
+    for k, r in enumerate((roll, other)):
+        body = temporal[f"/throws/{k}/body"]
+        centres = values(body, "Boxes3D:centers", 3)[:, 0]
+        # Rerun stores positions as float32; a throw that settled first keeps its last state
+        np.testing.assert_array_equal(centres[: r.steps + 1], r.trace.cm_pos[: r.steps + 1].astype(np.float32))
+        assert (centres[r.steps + 1 :] == centres[r.steps]).all()
+        colours.append(tuple(static[f"/throws/{k}/body"].column("Boxes3D:colors").to_pylist()[0]))
+        assert f"/throws/{k}/cm_path" in temporal and f"/throws/{k}/nodes" in temporal
+    assert colours[0] != colours[1]
+    steps, dist = _scalars(temporal, "/divergence/distance/1")
+    assert steps[0] == 0 and len(steps) == max(roll.steps, other.steps) + 1
+    # at t = 0 positions and orientations agree; U and L differ by exactly the nudge (relative)
+    assert dist[0] == pytest.approx(eps, rel=1e-8)
+    lsteps, logd = _scalars(temporal, "/divergence/log10/1")
+    np.testing.assert_allclose(logd, np.log10(dist[lsteps]))
+    # the position part against the two simulations directly, while both still run
+    n = min(roll.steps, other.steps) + 1
+    _, dpos = _scalars(temporal, "/divergence/position_cm/1")
+    np.testing.assert_allclose(dpos[:n], np.linalg.norm(roll.trace.cm_pos[:n] - other.trace.cm_pos[:n], axis=1))
+    # chaos: the red-sea throw's 1e-6 nudge changes its contact sequence, the states end far apart
+    assert roll.contact_sequence != other.contact_sequence
+    assert dist.max() > 1e4 * eps
+
+
+def test_identical_throws_have_exactly_zero_divergence(roll, tmp_path):
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd
+
+    twin = simulate(roll.ic.copy(), record=Record(states=True, energy=True))
+    path = tmp_path / "twins.rrd"
+    path.write_bytes(encode_compare_rrd([roll, twin], ["a", "a"]))
+    temporal = read_rrd(path)
+    _, dist = _scalars(temporal, "/divergence/distance/1")
+    assert len(dist) == roll.steps + 1 and (dist == 0).all()
+    assert "/divergence/log10/1" not in temporal  # log10(0): nothing to plot
+
+
+def test_compare_blueprint_shows_the_throws_and_the_log_divergence():
+    from dicetrace.sinks.rerun_compare import compare_blueprint
+
+    bp = compare_blueprint()
+    views = {type(v).__name__: v for v in _walk(bp.root_container)}
+    assert "Spatial3DView" in views and "TimeSeriesView" in views
+
+
+def _walk(node):
+    for c in getattr(node, "contents", []) or []:
+        yield c
+        yield from _walk(c)
+
+
+# -- optional channels (record --channels) --------------------------------------------------------
+
+CHANNEL_ENTITIES = ("/world/die/forces/normal", "/world/die/forces/friction", "/world/die/velocities")
+
+
+@pytest.fixture(scope="module")
+def channelled(tmp_path_factory):
+    from dicetrace.sinks.rerun import default_blueprint, encode_rrd, roll_logger
+    from dicetrace.sinks.rerun_channels import CHANNELS
+
+    r = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True, forces=True))
+    path = tmp_path_factory.mktemp("ch") / "channels.rrd"
+    chans = frozenset(CHANNELS)
+    path.write_bytes(encode_rrd(roll_logger(r, name="ch", channels=chans), default_blueprint(r, chans)))
+    return r, path
+
+
+def test_the_default_recording_has_no_optional_channel(rrd):
+    temporal = read_rrd(rrd)
+    assert not [e for e in temporal if e in CHANNEL_ENTITIES or e.startswith("/channels")]
+    assert "force_arrow_cm_per_unit" not in read_rrd_metadata(rrd)
+
+
+def test_channels_hold_the_kernels_forces_depths_and_node_velocities(channelled):
+    r, path = channelled
+    temporal, meta = read_rrd(path), read_rrd_metadata(path)
+    tr = r.trace
+    nodes = tr.node_pos
+    scale = meta["force_arrow_cm_per_unit"]
+    for part, cols in (("normal", [2]), ("friction", [0, 1])):
+        t = temporal[f"/world/die/forces/{part}"]
+        steps = t.column("step").to_pylist()
+        assert steps == list(range(r.steps + 1))
+        vec = t.column("Arrows3D:vectors").to_pylist()
+        org = t.column("Arrows3D:origins").to_pylist()
+        n_arrows = 0
+        for s, v, o in zip(steps, vec, org):
+            contact = np.flatnonzero(nodes[s, :, 2] <= 0.0)
+            assert len(v) == len(contact)
+            n_arrows += len(v)
+            if len(v):
+                want = np.zeros((len(contact), 3))
+                want[:, cols] = tr.forces[s, contact][:, cols]
+                np.testing.assert_allclose(np.array(v) / scale, want, rtol=1e-6, atol=1e-6 * np.abs(tr.forces).max())
+                np.testing.assert_allclose(o, nodes[s, contact], rtol=1e-6, atol=1e-5)
+        assert n_arrows > 50  # node-steps in contact over the red-sea throw (87)
+    # the normal force pushes up while a node is below ground (at least once), and is 0 off the ground
+    fz = np.stack([values(temporal[f"/channels/force_normal/{k}"], "Scalars:scalars")[:, 0] for k in range(1, 9)], axis=1)
+    np.testing.assert_array_equal(fz, tr.forces[:, :, 2])
+    assert (fz[nodes[..., 2] > 0] == 0).all() and (fz > 0).any()
+    depth = np.stack([values(temporal[f"/channels/penetration_cm/{k}"], "Scalars:scalars")[:, 0] for k in range(1, 9)], axis=1)
+    np.testing.assert_array_equal(depth, np.maximum(0.0, -nodes[..., 2]))
+    assert depth.max() > 0
+    # node velocities against the traced node positions: finite differences in free flight (before the first impact)
+    vel = values(temporal["/world/die/velocities"], "Arrows3D:vectors", 3).reshape(-1, 8, 3) / meta["velocity_arrow_s"]
+    first = int(np.flatnonzero((nodes[..., 2] <= 0).any(axis=1))[0])
+    fd = (nodes[1:first] - nodes[: first - 1]) / r.dt_s
+    np.testing.assert_allclose(vel[1:first], fd, atol=0.01 * np.abs(fd).max())
+
+
+def test_channels_blueprint_plots_the_depths():
+    from dicetrace.sinks.rerun import default_blueprint
+
+    def origins(bp):
+        return {str(getattr(v, "origin", "")) for v in _walk(bp.root_container)}
+
+    assert "/channels/penetration_cm" in origins(default_blueprint(None, {"penetration"}))
+    assert "/channels/penetration_cm" not in origins(default_blueprint(None))

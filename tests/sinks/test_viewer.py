@@ -63,3 +63,37 @@ def test_viewer_screenshot_shows_the_die_on_the_ground(tmp_path):
     # the right column (plots, contact log) uses the viewer's dark theme
     panels = im[int(0.1 * h) : int(0.9 * h), int(0.65 * w) :]
     assert (panels.sum(axis=-1) < 150).mean() > 0.3
+
+
+@pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
+@pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+def test_viewer_screenshot_shows_the_compare_view(tmp_path):
+    """``record --nudge``: both dice in their colours in the 3-D view, the log10 divergence curve in the plot."""
+    from PIL import Image
+
+    from dicetrace.ics import seed_slice
+    from dicetrace.simulate import Record, simulate
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd, throw_color
+
+    a = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True))
+    b = simulate(a.ic * (1 + 1e-6), record=Record(states=True, energy=True))
+    rrd = tmp_path / "compare.rrd"
+    rrd.write_bytes(encode_compare_rrd([a, b], ["throw 0", "nudged"]))
+    png = tmp_path / "shot.png"
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
+    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--screenshot-to", str(png), "--window-size", "1400x900"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr[-2000:]
+    im = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    h, w, _ = im.shape
+    Image.fromarray(im.astype(np.uint8)).save(tmp_path / "copy.png")
+
+    def near(region, color, tol=60):
+        return int((np.abs(region - np.array(color)).sum(axis=-1) <= tol).sum())
+
+    view = im[int(0.05 * h) : int(0.95 * h), : int(0.55 * w)]
+    npx = view.shape[0] * view.shape[1]
+    for k in (0, 1):  # each die, shaded, in its own colour
+        assert near(view, throw_color(k)) > 0.0003 * npx, f"throw {k}'s die is not visible"
+    plot = im[int(0.05 * h) : int(0.6 * h), int(0.62 * w) :]
+    assert near(plot, throw_color(1), tol=40) > 200, "the divergence curve (throw 1's colour) is not drawn"

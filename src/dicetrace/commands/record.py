@@ -1,4 +1,4 @@
-"""``dicetrace record``: simulate one throw and write it as a Rerun ``.rrd`` (and Parquet).
+"""``dicetrace record``: simulate one throw, or several to compare, and record it for Rerun (file, viewer, server).
 
 The IC comes from ``--ic VX,VY,VZ,LX,LY,LZ``, ``--slice seed --at X,Y[,Z]``,
 or ``--scan DIR --at X,Y`` (the scanned point nearest to X,Y, with the
@@ -10,9 +10,18 @@ integrator and time step when they are not the defaults).  ``--parquet DIR``
 also writes ``rolls.parquet``, ``contacts.parquet`` and
 ``trajectory.parquet`` there.  Prints one summary line.
 
+Sinks as in rerun's example scripts (``rr.script_add_args``): ``--out`` /
+``--save FILE`` (the default when no other is given), ``--spawn`` (open a
+viewer), ``--connect [--url URL]`` (a running viewer or gRPC server),
+``--serve`` (gRPC + web viewer, until Ctrl-C or ``--serve-for`` s).  They
+carry the same content and default blueprint: :mod:`dicetrace.sinks.rerun_stream`.
+
+Several ``--ic``, or ``--nudge EPS`` (a second throw from the first IC times
+1 + EPS), compare throws in one recording: :mod:`dicetrace.sinks.rerun_compare`.
+
 Exit codes: 0 done (settled or time cap); 1 numerical failure (status
 ``non_finite`` or ``blow_up``: the files are still written, for inspection);
-2 bad input (nothing written).
+2 bad input or an unreachable viewer / server (nothing written).
 """
 
 from __future__ import annotations
@@ -20,7 +29,7 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Optional
+from typing import List, Optional
 
 import typer
 
@@ -94,16 +103,16 @@ def check_output_folder(path: Path) -> Path:
 RECORD_MEMORY_FACTOR = 8.0
 
 
-def check_record_size(cfg) -> None:
-    """Refuse, before running, a throw whose recording could exceed the available memory.
+def check_record_size(cfg, n_throws: int = 1, forces: bool = False) -> None:
+    """Refuse, before running, throws whose recording could exceed the available memory.
 
-    The worst case is a throw that runs to the time cap: max_steps + 1 rows.
+    The worst case is throws that run to the time cap: max_steps + 1 rows each.
     """
     from dicetrace.simulate import Record, available_memory, trace_bytes
     from dicetrace.sinks._common import human_bytes
 
     steps = cfg.numerics.max_steps
-    need = trace_bytes(steps + 1, Record(states=True, energy=True)) * RECORD_MEMORY_FACTOR
+    need = trace_bytes(steps + 1, Record(states=True, energy=True, forces=forces)) * RECORD_MEMORY_FACTOR * n_throws
     avail = available_memory()
     if avail is not None and need > avail:
         fail(f"--dt {fmt_num(cfg.numerics.dt_s)} / --t-max {fmt_num(cfg.numerics.t_max_s)}: a throw may run to the "
@@ -138,14 +147,71 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
     return np.asarray(the_ic, dtype=np.float64), cfg, exact, desc
 
 
+def parse_nudge(text: str | None) -> float | None:
+    if text is None:
+        return None
+    try:
+        eps = float(text)
+    except ValueError:
+        fail(f"--nudge must be a number (a relative perturbation such as 1e-6), got {text!r}")
+    if not np.isfinite(eps) or abs(eps) >= 1.0:
+        fail(f"--nudge must be finite and in (-1, 1), got {text!r}")
+    return eps
+
+
+def parse_seconds(text: str | None, option: str) -> float | None:
+    if text is None:
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        fail(f"{option} must be a number of seconds, got {text!r}")
+    if not np.isfinite(v) or v < 0:
+        fail(f"{option} must be a finite number of seconds >= 0, got {text!r}")
+    return v
+
+
+def check_port(port: int | None, option: str) -> None:
+    if port is not None and not 0 < port < 65536:
+        fail(f"{option} {port} is out of range 1..65535")
+
+
+def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, web_port):
+    """The streaming sink asked for ("spawn", "connect", "serve" or None), its options checked; one-line failures."""
+    chosen = [name for name, on in (("spawn", spawn), ("connect", connect), ("serve", serve)) if on]
+    if len(chosen) > 1:
+        fail(f"give at most one of --spawn, --connect, --serve (got {', '.join('--' + c for c in chosen)})")
+    mode = chosen[0] if chosen else None
+    if url is not None and mode != "connect":
+        fail("--url needs --connect")
+    if serve_for is not None and mode != "serve":
+        fail("--serve-for needs --serve")
+    if web_port is not None and mode != "serve":
+        fail("--web-port needs --serve")
+    if port is not None and mode not in ("spawn", "serve"):
+        fail("--port needs --spawn or --serve (with --connect give --url)")
+    if mode == "spawn" and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        fail("--spawn needs a display to open the viewer on (DISPLAY and WAYLAND_DISPLAY are unset): use --serve "
+             "(web viewer) or --out FILE.rrd")
+    check_port(port, "--port")
+    check_port(web_port, "--web-port")
+    return mode
+
+
 def register(app: typer.Typer) -> None:
     @app.command("record")
     def record_cmd(
-        ic: Optional[str] = typer.Option(None, "--ic", help=IC_HELP),
+        ic: Optional[List[str]] = typer.Option(
+            None, "--ic", help=IC_HELP + " Repeat it to compare throws in one recording."
+        ),
         slice_name: Optional[str] = typer.Option(None, "--slice", help=SLICE_HELP),
         at: Optional[str] = typer.Option(None, "--at", help=AT_HELP + " With --scan: a scanned point (the nearest one)."),
         scan: Optional[Path] = typer.Option(
             None, "--scan", help="A scan folder (dicetrace scan): record its point nearest to --at, with its configuration."
+        ),
+        nudge: Optional[str] = typer.Option(
+            None, "--nudge", help="Compare with a second throw whose IC is the first one's times (1 + NUDGE), e.g. 1e-6: "
+            "both dice side by side and their divergence on a log scale."
         ),
         preset: Optional[str] = typer.Option(None, "--preset", help=PRESET_HELP + " [default: seed]"),
         integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
@@ -153,77 +219,187 @@ def register(app: typer.Typer) -> None:
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
         out: Optional[Path] = typer.Option(
-            None, "--out", help="Output .rrd file (default: recordings/<name>.rrd, the name encoding the IC); "
-            "a character device or FIFO is written directly, '-' is standard output."
+            None, "--out", "--save", help="Output .rrd file (default, when no other sink is given: "
+            "recordings/<name>.rrd, the name encoding the IC); a character device or FIFO is written directly, "
+            "'-' is standard output."
+        ),
+        spawn: bool = typer.Option(False, "--spawn", help="Open a Rerun viewer now and stream the recording to it."),
+        connect: bool = typer.Option(
+            False, "--connect", help="Stream the recording to a running Rerun viewer or gRPC server at --url "
+            "(exit 2 if none answers within 2 s)."
+        ),
+        url: Optional[str] = typer.Option(
+            None, "--url", help="With --connect: its address, rerun+http://HOST:PORT/proxy or a port "
+            "(default: rerun+http://127.0.0.1:9876/proxy, the SDK's default)."
+        ),
+        serve: bool = typer.Option(
+            False, "--serve", help="Serve the recording over gRPC and the web viewer over HTTP (the URL is printed) "
+            "until Ctrl-C or --serve-for seconds."
+        ),
+        serve_for: Optional[str] = typer.Option(None, "--serve-for", help="With --serve: stop after this many seconds."),
+        port: Optional[int] = typer.Option(
+            None, "--port", help="With --spawn or --serve: the gRPC port (default: 9876)."
+        ),
+        web_port: Optional[int] = typer.Option(None, "--web-port", help="With --serve: the web viewer's port (default: 9090)."),
+        channels: Optional[str] = typer.Option(
+            None, "--channels", help="Optional channels, comma-separated (default: none, a lean recording): forces "
+            "(per-node normal and friction contact forces as arrows), penetration (depth per node below the ground), "
+            "velocities (node velocities as arrows), or all."
         ),
         parquet: Optional[Path] = typer.Option(
             None, "--parquet", help="Also write rolls.parquet, contacts.parquet and trajectory.parquet into this folder."
         ),
     ) -> None:
-        """Simulate one throw and write it as a Rerun recording (.rrd) with a default blueprint.
+        """Simulate one throw (or several, to compare them) and record it for the Rerun viewer, with a default blueprint.
 
-        Open it with `rerun FILE.rrd`.  Exit code 1 on a numerical failure (the files are
-        still written for inspection), 2 on bad input.
+        Open a file with `rerun FILE.rrd`.  Sinks (as in rerun's example scripts): --out/--save FILE
+        (the default when no other sink is given), --spawn, --connect [--url URL], --serve.
+        Several --ic, or --nudge EPS, compare throws in one recording.  Exit code 1 on a numerical
+        failure (the files are still written for inspection), 2 on bad input or an unreachable
+        viewer or server.
         """
+        from dicetrace.sinks.rerun_stream import DEFAULT_PORT, DEFAULT_WEB_PORT, StreamError
+
+        ics = list(ic or [])
+        mode = check_sinks(spawn, connect, serve, url, serve_for, port, web_port)
+        serve_s = parse_seconds(serve_for, "--serve-for")
+        eps = parse_nudge(nudge)
+        comparing = len(ics) > 1 or eps is not None
+        from dicetrace.sinks.rerun_channels import parse_channels
+
+        try:
+            chans = parse_channels(channels)
+        except ValueError as e:
+            fail(f"--channels: {e}")
+        if comparing and chans:
+            fail("--channels records one throw: drop it when comparing throws (several --ic or --nudge)")
+        if comparing and parquet is not None:
+            fail("--parquet records one throw: drop it when comparing throws (several --ic or --nudge)")
         if scan is not None:
-            if ic is not None or slice_name is not None:
+            if ics or slice_name is not None:
                 fail("give either --scan DIR --at X,Y or --ic / --slice, not both")
             conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
+            all_ics = [the_ic]
+            labels = [ic_label(the_ic, coords, desc)]
         else:
             conv = preset_or_fail(preset or "seed").l_convention
-            the_ic, coords, desc = ic_from_options(ic, slice_name, at, conv)
-            cfg = build_config(preset or "seed", integrator, dt, t_max, ics=the_ic, tol=tol)
+            if len(ics) > 1 and (slice_name is not None or at is not None):
+                fail("give either several --ic or --slice/--at, not both")
+            the_ic, coords, desc = ic_from_options(ics[0] if ics else None, slice_name, at, conv)
+            all_ics = [the_ic] + [ic_from_options(t, None, None, conv)[0] for t in ics[1:]]
+            labels = [ic_label(the_ic, coords, desc)] + [ic_label(v, None, {"kind": "ic"}) for v in all_ics[1:]]
+        if eps is not None:
+            all_ics.append(all_ics[0] * (1.0 + eps))
+            labels.append(f"throw 0's IC × (1 + {eps:g})")
+        if scan is None:
+            cfg = build_config(preset or "seed", integrator, dt, t_max, ics=np.stack(all_ics), tol=tol)
         name = default_name(the_ic, coords, desc, cfg)
-        if out is None:
+        if comparing:
+            name = f"{name}_nudge{fmt_num(eps)}" if eps is not None and len(all_ics) == 2 else f"compare{len(all_ics)}_{name}"
+        if out is None and mode is None:
             out = DEFAULT_FOLDER / f"{name}.rrd"
-        dest = check_output_file(out, "--out", suffix=".rrd")
+        dest = None if out is None else check_output_file(out, "--out", suffix=".rrd")
         if parquet is not None:
             check_output_folder(parquet)
-            if dest.target is not None and os.path.realpath(parquet) == os.path.realpath(dest.target):
+            if dest is not None and dest.target is not None and os.path.realpath(parquet) == os.path.realpath(dest.target):
                 fail(f"--out {str(out)!r} and --parquet {str(parquet)!r} are the same path")
-        check_record_size(cfg)
+        try:
+            if mode == "connect":
+                from dicetrace.sinks.rerun_stream import check_connect
+
+                target = check_connect(url)
+            elif mode == "serve":
+                from dicetrace.sinks.rerun_stream import check_serve
+
+                check_serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT)
+        except StreamError as e:
+            fail(str(e))
+        except ValueError as e:
+            fail(f"--url {url}: {e}")
+        check_record_size(cfg, len(all_ics), "forces" in chans)
 
         from dicetrace.simulate import Record, simulate
 
-        roll = simulate(the_ic, config=cfg, record=Record(states=True, energy=True))
-        label = ic_label(the_ic, coords, desc)
+        rec_what = Record(states=True, energy=True, forces="forces" in chans)
+        rolls = [simulate(v, config=cfg, record=rec_what) for v in all_ics]
+        roll = rolls[0]
+        label = labels[0]
 
-        from dicetrace.sinks._common import Staging
-        from dicetrace.sinks.rerun import encode_rrd_of
+        if comparing:
+            from dicetrace.sinks.rerun_compare import compare_blueprint, compare_logger
 
-        # Everything is staged first and put in place together: a failure (a full
-        # disk) leaves neither a half-written file nor a recording without its tables.
-        with Staging() as staging:
-            data = encode_rrd_of(roll, name=name, ic_label=label)
-            tmp = staging.path(dest)
-            try:
-                tmp.write_bytes(data)
-            except OSError as e:
-                raise staging.fail(dest, e) from None
-            written = [dest.label if dest.kind == "stdout" else str(out)]
-            if parquet is not None:
-                from dicetrace.sinks.parquet import write_tables
+            log, blueprint = compare_logger(rolls, labels, name=name), compare_blueprint(rolls)
+        else:
+            from dicetrace.sinks.rerun import default_blueprint, roll_logger
 
-                meta = {"ic_label": label, **{k: v for k, v in desc.items() if k != "kind"}}
-                ids = [desc["ic_id"]] if "ic_id" in desc else None
-                coords2 = None if coords is None else coords[None, :]
-                paths = write_tables(parquet, roll, coords=coords2, ic_ids=ids, metadata=meta, staging=staging)
-                written.append(f"{parquet}{os.sep} ({', '.join(p.name for p in paths.values())})")
+            log = roll_logger(roll, name=name, ic_label=label, channels=chans)
+            blueprint = default_blueprint(roll, chans)
 
-        outcome = roll.outcome if roll.outcome >= 0 else "-1 (not settled)"
-        summary = (
-            f"outcome {outcome}  status {roll.status}  steps {roll.steps}  t_settle_s {roll.t_settle_s:.6g}  "
-            f"contact_sequence {roll.contact_sequence}  wrote {' '.join(written)}"
-        )
+        written = []
+        if dest is not None:
+            from dicetrace.sinks._common import Staging
+            from dicetrace.sinks.rerun import encode_rrd
+
+            # Everything is staged first and put in place together: a failure (a full
+            # disk) leaves neither a half-written file nor a recording without its tables.
+            with Staging() as staging:
+                data = encode_rrd(log, blueprint)
+                tmp = staging.path(dest)
+                try:
+                    tmp.write_bytes(data)
+                except OSError as e:
+                    raise staging.fail(dest, e) from None
+                written = [dest.label if dest.kind == "stdout" else str(out)]
+                if parquet is not None:
+                    from dicetrace.sinks.parquet import write_tables
+
+                    meta = {"ic_label": label, **{k: v for k, v in desc.items() if k != "kind"}}
+                    ids = [desc["ic_id"]] if "ic_id" in desc else None
+                    coords2 = None if coords is None else coords[None, :]
+                    paths = write_tables(parquet, roll, coords=coords2, ic_ids=ids, metadata=meta, staging=staging)
+                    written.append(f"{parquet}{os.sep} ({', '.join(p.name for p in paths.values())})")
+
         # the recording itself may be on stdout: the summary then goes to stderr
-        stream = sys.stderr if dest.kind == "stdout" or sys.stdout is None else sys.stdout
-        print(summary, file=stream)
-        if roll.status.failed:
+        stream_out = sys.stderr if (dest is not None and dest.kind == "stdout") or sys.stdout is None else sys.stdout
+        sent = ""
+        if mode is not None:
+            from dicetrace.sinks.rerun_stream import Stream, wait_serving
+
+            st = Stream(blueprint)
+            try:
+                if mode == "connect":
+                    st.connect(target)
+                elif mode == "spawn":
+                    st.spawn(port or DEFAULT_PORT)
+                else:
+                    web = st.serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT)
+                st.send(log)
+                sent = f"sent to {st.grpc_url}"
+                if mode == "serve":
+                    until = "Ctrl-C" if serve_s is None else f"{serve_s:g} s have passed (or Ctrl-C)"
+                    print(f"serving the web viewer at {web} (gRPC {st.grpc_url}) until {until}", file=stream_out, flush=True)
+                    wait_serving(serve_s)
+            except StreamError as e:
+                fail(str(e))
+            finally:
+                st.close()
+
+        outcomes = []
+        for k, r in enumerate(rolls):
+            o = r.outcome if r.outcome >= 0 else "-1 (not settled)"
+            pre = f"throw {k}: " if comparing else ""
+            outcomes.append(f"{pre}outcome {o}  status {r.status}  steps {r.steps}  t_settle_s {r.t_settle_s:.6g}  "
+                            f"contact_sequence {r.contact_sequence}")
+        summary = "  |  ".join(outcomes) + (f"  wrote {' '.join(written)}" if written else "") + (f"  {sent}" if sent else "")
+        print(summary, file=stream_out)
+        failed = [r for r in rolls if r.status.failed]
+        if failed:
+            r = failed[0]
             print(
-                f"dicetrace: numerical failure: status {roll.status} after {roll.steps} steps "
-                f"(t = {roll.t_settle_s:.6g} s): {roll.status.advice}; "
-                f"the recording was still written for inspection: {out}",
+                f"dicetrace: numerical failure: status {r.status} after {r.steps} steps "
+                f"(t = {r.t_settle_s:.6g} s): {r.status.advice}; "
+                f"the recording was still written for inspection: {' '.join(written + [sent]).strip()}",
                 file=sys.stderr,
             )
             sys.exit(EXIT_NUMERICAL_FAILURE)

@@ -26,6 +26,12 @@ Entities (world frame: z up, cm):
 ``summary``                 text document: IC, configuration, outcome, status,
                             contact sequence
 
+Optional channels (forces, penetration depths, node velocities) are
+logged only when asked: :mod:`dicetrace.sinks.rerun_channels`.  The same
+``log(rec)`` (:func:`roll_logger`) feeds the file and the streaming sinks
+(:mod:`dicetrace.sinks.rerun_stream`); several throws compared:
+:mod:`dicetrace.sinks.rerun_compare`.
+
 The recording property ``dicetrace`` (``rec.send_property``) holds the
 version, the full configuration (JSON), the IC and the summary:
 :func:`read_rrd_metadata`.  Read a file back with ``rerun.chunk.RrdReader`` (needs only
@@ -139,12 +145,30 @@ def encode_rrd_of(
     if tr is None or tr.node_offsets is None or tr.energy is None:
         raise ValueError("write_rrd needs a roll with states and energy: simulate(..., record=Record(states=True, energy=True))")
 
+    return encode_rrd(roll_logger(roll, name=name, ic_label=ic_label, trail_every=trail_every), default_blueprint(roll),
+                      application_id=application_id)
+
+
+def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, trail_every: int | None = None,
+                channels=frozenset()):
+    """``log(rec)``: logs the whole recording of ``roll`` (name, property, data) into a stream.
+
+    The one logging path of both the file (:func:`encode_rrd_of`) and the
+    streaming sinks (:mod:`dicetrace.sinks.rerun_stream`): they carry the same content.
+    ``channels``: optional channels (:mod:`dicetrace.sinks.rerun_channels`).
+    """
+    scales = {}
+    if channels:
+        from dicetrace.sinks.rerun_channels import arrow_scales
+
+        scales = arrow_scales(roll, channels)
+
     def log(rec) -> None:
         rec.send_recording_name(name)
-        rec.send_property("dicetrace", _rr().AnyValues(**metadata_values(roll, ic_label)))
-        log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every)
+        rec.send_property("dicetrace", _rr().AnyValues(**metadata_values(roll, ic_label), **scales))
+        log_roll(rec, roll, ic_label=ic_label, trail_every=trail_every, channels=channels, scales=scales)
 
-    return encode_rrd(log, default_blueprint(roll), application_id=application_id)
+    return log
 
 
 def _rr():
@@ -257,7 +281,8 @@ def event_texts(steps, nodes, entered) -> list[str]:
     return [f"step {int(s)}: node {int(n)} {'enters' if e else 'leaves'}" for s, n, e in zip(steps, nodes, entered)]
 
 
-def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None = None) -> None:
+def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None = None, channels=frozenset(),
+             scales=None) -> None:
     """Log one throw into an open recording stream (see the module docstring)."""
     import rerun as rr
 
@@ -411,9 +436,13 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
         )
     else:
         rec.log("contacts", rr.TextLog("no contact events", level="DEBUG"), static=True)
+    if channels:
+        from dicetrace.sinks.rerun_channels import arrow_scales, log_channels
+
+        log_channels(rec, roll, channels, rows, index, scales or arrow_scales(roll, channels))
 
 
-def _log_trail(rec, rr, cm, steps, t_s, trail_every) -> None:
+def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_path", color=CM_COLOR) -> None:
     """The growing centre-of-mass line strip, updated every ``trail_every`` steps.
 
     Update u (at row r_u) holds the path sampled every ``trail_every`` rows up
@@ -438,9 +467,9 @@ def _log_trail(rec, rr, cm, steps, t_s, trail_every) -> None:
         if (nfull - 1) * every != r:
             pts = np.concatenate([pts, cm[r : r + 1]])
         strips.append(pts)
-    rec.log("world/cm_path", rr.LineStrips3D.from_fields(radii=[0.03], colors=[CM_COLOR]), static=True)
+    rec.log(entity, rr.LineStrips3D.from_fields(radii=[0.03], colors=[color]), static=True)
     rec.send_columns(
-        "world/cm_path",
+        entity,
         indexes=[rr.TimeColumn("step", sequence=steps[rows]), rr.TimeColumn("sim_time", duration=t_s[rows])],
         columns=rr.LineStrips3D.columns(strips=strips),
     )
@@ -470,8 +499,8 @@ def _eye_for(cm: np.ndarray, half: float):
     return rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
 
 
-def default_blueprint(roll=None):
-    """3-D view of the world, energy plots, the contact log and the summary.
+def default_blueprint(roll=None, channels=()):
+    """3-D view of the world, energy plots, the contact log and the summary (and plots of scalar ``channels``).
 
     With a ``roll``, the 3-D camera frames its path.
     """
@@ -508,6 +537,7 @@ def default_blueprint(roll=None):
                 ),
             ),
             rrb.TextDocumentView(origin="/summary", name="summary"),
+            *_channel_views(channels),
         ),
         row_shares=[3, 2, 3],
     )
@@ -555,3 +585,11 @@ def read_rrd(path, *, static: bool = False) -> dict:
             t = t.sort_by("step")
         out[entity] = t
     return out
+
+
+def _channel_views(channels) -> list:
+    if not channels:
+        return []
+    from dicetrace.sinks.rerun_channels import channel_views
+
+    return channel_views(channels)

@@ -1,0 +1,205 @@
+"""Rerun compare recording: several throws side by side and their divergence from the first, on a log scale.
+
+Entities (world frame: z up, cm):
+
+``world/ground``               the ground plane (as in a single-throw recording)
+``throws/<k>/body``            throw k's die, a solid box in its own colour (:data:`THROW_COLORS`)
+``throws/<k>/nodes``           its eight corner nodes, labelled 1..8
+``throws/<k>/cm_path``         its centre-of-mass path so far
+``divergence/log10/<k>``       log10 of the phase-space distance of throw k from throw 0 (k ≥ 1);
+                               steps where the distance is exactly 0 are left out (no logarithm)
+``divergence/distance/<k>``    the distance itself (dimensionless), every step
+``divergence/position_cm/<k>`` |Δ centre of mass|, cm
+``divergence/angle_rad/<k>``   rotation angle between the two orientations, rad
+``summary``                    text document: each throw's IC, outcome and contact sequence
+
+The distance (:func:`divergence`) is the max norm of four relative parts,
+each scaled by throw 0's initial values: |Δx| / side, the rotation angle
+between the orientations (rad), |ΔU| / |U₀| and |ΔL| / |L₀|.  At t = 0 the
+positions and orientations agree, so for a throw whose IC is throw 0's
+scaled by (1 + ε) (``--nudge ε``) it is exactly ε up to rounding.
+Rerun 0.41 plots have no logarithmic axis, hence the log10 series.  A throw
+that settles before another keeps its last state.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: One colour per throw (cycled): blue, orange, green, purple, brown, pink.
+THROW_COLORS = np.array(
+    [[31, 119, 180], [255, 127, 14], [44, 160, 44], [148, 103, 189], [140, 86, 75], [227, 119, 194]], dtype=np.uint8
+)
+
+
+def throw_color(k: int) -> tuple[int, int, int]:
+    return tuple(int(c) for c in THROW_COLORS[k % len(THROW_COLORS)])
+
+
+def _padded(roll, n: int) -> dict:
+    """Throw's state arrays over rows 0..n-1, the last state repeated past its end."""
+    tr = roll.trace
+    rows = np.flatnonzero(tr.written & np.isfinite(tr.cm_pos).all(axis=1))
+    take = np.minimum(np.arange(n), rows[-1])
+    return {
+        "cm": tr.cm_pos[take],
+        "vel": tr.cm_vel[take],
+        "L": tr.L[take],
+        "off": tr.node_offsets[take],
+        "quat": tr.quat_xyzw[take],
+    }
+
+
+def common_length(rolls) -> int:
+    """Rows of the comparison: those of the longest throw (all share the time step)."""
+    return max(int(np.flatnonzero(r.trace.written)[-1]) + 1 for r in rolls)
+
+
+def rotation_angle(qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
+    """Angle (rad) of the rotation taking orientation ``qa`` to ``qb`` (quaternions xyzw, per row).
+
+    From the relative quaternion q = conj(qa)·qb as 2·atan2(|q_xyz|, |q_w|):
+    exactly 0 for equal inputs (an arccos of the trace would give ~1e-8).
+    """
+    va, wa = qa[:, :3], qa[:, 3]
+    vb, wb = qb[:, :3], qb[:, 3]
+    w = wa * wb + np.einsum("ni,ni->n", va, vb)
+    v = wa[:, None] * vb - wb[:, None] * va - np.cross(va, vb)
+    return 2.0 * np.arctan2(np.linalg.norm(v, axis=1), np.abs(w))
+
+
+def divergence(ref: dict, other: dict, *, side_cm: float, u0: float, l0: float) -> dict:
+    """Distance of ``other`` from ``ref`` per row: ``distance`` (max norm, see the module docstring) and its parts."""
+    dpos = np.linalg.norm(other["cm"] - ref["cm"], axis=1)
+    ang = rotation_angle(ref["quat"], other["quat"])
+    dvel = np.linalg.norm(other["vel"] - ref["vel"], axis=1)
+    dl = np.linalg.norm(other["L"] - ref["L"], axis=1)
+    parts = np.stack([dpos / side_cm, ang, dvel / max(u0, 1e-300), dl / max(l0, 1e-300)])
+    return {"distance": parts.max(axis=0), "position_cm": dpos, "angle_rad": ang}
+
+
+def compare_series(rolls) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+    """(step, t_s, [divergence of throw k from throw 0 for k ≥ 1])."""
+    n = common_length(rolls)
+    dt = rolls[0].dt_s
+    states = [_padded(r, n) for r in rolls]
+    cfg = rolls[0].config
+    side = 2.0 * float(cfg.preset.half_side_cm)
+    u0 = float(np.linalg.norm(rolls[0].ic[:3]))
+    l0 = float(np.linalg.norm(rolls[0].ic[3:]))
+    divs = [divergence(states[0], s, side_cm=side, u0=u0, l0=l0) for s in states[1:]]
+    steps = np.arange(n, dtype=np.int64)
+    return steps, steps * dt, divs
+
+
+def compare_summary(rolls, labels) -> str:
+    lines = ["# dicetrace: throws compared", "",
+             "Divergence: max norm of |Δx|/side, rotation angle (rad), |ΔU|/|U₀|, |ΔL|/|L₀| "
+             "(throw 0's initial values), against throw 0; plotted as log10.", "",
+             "| throw | IC | outcome | status | steps | contact sequence |", "|---|---|---|---|---|---|"]
+    for k, (r, lab) in enumerate(zip(rolls, labels)):
+        lines.append(f"| {k} | {lab} | {r.outcome} | {r.status} | {r.steps} | `{r.contact_sequence}` |")
+    return "\n".join(lines)
+
+
+def log_compare(rec, rolls, labels) -> None:
+    """Log the throws and their divergence into an open recording stream."""
+    import rerun as rr
+
+    from dicetrace.sinks.rerun import GROUND_COLOR, _log_trail
+
+    half = float(rolls[0].config.preset.half_side_cm)
+    steps, t_s, divs = compare_series(rolls)
+    n = len(steps)
+
+    def idx(st, t):
+        return [rr.TimeColumn("step", sequence=st), rr.TimeColumn("sim_time", duration=t)]
+
+    rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+    states = [_padded(r, n) for r in rolls]
+    allxy = np.concatenate([(s["cm"][:, None, :] + s["off"])[..., :2].reshape(-1, 2) for s in states])
+    lo = np.minimum(allxy.min(axis=0), -3 * half)
+    hi = np.maximum(allxy.max(axis=0), 3 * half)
+    centre, extent, thick = 0.5 * (lo + hi), 0.5 * (hi - lo) + 3.0 * half, 0.05 * half
+    rec.log("world/ground", rr.Boxes3D(centers=[[centre[0], centre[1], -thick]], half_sizes=[[extent[0], extent[1], thick]],
+                                       colors=[GROUND_COLOR], fill_mode="solid"), static=True)
+    rec.log("summary", rr.TextDocument(compare_summary(rolls, labels), media_type=rr.MediaType.MARKDOWN), static=True)
+
+    for k, s in enumerate(states):
+        color = throw_color(k)
+        base = f"throws/{k}"
+        index = idx(steps, t_s)
+        rec.log(f"{base}/body", rr.Boxes3D.from_fields(half_sizes=[[half, half, half]], colors=[color], fill_mode="solid",
+                                                       labels=[f"throw {k}"], show_labels=False), static=True)
+        rec.send_columns(f"{base}/body", indexes=index, columns=rr.Boxes3D.columns(centers=s["cm"], quaternions=s["quat"]))
+        rec.log(f"{base}/nodes", rr.Points3D.from_fields(radii=[0.07 * half], colors=[color],
+                                                        labels=[str(j) for j in range(1, 9)]), static=True)
+        nodes = s["cm"][:, None, :] + s["off"]
+        rec.send_columns(f"{base}/nodes", indexes=index,
+                         columns=rr.Points3D.columns(positions=nodes.reshape(-1, 3)).partition(np.full(n, 8)))
+        _log_trail(rec, rr, s["cm"], steps, t_s, None, entity=f"{base}/cm_path", color=color)
+
+    for k, d in enumerate(divs, start=1):
+        color = throw_color(k)
+        dist = d["distance"]
+        pos = dist > 0
+        rec.log(f"divergence/log10/{k}", rr.SeriesLines(names=[f"log10 distance, throw {k} vs 0"], colors=[color]),
+                static=True)
+        if pos.any():
+            rec.send_columns(f"divergence/log10/{k}", indexes=idx(steps[pos], t_s[pos]),
+                             columns=rr.Scalars.columns(scalars=np.log10(dist[pos])))
+        for key in ("distance", "position_cm", "angle_rad"):
+            rec.log(f"divergence/{key}/{k}", rr.SeriesLines(names=[f"{key}, throw {k} vs 0"], colors=[color]),
+                    static=True)
+            rec.send_columns(f"divergence/{key}/{k}", indexes=idx(steps, t_s), columns=rr.Scalars.columns(scalars=d[key]))
+
+
+def compare_blueprint(rolls=None):
+    """3-D view of all throws, the log10 divergence plot and the summary.
+
+    With ``rolls``, the 3-D camera frames the paths of all of them.
+    """
+    import rerun.blueprint as rrb
+
+    from dicetrace.sinks.rerun import _eye_for
+
+    eye = None
+    if rolls:
+        eye = _eye_for(np.concatenate([r.trace.cm_pos for r in rolls]), float(rolls[0].config.preset.half_side_cm))
+    view3d = rrb.Spatial3DView(origin="/", contents=["/world/**", "/throws/**"], name="throws", eye_controls=eye,
+                               background=(250, 250, 250), line_grid=rrb.LineGrid3D(visible=False))
+    div = rrb.TimeSeriesView(origin="/divergence/log10", name="log10 divergence from throw 0",
+                             plot_legend=rrb.PlotLegend(corner="RightBottom"))
+    pos = rrb.TimeSeriesView(origin="/divergence/position_cm", name="|Δ centre of mass| (cm)",
+                             plot_legend=rrb.PlotLegend(corner="LeftTop"))
+    right = rrb.Vertical(div, rrb.Tabs(pos, rrb.TextDocumentView(origin="/summary", name="summary")), row_shares=[3, 2])
+    return rrb.Blueprint(
+        rrb.Horizontal(view3d, right, column_shares=[3, 2]),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed", timeline="step", play_state="following"),
+        auto_views=False,
+    )
+
+
+def compare_logger(rolls, labels, *, name: str = "dicetrace compare"):
+    """``log(rec)`` of the compare recording (the file and the streaming sinks share it)."""
+    import rerun as rr
+
+    from dicetrace.sinks.rerun import metadata_values
+
+    def log(rec) -> None:
+        rec.send_recording_name(name)
+        meta = metadata_values(rolls[0], labels[0])
+        meta["n_throws"] = len(rolls)
+        rec.send_property("dicetrace", rr.AnyValues(**meta))
+        log_compare(rec, rolls, labels)
+
+    return log
+
+
+def encode_compare_rrd(rolls, labels, *, name: str = "dicetrace compare", application_id: str = "dicetrace") -> bytes:
+    """The bytes of the compare recording of ``rolls`` (throw 0 the reference)."""
+    from dicetrace.sinks.rerun import encode_rrd
+
+    return encode_rrd(compare_logger(rolls, labels, name=name), compare_blueprint(rolls), application_id=application_id)
