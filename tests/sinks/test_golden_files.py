@@ -291,7 +291,7 @@ def test_rrd_blueprint_equals_golden(golden, fresh):
     assert_no_differences(diffs)
     assert not [k for k in want if "unreached" in k], "a blueprint entity is not reachable from the viewport"
     origins = {v["ViewBlueprint:space_origin"][0] for v in want.values() if "ViewBlueprint:space_origin" in v}
-    assert origins == {"/world", "/energy", "/stop_test", "/contacts", "/summary"}
+    assert origins == {"/world", "/energy", "/stop_test", "/stop_margin", "/contacts", "/summary"}
 
 
 # -- the files themselves, and the comparison's own power ---------------------------------------------

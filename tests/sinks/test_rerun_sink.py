@@ -165,6 +165,11 @@ def test_energies_equal_the_trace(roll, temporal):
         np.testing.assert_array_equal(got, roll.trace.energy[key])
     got = values(temporal["/stop_test/energy"], "Scalars:scalars")[:, 0]
     np.testing.assert_array_equal(got, roll.trace.energy["stop_test"])
+    # the margin view: log10 of the energy above the threshold, -3 once it is at or below it (the stop)
+    margin = values(temporal["/stop_margin"], "Scalars:scalars")[:, 0]
+    above = roll.trace.energy["stop_test"] - roll.config.preset.e_stop
+    np.testing.assert_allclose(margin[above > 1e-3], np.log10(above[above > 1e-3]), rtol=1e-12)
+    assert margin[-1] == -3.0 and (margin[:-1] > -3.0).all()  # the crossing is the last step, and only it
 
 
 def test_contact_log_has_exactly_the_roll_events(roll, temporal):
@@ -257,7 +262,7 @@ def test_blueprint_shows_every_logged_entity_and_no_empty_view(rrd, temporal, st
     views = blueprint_views(rows)
     assert sorted(views.values()) == sorted(
         [("3D", "/world"), ("TimeSeries", "/energy"), ("TimeSeries", "/stop_test"), ("TextLog", "/contacts"),
-         ("TextDocument", "/summary")]
+         ("TextDocument", "/summary"), ("TimeSeries", "/stop_margin")]
     )  # fmt: skip
 
     def under(entity, origin):

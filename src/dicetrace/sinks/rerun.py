@@ -10,9 +10,9 @@ Entities (world frame: z up, cm):
 
 ``world/ground``            static thin box whose top face is the plane z = 0
 ``world/die/body``          the die, a solid box (centre + quaternion per step)
-``world/die/faces``         six thin coloured plates on the faces, labelled 1..6
+``world/die/faces``         six thin coloured plates on the faces, their numbers 1..6 shown
                             (1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black)
-``world/die/nodes``         the eight corner nodes, labelled 1..8; red while at
+``world/die/nodes``         the eight corner nodes, labelled 1..8 (on hover); red while at
                             or below the ground (z ≤ 0), grey otherwise
 ``world/cm``                the centre of mass
 ``world/cm_path``           the centre-of-mass path so far (a growing line strip,
@@ -22,6 +22,7 @@ Entities (world frame: z up, cm):
 ``energy/<name>``           energies, node-mass·cm²/s² (translational and
                             rotational kinetic, gravitational, elastic, total)
 ``stop_test/energy``        the program's stop-test energy, with its threshold
+``stop_margin``             log10 of the stop-test energy above the threshold (the crossing)
 ``contacts``                text log: one row per event, "step 176: node 6 enters"
 ``summary``                 text document: IC, configuration, outcome, status,
                             contact sequence
@@ -347,7 +348,7 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
             colors=FACE_COLORS,
             fill_mode="solid",
             labels=[str(v) for v in range(1, 7)],
-            show_labels=False,
+            show_labels=True,  # the face numbers, drawn on the plates
         ),
         static=True,
     )
@@ -365,7 +366,7 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     # -- nodes: red while in contact -------------------------------------------------------------
     rec.log(
         "world/die/nodes",
-        rr.Points3D.from_fields(radii=[0.09 * half], labels=[str(k) for k in range(1, 9)], show_labels=True),
+        rr.Points3D.from_fields(radii=[0.09 * half], labels=[str(k) for k in range(1, 9)], show_labels=False),
         static=True,
     )
     in_contact = nodes[..., 2] <= 0.0
@@ -399,6 +400,9 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     rec.send_columns(
         "stop_test/threshold", indexes=idx(ends, t_s[[0, -1]]), columns=rr.Scalars.columns(scalars=[e_stop, e_stop])
     )
+    rec.log("stop_margin", rr.SeriesLines(names=["log10(E − threshold), −3 at or below it"]), static=True)
+    margin = np.log10(np.maximum(np.asarray(energy["stop_test"], float) - e_stop, 1e-3))
+    rec.send_columns("stop_margin", indexes=index, columns=rr.Scalars.columns(scalars=margin))
 
     # -- contact events: text log and markers --------------------------------------------------
     ev_steps, ev_nodes, ev_enter = contact_events(roll.contact_sets, roll.contact_steps)
@@ -537,6 +541,7 @@ def default_blueprint(roll=None, channels=()):
                 ),
             ),
             rrb.TextDocumentView(origin="/summary", name="summary"),
+            rrb.TimeSeriesView(origin="/stop_margin", name="stop-test margin (log10)"),
             *_channel_views(channels),
         ),
         row_shares=[3, 2, 3],
