@@ -11,7 +11,7 @@ import dicetrace
 from dicetrace.cli import NOISE_TYPES, app
 from dicetrace.studies import LETTERS, TITLES
 
-COMMANDS = ("record", "simulate", "scan", "accuracy", "stability", "analyze")
+COMMANDS = ("record", "simulate", "scan", "accuracy", "stability", "analyze", "explore")
 
 
 def test_version(dicetrace_cli, tmp_path):

@@ -332,7 +332,7 @@ def _no_display(monkeypatch):
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
 
 
-def test_serve_on_a_taken_port_is_one_line_exit_2(work, dicetrace_cli, assert_one_line_error):
+def test_serve_on_a_taken_port_is_one_line_exit_2(snapshot, work, dicetrace_cli, assert_one_line_error):
     import socket
 
     with socket.socket() as s:

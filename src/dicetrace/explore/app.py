@@ -131,25 +131,28 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         fut = worker.submit_map(v, client)
         return await asyncio.wrap_future(fut)
 
-    async def map_png_ep(request: Request) -> Response:
+    async def _map_or_error(request: Request):
+        """(map, None), or (None, the error response: a bad view, or superseded by a newer one)."""
         try:
-            m = await _map(request)
+            return await _map(request), None
         except ViewError as e:
-            return _error(e)
+            return None, _error(e)
         except Cancelled:
-            return JSONResponse({"error": "superseded by a newer view", "param": None}, status_code=409)
+            return None, JSONResponse({"error": "superseded by a newer view", "param": None}, status_code=409)
+
+    async def map_png_ep(request: Request) -> Response:
+        m, err = await _map_or_error(request)
+        if err is not None:
+            return err
         png = await asyncio.to_thread(map_png, m.outcome)
         headers = {"X-Dicetrace-Wall-S": f"{m.wall_s:.6f}", "X-Dicetrace-Res": f"{m.view.res[0]},{m.view.res[1]}",
                    "X-Dicetrace-Counts": json.dumps(m.counts()), "Cache-Control": "no-store"}
         return Response(png, media_type="image/png", headers=headers)
 
     async def map_json_ep(request: Request) -> Response:
-        try:
-            m = await _map(request)
-        except ViewError as e:
-            return _error(e)
-        except Cancelled:
-            return JSONResponse({"error": "superseded by a newer view", "param": None}, status_code=409)
+        m, err = await _map_or_error(request)
+        if err is not None:
+            return err
         return JSONResponse({"query": m.view.to_query(), "xs": m.xs.tolist(), "ys": m.ys.tolist(),
                              "outcome": m.outcome.tolist(), "steps": m.steps.tolist(),
                              "counts": m.counts(), "wall_s": m.wall_s})

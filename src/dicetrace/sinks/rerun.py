@@ -544,15 +544,15 @@ def default_blueprint(roll=None, channels=()):
             rrb.TimeSeriesView(origin="/stop_margin", name="stop-test margin (log10)"),
             *_channel_views(channels),
         ),
-        row_shares=[3, 2, 3],
-    )
-    return rrb.Blueprint(
-        rrb.Horizontal(view3d, right, column_shares=[3, 2]),
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline="step", play_state="following"),
-        auto_views=False,
-    )
+        row_shares=[3, 2, 3])
+    return layout_blueprint(rrb, view3d, right)
+
+
+def layout_blueprint(rrb, view3d, right):
+    """dicetrace's layout: the 3-D view, ``right`` beside it; side panels collapsed, time following the end."""
+    return rrb.Blueprint(rrb.Horizontal(view3d, right, column_shares=[3, 2]), rrb.BlueprintPanel(state="collapsed"),
+                         rrb.SelectionPanel(state="collapsed"),
+                         rrb.TimePanel(state="collapsed", timeline="step", play_state="following"), auto_views=False)
 
 
 def read_rrd(path, *, static: bool = False) -> dict:

@@ -161,7 +161,7 @@ def compare_blueprint(rolls=None):
     """
     import rerun.blueprint as rrb
 
-    from dicetrace.sinks.rerun import _eye_for
+    from dicetrace.sinks.rerun import _eye_for, layout_blueprint
 
     eye = None
     if rolls:
@@ -173,13 +173,7 @@ def compare_blueprint(rolls=None):
     pos = rrb.TimeSeriesView(origin="/divergence/position_cm", name="|Δ centre of mass| (cm)",
                              plot_legend=rrb.PlotLegend(corner="LeftTop"))
     right = rrb.Vertical(div, rrb.Tabs(pos, rrb.TextDocumentView(origin="/summary", name="summary")), row_shares=[3, 2])
-    return rrb.Blueprint(
-        rrb.Horizontal(view3d, right, column_shares=[3, 2]),
-        rrb.BlueprintPanel(state="collapsed"),
-        rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(state="collapsed", timeline="step", play_state="following"),
-        auto_views=False,
-    )
+    return layout_blueprint(rrb, view3d, right)
 
 
 def compare_logger(rolls, labels, *, name: str = "dicetrace compare"):
