@@ -47,7 +47,7 @@ def test_circles_and_a_1d_step_are_smooth():
     assert r.verdict == "smooth" and r.smooth_Sbb == pytest.approx(0.5, abs=1e-5)
 
 
-@pytest.mark.parametrize("eps", [5, 10, 20])
+@pytest.mark.parametrize("eps", [5, pytest.param(10, marks=pytest.mark.slow), pytest.param(20, marks=pytest.mark.slow)])
 def test_newton_basins_are_fractal(eps):
     g = sample_grid(newton_classify, [(-1.0, 1.0), (-1.0, 1.0)], (N, N))
     r = basins_fractal_test(g, eps=eps)

@@ -41,6 +41,7 @@ def test_finite_time_lyapunov_of_a_throw_is_a_property_of_the_dynamics():
         throw_lyapunov(ic, direction=np.zeros(6))
 
 
+@pytest.mark.slow
 def test_the_ftle_field_is_higher_on_cell_borders():
     """Red-sea window, 30²: the throws at border nodes (outcome differs from a neighbour) part faster
     than those inside cells (measured mean 18.8 vs 16.5 /s, one-sided Mann-Whitney p = 4e-9)."""

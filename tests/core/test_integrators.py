@@ -105,6 +105,7 @@ def test_every_table_row_has_a_compiled_step():
 # -- free flight: parabola and exact rotation ---------------------------------------------------
 
 
+@pytest.mark.slow  # ~10 s each: the stepping driver is compiled afresh per scheme (first-class function, no cache)
 @pytest.mark.parametrize("integ", ALL)
 def test_free_flight_order(integ):
     """Free flight: X = X0 + U0·t + g·t²/2, offsets turned by ω·t (ω = −L_program/I).
