@@ -191,6 +191,8 @@ def test_record_a_scanned_point_reproduces_its_row(tmp_path, dicetrace_cli):
     res = dicetrace_cli("record", "--scan", str(folder), "--at", "1.7,4.05", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert f"steps {row['steps']} " in res.stdout and row["contact_sequence"] in res.stdout
+    # it says which point it snapped to (1.7,4.05 is no grid point; 1.75,4 is the nearest)
+    assert res.stderr == f"dicetrace: --scan: recording the scanned point nearest to --at 1.7,4.05: 1.75,4 (ic_id {row['ic_id']})\n"
     assert sequence_from_log(out) == row["contact_sequence"]
     rolls = pd.read_parquet(tmp_path / "pq" / "rolls.parquet")
     assert rolls["ic_id"][0] == row["ic_id"] and (rolls["x"][0], rolls["y"][0]) == (1.75, 4.0)

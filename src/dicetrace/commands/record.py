@@ -144,6 +144,10 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
     ndim = len(coords)
     exact = np.array([row[a] for a in "xyz"[:ndim]], dtype=np.float64)
     desc = {"kind": "scan", "slice": slice_name, "scan": str(folder), "ic_id": int(row["ic_id"])}
+    if not np.array_equal(exact, np.asarray(coords, dtype=np.float64)):  # snapped: say to which point
+        point = ",".join(f"{v:.10g}" for v in exact)
+        print(f"dicetrace: --scan: recording the scanned point nearest to --at {at}: {point} (ic_id {int(row['ic_id'])})",
+              file=sys.stderr, flush=True)
     return np.asarray(the_ic, dtype=np.float64), cfg, exact, desc
 
 
