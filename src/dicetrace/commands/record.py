@@ -382,12 +382,19 @@ def register(app: typer.Typer) -> None:
                 sent = f"sent to {st.grpc_url}"
                 if mode == "serve":
                     until = "Ctrl-C" if serve_s is None else f"{serve_s:g} s have passed (or Ctrl-C)"
-                    print(f"serving the web viewer at {web} (gRPC {st.grpc_url}) until {until}", file=stream_out, flush=True)
-                    wait_serving(serve_s)
+                    try:  # from here on Ctrl-C means "stop serving": a normal end, wherever it lands
+                        print(f"serving the web viewer at {web} (gRPC {st.grpc_url}) until {until}", file=stream_out,
+                              flush=True)
+                        wait_serving(serve_s)
+                    except KeyboardInterrupt:
+                        pass
             except StreamError as e:
                 fail(str(e))
             finally:
-                st.close()
+                try:
+                    st.close()
+                except KeyboardInterrupt:  # a Ctrl-C while the server shuts down (serving has ended)
+                    pass
 
         outcomes = []
         for k, r in enumerate(rolls):
