@@ -29,8 +29,10 @@ from dicetrace.core.state import new_states
 from dicetrace.params import INTEGRATORS, Config, Numerics, Preset, make_config
 
 ALL = tuple(INTEGRATORS)
-#: Integrators whose accuracy is set by dt (contact-adaptive's by its tolerance).
-BY_DT = tuple(i for i in INTEGRATORS if i != "contact-adaptive")
+#: Integrators whose accuracy is set by dt (the adaptive ones' by their tolerance).
+BY_DT = tuple(name for name, spec in INTEGRATORS.items() if not spec.adaptive)
+#: Integrators with error-controlled sub-steps.
+ADAPTIVE = tuple(name for name, spec in INTEGRATORS.items() if spec.adaptive)
 
 
 @numba.njit(cache=False)

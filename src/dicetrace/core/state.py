@@ -17,6 +17,10 @@ scheme keeps from one step to the next:
     the work area of the RK4 schemes: the state at the start of a sub-step
     and at its end, the offsets of an RK4 stage and the derivatives of
     stage 4 (for the embedded error estimate).
+``rk_k``, ``rk_y``, ``rk_y0``, ``rk_acc``
+    the work area of the embedded Runge–Kutta pairs (``schemes.erk``):
+    stage derivatives, stage point, sub-step start of y = (X, U, L, q) and
+    a weighted sum of stages.
 
 A record costs no reference counting when it crosses a call (numba passes
 a pointer; its fields are views without a reference count), unlike the
@@ -64,6 +68,10 @@ STATE = np.dtype(
         ("stage4_u", _F8, 3),
         ("stage4_a", _F8, 3),
         ("stage4_t", _F8, 3),
+        ("rk_k", _F8, (13, 13)),
+        ("rk_y", _F8, 13),
+        ("rk_y0", _F8, 13),
+        ("rk_acc", _F8, 13),
     ],
     align=True,
 )

@@ -30,17 +30,16 @@ from __future__ import annotations
 
 import math
 
-from dicetrace.core._jit import jit
+from dicetrace.core._jit import jit, specialise
 from dicetrace.core.forces import eval_forces, wrench_at
 from dicetrace.core.free_flight import (
-    CIRCUM,
     free_advance,
     free_flight,
     free_flight_safe,
     free_min_height,
     locate_entry,
 )
-from dicetrace.core.schemes.rk4 import accept_substep, begin_substeps, cf4, end_substeps
+from dicetrace.core.schemes.rk4 import accept_substep, begin_substeps, cf4, cf4_error, end_substeps
 from dicetrace.params import FRICTION_SPECTRAL
 
 #: Largest RK4 sub-step for the friction law, in units of 1/λ_f (λ_f the
@@ -137,9 +136,16 @@ def friction_rate(z, uk, P, kp):
     return lam
 
 
-@jit
-def step(st, kp, h, contact):
-    """One contact-aware step of ``st`` (the contract of ``core.schemes``).
+def drive(st, kp, h, contact):
+    """One contact-aware step of ``st`` (the contract of ``core.schemes``), a template.
+
+    Specialised (``_jit.specialise``) on its sub-step method: ``SUBSTEP(st,
+    kp, h, f0, f1, f2, t0, t1, t2)`` (one explicit step from the sub-step
+    start ``st.sub_*`` to ``st.new_*``), ``ERROR(st, kp, h, g0, g1, g2, q0,
+    q1, q2)`` (its local error estimate over ``kp.tol``, given the force sum
+    and torque at the new state), ``ERR_EXP`` (the step-size exponent,
+    1 / (estimator order + 1)), ``THETA`` (the largest λ_f·h of the friction
+    law) and ``H0`` (an impact's first sub-step as ω·h).
 
     Free flight (no node below the ground) is integrated exactly, in pieces
     of at most dt / ``substeps`` near the ground; the moment the lowest node
@@ -147,8 +153,9 @@ def step(st, kp, h, contact):
     there on, RK4 sub-steps of at most dt / ``substeps`` (shorter where the
     friction law is stiff, see :func:`friction_rate`), each cut where a node
     enters or leaves the ground (root of the cubic Hermite interpolant of its
-    height), until no node is below the ground.  Order 4 in dt at fixed
-    ``substeps``; error-controlled sub-steps with ``kp.tol > 0``.
+    height), until no node is below the ground.  The sub-step method's
+    order in dt at fixed ``substeps``; error-controlled sub-steps with
+    ``kp.tol > 0``.
     """
     W = st.W
     if not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
@@ -157,9 +164,7 @@ def step(st, kp, h, contact):
     I = kp.inertia
     hmax = h / max(kp.substeps, 1.0)
     adaptive = kp.tol > 0.0
-    h0 = ADAPT_H0 / math.sqrt(kp.k)
-    rn = CIRCUM * kp.half_side_cm
-    vfloor = math.sqrt(abs(kp.g) * kp.half_side_cm)
+    h0 = H0 / math.sqrt(kp.k)
     # the state lives in the sub-step start during the step (see rk4.cf4)
     begin_substeps(st)
     Xn = st.new_X
@@ -228,15 +233,15 @@ def step(st, kp, h, contact):
                 hs = st.h_next
         limited = hs < st.h_next
         lam = friction_rate(z, uk, P, kp)
-        if lam * hs > FRICTION_THETA:
-            hs = FRICTION_THETA / lam
+        if lam * hs > THETA:
+            hs = THETA / lam
             limited = True
         last = False
         if hs >= rest * (1.0 - 1e-12):
             hs = rest
             last = True
             limited = True
-        cf4(st, kp, hs, f0, f1, f2, t0, t1, t2)
+        SUBSTEP(st, kp, hs, f0, f1, f2, t0, t1, t2)
         # nodes that changed side within the sub-step: cut at the first crossing
         cut = 2.0
         for k in range(8):
@@ -255,31 +260,20 @@ def step(st, kp, h, contact):
             hs = cut * hs
             last = False
             limited = True
-            cf4(st, kp, hs, f0, f1, f2, t0, t1, t2)
+            SUBSTEP(st, kp, hs, f0, f1, f2, t0, t1, t2)
         if adaptive:
             # embedded order-3 estimate (FSAL): y4 - y3 = h/6·(k4 - k5), k5 the
             # derivative at the new state; scaled by the die's size and speed
             c5, g0, g1, g2, q0, q1, q2 = wrench_at(
                 Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P
             )
-            u4 = st.stage4_u
-            a4 = st.stage4_a
-            t4 = st.stage4_t
-            h6 = hs / 6.0
-            ex = h6 * math.sqrt((u4[0] - Un[0]) ** 2 + (u4[1] - Un[1]) ** 2 + (u4[2] - Un[2]) ** 2)
-            d0 = a4[0] - g0 / 8.0
-            d1 = a4[1] - g1 / 8.0
-            d2 = a4[2] - (g2 / 8.0 + kp.g)
-            eu = h6 * math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            el = (h6 / I) * math.sqrt((t4[0] - q0) ** 2 + (t4[1] - q1) ** 2 + (t4[2] - q2) ** 2)
-            vs = (
-                math.sqrt(Un[0] * Un[0] + Un[1] * Un[1] + Un[2] * Un[2])
-                + rn * math.sqrt(Ln[0] * Ln[0] + Ln[1] * Ln[1] + Ln[2] * Ln[2]) / I
-                + vfloor
-            )
-            err = max(ex / kp.half_side_cm, (eu + rn * el) / vs) / kp.tol
-            # 0.9·err^(-1/4), by two square roots (libm's pow cost 3 % of a physical throw)
-            fac = ADAPT_FAC_MAX if err == 0.0 else ADAPT_SAFETY / math.sqrt(math.sqrt(err))
+            err = ERROR(st, kp, hs, g0, g1, g2, q0, q1, q2)
+            if err == 0.0:
+                fac = ADAPT_FAC_MAX
+            elif ERR_EXP == 0.25:  # 0.9·err^(-1/4) by two square roots (libm's pow cost 3 % of a throw)
+                fac = ADAPT_SAFETY / math.sqrt(math.sqrt(err))
+            else:
+                fac = ADAPT_SAFETY * err ** (-ERR_EXP)
             if err > 1.0 and hs > ADAPT_HMIN * h:
                 st.h_next = hs * max(ADAPT_FAC_MIN, fac)
                 nsub += 1
@@ -298,3 +292,12 @@ def step(st, kp, h, contact):
         Xw[2] = math.nan
     end_substeps(st, kp)
     return eval_forces(st, kp)
+
+
+#: contact-substep / contact-adaptive: the driver on commutator-free RK4 sub-steps.
+step = jit(
+    specialise(
+        drive, "step_rk4", "contact-substep and contact-adaptive: :func:`drive` on RK4 sub-steps (``rk4.cf4``).",
+        SUBSTEP=cf4, ERROR=cf4_error, ERR_EXP=0.25, THETA=FRICTION_THETA, H0=ADAPT_H0,
+    )
+)

@@ -22,9 +22,11 @@ sub-steps.
 
 from __future__ import annotations
 
+import math
+
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, eval_forces, step_wrench, wrench_at
-from dicetrace.core.free_flight import free_flight, free_flight_safe
+from dicetrace.core.free_flight import CIRCUM, free_flight, free_flight_safe
 from dicetrace.core.rotation import apply9, mul9, rot9
 from dicetrace.core.state import set_angular_momentum
 
@@ -128,6 +130,45 @@ def cf4(st, kp, h, f10, f11, f12, t10, t11, t12):
         h12,
     )
     apply9(off, mul9(Ra, Rb), st.new_off)
+
+
+@jit(inline="always")
+def error_speed(U, L, kp):
+    """The speed that scales velocity errors: |U| + √3·half·|ω| + √(|g|·half)."""
+    rn = CIRCUM * kp.half_side_cm
+    return (
+        math.sqrt(U[0] * U[0] + U[1] * U[1] + U[2] * U[2])
+        + rn * math.sqrt(L[0] * L[0] + L[1] * L[1] + L[2] * L[2]) / kp.inertia
+        + math.sqrt(abs(kp.g) * kp.half_side_cm)
+    )
+
+
+@jit(inline="always")
+def cf4_error(st, kp, h, g0, g1, g2, q0, q1, q2):
+    """Local error of the last ``cf4`` step over ``kp.tol`` (contact-adaptive's estimate).
+
+    RK4 with its last stage and the derivative at the new state (force sum
+    g, torque q there; first same as last) gives an embedded order-3
+    solution (weights 1/6, 1/3, 1/3, 0, 1/6), hence the estimate
+    h/6·(k₄ − k₅) for X, U and L.  The norm is the largest of |e_X|/half and
+    (|e_U| + √3·half·|e_L|/I) / :func:`error_speed`.
+    """
+    I = kp.inertia
+    Un = st.new_U
+    Ln = st.new_L
+    rn = CIRCUM * kp.half_side_cm
+    u4 = st.stage4_u
+    a4 = st.stage4_a
+    t4 = st.stage4_t
+    h6 = h / 6.0
+    ex = h6 * math.sqrt((u4[0] - Un[0]) ** 2 + (u4[1] - Un[1]) ** 2 + (u4[2] - Un[2]) ** 2)
+    d0 = a4[0] - g0 / 8.0
+    d1 = a4[1] - g1 / 8.0
+    d2 = a4[2] - (g2 / 8.0 + kp.g)
+    eu = h6 * math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    el = (h6 / I) * math.sqrt((t4[0] - q0) ** 2 + (t4[1] - q1) ** 2 + (t4[2] - q2) ** 2)
+    vs = error_speed(Un, Ln, kp)
+    return max(ex / kp.half_side_cm, (eu + rn * el) / vs) / kp.tol
 
 
 @jit(inline="always")

@@ -1,0 +1,233 @@
+"""Embedded explicit Runge–Kutta pairs on the die's state with a unit quaternion (docs/model.md §9).
+
+The sub-step methods of the high-order contact schemes (``contact_dop853``).
+The state of a sub-step is y = (X, U, L, q) ∈ R¹³: centre of mass,
+velocity, angular momentum (program convention) and a quaternion q that
+rotates the sub-step's starting node offsets, q = 1 at the start::
+
+    X' = U     U' = g·ẑ + Σ_k F_k / 8     L' = τ = Σ_k F_k × x_k
+    q' = ½·(0, ω)·q,  ω = −L / I (physical, world frame)   x_k = R(q/|q|)·x_k(0)
+
+The quaternion's flow keeps |q| = 1 exactly, so any Runge–Kutta tableau
+integrates it at its full order; the stages read R(q/|q|), and the accepted
+step normalises q (a projection, which keeps the order) and sets the
+offsets to R(q)·x_k(0): the die stays rigid to rounding whatever the error
+of the step.  :func:`erk_template` and :func:`erk_error_template` are
+specialised (``_jit.specialise``) on a tableau: ``NS`` stages, ``A``, ``B``,
+``C`` and the error weights ``E5``, ``E3`` (NS + 1 entries: the last weighs
+the derivative at the new state, which the driver evaluates anyway as the
+next sub-step's first stage).  Error norm as in ``rk4.cf4_error`` (position
+over the half side, velocity over ``error_speed``), with the rotation's
+error counted as the node displacement it causes, combined as DOP853 does
+(Hairer, Nørsett & Wanner, *Solving ODEs I*, II.10):
+err = e₅² / √(e₅² + 0.01·e₃²).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dicetrace.core._jit import jit, specialise
+from dicetrace.core.forces import acceleration, wrench_at
+from dicetrace.core.free_flight import CIRCUM
+from dicetrace.core.schemes.rk4 import error_speed
+
+#: Components of the sub-step state y = (X, U, L, q).
+NY = 13
+
+#: DOP853 (Hairer, Nørsett & Wanner), the coefficients as tabulated in scipy.integrate._ivp.dop853_coefficients.
+#: DOP853 (Hairer, Nørsett & Wanner), the coefficients as tabulated in scipy.integrate._ivp.dop853_coefficients.
+DOP853_STAGES = 12
+DOP853_A = np.array([
+    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.05260015195876773, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.0197250569845379, 0.0591751709536137, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.02958758547680685, 0.0, 0.08876275643042054, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.2413651341592667, 0.0, -0.8845494793282861, 0.924834003261792, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.037037037037037035, 0.0, 0.0, 0.17082860872947386, 0.12546768756682242, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.037109375, 0.0, 0.0, 0.17025221101954405, 0.06021653898045596, -0.017578125, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.03709200011850479, 0.0, 0.0, 0.17038392571223998, 0.10726203044637328, -0.015319437748624402, 0.008273789163814023, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.6241109587160757, 0.0, 0.0, -3.3608926294469414, -0.868219346841726, 27.59209969944671, 20.154067550477894, -43.48988418106996, 0.0, 0.0, 0.0, 0.0],
+    [0.47766253643826434, 0.0, 0.0, -2.4881146199716677, -0.590290826836843, 21.230051448181193, 15.279233632882423, -33.28821096898486, -0.020331201708508627, 0.0, 0.0, 0.0],
+    [-0.9371424300859873, 0.0, 0.0, 5.186372428844064, 1.0914373489967295, -8.149787010746927, -18.52006565999696, 22.739487099350505, 2.4936055526796523, -3.0467644718982196, 0.0, 0.0],
+    [2.273310147516538, 0.0, 0.0, -10.53449546673725, -2.0008720582248625, -17.9589318631188, 27.94888452941996, -2.8589982771350235, -8.87285693353063, 12.360567175794303, 0.6433927460157636, 0.0],
+])
+DOP853_B = np.array([0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259])
+DOP853_C = np.array([0.0, 0.05260015195876773, 0.0789002279381516, 0.1183503419072274, 0.2816496580927726, 0.3333333333333333, 0.25, 0.3076923076923077, 0.6512820512820513, 0.6, 0.8571428571428571, 1.0])
+DOP853_E5 = np.array([0.01312004499419488, 0.0, 0.0, 0.0, 0.0, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294, 0.0])
+DOP853_E3 = np.array([-0.18980075407240762, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.4226823213237919, -0.1521609496625161, 0.20136540080403034, 0.02265179219836082, 0.0])
+#: Dormand–Prince 5(4), the coefficients as tabulated in scipy.integrate._ivp.rk.RK45.
+DP5_STAGES = 6
+DP5_A = np.array([
+    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.2, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.075, 0.225, 0.0, 0.0, 0.0, 0.0],
+    [0.9777777777777777, -3.7333333333333334, 3.5555555555555554, 0.0, 0.0, 0.0],
+    [2.9525986892242035, -11.595793324188385, 9.822892851699436, -0.2908093278463649, 0.0, 0.0],
+    [2.8462752525252526, -10.757575757575758, 8.906422717743473, 0.2784090909090909, -0.2735313036020583, 0.0],
+])
+DP5_B = np.array([0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096])
+DP5_C = np.array([0.0, 0.2, 0.3, 0.8, 0.8888888888888888, 1.0])
+DP5_E5 = np.array([-0.0012326388888888888, 0.0, 0.0042527702905061394, -0.03697916666666667, 0.05086379716981132, -0.0419047619047619, 0.025])
+DP5_E3 = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+@jit(inline="always")
+def quat_rotate(q0, q1, q2, q3, off, out):
+    """out_k = R(q/|q|)·off_k for the eight nodes (q = (w, x, y, z), any non-zero norm)."""
+    n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    s = 2.0 / n
+    r00 = 1.0 - s * (q2 * q2 + q3 * q3)
+    r01 = s * (q1 * q2 - q0 * q3)
+    r02 = s * (q1 * q3 + q0 * q2)
+    r10 = s * (q1 * q2 + q0 * q3)
+    r11 = 1.0 - s * (q1 * q1 + q3 * q3)
+    r12 = s * (q2 * q3 - q0 * q1)
+    r20 = s * (q1 * q3 - q0 * q2)
+    r21 = s * (q2 * q3 + q0 * q1)
+    r22 = 1.0 - s * (q1 * q1 + q2 * q2)
+    for k in range(8):
+        a = off[k, 0]
+        b = off[k, 1]
+        c = off[k, 2]
+        out[k, 0] = r00 * a + r01 * b + r02 * c
+        out[k, 1] = r10 * a + r11 * b + r12 * c
+        out[k, 2] = r20 * a + r21 * b + r22 * c
+
+
+@jit(inline="always")
+def derivative_row(K, i, y, f0, f1, f2, t0, t1, t2, kp):
+    """Row i of the stage derivatives K at the point y, with force sum f and torque t there."""
+    I = kp.inertia
+    a0, a1, a2 = acceleration(f0, f1, f2, kp)
+    K[i, 0] = y[3]
+    K[i, 1] = y[4]
+    K[i, 2] = y[5]
+    K[i, 3] = a0
+    K[i, 4] = a1
+    K[i, 5] = a2
+    K[i, 6] = t0
+    K[i, 7] = t1
+    K[i, 8] = t2
+    # q' = ½·(0, ω)·q with the physical ω = −L/I
+    w0 = -y[6] / I
+    w1 = -y[7] / I
+    w2 = -y[8] / I
+    qw = y[9]
+    qx = y[10]
+    qy = y[11]
+    qz = y[12]
+    K[i, 9] = -0.5 * (w0 * qx + w1 * qy + w2 * qz)
+    K[i, 10] = 0.5 * (qw * w0 + (w1 * qz - w2 * qy))
+    K[i, 11] = 0.5 * (qw * w1 + (w2 * qx - w0 * qz))
+    K[i, 12] = 0.5 * (qw * w2 + (w0 * qy - w1 * qx))
+
+
+@jit(inline="always")
+def _combine(w, n, K, y0, h, acc, y):
+    """y = y0 + h·Σ_{j<n} w_j·K_j, row by row (contiguous; zero weights skipped)."""
+    for c in range(NY):
+        acc[c] = 0.0
+    for j in range(n):
+        a = w[j]
+        if a != 0.0:
+            for c in range(NY):
+                acc[c] += a * K[j, c]
+    for c in range(NY):
+        y[c] = y0[c] + h * acc[c]
+
+
+def erk_template(st, kp, h, f0, f1, f2, t0, t1, t2):
+    """One step of the tableau (NS, A, B) from the sub-step start ``st.sub_*`` to ``st.new_*``.
+
+    ``f*``, ``t*``: contact force sum and torque at the start.  Leaves the
+    stage derivatives in ``st.rk_k`` (rows 0..NS−1) and the new state y in
+    ``st.rk_y`` (q normalised) for the error estimate (which overwrites
+    ``st.rk_y0`` and ``st.rk_acc``).
+    """
+    K = st.rk_k
+    y = st.rk_y
+    y0 = st.rk_y0
+    acc = st.rk_acc
+    X = st.sub_X
+    U = st.sub_U
+    L = st.sub_L
+    off = st.sub_off
+    offs = st.stage_off
+    I = kp.inertia
+    for j in range(3):
+        y0[j] = X[j]
+        y0[3 + j] = U[j]
+        y0[6 + j] = L[j]
+    y0[9] = 1.0
+    y0[10] = 0.0
+    y0[11] = 0.0
+    y0[12] = 0.0
+    derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
+    for i in range(1, NS):
+        _combine(A[i], i, K, y0, h, acc, y)
+        quat_rotate(y[9], y[10], y[11], y[12], off, offs)
+        below, g0, g1, g2, q0, q1, q2 = wrench_at(
+            y[2], y[3], y[4], y[5], y[6] / I, y[7] / I, y[8] / I, offs, kp, st.F, st.uk, st.z, st.P
+        )
+        derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
+    _combine(B, NS, K, y0, h, acc, y)
+    qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
+    for c in range(9, NY):
+        y[c] = y[c] / qn
+    for j in range(3):
+        st.new_X[j] = y[j]
+        st.new_U[j] = y[3 + j]
+        st.new_L[j] = y[6 + j]
+    quat_rotate(y[9], y[10], y[11], y[12], off, st.new_off)
+
+
+def erk_error_template(st, kp, h, g0, g1, g2, q0, q1, q2):
+    """Local error of the last step of the tableau (E5, E3) over ``kp.tol``; g, q: force sum and torque at the new state."""
+    K = st.rk_k
+    y = st.rk_y
+    derivative_row(K, NS, y, g0, g1, g2, q0, q1, q2, kp)
+    e5 = st.rk_acc
+    e3 = st.rk_y0  # the sub-step start is no longer needed
+    for c in range(NY):
+        e5[c] = 0.0
+        e3[c] = 0.0
+    for j in range(NS + 1):
+        a = E5[j]
+        b = E3[j]
+        for c in range(NY):
+            e5[c] += a * K[j, c]
+            e3[c] += b * K[j, c]
+    s5x = e5[0] * e5[0] + e5[1] * e5[1] + e5[2] * e5[2]
+    s5u = e5[3] * e5[3] + e5[4] * e5[4] + e5[5] * e5[5]
+    s5l = e5[6] * e5[6] + e5[7] * e5[7] + e5[8] * e5[8]
+    s5q = e5[9] * e5[9] + e5[10] * e5[10] + e5[11] * e5[11] + e5[12] * e5[12]
+    s3x = e3[0] * e3[0] + e3[1] * e3[1] + e3[2] * e3[2]
+    s3u = e3[3] * e3[3] + e3[4] * e3[4] + e3[5] * e3[5]
+    s3l = e3[6] * e3[6] + e3[7] * e3[7] + e3[8] * e3[8]
+    s3q = e3[9] * e3[9] + e3[10] * e3[10] + e3[11] * e3[11] + e3[12] * e3[12]
+    half = kp.half_side_cm
+    rn = CIRCUM * half
+    vs = error_speed(st.new_U, st.new_L, kp)
+    # a rotation error |e_q| turns the die by 2|e_q| and moves a corner by 2·rn·|e_q|
+    k5 = max(math.sqrt(s5x) / half + 2.0 * CIRCUM * math.sqrt(s5q), (math.sqrt(s5u) + rn * math.sqrt(s5l) / kp.inertia) / vs)
+    k3 = max(math.sqrt(s3x) / half + 2.0 * CIRCUM * math.sqrt(s3q), (math.sqrt(s3u) + rn * math.sqrt(s3l) / kp.inertia) / vs)
+    r5 = abs(h) * k5
+    r3 = abs(h) * k3
+    if r5 == 0.0:
+        return 0.0
+    return r5 * r5 / math.sqrt(r5 * r5 + 0.01 * r3 * r3) / kp.tol
+
+
+#: DOP853's sub-step and its error estimate (order 8; the estimate's exponent 1/8).
+dop853_substep = jit(
+    specialise(erk_template, "dop853_substep", NS=DOP853_STAGES, A=DOP853_A, B=DOP853_B)
+)
+dop853_error = jit(
+    specialise(erk_error_template, "dop853_error", NS=DOP853_STAGES, E5=DOP853_E5, E3=DOP853_E3)
+)
+#: Dormand–Prince 5(4)'s sub-step and its error estimate (order 5; exponent 1/5).
+dp5_substep = jit(specialise(erk_template, "dp5_substep", NS=DP5_STAGES, A=DP5_A, B=DP5_B))
+dp5_error = jit(specialise(erk_error_template, "dp5_error", NS=DP5_STAGES, E5=DP5_E5, E3=DP5_E3))
