@@ -125,17 +125,6 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
             study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
             quick_tol=(1e-6, 1e-8),
         ),
-        IntegratorSpec(
-            "contact-dp5", 7, 5, 0.99,
-            "contact-adaptive's sub-stepping with the Dormand-Prince 5(4) pair", "tab:gray",
-            scheme="contact_dp5",
-            study_dt_s=(1e-3,),
-            quick_dt_s=(1e-3,),
-            substepped=True,
-            adaptive=True,
-            study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9),
-            quick_tol=(1e-6, 1e-8),
-        ),
     )
 }
 

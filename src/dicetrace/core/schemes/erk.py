@@ -1,6 +1,6 @@
 """Embedded explicit Runge–Kutta pairs on the die's state with a unit quaternion (docs/model.md §9).
 
-The sub-step methods of the high-order contact schemes (``contact_dop853``).
+The sub-step method of the high-order contact scheme ``contact_dop853``.
 The state of a sub-step is y = (X, U, L, q) ∈ R¹³: centre of mass,
 velocity, angular momentum (program convention) and a quaternion q that
 rotates the sub-step's starting node offsets, q = 1 at the start::
@@ -13,8 +13,8 @@ integrates it at its full order; the stages read R(q/|q|), and the accepted
 step normalises q (a projection, which keeps the order) and sets the
 offsets to R(q)·x_k(0): the die stays rigid to rounding whatever the error
 of the step.  :func:`erk_template` and :func:`erk_error_template` are
-specialised (``_jit.specialise``) on a tableau: ``NS`` stages, ``A``, ``B``,
-``C`` and the error weights ``E5``, ``E3`` (NS + 1 entries: the last weighs
+specialised (``_jit.specialise``) on a tableau: ``NS`` stages, ``A``, ``B``
+(the system is autonomous: no nodes ``C``) and the error weights ``E5``, ``E3`` (NS + 1 entries: the last weighs
 the derivative at the new state, which the driver evaluates anyway as the
 next sub-step's first stage).  Error norm as in ``rk4.cf4_error`` (position
 over the half side, velocity over ``error_speed``), with the rotation's
@@ -55,23 +55,8 @@ DOP853_A = np.array([
     [2.273310147516538, 0.0, 0.0, -10.53449546673725, -2.0008720582248625, -17.9589318631188, 27.94888452941996, -2.8589982771350235, -8.87285693353063, 12.360567175794303, 0.6433927460157636, 0.0],
 ])
 DOP853_B = np.array([0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259])
-DOP853_C = np.array([0.0, 0.05260015195876773, 0.0789002279381516, 0.1183503419072274, 0.2816496580927726, 0.3333333333333333, 0.25, 0.3076923076923077, 0.6512820512820513, 0.6, 0.8571428571428571, 1.0])
 DOP853_E5 = np.array([0.01312004499419488, 0.0, 0.0, 0.0, 0.0, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294, 0.0])
 DOP853_E3 = np.array([-0.18980075407240762, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.4226823213237919, -0.1521609496625161, 0.20136540080403034, 0.02265179219836082, 0.0])
-#: Dormand–Prince 5(4), the coefficients as tabulated in scipy.integrate._ivp.rk.RK45.
-DP5_STAGES = 6
-DP5_A = np.array([
-    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-    [0.2, 0.0, 0.0, 0.0, 0.0, 0.0],
-    [0.075, 0.225, 0.0, 0.0, 0.0, 0.0],
-    [0.9777777777777777, -3.7333333333333334, 3.5555555555555554, 0.0, 0.0, 0.0],
-    [2.9525986892242035, -11.595793324188385, 9.822892851699436, -0.2908093278463649, 0.0, 0.0],
-    [2.8462752525252526, -10.757575757575758, 8.906422717743473, 0.2784090909090909, -0.2735313036020583, 0.0],
-])
-DP5_B = np.array([0.09114583333333333, 0.0, 0.44923629829290207, 0.6510416666666666, -0.322376179245283, 0.13095238095238096])
-DP5_C = np.array([0.0, 0.2, 0.3, 0.8, 0.8888888888888888, 1.0])
-DP5_E5 = np.array([-0.0012326388888888888, 0.0, 0.0042527702905061394, -0.03697916666666667, 0.05086379716981132, -0.0419047619047619, 0.025])
-DP5_E3 = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
 
 
 @jit(inline="always")
@@ -228,6 +213,3 @@ dop853_substep = jit(
 dop853_error = jit(
     specialise(erk_error_template, "dop853_error", NS=DOP853_STAGES, E5=DOP853_E5, E3=DOP853_E3)
 )
-#: Dormand–Prince 5(4)'s sub-step and its error estimate (order 5; exponent 1/5).
-dp5_substep = jit(specialise(erk_template, "dp5_substep", NS=DP5_STAGES, A=DP5_A, B=DP5_B))
-dp5_error = jit(specialise(erk_error_template, "dp5_error", NS=DP5_STAGES, E5=DP5_E5, E3=DP5_E3))
