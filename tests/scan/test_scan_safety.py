@@ -172,6 +172,21 @@ def test_each_chunk_is_logged_with_its_checksum(tmp_path):
     assert sorted(json.loads(meta[CHUNK_LOG_KEY])) == ["0", "1", "2"]
 
 
+def test_the_chunk_log_is_rewritten_at_most_once_a_second_and_complete_at_the_end(tmp_path, monkeypatch):
+    """25 chunks in well under a second: the manifest is written when the folder is made, for the first chunk and
+    as the scan ends -- not once per chunk (its log grows with the chunks) -- and logs every chunk."""
+    from dicetrace.scan import folder as folder_mod
+
+    writes = []
+    real = folder_mod._write_manifest
+    monkeypatch.setattr(folder_mod, "_write_manifest", lambda f, m, log: (writes.append(len(log)), real(f, m, log)))
+    monkeypatch.setattr(folder_mod, "LOG_INTERVAL_S", 60.0)
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=1)
+    assert writes == [0, 1, 25]
+    assert sorted(read_chunk_log(out)) == list(range(25))
+
+
 def test_a_corrupted_chunk_is_named_on_read_and_recomputed_on_resume(tmp_path, home5):
     out = tmp_path / "s"
     scan(HOME5, out, chunk=5)

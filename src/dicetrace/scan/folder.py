@@ -428,6 +428,9 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    with _MANIFEST_WRITE:  # entries an earlier scan failed to write: their parts are verified below by decoding
+        _PENDING.pop(folder.absolute(), None)
+        _LAST_LOG.pop(folder.absolute(), None)
     if not _check_manifest(folder, defn):
         _check_empty(folder)
         manifest = {
