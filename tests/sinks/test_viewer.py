@@ -94,7 +94,8 @@ def test_viewer_screenshot_shows_the_die_on_the_ground(tmp_path):
     rrd = write_rrd(roll, tmp_path / "throw.rrd")
     png = tmp_path / "shot.png"
     env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
-    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--screenshot-to", str(png), "--window-size", "1400x900"]
+    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
+           "--window-size", "1400x900"]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]
     assert png.exists() and png.stat().st_size > 10_000
@@ -148,7 +149,8 @@ def test_viewer_screenshot_shows_the_compare_view(tmp_path):
     rrd.write_bytes(encode_compare_rrd([a, b], ["throw 0", "nudged"]))
     png = tmp_path / "shot.png"
     env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
-    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--screenshot-to", str(png), "--window-size", "1400x900"]
+    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
+           "--window-size", "1400x900"]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]
     im = np.asarray(Image.open(png).convert("RGB")).astype(int)
