@@ -142,7 +142,7 @@ BAD = [
     case([*AT, "--out", "/proc/x.rrd"], "'/proc'"),
     case([*AT, "--out", "ok.rrd", "--parquet", "afile"], "--parquet", "'afile'"),
     case(["--scan", "nowhere", "--at", "1,2"], "--scan", "'nowhere'"),
-    case(["--scan", "adir.rrd", "--at", "1,2"], "--scan", "'adir.rrd'", "_scan.json"),
+    case(["--scan", "adir.rrd", "--at", "1,2"], "--scan", "'adir.rrd'", "_scan.parquet"),
     case(["--scan", "adir.rrd"], "--at", "--scan needs"),
     case(["--scan", "adir.rrd", "--ic", "1,2,3,4,5,6"], "--scan", "--ic"),
 ]

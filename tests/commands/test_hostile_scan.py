@@ -9,7 +9,6 @@ script's ``run_app``) in a snapshotted folder.
 
 from __future__ import annotations
 
-import json
 import os
 import socket
 import stat
@@ -22,7 +21,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-
+from dicetrace.scan import read_manifest
 
 
 HOME3 = ["--window", "home", "--res", "3"]
@@ -203,7 +202,7 @@ def test_a_long_scan_needs_yes_and_says_its_estimate(tmp_path, dicetrace_cli, mo
     res = dicetrace_cli("scan", *args, "--yes", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert res.stderr.startswith("dicetrace: scan: 144 ICs in 1 chunks to compute (of 144): ")
-    assert len(json.loads((tmp_path / "s" / "_scan.json").read_text())["definition"]["space"]["res"]) == 2
+    assert len(read_manifest(tmp_path / "s")["definition"]["space"]["res"]) == 2
 
 
 def test_estimate_scan_numbers(tmp_path):
@@ -321,7 +320,7 @@ def test_maps_onto_a_full_disk_are_one_line_and_keep_the_old_maps(snapshot, fill
                         cwd=tmp_path)
     assert_one_line_error(res, "No space left on device")
     assert snapshot(tmpfs) == before  # both old maps whole, no temporary
-    assert (tmp_path / "s" / "_scan.json").exists()  # the scan itself is complete and kept
+    assert (tmp_path / "s" / "_scan.parquet").exists()  # the scan itself is complete and kept
 
 
 def test_chunks_onto_a_full_disk_are_one_line_and_resume_afterwards(tmp_path, tmpfs, dicetrace_cli,
@@ -417,7 +416,7 @@ def test_random_options_never_trace_back(work, dicetrace_cli, opts):
         (line,) = res.stderr.strip().splitlines()
         assert line.startswith("dicetrace: error: ")
     else:
-        assert (work / given_["--out"] / "_scan.json").is_file(), (args, res.stderr)
+        assert (work / given_["--out"] / "_scan.parquet").is_file(), (args, res.stderr)
         for opt in ("--png", "--rrd"):
             if opt in given_:
                 assert (work / given_[opt]).is_file(), (args, res.stderr)

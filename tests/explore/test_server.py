@@ -153,7 +153,7 @@ def test_cli_serves_until_interrupted(tmp_path):
         req = urllib.request.Request(f"{base}/api/save?window={WINDOW}&res=4&name=cli", method="POST")
         with urllib.request.urlopen(req, timeout=120) as r:
             assert r.status == 200
-        assert (tmp_path / "scans" / "cli" / "_scan.json").is_file()
+        assert (tmp_path / "scans" / "cli" / "_scan.parquet").is_file()
     finally:
         proc.terminate()
         proc.wait(timeout=30)

@@ -40,7 +40,7 @@ def test_the_viewer_shows_the_map_upright_framed_and_with_its_legend(tmp_path):
     write_scan_rrd(out, rrd)
     png = tmp_path / "shot.png"
     env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
-    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--screenshot-to", str(png),
+    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
            "--window-size", "1400x900"]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
     assert res.returncode == 0, res.stderr[-2000:]

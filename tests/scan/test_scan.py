@@ -17,13 +17,13 @@ import pytest
 
 from dicetrace.ics import Grid, Points, Sample, seed_slice
 from dicetrace.scan import (
-    MANIFEST,
     MISSING,
     ScanDefinition,
     ScanMismatchError,
     grid_axes,
     ic_at,
     label_grid,
+    read_manifest,
     read_scan,
     scan,
 )
@@ -280,7 +280,7 @@ def test_metadata_and_manifest(tmp_path):
 
     out = tmp_path / "m"
     scan(Grid("seed", "home", 4), out, chunk=10, gamma=0.01)
-    man = json.loads((out / MANIFEST).read_text())
+    man = read_manifest(out)
     assert man["dicetrace_version"] == dicetrace.__version__ and man["n_ics"] == 16 and man["n_chunks"] == 2
     defn = ScanDefinition.from_dict(man["definition"])
     assert defn.config.preset.gamma == 0.01 and defn.space == Grid("seed", "home", 4)

@@ -24,10 +24,12 @@ import pytest
 
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.params import make_config
-from dicetrace.scan import MANIFEST, ScanDefinition, ScanMismatchError, read_scan, scan
+from dicetrace.scan import MANIFEST, ScanDefinition, ScanMismatchError, read_manifest, read_scan, scan
 from dicetrace.scan.read import label_grid, outcome_counts, status_counts
 from dicetrace.scan.folder import (
-    CHUNK_LOG,
+    CHUNK_LOG_KEY,
+    LEGACY_CHUNK_LOG,
+    LEGACY_MANIFEST,
     LOCK,
     CorruptChunkError,
     ScanBusyError,
@@ -164,7 +166,25 @@ def test_each_chunk_is_logged_with_its_checksum(tmp_path):
         p = out / e["file"]
         assert e["sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() and e["bytes"] == p.stat().st_size
         assert e["rows"] == (10 if c < 2 else 5)
-    assert json.loads((out / MANIFEST).read_text())["chunk_log"] == CHUNK_LOG
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(out / MANIFEST).metadata  # the log lives in the manifest's metadata
+    assert sorted(json.loads(meta[CHUNK_LOG_KEY])) == ["0", "1", "2"]
+
+
+def test_the_chunk_log_is_rewritten_at_most_once_a_second_and_complete_at_the_end(tmp_path, monkeypatch):
+    """25 chunks in well under a second: the manifest is written when the folder is made, for the first chunk and
+    as the scan ends -- not once per chunk (its log grows with the chunks) -- and logs every chunk."""
+    from dicetrace.scan import folder as folder_mod
+
+    writes = []
+    real = folder_mod._write_manifest
+    monkeypatch.setattr(folder_mod, "_write_manifest", lambda f, m, log: (writes.append(len(log)), real(f, m, log)))
+    monkeypatch.setattr(folder_mod, "LOG_INTERVAL_S", 60.0)
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=1)
+    assert writes == [0, 1, 25]
+    assert sorted(read_chunk_log(out)) == list(range(25))
 
 
 def test_a_corrupted_chunk_is_named_on_read_and_recomputed_on_resume(tmp_path, home5):
@@ -207,11 +227,11 @@ def test_record_from_a_corrupted_scan_names_the_chunk(tmp_path, dicetrace_cli, a
     assert not (tmp_path / "r.rrd").exists()
 
 
-def test_a_folder_without_a_chunk_log_is_adopted_and_garbage_is_refused(tmp_path, home5):
+def test_a_folder_without_a_chunk_log_is_adopted_and_garbage_is_refused(tmp_path, home5, to_legacy_layout):
     """Folders written before checksums: whole chunks are adopted (logged), undecodable ones recomputed."""
     out = tmp_path / "s"
     scan(HOME5, out, chunk=5)
-    (out / CHUNK_LOG).unlink()
+    to_legacy_layout(out, chunk_log=False)
     (out / "rolls" / "part-000003.parquet").write_bytes(b"PAR1 this is no Parquet file PAR1")
     with pytest.raises(CorruptChunkError, match=r"part-000003\.parquet"):
         read_scan(out)  # no checksum to compare: the decoding error names the file
@@ -221,16 +241,22 @@ def test_a_folder_without_a_chunk_log_is_adopted_and_garbage_is_refused(tmp_path
     assert (r.chunks_skipped, r.chunks_computed) == (4, 1)
     assert any("part-000003.parquet" in str(w.message) for w in caught)
     assert sorted(read_chunk_log(out)) == [0, 1, 2, 3, 4]
+    assert sorted(p.name for p in out.iterdir()) == sorted([LOCK, MANIFEST, "rolls"])  # the JSON manifest converted
     assert _data(read_scan(out)).equals(_data(home5))
 
 
-def test_a_torn_chunk_log_line_is_ignored(tmp_path, home5):
+def test_a_torn_chunk_log_line_is_ignored(tmp_path, home5, to_legacy_layout):
+    """An older dicetrace's append-only chunk log ``_scan.chunks.jsonl`` with a torn last line."""
     out = tmp_path / "s"
     scan(HOME5, out, chunk=5, max_chunks=3)
-    with open(out / CHUNK_LOG, "a") as f:
+    to_legacy_layout(out)
+    with open(out / LEGACY_CHUNK_LOG, "a") as f:
         f.write('{"chunk": 3, "file": "part-0000')  # a write killed half way
+    assert sorted(read_chunk_log(out)) == [0, 1, 2]
     r = scan(HOME5, out, chunk=5)
     assert (r.chunks_skipped, r.chunks_computed) == (3, 2)
+    assert not (out / LEGACY_MANIFEST).exists() and not (out / LEGACY_CHUNK_LOG).exists()
+    assert sorted(read_chunk_log(out)) == [0, 1, 2, 3, 4]
     assert _data(read_scan(out)).equals(_data(home5))
 
 
@@ -258,7 +284,7 @@ def test_a_huge_scan_folder_is_prepared_without_visiting_every_chunk(tmp_path):
     t0 = time.perf_counter()
     r = scan(Grid("seed", "home", 10**5), tmp_path / "s", max_chunks=0)
     assert time.perf_counter() - t0 < 5
-    man = json.loads((tmp_path / "s" / MANIFEST).read_text())
+    man = read_manifest(tmp_path / "s")
     assert man["n_ics"] == 10**10 and r.chunks_computed == 0 and not r.complete
 
 

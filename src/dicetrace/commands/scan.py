@@ -10,9 +10,10 @@ Examples::
     dicetrace scan ... --dask                      # a local Dask cluster
     dicetrace scan ... --scheduler tcp://host:8786 # an existing one
 
-The output folder holds the scan's definition (``_scan.json``), its chunk log,
-and the rolls table ``rolls/part-*.parquet``, written chunk by chunk: any
-Parquet reader reads ``OUT/rolls/`` as it is; re-running the same command
+The output folder holds the rolls table ``rolls/part-*.parquet``, written
+chunk by chunk, and the manifest ``_scan.parquet`` (no rows; the scan's
+definition and chunk log in its metadata): any Parquet reader reads ``OUT/``
+as it is (``OUT/rolls/`` too, even while a scan writes); re-running the same command
 resumes; a different definition against the folder is refused.  ``--png`` draws the outcome map,
 ``--rrd`` writes the interactive scan map for the Rerun viewer.
 
@@ -195,12 +196,10 @@ def parse_overrides(preset_name: str, items: List[str]) -> dict:
 
 
 def _existing_chunk(out: Path) -> int | None:
-    import json
-
-    from dicetrace.scan import MANIFEST
+    from dicetrace.scan import read_manifest
 
     try:
-        return int(json.loads((out / MANIFEST).read_text())["definition"]["chunk"])
+        return int(read_manifest(out)["definition"]["chunk"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
@@ -255,7 +254,7 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
 def register(app: typer.Typer) -> None:
     @app.command("scan")
     def scan_cmd(
-        out: Path = typer.Option(..., "--out", help="Output folder; its rolls/ subfolder is the Parquet dataset, one row per IC (re-run to resume)."),
+        out: Path = typer.Option(..., "--out", help="Output folder: a Parquet dataset, one row per IC, that any reader reads as it is (re-run to resume)."),
         slice_name: str = typer.Option("seed", "--slice", help=SLICE_HELP),
         window: Optional[str] = typer.Option(None, "--window", help=WINDOW_HELP),
         z: Optional[str] = typer.Option(None, "--z", help="Z0,Z1: the z range with a named window on a 3-D slice."),
@@ -363,7 +362,7 @@ def register(app: typer.Typer) -> None:
             raise
         done = report.chunks_skipped + report.chunks_computed
         if not quiet:
-            msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (the table: {out / 'rolls'}/)  "
+            msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (a Parquet dataset: read the folder as it is)  "
                    f"({report.chunks_computed:,} computed, {report.chunks_skipped:,} already there; "
                    f"{report.ics_computed:,} ICs in {report.wall_s:.1f} s, {report.rate_ics_s:,.0f} ICs/s)")
             print(msg, file=sys.stderr)

@@ -8,8 +8,9 @@
 See :func:`scan` (run or resume; in memory, locally or on Dask),
 :func:`iter_scan` (stream chunk tables), :func:`read_scan`,
 :func:`label_grid`, :func:`grid_axes` and :func:`ic_at`.  Without dicetrace,
-point any Parquet reader at the folder's ``rolls/`` (:func:`rolls_dir`):
-``polars.scan_parquet("scans/red-sea/rolls/")``.
+point any Parquet reader at the folder as it is:
+``polars.scan_parquet("scans/red-sea/")`` (its manifest ``_scan.parquet`` is
+a Parquet file of the same columns and no rows).
 """
 
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, config_from_dict
@@ -31,6 +32,7 @@ from dicetrace.scan.folder import (
     ScanMismatchError,
     ScanWarning,
     compute_chunk,
+    has_manifest,
     prepare_folder,
     read_manifest,
     rolls_dir,
@@ -56,6 +58,7 @@ __all__ = [
     "compute_chunk",
     "config_from_dict",
     "grid_axes",
+    "has_manifest",
     "ic_at",
     "iter_scan",
     "label_grid",

@@ -12,7 +12,7 @@ from dicetrace.scan.definition import ScanDefinition
 from dicetrace.simulate import simulate_batch
 from dicetrace.sinks._common import free_bytes, human_bytes
 
-from dicetrace.scan.folder import MANIFEST, _check_int, chunk_files
+from dicetrace.scan.folder import _check_int, chunk_files, has_manifest
 
 #: Bytes on disk per IC, a round upper estimate (measured 80–110 on the writeup's windows).
 BYTES_PER_IC = 128
@@ -93,7 +93,7 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     _check_int(threads, "threads", 1)
     _check_int(max_chunks, "max_chunks", 0)
     n_done = 0
-    if out is not None and Path(out).is_dir() and (Path(out) / MANIFEST).exists():
+    if out is not None and Path(out).is_dir() and has_manifest(out):
         n_done = sum(1 for c in chunk_files(out) if c < defn.n_chunks)
     chunks_todo = defn.n_chunks - n_done
     if max_chunks is not None:

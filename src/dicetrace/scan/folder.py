@@ -1,11 +1,18 @@
 """The scan dataset folder: manifest, chunk files, their checksum log, and the writer's lock.
 
-A scan folder holds ``_scan.json`` (the manifest: the scan definition, the
-dicetrace version), the manifest's chunk log ``_scan.chunks.jsonl`` (one line
-per finished chunk: its file, rows, size and SHA-256), and the subfolder
+A scan folder holds the manifest ``_scan.parquet`` and the subfolder
 ``rolls/`` with one Parquet file per finished chunk, ``part-NNNNNN.parquet``
-and nothing else.  Each chunk is written under a hidden temporary name beside
-the manifest, its checksum logged, and then renamed into ``rolls/``.  So a
+and nothing else.  The manifest is a Parquet file with the rolls table's
+columns and no rows; its key-value metadata holds the scan definition
+(``dicetrace.scan``: the definition, the dicetrace version) and the chunk log
+(``dicetrace.chunks``: per finished chunk its file, rows, size and SHA-256).
+So the folder holds nothing but Parquet files of one schema (and the empty
+lock file): every reader reads the scan folder itself as the rolls table, the
+manifest adding no row -- Polars too, which reads every non-empty file under a
+folder and refuses a folder with files of two extensions.  Each chunk is
+written under a hidden temporary name beside the manifest, renamed into
+``rolls/``, and its checksum logged in the manifest (rewritten atomically, at
+most once a second while a scan runs, and as it ends).  So a
 Ctrl-C or a kill loses at most the chunks in flight; running the same scan
 again verifies the finished chunks against their checksums (recomputing, with
 a :class:`ScanWarning`, any that are damaged), skips the good ones and ends
@@ -16,14 +23,17 @@ mixed in.  One writer at a time: a scan holds the folder's lock
 waits at most ``wait`` seconds, then refuses (:class:`ScanBusyError`),
 touching nothing.
 
-``rolls/`` is a plain Parquet dataset that every reader reads as it is,
-even while a scan writes into it: ``polars.scan_parquet("scan/rolls/")``,
-``pandas.read_parquet("scan/rolls")``, DuckDB's
-``read_parquet('scan/rolls/*.parquet')`` and ``pyarrow.dataset.dataset("scan/rolls")``
-(pandas and pyarrow also read the scan folder itself: they skip names starting
-with ``_`` or ``.``).  A folder written before ``rolls/`` existed (its parts
-beside the manifest) is still read; the next scan into it moves them into
-``rolls/``.
+Every reader reads the folder as it is: ``polars.scan_parquet("scan/")``,
+``pandas.read_parquet("scan")``, DuckDB's ``read_parquet('scan/**/*.parquet')``
+and ``pyarrow.dataset.dataset("scan")`` (pandas and pyarrow skip the manifest:
+they skip names starting with ``_`` or ``.``).  While a scan writes, its
+temporary files lie in the folder, which Polars refuses: ``rolls/`` alone
+holds only finished parts, and every reader reads it at any time.
+
+Folders of older dicetrace versions are still read: a JSON manifest
+``_scan.json`` with the chunk log ``_scan.chunks.jsonl`` beside it, and parts
+beside the manifest rather than in ``rolls/``; the next scan into such a
+folder turns it into this layout.
 """
 from __future__ import annotations
 
@@ -32,6 +42,7 @@ import itertools
 import json
 import os
 import re
+import threading
 import time
 import uuid
 import warnings
@@ -45,11 +56,17 @@ from dicetrace.ics import Grid, Sample
 from dicetrace.scan.definition import ScanDefinition, describe_differences
 from dicetrace.simulate import DEFAULT_CAP, simulate_batch
 from dicetrace.sinks._common import OutputError, remove_quietly
-from dicetrace.tables import rolls_table
+from dicetrace.tables import GRID_ROLLS_SCHEMA, rolls_table
 
-MANIFEST = "_scan.json"
-#: The manifest's chunk log: one JSON line per finished chunk (file, rows, bytes, sha256).
-CHUNK_LOG = "_scan.chunks.jsonl"
+#: The manifest: a Parquet file of the rolls table's schema with no rows; its key-value metadata holds the scan
+#: definition (MANIFEST_KEY) and the chunk log (CHUNK_LOG_KEY).
+MANIFEST = "_scan.parquet"
+MANIFEST_KEY = b"dicetrace.scan"
+#: The manifest's chunk log: chunk index → its file, rows, bytes and sha256 (a JSON object).
+CHUNK_LOG_KEY = b"dicetrace.chunks"
+#: The JSON manifest and its chunk log (one JSON line per finished chunk) of folders of an older dicetrace.
+LEGACY_MANIFEST = "_scan.json"
+LEGACY_CHUNK_LOG = "_scan.chunks.jsonl"
 #: The folder's writer lock (held by the one scan writing into it).
 LOCK = ".dicetrace-scan.lock"
 METADATA_KEY = b"dicetrace"
@@ -164,27 +181,46 @@ def _with_metadata(table: pa.Table, meta: dict) -> pa.Table:
 # -- the dataset folder ----------------------------------------------------------------------
 
 
+def has_manifest(folder) -> bool:
+    """True if ``folder`` holds a scan manifest (this version's, or an older dicetrace's JSON one)."""
+    return (Path(folder) / MANIFEST).is_file() or (Path(folder) / LEGACY_MANIFEST).is_file()
+
+
+def _manifest_metadata(path: Path) -> dict:
+    """The key-value metadata of the Parquet manifest at ``path``."""
+    return pq.read_schema(path).metadata or {}
+
+
 def read_manifest(folder) -> dict:
-    p = Path(folder) / MANIFEST
+    """The scan folder's manifest: its definition (``"definition"``), dicetrace version, size and creation time."""
+    folder = Path(folder)
+    p = folder / MANIFEST
     if not p.is_file():
-        raise FileNotFoundError(f"{str(folder)!r} is not a dicetrace scan folder (no {MANIFEST})")
+        p = folder / LEGACY_MANIFEST
+        if not p.is_file():
+            raise FileNotFoundError(f"{str(folder)!r} is not a dicetrace scan folder (no {MANIFEST})")
     try:
-        return json.loads(p.read_text())
-    except (OSError, ValueError) as e:
+        return json.loads(_manifest_metadata(p)[MANIFEST_KEY] if p.name == MANIFEST else p.read_text())
+    except (OSError, ValueError, KeyError, pa.ArrowException) as e:
         raise ValueError(f"{str(p)!r}: unreadable scan manifest ({' '.join(str(e).split())})") from None
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+def _write_manifest(folder: Path, manifest: dict, log: dict[int, dict]) -> None:
+    """Write the Parquet manifest atomically: the rolls schema, no rows, ``manifest`` and ``log`` as metadata."""
+    path = folder / MANIFEST
+    tmp = folder / f".{MANIFEST}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp"
+    meta = {
+        MANIFEST_KEY: json.dumps(manifest, indent=1, sort_keys=True).encode(),
+        CHUNK_LOG_KEY: json.dumps({str(c): log[c] for c in sorted(log)}, sort_keys=True).encode(),
+    }
     try:
-        with open(tmp, "w") as f:
-            f.write(text)
+        with open(tmp, "wb") as f:
+            pq.write_table(GRID_ROLLS_SCHEMA.empty_table().replace_schema_metadata(meta), f, compression="zstd")
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        remove_quietly(tmp)
 
 
 def file_sha256(path) -> tuple[str, int]:
@@ -196,14 +232,21 @@ def file_sha256(path) -> tuple[str, int]:
 
 
 def read_chunk_log(folder) -> dict[int, dict]:
-    """The chunk log of a scan folder: chunk index → its last entry (file, rows, bytes, sha256).
+    """The chunk log of a scan folder: chunk index → its entry (file, rows, bytes, sha256).
 
-    A torn last line (a write killed half way) is skipped: that chunk's
-    file was never renamed into place.
+    It is read from the manifest's metadata; for a folder of an older
+    dicetrace, from ``_scan.chunks.jsonl``, where a torn last line (a write
+    killed half way) is skipped: that chunk's file was never renamed into place.
     """
+    p = Path(folder) / MANIFEST
+    if p.is_file():
+        try:
+            return {int(c): e for c, e in json.loads(_manifest_metadata(p).get(CHUNK_LOG_KEY, b"{}")).items()}
+        except (OSError, ValueError, AttributeError, pa.ArrowException) as e:
+            raise ValueError(f"{str(p)!r}: unreadable chunk log ({' '.join(str(e).split())})") from None
     entries: dict[int, dict] = {}
     try:
-        with open(Path(folder) / CHUNK_LOG) as f:
+        with open(Path(folder) / LEGACY_CHUNK_LOG) as f:
             for line in f:
                 try:
                     e = json.loads(line)
@@ -220,11 +263,44 @@ def _log_name(folder: Path, path: Path) -> str:
     return Path(path).relative_to(folder).as_posix()
 
 
-def _append_chunk_log(folder: Path, entry: dict) -> None:
-    with open(folder / CHUNK_LOG, "a") as f:
-        f.write(json.dumps(entry, sort_keys=True) + "\n")
-        f.flush()
-        os.fsync(f.fileno())
+#: The chunk log is rewritten at most once a second, and at most 10 % of the time (its size grows with the
+#: chunks); the entries in between wait in memory.  A part renamed into rolls/ before its entry was written
+#: (a kill in between) is verified on resume by decoding it whole, as in a folder without a chunk log.
+LOG_INTERVAL_S = 1.0
+_MANIFEST_WRITE = threading.Lock()
+_PENDING: dict[Path, list[dict]] = {}
+_LAST_LOG: dict[Path, tuple[float, float]] = {}  # folder → (monotonic time of the last rewrite, its cost in s)
+
+
+def _log_chunks(folder: Path, entries: list[dict], *, force: bool = False) -> None:
+    """Add ``entries`` to the manifest's chunk log: rewritten (atomically) now if ``force`` or if it is due.
+
+    Call it holding the folder's lock; :func:`flush_chunk_log` writes what waits.
+    """
+    key = Path(folder).absolute()
+    with _MANIFEST_WRITE:
+        pending = _PENDING.setdefault(key, [])
+        pending.extend(entries)
+        last, cost = _LAST_LOG.get(key, (-float("inf"), 0.0))
+        t0 = time.monotonic()
+        if not pending or not (force or t0 - last >= max(LOG_INTERVAL_S, 10 * cost)):
+            return
+        try:
+            log = read_chunk_log(folder)
+            log.update({int(e["chunk"]): e for e in pending})
+            _write_manifest(Path(folder), read_manifest(folder), log)
+        except OSError as e:
+            reason = os.strerror(e.errno) if e.errno else " ".join(str(e).split())
+            raise OutputError(f"cannot write the scan manifest {str(Path(folder) / MANIFEST)!r}: {reason} (the "
+                              "finished chunks are kept: free space and re-run the same scan to resume)") from None
+        del _PENDING[key]
+        t1 = time.monotonic()
+        _LAST_LOG[key] = (t1, t1 - t0)
+
+
+def flush_chunk_log(folder) -> None:
+    """Write the chunk-log entries that wait in memory into the manifest (a scan calls it as it ends)."""
+    _log_chunks(Path(folder), [], force=True)
 
 
 def _parts_in(folder: Path) -> dict[int, Path]:
@@ -300,7 +376,7 @@ def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
         except OSError as e:
             return f"unreadable ({e.strerror or e})"
         if size != entry.get("bytes") or digest != entry.get("sha256"):
-            return f"its SHA-256 differs from the one recorded in {CHUNK_LOG}"
+            return f"its SHA-256 differs from the one recorded in {MANIFEST}"
         _remember(path, digest)
         return None
     try:
@@ -312,13 +388,12 @@ def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
 
 def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
     """True if ``folder`` holds this scan's manifest, False if none; ScanMismatchError if another scan's."""
-    mpath = folder / MANIFEST
-    if not mpath.exists():
+    if not has_manifest(folder):
         return False
     try:
-        have = json.loads(mpath.read_text())["definition"]
+        have = read_manifest(folder)["definition"]
     except (OSError, ValueError, KeyError, TypeError) as e:
-        raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest {MANIFEST} ({e})") from None
+        raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest ({e})") from None
     want = defn.to_dict()
     if json.dumps(have, sort_keys=True) != json.dumps(want, sort_keys=True):
         diffs = describe_differences(have, want)
@@ -344,13 +419,18 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     Call it holding the folder's lock (:func:`scan` does).  Raises
     :class:`ScanMismatchError` when the folder holds another scan, and
     FileExistsError when it holds files that are not a dicetrace scan.
-    Leftover temporary files of interrupted writes are removed.  Every
+    Leftover temporary files of interrupted writes are removed, and a
+    folder of an older dicetrace gets this version's layout (its JSON
+    manifest and chunk log become the Parquet manifest).  Every
     finished chunk is checked against its logged checksum; a damaged one
     (or one with the wrong number of rows) is deleted, to be recomputed,
     with a :class:`ScanWarning` naming it.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    with _MANIFEST_WRITE:  # entries an earlier scan failed to write: their parts are verified below by decoding
+        _PENDING.pop(folder.absolute(), None)
+        _LAST_LOG.pop(folder.absolute(), None)
     if not _check_manifest(folder, defn):
         _check_empty(folder)
         manifest = {
@@ -359,19 +439,25 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
             "definition": defn.to_dict(),
             "n_ics": defn.size,
             "n_chunks": defn.n_chunks,
-            "chunk_log": CHUNK_LOG,
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         }
-        _atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=1, sort_keys=True))
+        _write_manifest(folder, manifest, {})
+    elif not (folder / MANIFEST).is_file():  # an older dicetrace's JSON manifest and chunk log: convert them
+        manifest = read_manifest(folder)
+        manifest.pop("chunk_log", None)
+        _write_manifest(folder, manifest, read_chunk_log(folder))
+    for old in (LEGACY_MANIFEST, LEGACY_CHUNK_LOG):
+        (folder / old).unlink(missing_ok=True)
     rolls = folder / ROLLS_DIR
     if rolls.exists() and not rolls.is_dir():
         raise FileExistsError(f"{str(rolls)!r} is not a folder: the scan's rolls table goes there; move it away")
     rolls.mkdir(exist_ok=True)
     _move_legacy_parts(folder)
-    for p in folder.glob(".part-*.tmp"):
+    for p in [*folder.glob(".part-*.tmp"), *folder.glob(f".{MANIFEST}.*.tmp")]:
         p.unlink(missing_ok=True)
     log = read_chunk_log(folder)
     done = set()
+    adopted = []
     for c, p in chunk_files(folder).items():
         if c >= defn.n_chunks:
             continue
@@ -380,17 +466,18 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
         if why is None:
             if c not in log:  # adopt a chunk of a folder written before checksums were logged
                 digest, size = file_sha256(p)
-                _append_chunk_log(folder, {"chunk": c, "file": _log_name(folder, p), "rows": stop - start, "bytes": size,
-                                           "sha256": digest})
+                adopted.append({"chunk": c, "file": _log_name(folder, p), "rows": stop - start, "bytes": size,
+                                "sha256": digest})
             done.add(c)
         else:
             warnings.warn(f"scan chunk {str(p)!r} is damaged ({why}): recomputing it", ScanWarning, stacklevel=3)
             p.unlink(missing_ok=True)
+    _log_chunks(folder, adopted, force=True)
     return done
 
 
 def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
-    """Write chunk ``c`` atomically (temporary name, checksum logged, then rename).
+    """Write chunk ``c`` atomically (temporary name, then rename), and log its checksum (see :func:`_log_chunks`).
 
     A write that fails (say, on a full disk) leaves no temporary file and
     raises :class:`~dicetrace.sinks._common.OutputError` naming the chunk;
@@ -411,10 +498,10 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
             f.flush()
             os.fsync(f.fileno())
         digest, size = file_sha256(tmp)
-        _append_chunk_log(folder, {"chunk": c, "file": _log_name(folder, path), "rows": table.num_rows, "bytes": size,
-                                   "sha256": digest})
         os.replace(tmp, path)
         _remember(path, digest)
+        _log_chunks(folder, [{"chunk": c, "file": _log_name(folder, path), "rows": table.num_rows, "bytes": size,
+                              "sha256": digest}])
     except OSError as e:
         if isinstance(e, OutputError):
             raise

@@ -108,8 +108,8 @@ def _dataset_table(files: list[str], columns, filter=None) -> pa.Table:
 def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
     """The rolls table of a scan folder as Arrow, sorted by ``ic_id`` (finished chunks only).
 
-    Every chunk is verified against the checksum in the chunk log
-    (``_scan.chunks.jsonl``) first: a damaged one raises
+    Every chunk is verified against the checksum in the manifest's chunk
+    log first: a damaged one raises
     :class:`CorruptChunkError` naming the file.
     """
     folder = _folder_of(folder)

@@ -7,6 +7,7 @@ survives a kill, damage and a second writer is described in
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import os
@@ -31,7 +32,6 @@ from dicetrace.sinks._common import (
 from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask
 from dicetrace.scan.folder import (
     LOCK,
-    MANIFEST,
     _check_empty,
     _check_int,
     _check_manifest,
@@ -40,6 +40,8 @@ from dicetrace.scan.folder import (
     _version,
     _with_metadata,
     compute_chunk,
+    flush_chunk_log,
+    has_manifest,
     prepare_folder,
     write_chunk,
 )
@@ -276,7 +278,7 @@ def scan(
                 return _run_into(folder, defn, created, t0, threads=threads, progress=progress, client=client,
                                  max_chunks=max_chunks)
         except BaseException:
-            if not (folder / MANIFEST).exists():  # refused before anything was written: leave nothing behind
+            if not has_manifest(folder):  # refused before anything was written: leave nothing behind
                 if not had_lock:
                     remove_quietly(folder / LOCK)
                 remove_folders(created)
@@ -319,6 +321,12 @@ def _run_into(folder: Path, defn: ScanDefinition, created, t0: float, *, threads
                 pending.append((writer.submit(write_chunk, folder, defn, c, table), table.num_rows))
                 settle(block=len(pending) > 1)
             settle(block=True)
+    except BaseException:
+        with contextlib.suppress(OSError):  # the chunk log of the chunks written, if the disk lets us
+            flush_chunk_log(folder)
+        raise
+    else:
+        flush_chunk_log(folder)
     finally:
         close = getattr(chunks, "close", None)
         if close is not None:

@@ -42,6 +42,7 @@ pyarrow) or open it with the ``rerun`` viewer.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -401,7 +402,9 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
         "stop_test/threshold", indexes=idx(ends, t_s[[0, -1]]), columns=rr.Scalars.columns(scalars=[e_stop, e_stop])
     )
     rec.log("stop_margin", rr.SeriesLines(names=["log10(E − threshold), −3 at or below it"]), static=True)
-    margin = np.log10(np.maximum(np.asarray(energy["stop_test"], float) - e_stop, 1e-3))
+    # math.log10 (the C library's), not np.log10: numpy's vectorised log10 differs by an ulp between CPUs (its SIMD
+    # loops), and a recording is the same bits on every machine (the golden files)
+    margin = np.array([math.log10(v) for v in np.maximum(np.asarray(energy["stop_test"], float) - e_stop, 1e-3)])
     rec.send_columns("stop_margin", indexes=index, columns=rr.Scalars.columns(scalars=margin))
 
     # -- contact events: text log and markers --------------------------------------------------
