@@ -67,10 +67,8 @@ def _map_outcomes(page) -> np.ndarray:
     from dicetrace.explore.app import outcome_from_rgb
 
     data = page.evaluate("""() => {
-        const img = document.getElementById('map');
-        const c = document.createElement('canvas'); c.width = img.naturalWidth; c.height = img.naturalHeight;
-        const g = c.getContext('2d'); g.drawImage(img, 0, 0);
-        return {w: c.width, h: c.height, px: Array.from(g.getImageData(0, 0, c.width, c.height).data)};
+        const c = document.getElementById('map');
+        return {w: c.width, h: c.height, px: Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data)};
     }""")
     img = np.array(data["px"], dtype=np.uint8).reshape(data["h"], data["w"], 4)[..., :3]
     out = outcome_from_rgb(img)
