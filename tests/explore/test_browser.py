@@ -80,13 +80,18 @@ def _window_of(page) -> str:
     return parse_qs(urlparse(page.url).query)["window"][0]
 
 
-def test_page_map_zoom_and_throw(browser, explorer, tmp_path):
+def test_page_map_zoom_and_throw(browser, explorer, tmp_path, monkeypatch):
+    from dicetrace.explore import compute
+
+    monkeypatch.setattr(compute, "BLOCK", 4 * RES)  # the refined pass in strips of four rows
     page = browser.new_page(viewport={"width": 1300, "height": 900})
     errors = []
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.goto(explorer.url)
     _ready(page)
     np.testing.assert_array_equal(_map_outcomes(page), scan_outcomes(tmp_path, WINDOW, RES))
+    # the refined map was drawn strip by strip, top first
+    assert page.evaluate("document.body.dataset.strips") == ",".join(str(r) for r in range(4, RES + 1, 4))
 
     # drag a box over the middle of the map: the view zooms and the map is the new window's
     box = page.locator("#mapbox").bounding_box()
@@ -132,6 +137,10 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path):
     img = np.asarray(Image.open(io.BytesIO(shot)).convert("RGB")).astype(float)
     assert img.std() > 10, "the embedded Rerun viewer is blank"
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50
+    # the viewer lays the throw out as `dicetrace record`'s blueprint does: its 3-D view (background
+    # 250,250,250 in sinks.rerun.default_blueprint) fills the left 3/5 (Rerun's own layout has no such view)
+    share = (img[:, : img.shape[1] // 2] == 250).all(axis=-1).mean()
+    assert share > 0.25, f"record's blueprint is not the viewer's layout ({share:.3f} of the left half is its 3-D view)"
     if SHOT:
         page.screenshot(path=SHOT, full_page=True)
     assert not [e for e in errors if "rerun" not in e.lower()], errors

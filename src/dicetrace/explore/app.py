@@ -32,7 +32,7 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
-from dicetrace.explore.compute import Cancelled, Worker, scan_folder_for, throw_info, throw_rrd
+from dicetrace.explore.compute import Cancelled, Worker, scan_folder_for, strip_rows, throw_info, throw_rrd
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
 
 #: The passes of a view and their resolution divisors: the page asks for each in turn.
@@ -178,6 +178,7 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         except ViewError as e:
             return _error(e)
         fut = asyncio.wrap_future(worker.submit_map(v, request.query_params.get("client", "")[:64]))
+        rows = strip_rows(v)
 
         async def lines():
             sent = 0
@@ -191,9 +192,9 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
                 except Exception as e:
                     yield (json.dumps({"error": f"internal error: {type(e).__name__}: {e}", "status": 500}) + "\n").encode()
                     return
-                if m is not None and m.rows_done > sent:
-                    yield strip_line(m, sent, m.rows_done)
-                    sent = m.rows_done
+                for row0 in range(sent, m.rows_done if m is not None else 0, rows):  # a line per strip computed
+                    yield strip_line(m, row0, min(row0 + rows, m.rows_done))
+                    sent = min(row0 + rows, m.rows_done)
                 if finished:
                     yield (json.dumps({"done": True, "res": list(m.view.res), "wall_s": m.wall_s, "reused": m.reused,
                                        "counts": m.counts()}) + "\n").encode()
