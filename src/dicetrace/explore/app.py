@@ -9,7 +9,7 @@ Endpoints::
 
     GET  /                      the page (its view in the URL query)
     GET  /api/view              the normalised view: its query, axes, limits
-    GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: 1/16, 1/4 resolution)
+    GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: about 1/16, 1/4 resolution)
     GET  /api/map.json          the same map's outcome labels, [i][j] with i along x
     GET  /api/map.strips        the refined map as it is computed: NDJSON, a line per strip of image rows, then "done"
     GET  /api/hover?x=&y=       the nearest grid point's throw: coordinates, IC, outcome, steps, settle time, contacts

@@ -253,10 +253,6 @@ class Worker:
         with self._lock:
             return self._running.get(view.key()) or self._cache.get(view.key())
 
-    def _coarser(self, view: View) -> list[OutcomeMap]:
-        """Cached maps of ``view`` at other resolutions (a coarse pass's points may be this grid's)."""
-        with self._lock:
-            return [m for m in self._cache.values() if m.view.res != view.res and replace(m.view, res=view.res) == view]
 
     def _run_map(self, view: View, tok: _Token) -> OutcomeMap:
         def on_strip(m: OutcomeMap) -> None:
@@ -264,7 +260,9 @@ class Worker:
                 self._running[view.key()] = m
 
         try:
-            m = compute_map(view, tok.cancelled, threads=self.threads, known=self._coarser(view), on_strip=on_strip)
+            with self._lock:  # a coarser pass's points may be this grid's (compute_map takes those that are)
+                known = list(self._cache.values())
+            m = compute_map(view, tok.cancelled, threads=self.threads, known=known, on_strip=on_strip)
         except BaseException as e:
             with self._lock:
                 self._running.pop(view.key(), None)

@@ -2,10 +2,12 @@
 
 The script keeps the view in the URL (``history.pushState``: the browser's
 back button and the page's back/reset walk the history of views), loads a
-preview (1/16 resolution), a coarse map (1/4) and then the refined one, drawn into one canvas strip by strip
-as the server computes it (a newer view cancels the older on the server), zooms on a dragged box or the mouse wheel, pans with the arrow
-buttons, shows hover info, and on click loads that throw into Rerun's web
-viewer beside the map (shift-click adds a second throw to compare).
+preview (about 1/16 of the resolution), a coarse map (about 1/4) and then the
+refined one, drawn into one canvas strip by strip as the server computes it (a
+newer view cancels the older on the server), zooms on a dragged box or the
+mouse wheel, pans with the arrow buttons, shows hover info, and on click loads
+that throw into Rerun's web viewer beside the map (shift-click adds a second
+throw to compare).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ def _options(names, selected) -> str:
 
 def page_html(default: View, *, can_save: bool) -> str:
     """The page; ``default`` is the view of a URL without parameters."""
+    from dicetrace.explore.app import outcome_rgb_table
     from dicetrace.ics import SLICES
     from dicetrace.integrators import INTEGRATORS
     from dicetrace.params import PRESETS
@@ -33,8 +36,6 @@ def page_html(default: View, *, can_save: bool) -> str:
         f'<span class="key"><span class="sw" style="background:rgb{OUTCOME_RGB[o]}"></span>{html.escape(OUTCOME_NAMES[o])}</span>'
         for o in (1, 2, 3, 4, 5, 6, 0, -1)
     )
-    from dicetrace.explore.app import outcome_rgb_table
-
     cfg = {"default": default.to_query(), "canSave": can_save, "palette": outcome_rgb_table().tolist()}
     return (
         _TEMPLATE.replace("%LEGEND%", legend)
