@@ -101,8 +101,12 @@ let window4 = null;       // [x0, x1, y0, y1] numbers
 let res = [256, 256];
 let seq = 0;              // the newest load; older responses are dropped
 let throws = [];          // the throws shown in the viewer: {x, y, info}
-let viewer = null;
+let viewer = null;        // the Rerun viewer (a promise of it) once a throw is picked
 
+// Inside a frame (the notebook widget, dicetrace.explore.widget), the picks and the view go to the parent.
+function tellParent(type, data) {
+  if (window.parent !== window) window.parent.postMessage({source: "dicetrace-explore", type, ...data}, "*");
+}
 function readUrl() {
   const q = Object.fromEntries(new URLSearchParams(location.search));
   return Object.keys(q).length ? q : {...CFG.default};
@@ -121,6 +125,7 @@ async function load(q, push) {
   if (push) history.pushState(view, "", "?" + qs(view));
   else history.replaceState(view, "", "?" + qs(view));
   fillControls();
+  tellParent("view", {view});
   document.body.dataset.state = "computing";
   document.body.dataset.strips = "";
   const c = $("map");
@@ -236,8 +241,11 @@ async function hover(x, y) {
   $("info").textContent = "hover: " + describe(j) + (picked ? "\n\n" + picked + compare() : "");
 }
 
-async function ensureViewer() {
-  if (viewer) return viewer;
+function ensureViewer() {  // one viewer, however many picks come while it loads
+  viewer = viewer || makeViewer().catch((e) => { viewer = null; throw e; });
+  return viewer;
+}
+async function makeViewer() {
   const mod = await import("/rerun/widget.js");
   const handlers = {};
   const box = $("viewerbox");
@@ -249,9 +257,8 @@ async function ensureViewer() {
   };
   mod.default.render({model, el: box});
   for (let k = 0; k < 600 && !model.ready; k++) await new Promise((r) => setTimeout(r, 100));
-  viewer = {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
-            close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
-  return viewer;
+  return {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
+          close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
 }
 async function pick(x, y, add) {
   const r = await fetch("/api/hover?" + qs(view, {x, y}));
@@ -259,12 +266,14 @@ async function pick(x, y, add) {
   if (!r.ok) { showError(info.error); return; }
   const url = new URL("/api/throw.rrd?" + qs(view, {i: info.i, j: info.j}), location.href).href;
   $("download").href = url + "&download=1";
-  const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
-  if (!add) { if (v) throws.forEach((t) => v.close(t.url)); throws = []; }
+  const gone = add ? [] : throws;
+  if (!add) throws = [];
   throws.push({x, y, info, url});
-  if (v) v.open(url);
   $("info").dataset.throws = JSON.stringify(throws.map((t) => t.info));
+  tellParent("throws", {throws: throws.map((t) => t.info)});
   $("info").textContent = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n") + compare();
+  const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
+  if (v) { gone.forEach((t) => v.close(t.url)); v.open(url); }
 }
 function compare() {
   if (throws.length < 2) return "";
