@@ -134,3 +134,23 @@ def test_viewer_throw_is_record_recording_with_its_blueprint(client, tmp_path, d
     assert blueprint_tree(served) == want and blueprint_tree(downloaded) == want
     origins = {v["ViewBlueprint:space_origin"][0] for v in want.values() if "ViewBlueprint:space_origin" in v}
     assert origins == {"/world", "/energy", "/stop_test", "/stop_margin", "/contacts", "/summary"}
+
+
+@pytest.mark.slow
+def test_a_newer_view_ends_the_stale_strips_stream_at_its_next_strip(monkeypatch):
+    from dicetrace.explore import Explorer, compute
+
+    monkeypatch.setattr(compute, "BLOCK", 2 * 200)  # strips of 2 rows: 100 of them
+    with Explorer(window="red-sea", res=RES) as ex:
+        base = f"http://127.0.0.1:{ex.port}/api/map.strips?window=red-sea"
+        urllib.request.urlopen(base + "&res=8", timeout=120).read()  # compiled and warm
+        with urllib.request.urlopen(base + "&res=200&client=z", timeout=300) as stale:
+            first = json.loads(stale.readline())
+            assert (first["row0"], first["row1"]) == (0, 2)
+            with urllib.request.urlopen(base + f"&res={RES}&client=z", timeout=300) as fresh:
+                strips, done = strip_lines(fresh)
+            rest = [json.loads(line) for line in stale]
+        assert done["res"] == [RES, RES] and strips[-1]["row1"] == RES
+        assert rest[-1] == {"error": "superseded by a newer view", "status": 409}
+        assert len(rest) - 1 < 99, "the stale map went on to its end"
+        assert ex.app.state.worker.cancelled_count == 1
