@@ -4,8 +4,15 @@ Starts a real explorer (uvicorn on 127.0.0.1, a free port), warms the kernels
 with 4×4 and 8×8 maps (numba's compile or cache load is reported separately), then
 times over HTTP, as the page asks:
 
-* red sea's three passes as the page asks for them: preview (1/16 resolution), coarse (1/4), refined,
-* the same after a zoom to red-sea-2.
+* red sea's passes as the page asks for them: preview (about 1/16 of the resolution) and
+  coarse (about 1/4) as PNGs, then the refined map streamed in strips of rows
+  (``/api/map.strips``): the time to its first strip and to its last,
+* the same after a zoom to red-sea-2,
+
+and then, for comparison, the batch kernel alone (``simulate_batch``, one call, in this
+process) on all the refined view's ICs: what the explorer adds is the difference.  The
+explorer runs in this process, so the CPU time it takes (all threads: ``time.process_time``)
+is printed beside the wall time: on a shared machine it varies much less.
 
 For ``--preset physical`` the preset's own integrator (contact-adaptive) is
 used unless ``--integrator`` says otherwise.
@@ -16,6 +23,7 @@ Usage: ``python benchmarks/bench_explore.py [--preset seed] [--res 256] [--integ
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import time
 import urllib.request
@@ -41,17 +49,32 @@ def main() -> None:
     with Explorer(window="red-sea", res=a.res, preset=a.preset, integrator=a.integrator, threads=a.threads) as ex:
         base = f"http://127.0.0.1:{ex.port}"
 
-        def fetch(window: str, pass_: str) -> float:
-            q = {"window": window, "res": a.res, "preset": a.preset, "pass": pass_, "client": "bench"}
+        def query(window: str, **extra) -> str:
+            q = {"window": window, "res": a.res, "preset": a.preset, "client": "bench", **extra}
             if a.integrator:
                 q["integrator"] = a.integrator
+            return urlencode(q)
+
+        def fetch(window: str, pass_: str) -> float:
             t0 = time.perf_counter()
-            with urllib.request.urlopen(f"{base}/api/map.png?{urlencode(q)}", timeout=3600) as r:
+            with urllib.request.urlopen(f"{base}/api/map.png?{query(window, **{'pass': pass_})}", timeout=3600) as r:
                 r.read()
                 res = r.headers["X-Dicetrace-Res"]
             dt = time.perf_counter() - t0
-            print(f"  {window:>32}  {pass_:6}  {res:>7}  {dt:7.3f} s")
+            print(f"  {window:>32}  {pass_:7}  {res:>7}  {dt:7.3f} s")
             return dt
+
+        def refine(window: str) -> tuple[float, float]:
+            t0, c0 = time.perf_counter(), time.process_time()
+            first = None
+            with urllib.request.urlopen(f"{base}/api/map.strips?{query(window)}", timeout=3600) as r:
+                for line in r:
+                    msg = json.loads(line)
+                    first = first if first is not None else time.perf_counter() - t0
+            dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+            print(f"  {window:>32}  refined  {a.res},{a.res}  {dt:7.3f} s  (CPU {cpu:.3f} s; first strip {first:.3f} s; "
+                  f"computed in {msg['wall_s']:.3f} s, {msg['reused']} points taken from the coarser passes)")
+            return first, dt
 
         t0 = time.perf_counter()
         for warm in (4, 8):  # the single-throw path (up to 16 ICs) and the batch kernel
@@ -60,17 +83,24 @@ def main() -> None:
                 q["integrator"] = a.integrator
             urllib.request.urlopen(f"{base}/api/map.png?{urlencode(q)}", timeout=3600).read()
         print(f"preset {a.preset}, {os.cpu_count()} CPUs; kernel compile or cache load {time.perf_counter() - t0:.2f} s")
-        first = fetch(_window("red-sea"), "preview")
-        coarse = fetch(_window("red-sea"), "coarse")
-        fine = 0.0 if a.no_fine else fetch(_window("red-sea"), "fine")
-        zp = fetch(_window("red-sea-2"), "preview")
-        zc = fetch(_window("red-sea-2"), "coarse")
-        zf = 0.0 if a.no_fine else fetch(_window("red-sea-2"), "fine")
-        refined = "" if a.no_fine else f", refined {a.res}×{a.res} {first + coarse + fine:.3f} s"
-        zrefined = "" if a.no_fine else f", refined {zp + zc + zf:.3f} s"
-        print(f"red sea: first image {first:.3f} s, coarse {first + coarse:.3f} s{refined} after the request; "
-              f"after a zoom to red-sea-2: first image {zp:.3f} s, coarse {zp + zc:.3f} s{zrefined} "
-              "(the page asks for the passes in turn)")
+        out = []
+        for name in ("red-sea", "red-sea-2"):
+            p = fetch(_window(name), "preview")
+            c = fetch(_window(name), "coarse")
+            f1, f = (0.0, 0.0) if a.no_fine else refine(_window(name))
+            refined = "" if a.no_fine else f", first refined strip {p + c + f1:.3f} s, refined {a.res}×{a.res} {p + c + f:.3f} s"
+            out.append(f"first image {p:.3f} s, coarse {p + c:.3f} s{refined}")
+        print(f"red sea: {out[0]} after the request; after a zoom to red-sea-2: {out[1]} (the page asks for the passes in turn)")
+    if not a.no_fine:
+        from dicetrace.simulate import simulate_batch
+
+        v = ex.view
+        grid, cfg = v.grid(), v.config()
+        ics = grid.block(0, grid.size).ics
+        t0, c0 = time.perf_counter(), time.process_time()
+        simulate_batch(ics, config=cfg, l_convention=grid.slice.l_convention, threads=a.threads)
+        print(f"the batch kernel alone on red sea's {grid.size} refined ICs, one call: {time.perf_counter() - t0:.3f} s "
+              f"(CPU {time.process_time() - c0:.3f} s)")
 
 
 if __name__ == "__main__":

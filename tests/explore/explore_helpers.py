@@ -1,4 +1,4 @@
-"""Helpers of the explorer tests: a small view of the seed slice, map PNGs decoded, scans to compare with."""
+"""Helpers of the explorer tests: a small view of the seed slice, map PNGs decoded, scans to compare with, a page's map."""
 
 from __future__ import annotations
 
@@ -31,3 +31,24 @@ def scan_outcomes(tmp_path, window: str, res, name: str = "scan", **options) -> 
     folder = tmp_path / name
     scan(Grid("seed", get_window(window), res), folder, **options)
     return label_grid(folder)
+
+
+def wait_ready(page, timeout=120_000):
+    """Wait until the page (or frame) has its refined map, or shows an error (then fail with it)."""
+    page.wait_for_function("document.body.dataset.state === 'ready' || document.body.dataset.state === 'error'",
+                           timeout=timeout)
+    assert page.evaluate("document.body.dataset.state") == "ready", page.inner_text("#error")
+
+
+def page_outcomes(page) -> np.ndarray:
+    """The outcome grid [i, j] of the map the page (or frame) shows, read from its canvas."""
+    from dicetrace.explore.app import outcome_from_rgb
+
+    data = page.evaluate("""() => {
+        const c = document.getElementById('map');
+        return {w: c.width, h: c.height, px: Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data)};
+    }""")
+    img = np.array(data["px"], dtype=np.uint8).reshape(data["h"], data["w"], 4)[..., :3]
+    out = outcome_from_rgb(img)
+    assert (out != -9).all()
+    return out

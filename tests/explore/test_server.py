@@ -112,7 +112,7 @@ def test_a_newer_view_cancels_the_stale_map():
     w = Worker()
     try:
         w.submit_map(View(res=(8, 8))).result()  # the batch kernel compiled (more than 16 ICs)
-        stale = w.submit_map(View(res=(400, 400)), client="c")  # ~40 blocks of work
+        stale = w.submit_map(View(res=(400, 400)), client="c")  # ~20 strips of work
         time.sleep(0.2)
         new_view = View(window=parse_window(WINDOW), res=(RES, RES))
         t0 = time.perf_counter()

@@ -31,7 +31,6 @@ import json
 import os
 import re
 import sys
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -42,6 +41,7 @@ import pytest
 pytest.importorskip("rerun")
 
 from rerun.chunk import RrdReader  # noqa: E402
+from rrd_blueprint import VOLATILE_COLUMNS, blueprint_tree  # noqa: E402
 
 GOLDEN = Path(__file__).resolve().parents[1] / "data" / "golden"
 RRD_NAME = "seed_x1.65_y3.9.rrd"
@@ -50,7 +50,6 @@ RECORD_ARGS = ("record", "--slice", "seed", "--at", "1.65,3.9")
 MAX_TOTAL_BYTES = 1_000_000
 
 # Written anew on every run, whatever the code: never compared.
-_VOLATILE_COLUMNS = {"rerun.controls.RowId", "RecordingInfo:start_time", "log_time"}
 _VERSION = "<version>"
 
 
@@ -203,7 +202,7 @@ def recording_tables(path: Path) -> dict[str, pa.Table]:
     parts: dict[str, list[pa.Table]] = {}
     for ch in reader.stream(store=store):
         t = pa.Table.from_batches([ch.to_record_batch()]).replace_schema_metadata(None)  # chunk id, entity
-        t = t.drop_columns([c for c in t.column_names if c in _VOLATILE_COLUMNS])
+        t = t.drop_columns([c for c in t.column_names if c in VOLATILE_COLUMNS])
         index = [f.name for f in t.schema if (f.metadata or {}).get(b"rerun:kind") == b"index"]
         if len(t.column_names) == len(index):
             continue  # nothing left but timelines (the start-time property)
@@ -238,47 +237,6 @@ def test_rrd_recording_equals_golden(golden, fresh):
 
 
 # -- .rrd: the blueprint store ----------------------------------------------------------------------
-
-_UUID = re.compile(r"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}")
-
-
-def blueprint_tree(path: Path) -> dict[str, dict]:
-    """The blueprint store as {entity: {component: value}}, ids replaced by tree positions.
-
-    The viewport's root container is ``root``; the i-th entry of container
-    ``c`` is ``c.i`` (so ``/view/root.1.0`` is the first view in the second
-    entry of the root).  Any id not reached from the root stays ``unreached-N``.
-    """
-    reader = RrdReader(str(path))
-    (store,) = reader.blueprints()
-    rows: dict[str, dict] = {}
-    for ch in reader.stream(store=store):
-        for row in pa.Table.from_batches([ch.to_record_batch()]).to_pylist():
-            comp = {k: v for k, v in row.items() if k not in _VOLATILE_COLUMNS}
-            rows.setdefault(f"{'static' if ch.is_static else 'temporal'} {ch.entity_path}", {}).update(comp)
-    names: dict[str, str] = {}
-    (viewport,) = [v for k, v in rows.items() if k.endswith(" /viewport")]
-    todo = [(str(uuid.UUID(bytes=bytes(viewport["ViewportBlueprint:root_container"][0]))), "root")]
-    while todo:
-        uid, name = todo.pop()
-        names[uid] = name
-        for k, v in rows.items():
-            if k.endswith(f"/container/{uid}"):
-                for i, child in enumerate(v.get("ContainerBlueprint:contents") or []):
-                    todo.append((child.split("/", 1)[1], f"{name}.{i}"))
-
-    def canon(obj):
-        if isinstance(obj, str):
-            return _UUID.sub(lambda m: names.setdefault(m.group(0), f"unreached-{len(names)}"), obj)
-        if isinstance(obj, list):
-            return [canon(x) for x in obj]
-        if isinstance(obj, dict):
-            return {canon(k): canon(v) for k, v in obj.items()}
-        return obj
-
-    tree = {canon(k): canon(v) for k, v in rows.items()}
-    tree["temporal /viewport"]["ViewportBlueprint:root_container"] = "root"
-    return tree
 
 
 def test_rrd_blueprint_equals_golden(golden, fresh):

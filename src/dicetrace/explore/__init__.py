@@ -2,6 +2,7 @@
 
 >>> from dicetrace.explore import Explorer
 >>> Explorer(window="red-sea")          # in Jupyter: the explorer in an IFrame  # doctest: +SKIP
+>>> Explorer(window="red-sea").widget(on_pick=print)   # a widget: picks come back  # doctest: +SKIP
 
 :class:`View` (what a map shows, from URL parameters), :func:`compute_map`
 (its outcomes through the batch kernel), :func:`create_app` (the ASGI app)
@@ -16,6 +17,7 @@ __all__ = [
     "MIN_RES",
     "Cancelled",
     "Explorer",
+    "ExplorerWidget",
     "OutcomeMap",
     "View",
     "ViewError",
@@ -34,6 +36,10 @@ def __getattr__(name):  # the server stack (starlette, uvicorn) is imported only
         from dicetrace.explore.app import create_app
 
         return create_app
+    if name == "ExplorerWidget":  # anywidget and ipywidgets too
+        from dicetrace.explore.widget import ExplorerWidget
+
+        return ExplorerWidget
     if name in ("Explorer", "make_view"):
         from dicetrace.explore import server
 

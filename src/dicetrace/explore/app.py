@@ -9,8 +9,9 @@ Endpoints::
 
     GET  /                      the page (its view in the URL query)
     GET  /api/view              the normalised view: its query, axes, limits
-    GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: 1/16, 1/4 resolution)
+    GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: about 1/16, 1/4 resolution)
     GET  /api/map.json          the same map's outcome labels, [i][j] with i along x
+    GET  /api/map.strips        the refined map as it is computed: NDJSON, a line per strip of image rows, then "done"
     GET  /api/hover?x=&y=       the nearest grid point's throw: coordinates, IC, outcome, steps, settle time, contacts
     GET  /api/throw.rrd?x=&y=   that throw as a Rerun recording (as ``dicetrace record`` writes it)
     POST /api/save?name=        the view as a scan dataset (as ``dicetrace scan`` writes it) in the start-up folder
@@ -28,16 +29,18 @@ from pathlib import Path
 import numpy as np
 from starlette.applications import Starlette
 from starlette.requests import Request
-from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response
+from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
-from dicetrace.explore.compute import Cancelled, Worker, scan_folder_for, throw_info, throw_rrd
+from dicetrace.explore.compute import Cancelled, Worker, scan_folder_for, strip_rows, throw_info, throw_rrd
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
 
 #: The passes of a view and their resolution divisors: the page asks for each in turn.
 PASSES = {"preview": 16, "coarse": 4, "fine": 1}
 #: Longest a hover or throw may take before the request gives up, s.
 THROW_TIMEOUT_S = 120.0
+#: How often a streamed map looks for new strips, s.
+STRIP_POLL_S = 0.03
 
 
 def outcome_rgb_table() -> np.ndarray:
@@ -67,6 +70,18 @@ def outcome_from_rgb(img: np.ndarray) -> np.ndarray:
     for k in range(8):
         out[(img[..., :3] == table[k]).all(axis=-1)] = k - 1
     return out[::-1].T
+
+
+def strip_line(m, row0: int, row1: int) -> bytes:
+    """One NDJSON line of :func:`create_app`'s ``/api/map.strips``: image rows row0..row1 (top first) of map ``m``.
+
+    ``outcome`` is base64 of one byte per pixel, row by row, left to right: the
+    outcome + 1 (0 undefined-grey ... 7 face 6), the row of :func:`outcome_rgb_table`.
+    """
+    import base64
+
+    img = (np.asarray(m.strip(row0, row1), dtype=np.int16).T[::-1] + 1).astype(np.uint8)
+    return (json.dumps({"row0": row0, "row1": row1, "outcome": base64.b64encode(img.tobytes()).decode()}) + "\n").encode()
 
 
 def _error(e: Exception, status: int = 400) -> JSONResponse:
@@ -157,6 +172,37 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
                              "outcome": m.outcome.tolist(), "steps": m.steps.tolist(),
                              "counts": m.counts(), "wall_s": m.wall_s})
 
+    async def map_strips_ep(request: Request) -> Response:
+        try:
+            v = _view(request, default)
+        except ViewError as e:
+            return _error(e)
+        fut = asyncio.wrap_future(worker.submit_map(v, request.query_params.get("client", "")[:64]))
+        rows = strip_rows(v)
+
+        async def lines():
+            sent = 0
+            while True:
+                finished = fut.done()
+                try:
+                    m = fut.result() if finished else worker.progress(v)
+                except Cancelled:
+                    yield (json.dumps({"error": "superseded by a newer view", "status": 409}) + "\n").encode()
+                    return
+                except Exception as e:
+                    yield (json.dumps({"error": f"internal error: {type(e).__name__}: {e}", "status": 500}) + "\n").encode()
+                    return
+                for row0 in range(sent, m.rows_done if m is not None else 0, rows):  # a line per strip computed
+                    yield strip_line(m, row0, min(row0 + rows, m.rows_done))
+                    sent = min(row0 + rows, m.rows_done)
+                if finished:
+                    yield (json.dumps({"done": True, "res": list(m.view.res), "wall_s": m.wall_s, "reused": m.reused,
+                                       "counts": m.counts()}) + "\n").encode()
+                    return
+                await asyncio.wait([fut], timeout=STRIP_POLL_S)
+
+        return StreamingResponse(lines(), media_type="application/x-ndjson", headers={"Cache-Control": "no-store"})
+
     async def hover(request: Request) -> Response:
         try:
             v = _view(request, default)
@@ -172,11 +218,12 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
             i, j = _point(request, v)
         except ViewError as e:
             return _error(e)
-        name, data, summary = await asyncio.wait_for(
-            asyncio.wrap_future(worker.submit_throw(throw_rrd, v, i, j)), THROW_TIMEOUT_S)
+        download = bool(request.query_params.get("download"))
+        name, data, summary = await asyncio.wait_for(  # for the viewer, record's blueprint made active
+            asyncio.wrap_future(worker.submit_throw(throw_rrd, v, i, j, not download)), THROW_TIMEOUT_S)
         headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"],
                    "Access-Control-Allow-Origin": request.headers.get("origin", "") or "null"}
-        if request.query_params.get("download"):
+        if download:
             headers["Content-Disposition"] = f'attachment; filename="{name}.rrd"'
         return Response(data, media_type="application/octet-stream", headers=headers)
 
@@ -217,6 +264,7 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         Route("/api/view", view_info),
         Route("/api/map.png", map_png_ep),
         Route("/api/map.json", map_json_ep),
+        Route("/api/map.strips", map_strips_ep),
         Route("/api/hover", hover),
         Route("/api/throw.rrd", throw),
         Route("/api/save", save, methods=["POST"]),

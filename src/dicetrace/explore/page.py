@@ -2,10 +2,12 @@
 
 The script keeps the view in the URL (``history.pushState``: the browser's
 back button and the page's back/reset walk the history of views), loads a
-preview (1/16 resolution), a coarse map (1/4) and then the refined one (a newer view cancels the older on the
-server), zooms on a dragged box or the mouse wheel, pans with the arrow
-buttons, shows hover info, and on click loads that throw into Rerun's web
-viewer beside the map (shift-click adds a second throw to compare).
+preview (about 1/16 of the resolution), a coarse map (about 1/4) and then the
+refined one, drawn into one canvas strip by strip as the server computes it (a
+newer view cancels the older on the server), zooms on a dragged box or the
+mouse wheel, pans with the arrow buttons, shows hover info, and on click loads
+that throw into Rerun's web viewer beside the map (shift-click adds a second
+throw to compare).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ def _options(names, selected) -> str:
 
 def page_html(default: View, *, can_save: bool) -> str:
     """The page; ``default`` is the view of a URL without parameters."""
+    from dicetrace.explore.app import outcome_rgb_table
     from dicetrace.ics import SLICES
     from dicetrace.integrators import INTEGRATORS
     from dicetrace.params import PRESETS
@@ -33,7 +36,7 @@ def page_html(default: View, *, can_save: bool) -> str:
         f'<span class="key"><span class="sw" style="background:rgb{OUTCOME_RGB[o]}"></span>{html.escape(OUTCOME_NAMES[o])}</span>'
         for o in (1, 2, 3, 4, 5, 6, 0, -1)
     )
-    cfg = {"default": default.to_query(), "canSave": can_save}
+    cfg = {"default": default.to_query(), "canSave": can_save, "palette": outcome_rgb_table().tolist()}
     return (
         _TEMPLATE.replace("%LEGEND%", legend)
         .replace("%SLICES%", _options(SLICES, default.slice))
@@ -83,7 +86,7 @@ _TEMPLATE = r"""<!doctype html>
 <div id="main">
  <div>
   <div style="display:flex"><div id="ylab" class="ax"><span id="y1"></span><span>y</span><span id="y0"></span></div>
-   <div><div id="mapbox"><img id="map" alt="outcome map" draggable="false"><div id="sel"></div></div>
+   <div><div id="mapbox"><canvas id="map" aria-label="outcome map"></canvas><div id="sel"></div></div>
    <div id="xlab" class="ax"><span id="x0"></span><span>x</span><span id="x1"></span></div></div></div>
   <div id="info"></div>
  </div>
@@ -98,8 +101,12 @@ let window4 = null;       // [x0, x1, y0, y1] numbers
 let res = [256, 256];
 let seq = 0;              // the newest load; older responses are dropped
 let throws = [];          // the throws shown in the viewer: {x, y, info}
-let viewer = null;
+let viewer = null;        // the Rerun viewer (a promise of it) once a throw is picked
 
+// Inside a frame (the notebook widget, dicetrace.explore.widget), the picks and the view go to the parent.
+function tellParent(type, data) {
+  if (window.parent !== window) window.parent.postMessage({source: "dicetrace-explore", type, ...data}, "*");
+}
 function readUrl() {
   const q = Object.fromEntries(new URLSearchParams(location.search));
   return Object.keys(q).length ? q : {...CFG.default};
@@ -118,22 +125,62 @@ async function load(q, push) {
   if (push) history.pushState(view, "", "?" + qs(view));
   else history.replaceState(view, "", "?" + qs(view));
   fillControls();
+  tellParent("view", {view});
   document.body.dataset.state = "computing";
-  for (const pass of ["preview", "coarse", "fine"]) {
-    setStatus(pass === "fine" ? "refining…" : `computing a ${pass} map…`, true);
-    const t0 = performance.now();
+  document.body.dataset.strips = "";
+  const c = $("map");
+  if (c.width !== res[0] || c.height !== res[1]) { c.width = res[0]; c.height = res[1]; }
+  const t0 = performance.now();
+  for (const pass of ["preview", "coarse"]) {
+    setStatus(`computing a ${pass} map…`, true);
     r = await fetch("/api/map.png?" + qs(view, {pass, client}));
     if (my !== seq) return;                      // a newer view took over
     if (r.status === 409) return;
-    if (!r.ok) { j = await r.json(); showError(j.error); setStatus("", false); document.body.dataset.state = "error"; return; }
-    const blob = await r.blob();
-    $("map").src = URL.createObjectURL(blob);
-    $("map").dataset.pass = pass;
-    $("map").dataset.res = r.headers.get("X-Dicetrace-Res");
-    $("map").dataset.query = qs(view);
-    setStatus(`${pass} ${r.headers.get("X-Dicetrace-Res")} in ${((performance.now() - t0) / 1000).toFixed(2)} s`, pass !== "fine");
+    if (!r.ok) { j = await r.json(); return fail(j.error); }
+    const img = await createImageBitmap(await r.blob());
+    if (my !== seq) return;
+    const g = c.getContext("2d"); g.imageSmoothingEnabled = false;
+    g.drawImage(img, 0, 0, c.width, c.height);   // its pixels as blocks of the full grid
+    c.dataset.pass = pass; c.dataset.res = r.headers.get("X-Dicetrace-Res");
   }
+  if (!await refine(my, c, t0)) return;
+  c.dataset.pass = "fine"; c.dataset.res = res.join(","); c.dataset.query = qs(view);
   document.body.dataset.state = "ready";
+}
+function fail(msg) { showError(msg); setStatus("", false); document.body.dataset.state = "error"; return false; }
+
+// The refined map, strip by strip as the server computes it (NDJSON: rows row0..row1 as outcome bytes, then "done").
+async function refine(my, c, t0) {
+  setStatus("refining…", true);
+  const r = await fetch("/api/map.strips?" + qs(view, {client}));
+  if (!r.ok) { const j = await r.json(); return fail(j.error); }
+  const reader = r.body.pipeThrough(new TextDecoderStream()).getReader();
+  const g = c.getContext("2d");
+  let buf = "";
+  for (;;) {
+    const {value, done} = await reader.read();
+    if (my !== seq) { reader.cancel(); return false; }
+    if (done) return fail("the map stream ended early");
+    buf += value;
+    let nl;
+    while ((nl = buf.indexOf("\n")) >= 0) {
+      const msg = JSON.parse(buf.slice(0, nl)); buf = buf.slice(nl + 1);
+      if (msg.error) { if (msg.status !== 409) fail(msg.error); return false; }
+      if (msg.done) {
+        setStatus(`refined ${msg.res.join("×")} in ${((performance.now() - t0) / 1000).toFixed(2)} s`, false);
+        return true;
+      }
+      const bytes = Uint8Array.from(atob(msg.outcome), (ch) => ch.charCodeAt(0));
+      const img = g.createImageData(c.width, msg.row1 - msg.row0);
+      for (let k = 0; k < bytes.length; k++) {
+        const rgb = CFG.palette[bytes[k]];
+        img.data[4 * k] = rgb[0]; img.data[4 * k + 1] = rgb[1]; img.data[4 * k + 2] = rgb[2]; img.data[4 * k + 3] = 255;
+      }
+      g.putImageData(img, 0, msg.row0);
+      document.body.dataset.strips += (document.body.dataset.strips ? "," : "") + msg.row1;
+      setStatus(`refining… ${msg.row1}/${c.height} rows`, true);
+    }
+  }
 }
 
 function fillControls() {
@@ -194,8 +241,11 @@ async function hover(x, y) {
   $("info").textContent = "hover: " + describe(j) + (picked ? "\n\n" + picked + compare() : "");
 }
 
-async function ensureViewer() {
-  if (viewer) return viewer;
+function ensureViewer() {  // one viewer, however many picks come while it loads
+  viewer = viewer || makeViewer().catch((e) => { viewer = null; throw e; });
+  return viewer;
+}
+async function makeViewer() {
   const mod = await import("/rerun/widget.js");
   const handlers = {};
   const box = $("viewerbox");
@@ -207,9 +257,8 @@ async function ensureViewer() {
   };
   mod.default.render({model, el: box});
   for (let k = 0; k < 600 && !model.ready; k++) await new Promise((r) => setTimeout(r, 100));
-  viewer = {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
-            close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
-  return viewer;
+  return {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
+          close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
 }
 async function pick(x, y, add) {
   const r = await fetch("/api/hover?" + qs(view, {x, y}));
@@ -217,12 +266,14 @@ async function pick(x, y, add) {
   if (!r.ok) { showError(info.error); return; }
   const url = new URL("/api/throw.rrd?" + qs(view, {i: info.i, j: info.j}), location.href).href;
   $("download").href = url + "&download=1";
-  const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
-  if (!add) { if (v) throws.forEach((t) => v.close(t.url)); throws = []; }
+  const gone = add ? [] : throws;
+  if (!add) throws = [];
   throws.push({x, y, info, url});
-  if (v) v.open(url);
   $("info").dataset.throws = JSON.stringify(throws.map((t) => t.info));
+  tellParent("throws", {throws: throws.map((t) => t.info)});
   $("info").textContent = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n") + compare();
+  const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
+  if (v) { gone.forEach((t) => v.close(t.url)); v.open(url); }
 }
 function compare() {
   if (throws.length < 2) return "";

@@ -3,8 +3,9 @@
 ``Explorer`` is the notebook face: it starts the server on a free port in a
 thread, and displays as an IFrame of the page (``_repr_html_``), so
 ``dicetrace.explore.Explorer(window="red-sea")`` as a cell's last line
-shows the explorer inside Jupyter.  ``stop()`` (or leaving a ``with``
-block) shuts it down and frees the port.
+shows the explorer inside Jupyter; ``Explorer.widget()`` is the same page as
+an anywidget whose picked throws and view come back to Python.  ``stop()``
+(or leaving a ``with`` block) shuts it down and frees the port.
 """
 
 from __future__ import annotations
@@ -121,6 +122,19 @@ class Explorer:
 
     def __exit__(self, *exc) -> None:
         self.stop()
+
+    def widget(self, on_pick=None):
+        """The explorer as a Jupyter widget whose ``throws`` and ``view`` follow the page (started if it is not).
+
+        ``on_pick(info)`` is called with the hover info of each throw picked on the page:
+        :class:`~dicetrace.explore.widget.ExplorerWidget`.
+        """
+        from dicetrace.explore.widget import ExplorerWidget
+
+        w = ExplorerWidget(url=self.start().url, height=self.height)
+        if on_pick is not None:
+            w.on_pick(on_pick)
+        return w
 
     def __repr__(self) -> str:
         state = "running at " + self.url if self.running else "stopped"

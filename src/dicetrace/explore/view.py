@@ -91,9 +91,8 @@ class View:
         return Grid(sl, self.window, (nx, ny))
 
     def coarse(self, factor: int = 4) -> "View":
-        """The same window at about 1/``factor`` of the resolution (the first, quick pass)."""
-        nx, ny = self.res
-        return replace(self, res=(max(MIN_RES, -(-nx // factor)), max(MIN_RES, -(-ny // factor))))
+        """The same window at about 1/``factor`` of the resolution (a first, quick pass): :func:`pass_res` per axis."""
+        return replace(self, res=tuple(pass_res(n, factor) for n in self.res))
 
     def zoomed(self, x0: float, x1: float, y0: float, y1: float) -> "View":
         return replace(self, window=((float(x0), float(x1)), (float(y0), float(y1))))
@@ -127,6 +126,22 @@ class View:
             t = (v - lo) / (hi - lo) * (n - 1)
             out.append(int(min(max(round(t), 0), n - 1)))
         return out[0], out[1]
+
+
+def pass_res(n: int, factor: int) -> int:
+    """A coarse pass's points on an axis of ``n``: about n/``factor``, and a subgrid of the n points if one is near.
+
+    With c − 1 dividing n − 1 every (n−1)/(c−1)-th point of the full grid is a
+    point of the coarse one, bit for bit (the grid formula divides the same
+    rational), so the refined pass takes those results instead of computing
+    them again: 256 → 52 and 16.  Otherwise ⌈n/factor⌉.
+    """
+    target = n / factor
+    near = [(n - 1) // d + 1 for d in range(1, n) if (n - 1) % d == 0]
+    near = [c for c in near if MIN_RES <= c < n and target / 2 <= c <= target * 1.25]
+    if near:
+        return min(near, key=lambda c: abs(math.log(c / target)))
+    return max(MIN_RES, -(-n // factor))
 
 
 def _num(param: str, text) -> float:

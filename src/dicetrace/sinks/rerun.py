@@ -141,14 +141,14 @@ def encode_rrd_of(
     ic_label: str | None = None,
     trail_every: int | None = None,
     application_id: str = "dicetrace",
+    activate: bool = False,
 ) -> bytes:
-    """The bytes of :func:`write_rrd`'s recording of ``roll`` (nothing is written)."""
+    """The bytes of :func:`write_rrd`'s recording of ``roll`` (nothing is written); ``activate``: as :func:`encode_rrd`."""
     tr = roll.trace
     if tr is None or tr.node_offsets is None or tr.energy is None:
         raise ValueError("write_rrd needs a roll with states and energy: simulate(..., record=Record(states=True, energy=True))")
-
     return encode_rrd(roll_logger(roll, name=name, ic_label=ic_label, trail_every=trail_every), default_blueprint(roll),
-                      application_id=application_id)
+                      application_id=application_id, activate=activate)
 
 
 def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, trail_every: int | None = None,
@@ -183,18 +183,18 @@ def _rr():
 ENCODE_TIMEOUT_S = 600.0
 
 
-def encode_rrd(log, blueprint, *, application_id: str = "dicetrace") -> bytes:
+def encode_rrd(log, blueprint, *, application_id: str = "dicetrace", activate: bool = False) -> bytes:
     """The bytes of a ``.rrd`` recording: ``log(rec)`` logs into a fresh stream with ``blueprint`` as its default.
 
-    Encoded in memory (rerun's binary stream), so that all file writing is
-    Python's own (errors such as a full disk surface as exceptions, never as
-    a stuck or dying background writer).
+    Encoded in memory (rerun's binary stream): all file writing is Python's own (a full disk raises,
+    never a stuck background writer).  ``activate`` makes it the active blueprint too: Rerun's web
+    viewer (0.41) lays out a recording opened by URL by its own heuristics otherwise.
     """
     rr = _rr()
     rec = rr.RecordingStream(application_id)
     stream = rec.binary_stream()
     try:
-        rec.send_blueprint(blueprint, make_active=False, make_default=True)
+        rec.send_blueprint(blueprint, make_active=activate, make_default=True)
         log(rec)
         data = stream.read(flush=True, flush_timeout_sec=ENCODE_TIMEOUT_S)
     finally:
