@@ -37,7 +37,7 @@ from dicetrace.params import make_config
 from dicetrace.studies.accuracy import T_MAX_S, run_batch, sample_ics
 
 V_REGS = (10.0, 3.0, 1.0, 0.3)
-TOLS = (1e-6, 1e-7, 1e-8, 1e-9, 1e-10)
+TOLS = (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11)
 QUICK = dict(n=8, v_regs=(10.0, 3.0), tols=(1e-6, 1e-7))
 #: Agreement of the two tightest runs (and the independent one) that makes a v_reg converged.
 CONVERGED_SELF = 0.97
