@@ -109,7 +109,7 @@ class KernelParams(NamedTuple):
     blowup_rel: float  # blow-up if E_dyn - E_rest > (1+rel)·(E0 - E_rest) + abs
     blowup_abs: float
     substeps: float  # sub-steps per step while in contact (contact-substep)
-    tol: float = 0.0  # local error tolerance of the sub-steps (contact-adaptive); 0: fixed sub-steps
+    tol: float = 0.0  # local error tolerance of the sub-steps (the adaptive integrators); 0: fixed sub-steps
 
 
 @dataclass(frozen=True)
@@ -288,10 +288,12 @@ class Numerics:
         only the free-flight step and the output granularity (contact sets,
         stop test, settle time).
     tol
-        ``contact-adaptive`` only: the local error tolerance of its sub-steps
-        (relative: position error per sub-step in units of the half side,
-        velocity error in units of the die's current speed |U| + √3·half·|ω|
-        + √(|g|·half)), in [``TOL_MIN``, 1).  Its sub-steps are at most dt long.
+        The error-controlled integrators only (``contact-adaptive``,
+        ``contact-dop853``: ``IntegratorSpec.adaptive``): the local error
+        tolerance of their sub-steps (relative: position error per sub-step in
+        units of the half side, velocity error in units of the die's current
+        speed |U| + √3·half·|ω| + √(|g|·half)), in [``TOL_MIN``, 1).  Their
+        sub-steps are at most dt long.
     """
 
     integrator: str = "semi-implicit-euler"
@@ -437,7 +439,7 @@ def make_config(
     ``dt_s="auto"`` picks the step with :func:`auto_dt` for impacts at
     ``v_impact_cm_s`` (cm/s; see :func:`impact_speed_cm_s`), or raises
     ValueError when no step fits the budget.  ``tol``: the local error
-    tolerance of ``contact-adaptive`` (default ``Numerics.tol``).
+    tolerance of the error-controlled integrators (default ``Numerics.tol``).
     """
     if isinstance(preset, str):
         p = get_preset(preset)
@@ -460,7 +462,8 @@ def make_config(
         import warnings
 
         warnings.warn(
-            f"tol (the error tolerance of contact-adaptive's sub-steps) has no effect on {integrator}, "
+            f"tol (the error tolerance of the error-controlled sub-steps of "
+            f"{', '.join(n for n, sp in INTEGRATORS.items() if sp.adaptive)}) has no effect on {integrator}, "
             "whose steps are fixed",
             UserWarning,
             stacklevel=2,

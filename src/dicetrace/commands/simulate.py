@@ -29,6 +29,7 @@ import numpy as np
 import typer
 
 from dicetrace.commands._common import fail, output_file, parse_floats
+from dicetrace.params import INTEGRATORS, PRESETS, TOL_MIN, Numerics
 from dicetrace.status import Status
 
 FORMATS = ("table", "csv", "json")
@@ -44,8 +45,16 @@ SLICE_HELP = (
 )
 AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
 PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
-INTEGRATOR_HELP = "Integrator: semi-implicit-euler, forward-euler, verlet, rk4, contact-substep, contact-adaptive (default: the preset's own, semi-implicit-euler for seed, contact-adaptive for physical)."
-TOL_HELP = "contact-adaptive only: local error tolerance of its sub-steps, in [1e-14, 1) (default 1e-7; smaller is more accurate and slower)."
+INTEGRATOR_HELP = (
+    f"Integrator: {', '.join(INTEGRATORS)} (default: the preset's own, "
+    + ", ".join(f"{p.integrator} for {name}" for name, p in PRESETS.items()) + ")."
+)
+#: The integrators with error-controlled sub-steps (those that take --tol).
+ADAPTIVE = ", ".join(name for name, spec in INTEGRATORS.items() if spec.adaptive)
+TOL_HELP = (
+    f"{ADAPTIVE} only: local error tolerance of their sub-steps, in [{TOL_MIN:g}, 1) "
+    f"(default {Numerics.tol:g}; smaller is more accurate and slower)."
+)
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
 
@@ -112,12 +121,12 @@ def build_config(
     else:
         dt = parse_positive(dt, "--dt", "the time step in s, or 'auto'")
     t_max = parse_positive(t_max, "--t-max", "the time cap in s")
-    tol = parse_positive(tol, "--tol", "the local error tolerance of contact-adaptive")
+    tol = parse_positive(tol, "--tol", f"the local error tolerance of {ADAPTIVE}")
     integ = integrator or model.integrator
     if tol is not None and not TOL_MIN <= tol < 1:
         fail(f"--tol: tolerance tol must be a number in [{TOL_MIN:g}, 1), got {fmt_num(tol)}")
     if tol is not None and not INTEGRATORS[integ].adaptive:
-        fail(f"--tol {fmt_num(tol)} applies only to --integrator contact-adaptive (its error-controlled sub-steps); "
+        fail(f"--tol {fmt_num(tol)} applies only to the integrators with error-controlled sub-steps ({ADAPTIVE}); "
              f"{integ} has fixed steps: drop --tol")
     try:
         return make_config(base, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol, **overrides)
