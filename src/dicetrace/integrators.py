@@ -105,7 +105,7 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
         ),
         IntegratorSpec(
             "contact-adaptive", 5, 4, _RK4_BOUND,
-            "contact-substep with error-controlled sub-steps (tolerance tol; default for physical)", "tab:brown",
+            "contact-substep with error-controlled sub-steps (tolerance tol)", "tab:brown",
             scheme="contact_substep",
             study_dt_s=(1e-3,),
             quick_dt_s=(1e-3,),
@@ -116,7 +116,8 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
         ),
         IntegratorSpec(
             "contact-dop853", 6, 8, 5.96,
-            "contact-adaptive's sub-stepping with the order-8 Dormand-Prince pair (DOP853)", "tab:pink",
+            "contact-adaptive's sub-stepping with the order-8 Dormand-Prince pair (DOP853; default for physical)",
+            "tab:pink",
             scheme="contact_dop853",
             study_dt_s=(1e-3,),
             quick_dt_s=(1e-3,),
