@@ -6,8 +6,8 @@ says more about the sample than about the die.  The growth rate of the
 number ``N(n)`` of distinct length-``n`` prefixes, ``N(n) ~ exp(h n)``, is
 the topological entropy of the symbolic dynamics (nats per contact set); it
 is estimated where ``N(n)`` is still far below the number of sequences
-(``N(n) ≤ max_fill · M``), and checked against half and a quarter of the
-sample.
+that long (``N(n) ≤ max_fill · M(n)``), and checked against half and a
+quarter of the sample.
 
 A penalty ground adds micro-bounces (a corner leaving and re-entering the
 ground within a few steps); :func:`coarse_grain` drops every set that lasts
@@ -46,12 +46,18 @@ def coarse_grain(sets, steps, end_step: int, *, min_steps: int) -> tuple:
     return tuple(out)
 
 
-def prefix_counts(sequences: Sequence[Sequence], max_len: int) -> np.ndarray:
-    """``N(n)`` for n = 1 … ``max_len``: distinct length-n prefixes among the sequences at least n long."""
+def prefix_counts(sequences: Sequence[Sequence], max_len: int, *, with_alive: bool = False):
+    """``N(n)`` for n = 1 … ``max_len``: distinct length-n prefixes among the sequences at least n long.
+
+    With ``with_alive`` also ``M(n)``, the number of sequences at least n long.
+    """
     out = np.zeros(int(max_len), dtype=np.int64)
+    alive = np.zeros(int(max_len), dtype=np.int64)
     for n in range(1, int(max_len) + 1):
-        out[n - 1] = len({tuple(q[:n]) for q in sequences if len(q) >= n})
-    return out
+        long_enough = [tuple(q[:n]) for q in sequences if len(q) >= n]
+        out[n - 1] = len(set(long_enough))
+        alive[n - 1] = len(long_enough)
+    return (out, alive) if with_alive else out
 
 
 @dataclasses.dataclass(frozen=True)
@@ -67,27 +73,35 @@ class PrefixEntropy:
     n_sequences: int
 
 
-def _fit(counts: np.ndarray, m: int, n_min: int, max_fill: float) -> tuple[float, float, tuple[int, int]]:
+def _fit(counts: np.ndarray, alive: np.ndarray, min_count: int, max_fill: float) -> tuple[float, float, tuple]:
     n = np.arange(1, len(counts) + 1)
-    ok = (n >= n_min) & (counts <= max_fill * m) & (counts > 0)
+    m = alive[0] if len(alive) else 0
+    ok = (counts >= min_count) & (counts <= max_fill * alive) & (alive >= 0.5 * m)
     if ok.sum() < 3:
         return math.nan, math.nan, (0, 0)
     fit = fit_power_law(np.exp(n[ok]), counts[ok])  # ln N = h n + c
     return float(fit.slope), float(fit.slope_stderr), (int(n[ok][0]), int(n[ok][-1]))
 
 
-def prefix_entropy(sequences: Sequence[Sequence], *, max_len: int = 60, n_min: int = 2, max_fill: float = 0.1,
-                   rng: np.random.Generator | int = 0) -> PrefixEntropy:
-    """The growth rate ``h`` of ``N(n)`` on the lengths where ``N(n) ≤ max_fill · M`` (``M`` sequences long
-    enough), with the same fit on a random half and quarter of the sample (the sample-size check)."""
+def prefix_entropy(sequences: Sequence[Sequence], *, max_len: int = 60, min_count: int = 5,
+                   max_fill: float = 0.1, rng: np.random.Generator | int = 0) -> PrefixEntropy:
+    """The growth rate ``h`` of ``N(n)``, fitted where ``min_count ≤ N(n) ≤ max_fill · M(n)`` and ``M(n) ≥ M/2``.
+
+    ``M(n)`` is the number of sequences at least ``n`` long (``M`` all of
+    them): the fit stays where the count is neither in the deterministic
+    start (``N < min_count``) nor limited by the sample (``N`` near ``M(n)``),
+    nor by the sequences that have ended.  The same fit on a random half and
+    quarter of the sample is the sample-size check: a rate that depends on
+    the sample size is not the die's.
+    """
     seqs = [tuple(q) for q in sequences]
     m = len(seqs)
-    counts = prefix_counts(seqs, max_len)
-    h, se, rng_n = _fit(counts, m, n_min, max_fill)
+    counts, alive = prefix_counts(seqs, max_len, with_alive=True)
+    h, se, rng_n = _fit(counts, alive, min_count, max_fill)
     gen = np.random.default_rng(rng)
     subs = []
     for frac in (2, 4):
         pick = gen.choice(m, size=max(1, m // frac), replace=False)
         sub = [seqs[i] for i in pick]
-        subs.append(_fit(prefix_counts(sub, max_len), len(sub), n_min, max_fill)[0])
+        subs.append(_fit(*prefix_counts(sub, max_len, with_alive=True), min_count, max_fill)[0])
     return PrefixEntropy(h, se, rng_n, counts, subs[0], subs[1], m)

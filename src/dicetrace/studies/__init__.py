@@ -22,9 +22,9 @@ from types import ModuleType
 
 #: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..j).
 WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation",
-                   "transient")
+                   "transient", "referee")
 #: Letter of each writeup study (its figures' prefix) -> name.
-LETTERS = dict(zip("abcdefghij", WRITEUP_STUDIES))
+LETTERS = dict(zip("abcdefghijk", WRITEUP_STUDIES))
 #: What each writeup study is about (the first line of its module's docstring, after the name).
 TITLES = {
     "cells": "the cell structure of the home window and the zoom ladder (writeup 4.1)",
@@ -37,6 +37,7 @@ TITLES = {
     "wedge": "the ball–hill wedge (writeup 4.2 and appendix 8.1)",
     "animation": "the third slice axis as time (writeup 6.1)",
     "transient": "transient chaos of the discrete and the converged die: λ, κ and α, with convergence certificates",
+    "referee": "every claim the referee marked, redone: vertices, chaos floor, α, λ, one cell, topology, stiffness",
 }
 #: The integrator studies (their own commands).
 INTEGRATOR_STUDIES = ("accuracy", "stability")
@@ -53,7 +54,7 @@ def resolve(names) -> list[str]:
             return list(WRITEUP_STUDIES)
         key = LETTERS.get(key, key)
         if key not in WRITEUP_STUDIES:
-            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..j)")
+            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..k)")
         if key not in out:
             out.append(key)
     return out
