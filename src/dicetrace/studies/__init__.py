@@ -20,7 +20,7 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..j).
+#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..k).
 WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation",
                    "transient", "referee")
 #: Letter of each writeup study (its figures' prefix) -> name.
@@ -37,7 +37,7 @@ TITLES = {
     "wedge": "the ball–hill wedge (writeup 4.2 and appendix 8.1)",
     "animation": "the third slice axis as time (writeup 6.1)",
     "transient": "transient chaos of the discrete and the converged die: λ, κ and α, with convergence certificates",
-    "referee": "every claim the referee marked, redone: vertices, chaos floor, α, λ, one cell, topology, stiffness",
+    "referee": "every claim the referee marked, redone with controls, error bars and enough scales",
 }
 #: The integrator studies (their own commands).
 INTEGRATOR_STUDIES = ("accuracy", "stability")
@@ -46,7 +46,7 @@ STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES
 
 
 def resolve(names) -> list[str]:
-    """Writeup study names from names, letters (a..j) or ``all`` (ValueError naming the choices)."""
+    """Writeup study names from names, letters (a..k) or ``all`` (ValueError naming the choices)."""
     out: list[str] = []
     for n in names or ("all",):
         key = str(n).strip().lower()

@@ -61,6 +61,15 @@ def _agreement_row(a) -> dict:
             "chance": a.chance, "n": a.n}
 
 
+def _outside(v: float, deltas) -> float | str:
+    """An equivalent δ, or text when it is outside the measured range (JSON has no inf)."""
+    if v == math.inf:
+        return f"> {max(deltas):.0e}"
+    if math.isnan(v):
+        return f"< {min(deltas):.0e}"
+    return v
+
+
 def _uniform(ctx: Context, window, n: int) -> np.ndarray:
     (x0, x1), (y0, y1) = window_ranges(window)
     return np.column_stack([ctx.rng.uniform(x0, x1, n), ctx.rng.uniform(y0, y1, n)])
@@ -129,13 +138,13 @@ def chaos_floors(ctx: Context) -> dict:
             "n": n, "reference": ref_model, "deltas": list(deltas),
             "floor": [{"delta": f.delta, **_agreement_row(f.agreement)} for f in floors],
             "discrete_vs_converged": _agreement_row(a_disc),
-            "equivalent_delta": equivalent_perturbation(deltas, fr, a_disc.fraction),
-            "equivalent_delta_ci": [equivalent_perturbation(deltas, fr, a_disc.ci[1]),
-                                    equivalent_perturbation(deltas, fr, a_disc.ci[0])],
+            "equivalent_delta": _outside(equivalent_perturbation(deltas, fr, a_disc.fraction), deltas),
+            "equivalent_delta_ci": [_outside(equivalent_perturbation(deltas, fr, a_disc.ci[1]), deltas),
+                                    _outside(equivalent_perturbation(deltas, fr, a_disc.ci[0]), deltas)],
         }
         ctx.n_throws += n * (len(deltas) + 2)
         ctx.log(f"floor {w}: " + ", ".join(f"{f.delta:g}: {f.agreement.fraction:.3f}" for f in floors)
-                + f"; discrete {a_disc.fraction:.3f} (κ {a_disc.kappa:.2f}) ≈ δ {out[w]['equivalent_delta']:.2g}")
+                + f"; discrete {a_disc.fraction:.3f} (κ {a_disc.kappa:.2f}) ≈ δ {out[w]['equivalent_delta']}")
     return out
 
 

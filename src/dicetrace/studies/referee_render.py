@@ -55,6 +55,11 @@ def _vertices(R: dict, out: Output) -> None:
     out.tables["vertices"] = md_table([row(r) for r in V["controls"] + V["rows"]], cols)
 
 
+def _delta(v, deltas) -> str:
+    """An equivalent δ: a number, or the study's text for one outside the measured range."""
+    return v if isinstance(v, str) else fmt(v, ".2g")
+
+
 def _floor(R: dict, out: Output) -> None:
     import matplotlib.pyplot as plt
 
@@ -82,8 +87,8 @@ def _floor(R: dict, out: Output) -> None:
                          "k": pm(f["kappa"], f["kappa_stderr"], ".3f")})
         rows.append({"w": w, "d": "discrete (1 ms)", "a": f"{dv['fraction']:.3f} [{dv['ci'][0]:.3f}, {dv['ci'][1]:.3f}]",
                      "k": pm(dv["kappa"], dv["kappa_stderr"], ".3f"),
-                     "eq": f"{fmt(d['equivalent_delta'], '.2g')} [{fmt(d['equivalent_delta_ci'][0], '.2g')}, "
-                           f"{fmt(d['equivalent_delta_ci'][1], '.2g')}]"})
+                     "eq": f"{_delta(d['equivalent_delta'], d['deltas'])} [{_delta(d['equivalent_delta_ci'][0], d['deltas'])}, "
+                           f"{_delta(d['equivalent_delta_ci'][1], d['deltas'])}]"})
     fig.tight_layout()
     out.save_fig(fig, "k_floor", caption="Chaos floor of the converged model (agreement with itself under a relative "
                  "IC perturbation δ, 95 % Wilson intervals; Cohen's κ dotted) up to δ = 1e-2, and the discrete "
