@@ -81,6 +81,16 @@ def test_unsaturated_exponent_recovers_alpha_and_the_crossover():
     assert not r.used[-1]  # the saturated scales are left out
 
 
+def test_smallest_local_slope_ignores_scales_without_changes():
+    # at the two smallest ε only 1 pair in 10 000 changed: too few to give a slope; the reported smallest-scale
+    # slope comes from the first pair of scales that both have ≥ 10 changes (here exactly 0.7 by construction)
+    eps = np.logspace(-8, -1, 8)
+    f = 1e-3 * (eps / 1e-4) ** 0.7
+    f[:2] = 1e-4
+    r = unsaturated_exponent(eps, f, 10_000, f_sat=0.8)
+    assert r.alpha_smallest == pytest.approx(0.7, rel=1e-9)
+
+
 def test_unsaturated_exponent_needs_unsaturated_points():
     with pytest.raises(ValueError, match="unsaturated"):
         unsaturated_exponent([1e-2, 1e-1], [0.7, 0.8], 1000, f_sat=0.8)

@@ -47,7 +47,10 @@ def test_join_fraction_of_two_columns_joined_by_a_bridge():
 
 def test_resolution_verdict():
     assert resolution_verdict([0.1, 0.25, 0.42], [300, 1200, 5000]) == "undetermined"
-    assert resolution_verdict([0.3, 0.41, 0.42], [300, 1200, 5000]) == "converged"
+    assert resolution_verdict([0.41, 0.41, 0.42], [300, 1200, 5000]) == "converged"
+    # a slow drift: each step within 2σ of the last, but 0.37 → 0.49 over three is 2.4σ (the red-sea series)
+    assert resolution_verdict([0.371, 0.416, 0.489], [132, 238, 403]) == "undetermined"
+    assert resolution_verdict([0.4, 0.5], [100, 100]) == "undetermined"  # two points are no series
 
 
 def test_coarse_grain_drops_micro_bounces():

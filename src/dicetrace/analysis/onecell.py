@@ -93,11 +93,20 @@ def join_fraction(grid3d, *, k: int = 0, min_cell: int = 5) -> float:
 
 
 def resolution_verdict(values, counts, *, z: float = 2.0) -> str:
-    """``"converged"`` when the last two values of a resolution series agree within ``z`` binomial errors, else
-    ``"undetermined"`` (``values`` are fractions of ``counts`` cells, coarse to fine)."""
+    """``"converged"`` when a resolution series (coarse to fine) has stopped moving, else ``"undetermined"``.
+
+    ``values`` are fractions of ``counts`` cells.  Converged: the last value
+    agrees with each of the two before it within ``z`` binomial standard
+    errors of the difference (a slow drift over the last three is not a
+    converged value).
+    """
     v = np.asarray(values, dtype=float)
     n = np.asarray(counts, dtype=float)
-    if len(v) < 2 or not np.all(np.isfinite(v[-2:])):
+    if len(v) < 3 or not np.all(np.isfinite(v[-3:])):
         return "undetermined"
-    se = math.sqrt(sum(p * (1 - p) / max(m, 1) for p, m in zip(v[-2:], n[-2:])))
-    return "converged" if abs(v[-1] - v[-2]) <= z * max(se, 1e-12) else "undetermined"
+
+    def se(i: int, j: int) -> float:
+        return math.sqrt(v[i] * (1 - v[i]) / max(n[i], 1) + v[j] * (1 - v[j]) / max(n[j], 1))
+
+    ok = all(abs(v[-1] - v[i]) <= z * max(se(-1, i), 1e-12) for i in (-2, -3))
+    return "converged" if ok else "undetermined"

@@ -14,8 +14,9 @@ mixes the two regimes.  Here:
   *crossover scale* ``ε_c`` where that small-ε power law, extrapolated,
   reaches ``f_sat`` (``A ε_c**α = f_sat``).  In finite-time transient chaos a
   border is smooth below some scale, which shows as a local slope that rises
-  towards 1 as ε → 0: the function reports the slope at the smallest scales
-  separately (``alpha_smallest``).
+  towards 1 as ε → 0: the function reports the local slope at the smallest
+  pair of scales that both carry ``min_changes`` changed pairs separately
+  (``alpha_smallest``).
 """
 
 from __future__ import annotations
@@ -97,8 +98,10 @@ def unsaturated_exponent(eps, f, n, *, f_sat: float, max_fraction: float = 0.1,
     fit = fit_power_law(eps[used], f[used], weights=w[used])
     eps_c = math.exp((math.log(f_sat) - fit.intercept) / fit.slope) if fit.slope > 0 else math.nan
     sl = local_slopes(eps, f, n)
-    k = int(np.nanargmin(np.where(np.isfinite(sl.slope) & np.isfinite(sl.stderr), sl.eps_mid, np.inf))) \
-        if np.isfinite(sl.slope).any() else -1
+    order = np.argsort(eps)
+    enough = (f * n >= min_changes)[order]
+    both = enough[1:] & enough[:-1] & np.isfinite(sl.slope)  # both ends carry ≥ min_changes changed pairs
+    k = int(np.flatnonzero(both)[0]) if both.any() else -1
     a_s, a_se = (float(sl.slope[k]), float(sl.stderr[k])) if k >= 0 else (math.nan, math.nan)
     se = fit.slope_stderr if math.isfinite(fit.slope_stderr) else math.nan
     return UnsaturatedExponent(float(fit.slope), float(se), float(eps_c), float(f_sat), used, a_s, a_se, sl)

@@ -351,7 +351,10 @@ def _peak_penetration(ics: np.ndarray, cfg) -> np.ndarray:
 
 
 def stiffness(ctx: Context) -> dict:
+    from scipy import stats
+
     from dicetrace.analysis import basins_fractions, uncertainty_exponent_perturbation
+    from dicetrace.analysis.agreement import agreement
     from dicetrace.analysis.grouping import wilson_interval
     from dicetrace.analysis.scaling import saturation_level, unsaturated_exponent
     from dicetrace.analysis.simulator import classify_on_slice
@@ -363,14 +366,15 @@ def stiffness(ctx: Context) -> dict:
     n_pen = ctx.pick(30, 3)
     (x0, x1), (y0, y1) = window_ranges(K_WINDOW)
     width = min(x1 - x0, y1 - y0)
-    eps = width * (np.logspace(-6, -1, 6) if not ctx.quick else np.logspace(-3, -1, 3))
+    eps = width * (np.logspace(-11, -3, 9) if not ctx.quick else np.logspace(-3, -1, 3))
     pts = _uniform(ctx, K_WINDOW, n_alpha)
     pen_pts = _uniform(ctx, K_WINDOW, n_pen)
-    rows = []
+    rows, maps = [], []
     for k in ctx.pick(K_SWEEP, (5e5, 5e7)):
         cfg = config("physical", k=k)
         s = ctx.sample(K_WINDOW, res, preset="physical", k=k)
         lab = s.labels.ravel()
+        maps.append(lab)
         fr = basins_fractions(lab)
         faces = {}
         for f in range(1, 7):
@@ -399,8 +403,11 @@ def stiffness(ctx: Context) -> dict:
                      "pen_q90_cm": float(np.quantile(pen, 0.9)),
                      "alpha": a, "alpha_stderr": a_se, "alpha_all": ue.alpha, "alpha_all_stderr": ue.alpha_stderr,
                      "f": list(ue.f), "eps_rel": list(eps / width)})
+        rows[-1]["agreement_with_softest"] = _agreement_row(agreement(lab, maps[0]))
         ctx.log(f"k {k:.1e}: settle {t.mean():.3f} s, peak penetration median {np.median(pen):.4f} cm, α {a}")
-    return {"window": K_WINDOW, "rows": rows}
+    counts = np.array([[int((m == f).sum()) for f in range(1, 7)] for m in maps])
+    chi2, p, dof, _ = stats.chi2_contingency(counts)
+    return {"window": K_WINDOW, "rows": rows, "faces_chi2": float(chi2), "faces_dof": int(dof), "faces_p": float(p)}
 
 
 def compute(ctx: Context) -> Computed:

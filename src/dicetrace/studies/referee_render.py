@@ -249,9 +249,13 @@ def _stiffness(R: dict, out: Output) -> None:
     out.tables["stiffness"] = md_table([
         {"k": f"{r['k']:.1e}", "f": " ".join(f"{r['faces'][str(f)][0]:.3f}" for f in range(1, 7)),
          "t": pm(r["settle_mean_s"], r["settle_stderr_s"], ".3f"), "p": f"{r['pen_median_cm']:.4f} / {r['pen_max_cm']:.4f}",
-         "a": pm(r["alpha"], r["alpha_stderr"], ".2f"), "u": r["unsettled"]} for r in S["rows"]],
+         "a": pm(r["alpha"], r["alpha_stderr"], ".2f"), "u": r["unsettled"],
+         "aa": pm(r["alpha_all"], r["alpha_all_stderr"], ".2f"),
+         "ag": f"{r['agreement_with_softest']['fraction']:.3f} (κ {r['agreement_with_softest']['kappa']:.2f})"}
+        for r in S["rows"]],
         [("k", "k (1/s²)", ""), ("f", "faces 1–6", ""), ("u", "unsettled", "d"), ("t", "mean settle time (s)", ""),
-         ("p", "peak penetration median / max (cm)", ""), ("a", "α unsaturated", "")])
+         ("p", "peak penetration median / max (cm)", ""), ("a", "α unsaturated", ""), ("aa", "α all ε", ""),
+         ("ag", "same outcome as k = 5·10⁵ (κ)", "")])
 
 
 def render(c: Computed, out: Output) -> None:
