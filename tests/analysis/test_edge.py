@@ -12,7 +12,7 @@ from dicetrace.analysis.edge import edge_release_rate, pooled_rate
 
 
 def test_converged_seed_die_leaves_its_edge_at_the_rigid_body_rate():
-    # Known answer: λ = √(m g r / I_edge) = √(3g / (2√2 s)) = 22.76 /s for the model's inertia (1/6) m s²
+    # Known answer: λ = √(m g r / I_edge) = √(3g / (2√2 s)) = 22.80 /s for the model's inertia (1/6) m s²
     # (analysis.settle.edge_balance_rate). The seed preset integrated accurately (contact-substep RK4, dt 0.25 ms)
     # holds the pivot (its friction is Coulomb's, μ = 1.2) and sinks it by only 8e-3 cm: measured 22.74 /s;
     # tolerance 1 %, the size of the compliance and of the non-linearity up to 0.01 rad.
@@ -23,7 +23,7 @@ def test_converged_seed_die_leaves_its_edge_at_the_rigid_body_rate():
 
 def test_physical_die_pivot_creeps():
     # The physical preset's per-node friction is viscous below v_reg = 10 cm/s, so the pivot creeps and the rate
-    # lies between the held pivot (22.76 /s) and the frictionless floor √(6g/(√2 s)) = 45.6 /s (settle study);
+    # lies between the held pivot (22.80 /s) and the frictionless floor √(6g/(√2 s)) = 45.6 /s (settle study);
     # measured 24.4 /s, independent of tilt0 in 1e-8…1e-4 to 0.1 %.
     a = edge_release_rate(preset="physical", tilt0=1e-6)
     b = edge_release_rate(preset="physical", tilt0=1e-4)

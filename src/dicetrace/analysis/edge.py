@@ -4,7 +4,7 @@ A die balanced on an edge is the saddle whose stable manifold the cell
 borders are made of.  Linearised about the balance, the rigid-body rotation
 about the (held) edge obeys ``I_edge φ'' = m g r φ``: one unstable
 eigenvalue ``λ = √(m g r / I_edge)``
-(:func:`dicetrace.analysis.settle.edge_balance_rate`; 22.76 /s for the
+(:func:`dicetrace.analysis.settle.edge_balance_rate`; 22.80 /s for the
 model's inertia ``I = (1/6) m s²``, ``s = 2`` cm).
 
 * :func:`edge_release_rate` measures the same eigenvalue *in the simulation*:
