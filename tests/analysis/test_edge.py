@@ -43,3 +43,16 @@ def test_pooled_rate_of_a_normal_sample():
     assert p.syst == pytest.approx(0.3, rel=1e-9)
     assert p.total == pytest.approx(math.hypot(p.stat, 0.3), rel=1e-12)
     assert p.n == 400 and p.q25 < p.median < p.q75
+
+
+def test_jacobian_of_the_physical_saddle_matches_its_release():
+    # The physical preset's force law is smooth at rest, so the finite-difference Jacobian of the 0.1 s map about
+    # the balance has one unstable eigenvalue, the same at h and h/100 (measured 24.427 both, to 1e-7), and equal
+    # to the release rate (24.42 /s) to 0.5 % (the release fit sees the nonlinearity up to 0.01 rad).
+    from dicetrace.analysis.edge import edge_jacobian_rate
+
+    j = edge_jacobian_rate(preset="physical")
+    assert j.rate == pytest.approx(j.rate_fine, rel=1e-4)
+    rel = edge_release_rate(preset="physical", tilt0=1e-6)
+    assert j.rate == pytest.approx(rel.rate, rel=5e-3)
+    assert edge_balance_rate() < j.rate

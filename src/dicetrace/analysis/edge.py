@@ -14,6 +14,14 @@ model's inertia ``I = (1/6) m s²``, ``s = 2`` cm).
   fitted from ten times ``tilt0`` up to ``saturation`` rad (where
   ``sin φ = φ`` to 2e-5).  The simulated eigenvalue includes what the
   analytic one leaves out: the compliant ground and a pivot that can slip.
+* :func:`edge_jacobian_rate` linearises the simulation itself: the Jacobian of
+  the time-T map of the die's planar state about the balance, by central
+  differences, and ``λ = ln |μ_max| / T`` from its largest eigenvalue.  It
+  exists only where the force law is differentiable at rest: the ``seed``
+  preset's friction ``μ P u / σ`` is of degree 0 in the velocities (a
+  perturbation of any size meets a friction force of order ``μ P``), so its
+  finite differences do not converge as the step shrinks; the function
+  reports both steps' rates so that this shows.
 * :func:`pooled_rate`: the divergence rates of every border fit pooled
   without selection: median, its standard error (order statistics), a systematic error
   from alternative fits of the same borders, and their sum in quadrature.
@@ -30,7 +38,7 @@ from dicetrace.params import Config
 
 from .simulator import _resolve_config
 
-__all__ = ["EdgeRelease", "edge_release_rate", "PooledRate", "pooled_rate"]
+__all__ = ["EdgeRelease", "edge_release_rate", "EdgeJacobian", "edge_jacobian_rate", "PooledRate", "pooled_rate"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,19 +68,13 @@ def edge_release_rate(*, config: Config | None = None, preset: str = "seed", til
     ValueError when the run ends before the tilt reaches ``saturation``
     (e.g. a numerical failure).
     """
-    from dataclasses import replace
-
     from dicetrace.simulate import Record, simulate
 
     from .lyapunov import finite_time_lyapunov
 
-    cfg = _resolve_config(config, preset, overrides)
-    p = cfg.preset
-    theta = math.pi / 4 + float(tilt0)
-    d_eq = 8.0 * abs(p.g) / (2.0 * p.k)
-    z0 = p.half_side_cm * (math.sin(theta) + math.cos(theta)) - d_eq
-    cfg = replace(cfg, preset=replace(p, z0_cm=z0), numerics=replace(cfg.numerics, t_max_s=t_max_s))
-    roll = simulate(np.zeros(6), config=cfg, orientation=_rot_x(theta), record=Record(states=True))
+    cfg = _balanced_config(_resolve_config(config, preset, overrides), float(tilt0), 0.0, t_max_s)
+    roll = simulate(np.zeros(6), config=cfg, orientation=_rot_x(math.pi / 4 + float(tilt0)),
+                    record=Record(states=True))
     rot = roll.trace.rotation
     tilt = np.abs(np.arctan2(rot[:, 2, 1], rot[:, 1, 1]) - math.pi / 4)
     t = roll.trace.t_s
@@ -82,6 +84,69 @@ def edge_release_rate(*, config: Config | None = None, preset: str = "seed", til
     start = t[np.argmax(tilt > 10 * tilt0)]
     fit = finite_time_lyapunov(t, tilt, saturation=saturation, t_min=start)
     return EdgeRelease(fit.exponent, fit.stderr, fit.fit_range, roll.status.label, t, tilt)
+
+
+def _balanced_config(cfg: Config, tilt: float, dz: float, t_max_s: float) -> Config:
+    from dataclasses import replace
+
+    p = cfg.preset
+    d_eq = 8.0 * abs(p.g) / (2.0 * p.k)
+    theta = math.pi / 4 + tilt
+    z0 = p.half_side_cm * (math.sin(theta) + math.cos(theta)) - d_eq + dz
+    return replace(cfg, preset=replace(p, z0_cm=z0), numerics=replace(cfg.numerics, t_max_s=t_max_s))
+
+
+@dataclasses.dataclass(frozen=True)
+class EdgeJacobian:
+    """``rate`` = ln|μ_max|/T (1/s) at the finite-difference step ``h``; ``rate_fine`` at ``h/100``; eigenvalues."""
+
+    rate: float
+    rate_fine: float
+    eigenvalues: np.ndarray
+    horizon_s: float
+
+
+def _planar_map(cfg: Config, x: np.ndarray, horizon_s: float) -> np.ndarray:
+    """The die's planar state (dz cm, v_y, v_z cm/s, tilt rad, ω_x rad/s) after ``horizon_s`` from ``x``."""
+    from dicetrace.simulate import Record, simulate
+
+    p = cfg.preset
+    c = _balanced_config(cfg, float(x[3]), float(x[0]), horizon_s)
+    sign = 1.0 if p.l_convention == "physical" else -1.0  # the program's L is the negative of the physical one
+    ic = np.array([0.0, x[1], x[2], sign * p.inertia * x[4], 0.0, 0.0])
+    tr = simulate(ic, config=c, orientation=_rot_x(math.pi / 4 + float(x[3])), record=Record(states=True)).trace
+    rot = tr.rotation[-1]
+    z_ref = _balanced_config(cfg, 0.0, 0.0, horizon_s).preset.z0_cm
+    return np.array([tr.cm_pos[-1, 2] - z_ref, tr.cm_vel[-1, 1], tr.cm_vel[-1, 2],
+                     math.atan2(rot[2, 1], rot[1, 1]) - math.pi / 4, sign * tr.L[-1, 0] / p.inertia])
+
+
+def edge_jacobian_rate(*, config: Config | None = None, preset: str = "physical", horizon_s: float = 0.1,
+                       h: float = 1e-4, **overrides) -> EdgeJacobian:
+    """The unstable eigenvalue of the simulated edge saddle, from the Jacobian of its time-``horizon_s`` map.
+
+    The state is the die's motion in the plane normal to its edge (centre
+    height, the two velocities in that plane, the tilt and its rate; the
+    position along the ground is neutral and left out), perturbed by ``h``
+    times the scales (1e-3 cm, 1 cm/s, 1 cm/s, 1e-3 rad, 0.1 rad/s) in
+    central differences about the balance at rest.  The same at ``h/100``
+    is ``rate_fine``: the two agree where the map is differentiable.
+    """
+    cfg = _resolve_config(config, preset, overrides)
+    scales = np.array([1e-3, 1.0, 1.0, 1e-3, 1e-1])
+
+    def rate(step: float) -> tuple[float, np.ndarray]:
+        jac = np.zeros((5, 5))
+        for j in range(5):
+            e = np.zeros(5)
+            e[j] = step * scales[j]
+            jac[:, j] = (_planar_map(cfg, e, horizon_s) - _planar_map(cfg, -e, horizon_s)) / (2 * e[j])
+        mu = np.linalg.eigvals(jac)
+        return math.log(float(np.abs(mu).max())) / horizon_s, mu
+
+    r, mu = rate(h)
+    r_fine, _ = rate(h / 100)
+    return EdgeJacobian(r, r_fine, mu, float(horizon_s))
 
 
 @dataclasses.dataclass(frozen=True)

@@ -205,7 +205,7 @@ def _refit_halves(prof, lab_by_side) -> tuple[list, list]:
 
 def edge_rates(ctx: Context) -> dict:
     from dicetrace.analysis import edge_balance_rate
-    from dicetrace.analysis.edge import edge_release_rate, pooled_rate
+    from dicetrace.analysis.edge import edge_jacobian_rate, edge_release_rate, pooled_rate
     from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
     from dicetrace.studies.settle import borders, fit_border, free_pivot_rate
 
@@ -226,6 +226,14 @@ def edge_rates(ctx: Context) -> dict:
                 row.update(rate=None, error=str(e))
             releases.append(row)
     out["releases"] = releases
+    jac = []
+    for name, opts in (("physical (contact-adaptive)", {"preset": "physical"}),
+                       ("seed, contact-substep dt 0.1 ms", {"preset": "seed", "integrator": "contact-substep",
+                                                            "dt_s": 1e-4})):
+        j = edge_jacobian_rate(**opts)
+        jac.append({"model": name, "rate": j.rate, "rate_fine": j.rate_fine, "horizon_s": j.horizon_s,
+                    "abs_eigenvalues": sorted(np.abs(j.eigenvalues).tolist(), reverse=True)})
+    out["jacobian"] = jac
     fits = {}
     for model in ("discrete", "converged"):
         cfg = config(model)
