@@ -156,8 +156,8 @@ def _lambda(R: dict, out: Output) -> None:
     out.tables["lambda_jacobian"] = md_table([
         {"m": r["model"], "r": r["rate"], "f": r["rate_fine"], "mu": ", ".join(f"{v:.3g}" for v in r["abs_eigenvalues"])}
         for r in L.get("jacobian", [])],
-        [("m", "model", ""), ("r", "λ = ln|μ_max|/T, step h (1/s)", ".3f"), ("f", "the same at h/100", ".3f"),
-         ("mu", "|eigenvalues| of the 0.1 s map", "")])
+        [("m", "model", ""), ("r", "λ = ln(largest modulus)/T, step h (1/s)", ".3f"), ("f", "the same at h/100", ".3f"),
+         ("mu", "moduli of the eigenvalues of the 0.1 s map", "")])
     out.tables["lambda_fits"] = md_table([
         {"m": m, "n": r.get("n"), "b": r["n_borders"], "u": r["n_sides_unfit"],
          "med": pm(r.get("median"), r.get("total"), ".2f"), "st": fmt(r.get("stat"), ".2f"),
