@@ -1,0 +1,72 @@
+"""Study k (referee), CI-sized: ``dicetrace analyze referee --quick`` into a temporary folder, and its numbers.
+
+The full run (``dicetrace analyze referee --out analysis``) regenerates the committed results; this quick run
+checks that every part runs and that the answers the controls know come out.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def referee(tmp_path_factory):
+    here = tmp_path_factory.mktemp("referee")
+    proc = subprocess.run([sys.executable, "-m", "dicetrace.cli", "analyze", "referee", "--quick"], cwd=here,
+                          capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    out = here / "dicetrace-results" / "analysis"
+    return out, json.loads((out / "results" / "referee.json").read_text())
+
+
+@pytest.mark.slow
+def test_vertex_controls(referee):
+    _, R = referee
+    sector, strip = R["vertices"]["controls"]
+    assert sector["dim_meet3"] == 0.0 and all(n == 1 for n in sector["meet3"])  # one triple point, every scale
+    assert strip["dim_meet3"] is None and all(n == 0 for n in strip["meet3"])  # no vertex
+    assert max(strip["any3"]) > 0  # ... although boxes hold three outcomes (the old count's artefact)
+    for r in R["vertices"]["rows"]:
+        assert r["dim_meet3"] is None or r["dim_meet3"] >= 0  # never negative
+
+
+@pytest.mark.slow
+def test_floor_reaches_1e_2_with_intervals(referee):
+    _, R = referee
+    for w, d in R["floor"].items():
+        assert max(d["deltas"]) == pytest.approx(1e-2)
+        for f in d["floor"]:
+            assert f["ci"][0] <= f["fraction"] <= f["ci"][1]
+            assert -1 <= f["kappa"] <= 1
+        assert d["floor"][0]["fraction"] == 1.0  # δ = 1e-12 changes nothing in 40 throws
+
+
+@pytest.mark.slow
+def test_edge_saddle_and_pooled_fits(referee):
+    _, R = referee
+    L = R["lambda"]
+    assert L["analytic_fixed_pivot"] == pytest.approx(math.sqrt(3 * 980 / (2 * math.sqrt(2) * 2)), rel=1e-12)
+    conv = [r for r in L["releases"] if r["model"] == "seed, contact-substep dt 0.25 ms" and r["tilt0"] == 1e-4][0]
+    assert conv["rate"] == pytest.approx(L["analytic_fixed_pivot"], rel=0.01)  # see tests/analysis/test_edge.py
+    for m in ("discrete", "converged"):
+        assert L["fits"][m]["n"] == len(L["fits"][m]["all"]) > 0
+        assert L["fits"][m]["total"] >= L["fits"][m]["syst"]
+
+
+@pytest.mark.slow
+def test_other_parts_ran(referee):
+    out, R = referee
+    assert R["onecell"]["verdict"] in ("converged", "undetermined")
+    assert len(R["onecell"]["series"]) >= 3
+    assert {r["min_steps"] for r in R["entropy"]["rows"]} == {1, 3, 5}
+    assert [r["k"] for r in R["stiffness"]["rows"]] == [5e5, 5e7]
+    assert all(r["pen_median_cm"] > 0 for r in R["stiffness"]["rows"])
+    # a stiffer ground sinks less: peak penetration falls with k
+    assert R["stiffness"]["rows"][1]["pen_median_cm"] < R["stiffness"]["rows"][0]["pen_median_cm"]
+    for name in ("k_vertices", "k_floor", "k_alpha", "k_lambda", "k_onecell", "k_entropy", "k_stiffness"):
+        assert (out / "figures" / f"{name}.png").stat().st_size > 0
