@@ -39,13 +39,17 @@ import math
 
 import numpy as np
 
-from dicetrace.studies.context import Computed, Context, Output
+from pathlib import Path
+
+from dicetrace.studies.context import Computed, Context, Options, Output
 from dicetrace.studies.text import fmt, md_table, pm
 
 NAME = "converged"
 WINDOWS = ("home", "zoom-out", "more-out", "red-sea")
 #: The models, in the tables' column order.
 MODEL_NAMES = ("discrete", "converged", "physical")
+#: Borders of each map located for the settle-time divergence λ (full run).
+BORDERS_FULL = 12
 #: A difference between two models counts as a change beyond this many standard errors.
 CHANGE_SIGMA = 3.0
 
@@ -91,6 +95,30 @@ def settle_stats(s) -> dict:
         out.update(kappa=k.kappa, kappa_stderr=k.stderr, kappa_t0=k.t0, kappa_t1=k.t1)
     except ValueError as e:
         out.update(kappa=None, kappa_stderr=None, kappa_error=str(e))
+    return out
+
+
+def settle_divergence(ctx: Context, s, cfg) -> dict:
+    """Section g's settle-time divergence T ≈ T0 − ln(d)/λ at borders of this map: λ over all fitted sides
+    (mean ± se, median ± bootstrap se) and over the clean fits (r < −0.995)."""
+    from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
+    from dicetrace.studies.settle import border_pairs, fit_border, summarise
+
+    classify, settle = classify_on_slice("seed", config=cfg), settle_on_slice("seed", config=cfg)
+    dists = np.logspace(-11, -4, ctx.pick(22, 8))
+    fits = []
+    for pa, pb in border_pairs(s, ctx.pick(BORDERS_FULL, 2), ctx.rng):
+        f, _ = fit_border(classify, settle, np.array(pa), np.array(pb), dists)
+        fits.append(f)
+    ctx.n_throws += classify.n_evals + settle.n_evals
+    out = summarise(fits)
+    lam = np.asarray(out.pop("all"), dtype=float)
+    out.pop("r")
+    out["n_borders"] = len(fits)
+    out["lambdas"] = lam
+    if len(lam):
+        out["mean"] = float(lam.mean())
+        out["mean_stderr"] = float(lam.std(ddof=1) / math.sqrt(len(lam))) if len(lam) > 1 else None
     return out
 
 
@@ -155,7 +183,7 @@ def measure_map(ctx: Context, window: str, model: str, opts: dict, res: int, ref
         tight_dt_s=cert.tight_config.numerics.dt_s,
         certificate=_agreement_dict(cert.tightened), floor=_agreement_dict(cert.floor),
         above_floor=cert.converged, converged=converged_verdict(cert),
-        cells=cs, settle=settle_stats(s), repetition=repetition_stats(s),
+        cells=cs, settle=settle_stats(s), repetition=repetition_stats(s), divergence=settle_divergence(ctx, s, cfg),
         **face_stats(g, None if ref is None else ref.labels),
     )
     if ref is not None:
@@ -232,6 +260,7 @@ MEASURES_WITH_ERRORS = (
     ("Sbb", "Sbb", _pair("Sbb", "Sbb_stderr")),
     ("settle_mean", "mean settle time (s)", _nested("settle", "mean", "mean_stderr")),
     ("kappa", "escape rate κ (1/s)", _nested("settle", "kappa", "kappa_stderr")),
+    ("lambda", "settle-time divergence λ, all fits (1/s)", _nested("divergence", "mean", "mean_stderr")),
 )
 
 #: The same getters by key.
@@ -252,8 +281,6 @@ def compute(ctx: Context) -> Computed:
                 ref = s
             by[w][m] = row
             plot[(w, m)] = s
-        by[w]["changes"] = changes(by[w])
-        by[w]["changes_physical"] = changes(by[w], "discrete", "physical")
     summary = _summary(by)
     return Computed({"res": res, "windows": list(WINDOWS), "models": {m: {**opts[m], "integrator": by[WINDOWS[0]][m][
         "integrator"], "tol": by[WINDOWS[0]][m]["tol"], "dt_s": by[WINDOWS[0]][m]["dt_s"]} for m in MODEL_NAMES},
@@ -261,7 +288,13 @@ def compute(ctx: Context) -> Computed:
 
 
 def _summary(by: dict) -> dict:
-    """Ranges over the windows per model (for the answers table) and the certificates' verdicts."""
+    """Ranges over the windows per model (for the answers table) and the certificates' verdicts.
+
+    Also (re)writes each window's ``changes`` and ``changes_physical`` (:func:`changes`) into ``by``.
+    """
+    for w in WINDOWS:
+        by[w]["changes"] = changes(by[w])
+        by[w]["changes_physical"] = changes(by[w], "discrete", "physical")
     out: dict = {}
     for m in MODEL_NAMES:
         rows = [by[w][m] for w in WINDOWS]
@@ -273,7 +306,7 @@ def _summary(by: dict) -> dict:
             "n_converged": sum(bool(r["converged"]) for r in rows), "n_maps": len(rows),
             "converged_windows": [w for w in WINDOWS if by[w][m]["converged"]],
         }
-    out["n_changed"] = {w: [c["measure"] for c in by[w]["changes"] if c["changed"]] for w in WINDOWS}
+    out["changed"] = {w: [c["measure"] for c in by[w]["changes"] if c["changed"]] for w in WINDOWS}
     return out
 
 
@@ -353,6 +386,13 @@ def window_table(rows: dict) -> str:
         line("unsettled throws", [str(r["settle"]["n_unsettled"]) for r in ms]),
         line("escape rate κ (1/s)", [pm(r["settle"].get("kappa"), r["settle"].get("kappa_stderr"), ".1f") for r in ms],
              "kappa"),
+        line("settle-time divergence λ, all sides (1/s)", [
+            f"{pm(r['divergence'].get('mean'), r['divergence'].get('mean_stderr'), '.1f')} "
+            f"({r['divergence']['n_fits']} sides)" for r in ms], "lambda"),
+        line("λ median ± bootstrap / clean fits (1/s)", [
+            f"{pm(r['divergence'].get('median'), r['divergence'].get('median_stderr'), '.1f')} / "
+            f"{pm(r['divergence'].get('clean_mean'), r['divergence'].get('clean_stderr'), '.1f')} "
+            f"({r['divergence']['n_clean']})" for r in ms]),
         line("outcome autocorrelation, largest off-centre", [f"{r['repetition']['outcome_offcentre_max_corr']:.2f}"
                                                              for r in ms]),
         line("outcome periods (strength ≥ 0.3)", [str(r["repetition"]["n_outcome_periods"]) for r in ms]),
@@ -405,7 +445,15 @@ def answers(by: dict, summary: dict) -> dict[str, str]:
                   f"{fmt(summary['discrete']['alpha_pert_min'], '.2f')}–{fmt(summary['discrete']['alpha_pert_max'], '.2f')}); "
                   f"boundary-mask dimension {fmt(s['dim_mask_min'], '.2f')}–{fmt(s['dim_mask_max'], '.2f')}. "
                   f"Table in section k ({cert})."),
-        "faces": "; ".join(f"{w} χ² p = {fmt(c[w].get('chi2_p_vs_discrete'), '.0e')}" for w in WINDOWS),
+        "lambda": ("Settle-time divergence T ≈ T0 − ln(d)/λ at borders of the converged maps, all fitted sides "
+                   "(no selection): " + "; ".join(
+                       f"{w} {pm(c[w]['divergence'].get('mean'), c[w]['divergence'].get('mean_stderr'), '.1f')} /s "
+                       f"(discrete {pm(by[w]['discrete']['divergence'].get('mean'), by[w]['discrete']['divergence'].get('mean_stderr'), '.1f')})"
+                       for w in WINDOWS) + "."),
+        "changes": (f"Certified (section k): {cert}, {summary['physical']['n_converged']} of "
+                    f"{summary['physical']['n_maps']} physical maps, {summary['discrete']['n_converged']} of "
+                    f"{summary['discrete']['n_maps']} discrete ones. Beyond {CHANGE_SIGMA:g} σ, converging changes: "
+                    + "; ".join(f"{w}: {', '.join(summary['changed'][w]) or 'nothing'}" for w in WINDOWS) + "."),
     }
 
 
@@ -481,3 +529,31 @@ def render(c: Computed, out: Output) -> None:
         "conv": verdict_text(by[w][m])} for w in WINDOWS for m in MODEL_NAMES], [
         ("w", "window", ""), ("m", "model", ""), ("integ", "integrator", ""),
         ("cert", "certificate [95 % CI], Cohen's κ / chaos floor [95 % CI]", ""), ("conv", "converged", "")])
+
+
+def rerender(out, options: Options = Options()) -> Path:
+    """Redraw the figures and tables of a finished run in ``out`` without simulating.
+
+    Reads ``out/results/converged.json`` and the grids cached in
+    ``out/cache`` (``options`` must be those of the run, for the cache keys),
+    recomputes the summary, the changes and the tables from the stored
+    numbers, and rewrites the JSON. RuntimeError if a grid is not cached.
+    """
+    import json
+
+    from dicetrace.studies.context import write_json
+
+    out = Path(out)
+    path = out / "results" / f"{NAME}.json"
+    results = json.loads(path.read_text())
+    ctx = Context(NAME, options, out / "cache")
+    opts = models(options.integrator, options.tol)
+    plot = {(w, m): ctx.sample(w, results["res"], **opts[m]) for w in results["windows"] for m in MODEL_NAMES}
+    if ctx.n_throws:
+        raise RuntimeError(f"{ctx.n_throws} throws were not in {out / 'cache'}: not the run's grids")
+    results["summary"] = _summary(results["by"])
+    output = Output(out)
+    render(Computed(results, plot), output)
+    results["figures"], results["tables"] = output.figures, output.tables
+    write_json(path, results)
+    return path
