@@ -147,7 +147,7 @@ def face_stats(g: np.ndarray, ref: np.ndarray | None) -> dict:
     from dicetrace.analysis import basins_fractions_table
     from dicetrace.studies.cells import block_fraction_stderr
 
-    fr = {int(r.label): {"fraction": float(r.fraction), "count": int(r.count),
+    fr = {str(int(r.label)): {"fraction": float(r.fraction), "count": int(r.count),
                          "block_stderr": block_fraction_stderr(g, int(r.label))}
           for r in basins_fractions_table(g).itertuples() if r.label > 0}
     out = {"fractions": fr}
@@ -327,10 +327,17 @@ def _cert_text(r: dict) -> str:
             f"{f['fraction']:.3f} [{f['ci'][0]:.3f}, {f['ci'][1]:.3f}]")
 
 
+def _numerics(r: dict) -> str:
+    """The integrator of a model's row and its tolerance (adaptive) or step (fixed)."""
+    from dicetrace.integrators import INTEGRATORS
+
+    if INTEGRATORS[r["integrator"]].adaptive:
+        return f"{r['integrator']}, tol {r['tol']:.0e}"
+    return f"{r['integrator']}, dt {1000 * r['dt_s']:g} ms"
+
+
 def _model_header(r: dict) -> str:
-    num = (f"{r['integrator']}, tol {r['tol']:.0e}" if r["integrator"] != "semi-implicit-euler"
-           else f"{r['integrator']}, dt {1000 * r['dt_s']:g} ms")
-    return f"{r['model']} ({num})"
+    return f"{r['model']} ({_numerics(r)})"
 
 
 def window_table(rows: dict) -> str:
@@ -347,11 +354,11 @@ def window_table(rows: dict) -> str:
         return r
 
     def face(k):
-        return [pm(r["fractions"].get(k, {}).get("fraction"), r["fractions"].get(k, {}).get("block_stderr"), ".3f")
-                for r in ms]
+        f = [r["fractions"].get(str(k), {}) for r in ms]  # keys are strings, as in the JSON
+        return [pm(x.get("fraction"), x.get("block_stderr"), ".3f") for x in f]
 
     lines = [
-        line("integrator", [_model_header(r).split(" (", 1)[1][:-1] for r in ms]),
+        line("integrator", [_numerics(r) for r in ms]),
         line("certificate (10× tighter) / chaos floor", [_cert_text(r) for r in ms]),
         line("converged", [verdict_text(r) for r in ms]),
         line("agreement with the discrete map (κ)", ["–"] + [
@@ -525,7 +532,7 @@ def render(c: Computed, out: Output) -> None:
     out.tables["changes"] = changes_text(by)
     out.tables.update({f"answer_{k}": v for k, v in answers(by, c.results["summary"]).items()})
     out.tables["certificates"] = md_table([{
-        "w": w, "m": m, "integ": _model_header(by[w][m]).split(" (", 1)[1][:-1], "cert": _cert_text(by[w][m]),
+        "w": w, "m": m, "integ": _numerics(by[w][m]), "cert": _cert_text(by[w][m]),
         "conv": verdict_text(by[w][m])} for w in WINDOWS for m in MODEL_NAMES], [
         ("w", "window", ""), ("m", "model", ""), ("integ", "integrator", ""),
         ("cert", "certificate [95 % CI], Cohen's κ / chaos floor [95 % CI]", ""), ("conv", "converged", "")])
