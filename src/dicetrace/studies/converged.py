@@ -131,9 +131,11 @@ def repetition_stats(s) -> dict:
     res = g.shape[0]
     tex = texture_labels(g, max(1.0, 0.015 * (res - 1)))
     rows_tex = periods_rows(find_periods(tex, spacing=h, min_strength=0.1), "", "texture")
+    rows_out = periods_rows(find_periods(g, spacing=h, min_strength=0.3), "", "outcome")
     return {
         "outcome_offcentre_max_corr": off_centre_max(label_autocorrelation(g), int(0.05 * res)),
-        "n_outcome_periods": int(len(find_periods(g, spacing=h, min_strength=0.3))),
+        "n_outcome_periods": len(rows_out),
+        "outcome_periods": [{k: r[k] for k in ("dx", "dy", "length", "strength")} for r in rows_out],
         "texture_offcentre_max_corr": off_centre_max(label_autocorrelation(tex), int(0.05 * res)),
         "texture_periods": [{k: r[k] for k in ("dx", "dy", "length", "strength")} for r in rows_tex],
         "texture_stripe_spacing": stripe_spacing(rows_tex),
@@ -349,7 +351,7 @@ def window_table(rows: dict) -> str:
         r = {"measure": label, **{m: v for m, v in zip(MODEL_NAMES, vals)}}
         c = z.get(key)
         if c is not None:
-            r["z"] = (f"p = {c['converged']:.1e}" if c["z"] is None else f"{c['z']:.1f}") + (" **changed**" if c[
+            r["z"] = (_p_text(c["converged"]) if c["z"] is None else f"{c['z']:.1f}") + (" **changed**" if c[
                 "changed"] else "")
         return r
 
@@ -371,7 +373,7 @@ def window_table(rows: dict) -> str:
                                                for r in ms]),
         line("median cell (nodes)", [f"{r['cells']['median_size']:.0f}" for r in ms]),
         *[line(f"face {k} fraction", face(k)) for k in range(1, 7)],
-        line("face counts vs discrete: χ² p", ["–"] + [fmt(r.get("chi2_p_vs_discrete"), ".1e") for r in ms[1:]], "faces"),
+        line("face counts vs discrete: χ² p", ["–"] + [_p_text(r.get("chi2_p_vs_discrete")) for r in ms[1:]], "faces"),
         line("boundary fraction", [pm(r["boundary_fraction"], r["boundary_fraction_block_stderr"]) for r in ms],
              "boundary_fraction"),
         line("α boxes", [pm(*MEASURES["alpha_box"](r)) for r in ms], "alpha_box"),
@@ -384,7 +386,7 @@ def window_table(rows: dict) -> str:
                                for r in ms], "Sbb"),
         line("Wada merge", [("r=" + str(r["wada_merge_r"])) if r.get("wada_merge_r") is not None else
                             (f"no (far {r['wada_merge_far_r5']:.2f})" if "wada_merge_far_r5" in r else "–") for r in ms]),
-        line("settle time mean (s)", [pm(r["settle"]["mean"], r["settle"]["mean_stderr"], ".3f") for r in ms],
+        line("settle time mean (s)", [pm(r["settle"]["mean"], r["settle"]["mean_stderr"], ".4f") for r in ms],
              "settle_mean"),
         line("settle time median / 90 % / max (s)", [f"{r['settle']['median']:.2f} / {r['settle']['q90']:.2f} / "
                                                      f"{r['settle']['max']:.2f}" for r in ms]),
@@ -402,7 +404,9 @@ def window_table(rows: dict) -> str:
             f"({r['divergence']['n_clean']})" for r in ms]),
         line("outcome autocorrelation, largest off-centre", [f"{r['repetition']['outcome_offcentre_max_corr']:.2f}"
                                                              for r in ms]),
-        line("outcome periods (strength ≥ 0.3)", [str(r["repetition"]["n_outcome_periods"]) for r in ms]),
+        line("outcome period vectors (Δx, Δy; strength ≥ 0.3)", [", ".join(
+            f"({p['dx']:.3g}, {p['dy']:.3g}; {p['strength']:.2f})" for p in r["repetition"].get("outcome_periods", [])[:2])
+            or "none" for r in ms]),
         line("texture period vectors (Δx, Δy)", [", ".join(f"({p['dx']:.3g}, {p['dy']:.3g})" for p in
                                                            r["repetition"]["texture_periods"][:2]) or "none"
                                                  for r in ms]),
@@ -428,9 +432,16 @@ def changes_text(by: dict) -> str:
     return "\n".join(lines)
 
 
+def _p_text(p) -> str:
+    """A p-value; one that underflows to 0 as an upper bound."""
+    if p is None:
+        return "–"
+    return "p < 1e-300" if p == 0 else f"p = {p:.1e}"
+
+
 def _fmt_change(c: dict) -> str:
     if c["z"] is None:
-        return f"(p = {c['converged']:.1e})"
+        return f"({_p_text(c['converged'])})"
     return f"{c['discrete']:.3g} → {c['converged']:.3g} ({c['z']:.0f} σ)"
 
 
@@ -442,11 +453,16 @@ def answers(by: dict, summary: dict) -> dict[str, str]:
     s = summary["converged"]
     cert = f"{s['n_converged']} of {s['n_maps']} converged-seed maps certified"
     return {
-        "periods": (f"Outcomes do not repeat either: largest off-centre autocorrelation "
+        "periods": ("Largest off-centre autocorrelation of the outcomes "
                     f"{rep['zoom-out']['outcome_offcentre_max_corr']:.2f} (zoom-out), "
-                    f"{rep['more-out']['outcome_offcentre_max_corr']:.2f} (more-out); texture periods in zoom-out: "
+                    f"{rep['more-out']['outcome_offcentre_max_corr']:.2f} (more-out), "
+                    f"{c['home']['repetition']['outcome_offcentre_max_corr']:.2f} (home); outcome period vectors "
+                    "of strength ≥ 0.3: " + "; ".join(
+                        f"{w} " + (", ".join(f"({p['dx']:.4g}, {p['dy']:.4g})" for p in c[w]["repetition"].get(
+                            "outcome_periods", [])[:2]) or "none") for w in ("home", "zoom-out", "more-out"))
+                    + ". Texture periods in zoom-out: "
                     + (", ".join(f"({p['dx']:.4f}, {p['dy']:.4f})" for p in tex[:2]) or "none")
-                    + f"; more-out stripe spacing {fmt(rep['more-out']['texture_stripe_spacing'], '.2f')}."),
+                    + f"; more-out texture stripe spacing {fmt(rep['more-out']['texture_stripe_spacing'], '.2f')}."),
         "alpha": (f"α (perturbation) from {fmt(s['alpha_pert_min'], '.2f')} to {fmt(s['alpha_pert_max'], '.2f')} "
                   f"over home, zoom-out, more-out, red sea (discrete, same grids: "
                   f"{fmt(summary['discrete']['alpha_pert_min'], '.2f')}–{fmt(summary['discrete']['alpha_pert_max'], '.2f')}); "
@@ -544,7 +560,8 @@ def rerender(out, options: Options = Options()) -> Path:
     Reads ``out/results/converged.json`` and the grids cached in
     ``out/cache`` (``options`` must be those of the run, for the cache keys),
     recomputes the summary, the changes and the tables from the stored
-    numbers, and rewrites the JSON. RuntimeError if a grid is not cached.
+    numbers (and the repetition measures, a deterministic function of the
+    cached grids), and rewrites the JSON. RuntimeError if a grid is not cached.
     """
     import json
 
@@ -558,6 +575,8 @@ def rerender(out, options: Options = Options()) -> Path:
     plot = {(w, m): ctx.sample(w, results["res"], **opts[m]) for w in results["windows"] for m in MODEL_NAMES}
     if ctx.n_throws:
         raise RuntimeError(f"{ctx.n_throws} throws were not in {out / 'cache'}: not the run's grids")
+    for (w, m), s in plot.items():  # a pure function of the cached grid: refreshed with the code
+        results["by"][w][m]["repetition"] = repetition_stats(s)
     results["summary"] = _summary(results["by"])
     output = Output(out)
     render(Computed(results, plot), output)
