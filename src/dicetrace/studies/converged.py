@@ -458,8 +458,10 @@ def answers(by: dict, summary: dict) -> dict[str, str]:
                     f"{rep['more-out']['outcome_offcentre_max_corr']:.2f} (more-out), "
                     f"{c['home']['repetition']['outcome_offcentre_max_corr']:.2f} (home); outcome period vectors "
                     "of strength ≥ 0.3: " + "; ".join(
-                        f"{w} " + (", ".join(f"({p['dx']:.4g}, {p['dy']:.4g})" for p in c[w]["repetition"].get(
-                            "outcome_periods", [])[:2]) or "none") for w in ("home", "zoom-out", "more-out"))
+                        f"{w} " + (", ".join(f"({p['dx']:.4g}, {p['dy']:.4g}), {p['length'] / c[w]['spacing']:.1f} "
+                                             "grid nodes long" for p in c[w]["repetition"].get("outcome_periods", [])[:2])
+                                   or "none") for w in ("home", "zoom-out", "more-out"))
+                    + " (a lag of a few nodes is the size of the larger cells, not a repetition)"
                     + ". Texture periods in zoom-out: "
                     + (", ".join(f"({p['dx']:.4f}, {p['dy']:.4f})" for p in tex[:2]) or "none")
                     + f"; more-out texture stripe spacing {fmt(rep['more-out']['texture_stripe_spacing'], '.2f')}."),
