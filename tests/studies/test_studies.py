@@ -138,9 +138,9 @@ def test_cli_rejects_an_unknown_study(tmp_path):
 @pytest.mark.slow
 @pytest.mark.skipif(not (REPO / "analysis" / ".committed-results").exists(), reason="no committed results here")
 def test_quick_run_never_touches_the_committed_results():
-    """``--quick`` (or --res, --seed) into analysis/ is refused before anything is written."""
+    """``--quick`` (or --res, --seed, --integrator, --tol) into analysis/ is refused before anything is written."""
     before = {p: p.stat().st_mtime_ns for p in (REPO / "analysis").rglob("*") if p.is_file()}
-    for args in (["--quick"], ["--res", "21"], ["--seed", "1"]):
+    for args in (["--quick"], ["--res", "21"], ["--seed", "1"], ["--integrator", "contact-adaptive"], ["--tol", "1e-6"]):
         proc = _dicetrace("analyze", "wedge", *args, "--out", "analysis", cwd=REPO)
         assert proc.returncode == 2, (args, proc.stderr)
         assert "committed full-run results" in proc.stderr and proc.stderr.count("\n") == 1

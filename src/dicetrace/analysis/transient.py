@@ -203,15 +203,25 @@ def _tightened(cfg: Config, factor: float) -> Config:
 
 
 def certify_map(window, res, slice_spec="seed", *, config: Config | None = None, preset: str = "seed",
-                factor: float = 10.0, rng: int = 0, **overrides) -> MapCertificate:
-    """The convergence certificate of the outcome map of a 2-D window (see :class:`MapCertificate`)."""
+                factor: float = 10.0, rng: int = 0, base=None, **overrides) -> MapCertificate:
+    """The convergence certificate of the outcome map of a 2-D window (see :class:`MapCertificate`).
+
+    ``base``: the map's outcomes at ``config`` if already simulated (any
+    shape holding the grid's points in :func:`window_points` order), so that
+    only the tightened and the moved maps are run.
+    """
     from .agreement import agreement
 
     sl = resolve_slice(slice_spec)
     cfg = _resolve_config(config, preset, overrides)
     pts, shape, axes = window_points(resolve_window(window, 2), res)
     tight = _tightened(cfg, float(factor))
-    base = _run(sl, cfg, pts, False, BATCH_POINTS).outcome
+    if base is None:
+        base = _run(sl, cfg, pts, False, BATCH_POINTS).outcome
+    else:
+        base = np.asarray(base).ravel()
+        if base.size != len(pts):
+            raise ValueError(f"base has {base.size} outcomes for a grid of {len(pts)} points")
     fine = _run(sl, tight, pts, False, BATCH_POINTS).outcome
     spacing = np.array([a[1] - a[0] if len(a) > 1 else 0.0 for a in axes])
     angle = np.random.default_rng(rng).uniform(0, 2 * np.pi, len(pts))

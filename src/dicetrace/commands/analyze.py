@@ -61,6 +61,10 @@ def register(app: typer.Typer) -> None:
                                            "(full runs only)."),
         res: Optional[int] = typer.Option(None, "--res", help="Override each study's main grid size (points per axis)."),
         seed: Optional[int] = typer.Option(None, "--seed", help="Random seed of perturbations and picks."),
+        integrator: Optional[str] = typer.Option(None, "--integrator", help="Integrator of the converged models "
+                                                 "of study k (converged); default: each model's own."),
+        tol: Optional[float] = typer.Option(None, "--tol", help="Tolerance of the converged models of study k "
+                                            "(adaptive integrators); default: each model's own."),
         no_cache: bool = typer.Option(False, "--no-cache", help="Re-simulate grids cached in OUT/cache."),
         no_report: bool = typer.Option(False, "--no-report", help="Do not rebuild REPORT.md."),
         report_only: bool = typer.Option(False, "--report-only", help="Only re-assemble OUT/REPORT.md from "
@@ -86,9 +90,11 @@ def register(app: typer.Typer) -> None:
             fail(str(e))
         if res is not None and res < 3:
             fail(f"--res must be at least 3, got {res}")
-        options = Options(quick=quick, res=res, seed=DEFAULT_SEED if seed is None else seed, no_cache=no_cache)
+        options = Options(quick=quick, res=res, seed=DEFAULT_SEED if seed is None else seed, no_cache=no_cache,
+                          integrator=integrator, tol=tol)
         why = ", ".join(w for w, on in (("--quick", quick), ("--res", res is not None),
-                                        ("--seed", options.seed != DEFAULT_SEED)) if on)
+                                        ("--seed", options.seed != DEFAULT_SEED), ("--integrator", integrator is not None),
+                                        ("--tol", tol is not None)) if on)
         try:
             prepare_out(target, full=options.full, why=why)
         except ValueError as e:

@@ -20,11 +20,11 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..k).
+#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..l).
 WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation",
-                   "transient", "referee")
+                   "transient", "referee", "converged")
 #: Letter of each writeup study (its figures' prefix) -> name.
-LETTERS = dict(zip("abcdefghijk", WRITEUP_STUDIES))
+LETTERS = dict(zip("abcdefghijkl", WRITEUP_STUDIES))
 #: What each writeup study is about (the first line of its module's docstring, after the name).
 TITLES = {
     "cells": "the cell structure of the home window and the zoom ladder (writeup 4.1)",
@@ -38,6 +38,7 @@ TITLES = {
     "animation": "the third slice axis as time (writeup 6.1)",
     "transient": "transient chaos of the discrete and the converged die: λ, κ and α, with convergence certificates",
     "referee": "every claim the referee marked, redone with controls, error bars and enough scales",
+    "converged": "converged maps beside the discrete ones: every measure of a map, side by side, with certificates",
 }
 #: The integrator studies (their own commands).
 INTEGRATOR_STUDIES = ("accuracy", "stability")
@@ -46,7 +47,7 @@ STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES
 
 
 def resolve(names) -> list[str]:
-    """Writeup study names from names, letters (a..k) or ``all`` (ValueError naming the choices)."""
+    """Writeup study names from names, letters (a..l) or ``all`` (ValueError naming the choices)."""
     out: list[str] = []
     for n in names or ("all",):
         key = str(n).strip().lower()
@@ -54,7 +55,7 @@ def resolve(names) -> list[str]:
             return list(WRITEUP_STUDIES)
         key = LETTERS.get(key, key)
         if key not in WRITEUP_STUDIES:
-            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..k)")
+            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..l)")
         if key not in out:
             out.append(key)
     return out

@@ -38,17 +38,25 @@ WRITEUP_WINDOWS = ("home", "zoom-out", "more-out", "most-out", "red-sea", "red-s
 
 @dataclass(frozen=True)
 class Options:
-    """How a study runs: ``quick`` (CI-sized grids), ``res`` (override of the main grid), the seed, the cache."""
+    """How a study runs: ``quick`` (CI-sized grids), ``res`` (override of the main grid), the seed, the cache.
+
+    ``integrator`` and ``tol`` override the integrator and tolerance of the
+    converged models (study k, :mod:`dicetrace.studies.converged`); the
+    other studies ignore them.
+    """
 
     quick: bool = False
     res: int | None = None
     seed: int = DEFAULT_SEED
     no_cache: bool = False
+    integrator: str | None = None
+    tol: float | None = None
 
     @property
     def full(self) -> bool:
-        """The committed results' settings: full size, default grid and seed."""
-        return not self.quick and self.res is None and self.seed == DEFAULT_SEED
+        """The committed results' settings: full size, default grid, seed and integrators."""
+        return (not self.quick and self.res is None and self.seed == DEFAULT_SEED and self.integrator is None
+                and self.tol is None)
 
 
 @dataclass

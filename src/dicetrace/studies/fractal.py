@@ -30,7 +30,9 @@ SERIES = {
 EXTRA = ("red-sea-3", "red-sea-4", "party-2", "party-3")
 
 
-def measures(ctx: Context, w, s, classify, *, perturb: bool) -> dict:
+def measures(ctx: Context, w, s, classify, *, perturb: bool, wada_grid: bool = True) -> dict:
+    """The measures of one window's map (section b's table); ``perturb``: also those that call ``classify``
+    (α by perturbation and, with ``wada_grid``, the Wada refinement)."""
     from dicetrace.analysis import (
         boundary_dimension,
         chaos_measures,
@@ -57,7 +59,7 @@ def measures(ctx: Context, w, s, classify, *, perturb: bool) -> dict:
         row["wada_merge_r"] = wm.r_wada
         row["wada_merge_far_r5"] = float(wm.far_fraction[-1])
         row["wada_merge_far_r1"] = float(wm.far_fraction[min(1, len(wm.far_fraction) - 1)])
-        if perturb:
+        if perturb and wada_grid:
             wg = wada_grid_test(classify, g, s.extent, max_level=ctx.pick(12, 4), max_segments=ctx.pick(300, 20),
                                 exclude=(-1, 0), rng=ctx.rng)
             row["wada_grid_G"] = float(wg.wada_fraction[-1])

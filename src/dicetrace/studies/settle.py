@@ -53,7 +53,12 @@ def borders(ctx: Context, preset: str, integrator, n_borders: int, res):
         kw["preset"] = preset
     if integrator is not None:
         kw["integrator"] = integrator
-    s = ctx.sample(BORDER_WINDOW, res, **kw)
+    return border_pairs(ctx.sample(BORDER_WINDOW, res, **kw), n_borders, ctx.rng)
+
+
+def border_pairs(s, n_borders: int, rng: np.random.Generator) -> list:
+    """Up to ``n_borders`` random face-neighbour pairs of the map ``s`` (a WindowSample) whose outcomes differ,
+    both settled: ((x, y), (x', y')) each."""
     g = s.labels
     ax, ay = s.axes
     pairs = []
@@ -63,7 +68,7 @@ def borders(ctx: Context, preset: str, integrator, n_borders: int, res):
         ii, jj = np.nonzero((a != b) & (a > 0) & (b > 0))
         for i, j in zip(ii, jj):
             pairs.append(((ax[i], ay[j]), (ax[i + off[0]], ay[j + off[1]])))
-    pick = ctx.rng.choice(len(pairs), size=min(n_borders, len(pairs)), replace=False)
+    pick = rng.choice(len(pairs), size=min(n_borders, len(pairs)), replace=False)
     return [pairs[q] for q in pick]
 
 

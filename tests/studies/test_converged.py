@@ -1,0 +1,178 @@
+"""Study k (converged): the model table, the certificate verdict, the side-by-side measures and a reduced run.
+
+The reduced run (9² grids, CI-sized perturbations) checks the pipeline end to
+end and that :func:`~dicetrace.studies.converged.rerender` reproduces the
+run's tables from its JSON and cached grids (render changes no number). The
+full run is ``dicetrace analyze converged --out analysis``.
+"""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from dicetrace.analysis import agreement
+from dicetrace.studies import LETTERS, resolve
+from dicetrace.studies import converged as k
+from dicetrace.studies.context import Options
+
+
+def test_registered_as_study_k():
+    assert LETTERS["k"] == "converged" and resolve(["k"]) == ["converged"]
+
+
+def test_models_read_the_presets_and_take_the_overrides():
+    from dicetrace.params import make_config
+
+    m = k.models()
+    assert k.model_config(m["discrete"]).numerics.integrator == "semi-implicit-euler"
+    assert k.model_config(m["converged"]).numerics.integrator == "contact-adaptive"
+    assert k.model_config(m["converged"]).numerics.tol == 1e-7
+    # physical: whatever its preset's default integrator is
+    assert k.model_config(m["physical"]).numerics.integrator == make_config("physical").numerics.integrator
+    o = k.models(integrator="contact-substep", tol=1e-5)
+    assert o["discrete"] == m["discrete"]  # the discrete model is never overridden
+    assert o["converged"]["integrator"] == o["physical"]["integrator"] == "contact-substep"
+    assert o["converged"]["tol"] == o["physical"]["tol"] == 1e-5
+
+
+def test_integrator_overrides_are_not_the_committed_settings():
+    assert Options().full
+    assert not Options(integrator="contact-adaptive").full
+    assert not Options(tol=1e-8).full
+
+
+def _cert(base, tight, near):
+    from dicetrace.analysis.transient import MapCertificate
+
+    a_t, a_f = agreement(base, tight), agreement(base, near)
+    return MapCertificate(a_t, a_f, bool(a_t.ci[1] >= a_f.ci[0]), np.asarray(base), None)
+
+
+def test_verdict_needs_the_floor_and_more_than_chance():
+    rng = np.random.default_rng(1)
+    base = rng.integers(1, 7, 4000)
+    other = rng.integers(1, 7, 4000)
+    copy = base.copy()
+    copy[:40] = other[:40]  # 99 % agreement
+    assert k.converged_verdict(_cert(base, copy, copy))
+    # below a floor of 99 %: not converged
+    half = base.copy()
+    half[:2000] = other[:2000]
+    assert not k.converged_verdict(_cert(base, half, copy))
+    # the floor at chance and the certificate at chance too: certify_map's rule passes it, the verdict does not
+    c = _cert(base, other, rng.integers(1, 7, 4000))
+    assert c.converged or c.tightened.ci[1] < c.floor.ci[0]
+    assert not k.converged_verdict(c)
+
+
+def _row(**kw):
+    base = {"boundary_fraction": 0.9, "boundary_fraction_block_stderr": 0.01, "alpha": 0.1,
+            "alpha_block_stderr": None, "alpha_stderr": 0.02, "alpha_pert": 0.5, "alpha_pert_stderr": 0.05,
+            "dim_mask": 1.9, "dim_mask_stderr": 0.0, "Sb": 1.0, "Sb_stderr": 0.1, "Sbb": 1.0, "Sbb_stderr": 0.1,
+            "settle": {"mean": 0.7, "mean_stderr": 0.01, "kappa": None, "kappa_stderr": None},
+            "divergence": {"mean": 23.0, "mean_stderr": 1.0}}
+    base.update(kw)
+    return base
+
+
+def test_changes_flag_differences_beyond_three_sigma_only():
+    rows = {"discrete": _row(), "converged": _row(alpha_pert=0.8, Sb=1.2, alpha=0.2,
+                                                  settle={"mean": 0.8, "mean_stderr": 0.01}),
+            }
+    rows["converged"]["chi2_p_vs_discrete"] = 1e-6
+    ch = {c["key"]: c for c in k.changes(rows)}
+    assert ch["alpha_pert"]["changed"] and ch["alpha_pert"]["z"] == pytest.approx(0.3 / np.hypot(0.05, 0.05))
+    assert not ch["Sb"]["changed"]  # 0.2 / 0.14 = 1.4 σ
+    assert ch["alpha_box"]["changed"]  # the regression stderr stands in for a missing block stderr: 3.5 σ
+    assert ch["settle_mean"]["changed"]
+    assert "dim_mask" not in ch  # a zero error bar: not judged
+    assert "kappa" not in ch  # no value: not judged
+    assert ch["faces"]["changed"]
+
+
+def test_face_stats_chi2_tells_different_face_counts_apart():
+    rng = np.random.default_rng(0)
+    a = rng.integers(1, 7, (60, 60))
+    same = rng.integers(1, 7, (60, 60))
+    skew = np.where(rng.random((60, 60)) < 0.3, 3, a)
+    assert k.face_stats(same, a)["chi2_p_vs_discrete"] > 1e-3
+    assert k.face_stats(skew, a)["chi2_p_vs_discrete"] < 1e-10
+    fr = k.face_stats(a, None)["fractions"]
+    assert sum(f["fraction"] for f in fr.values()) == pytest.approx(1.0)
+    assert all(f["block_stderr"] > 0 for f in fr.values())
+
+
+def test_settle_stats_border_and_interior():
+    g = np.ones((20, 20), dtype=np.int64)
+    g[:, 10:] = 2
+    t = np.full(g.shape, 0.5)
+    t[:, 9:11] = 1.5  # slow along the border
+    s = SimpleNamespace(labels=g, t_settle_s=t)
+    st = k.settle_stats(s)
+    assert st["border_mean"] == pytest.approx(1.5) and st["interior_mean"] == pytest.approx(0.5)
+    assert st["n_unsettled"] == 0 and st["median"] == pytest.approx(0.5) and st["max"] == pytest.approx(1.5)
+
+
+def test_certify_map_reuses_a_given_base_map():
+    from dicetrace.analysis.simulator import sample_window
+    from dicetrace.analysis.transient import certify_map
+    from dicetrace.params import make_config
+
+    cfg = make_config("seed")
+    s = sample_window("home", 5, config=cfg)
+    a = certify_map("home", 5, config=cfg)
+    b = certify_map("home", 5, config=cfg, base=s.labels)
+    assert np.array_equal(a.labels, b.labels)
+    assert a.tightened == b.tightened and a.floor == b.floor
+    with pytest.raises(ValueError, match="base has"):
+        certify_map("home", 5, config=cfg, base=s.labels[:2])
+
+
+@pytest.fixture(scope="module")
+def reduced_run(tmp_path_factory):
+    from dicetrace.studies.runner import run_study
+
+    out = tmp_path_factory.mktemp("converged")
+    opts = Options(quick=True, res=9)
+    res = run_study("converged", opts, out)
+    return out, opts, res
+
+
+@pytest.mark.slow
+def test_reduced_run_measures_every_window_and_model(reduced_run):
+    out, _, R = reduced_run
+    assert R["res"] == 9 and R["windows"] == list(k.WINDOWS)
+    for w in k.WINDOWS:
+        for m in k.MODEL_NAMES:
+            r = R["by"][w][m]
+            assert r["res"] == 9 and r["cells"]["n_nodes"] == 81
+            assert 0 <= r["certificate"]["fraction"] <= 1 and 0 <= r["floor"]["fraction"] <= 1
+            assert r["certificate"]["ci"][0] <= r["certificate"]["fraction"] <= r["certificate"]["ci"][1]
+            assert isinstance(r["converged"], bool)
+            assert sum(f["count"] for f in r["fractions"].values()) + r["settle"]["n_unsettled"] <= 81
+            for key in ("boundary_fraction", "alpha", "Sb", "Sbb", "dim_mask"):
+                assert key in r
+            assert set(r["repetition"]) >= {"outcome_offcentre_max_corr", "texture_periods"}
+        # the tighter run of an adaptive model lowers the tolerance; of the fixed-step one, the step
+        assert R["by"][w]["converged"]["tight_tol"] == pytest.approx(R["by"][w]["converged"]["tol"] / 10)
+        assert R["by"][w]["discrete"]["tight_dt_s"] == pytest.approx(R["by"][w]["discrete"]["dt_s"] / 10)
+        assert "agreement_with_discrete" in R["by"][w]["converged"]
+    for name in ("k_maps", "k_uncertainty", "k_alpha"):
+        assert (out / R["figures"][name]["path"]).stat().st_size < 300_000
+    for w in k.WINDOWS:
+        assert R["tables"][f"window_{w}"].count("\n") > 30
+    assert "converged-seed maps certified" in R["tables"]["answer_alpha"]
+
+
+@pytest.mark.slow
+def test_rerender_reproduces_the_tables_without_simulating(reduced_run):
+    out, opts, R = reduced_run
+    path = k.rerender(out, opts)
+    again = json.loads(path.read_text())
+    assert again["tables"] == json.loads(json.dumps(R["tables"]))
+    with pytest.raises(RuntimeError, match="not in"):
+        k.rerender(out, Options(quick=True, res=9, tol=1e-6))  # other grids: not cached
