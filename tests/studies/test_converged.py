@@ -16,24 +16,24 @@ import pytest
 
 from dicetrace.analysis import agreement
 from dicetrace.studies import LETTERS, resolve
-from dicetrace.studies import converged as k
+from dicetrace.studies import converged as conv
 from dicetrace.studies.context import Options
 
 
-def test_registered_as_study_k():
-    assert LETTERS["k"] == "converged" and resolve(["k"]) == ["converged"]
+def test_registered_as_study_l():
+    assert LETTERS["l"] == "converged" and resolve(["l"]) == ["converged"]
 
 
 def test_models_read_the_presets_and_take_the_overrides():
     from dicetrace.params import make_config
 
-    m = k.models()
-    assert k.model_config(m["discrete"]).numerics.integrator == "semi-implicit-euler"
-    assert k.model_config(m["converged"]).numerics.integrator == "contact-adaptive"
-    assert k.model_config(m["converged"]).numerics.tol == 1e-7
+    m = conv.models()
+    assert conv.model_config(m["discrete"]).numerics.integrator == "semi-implicit-euler"
+    assert conv.model_config(m["converged"]).numerics.integrator == "contact-adaptive"
+    assert conv.model_config(m["converged"]).numerics.tol == 1e-7
     # physical: whatever its preset's default integrator is
-    assert k.model_config(m["physical"]).numerics.integrator == make_config("physical").numerics.integrator
-    o = k.models(integrator="contact-substep", tol=1e-5)
+    assert conv.model_config(m["physical"]).numerics.integrator == make_config("physical").numerics.integrator
+    o = conv.models(integrator="contact-substep", tol=1e-5)
     assert o["discrete"] == m["discrete"]  # the discrete model is never overridden
     assert o["converged"]["integrator"] == o["physical"]["integrator"] == "contact-substep"
     assert o["converged"]["tol"] == o["physical"]["tol"] == 1e-5
@@ -58,15 +58,15 @@ def test_verdict_needs_the_floor_and_more_than_chance():
     other = rng.integers(1, 7, 4000)
     copy = base.copy()
     copy[:40] = other[:40]  # 99 % agreement
-    assert k.converged_verdict(_cert(base, copy, copy))
+    assert conv.converged_verdict(_cert(base, copy, copy))
     # below a floor of 99 %: not converged
     half = base.copy()
     half[:2000] = other[:2000]
-    assert not k.converged_verdict(_cert(base, half, copy))
+    assert not conv.converged_verdict(_cert(base, half, copy))
     # the floor at chance and the certificate at chance too: certify_map's rule passes it, the verdict does not
     c = _cert(base, other, rng.integers(1, 7, 4000))
     assert c.converged or c.tightened.ci[1] < c.floor.ci[0]
-    assert not k.converged_verdict(c)
+    assert not conv.converged_verdict(c)
 
 
 def _row(**kw):
@@ -84,7 +84,7 @@ def test_changes_flag_differences_beyond_three_sigma_only():
                                                   settle={"mean": 0.8, "mean_stderr": 0.01}),
             }
     rows["converged"]["chi2_p_vs_discrete"] = 1e-6
-    ch = {c["key"]: c for c in k.changes(rows)}
+    ch = {c["key"]: c for c in conv.changes(rows)}
     assert ch["alpha_pert"]["changed"] and ch["alpha_pert"]["z"] == pytest.approx(0.3 / np.hypot(0.05, 0.05))
     assert not ch["Sb"]["changed"]  # 0.2 / 0.14 = 1.4 σ
     assert ch["alpha_box"]["changed"]  # the regression stderr stands in for a missing block stderr: 3.5 σ
@@ -99,9 +99,9 @@ def test_face_stats_chi2_tells_different_face_counts_apart():
     a = rng.integers(1, 7, (60, 60))
     same = rng.integers(1, 7, (60, 60))
     skew = np.where(rng.random((60, 60)) < 0.3, 3, a)
-    assert k.face_stats(same, a)["chi2_p_vs_discrete"] > 1e-3
-    assert k.face_stats(skew, a)["chi2_p_vs_discrete"] < 1e-10
-    fr = k.face_stats(a, None)["fractions"]
+    assert conv.face_stats(same, a)["chi2_p_vs_discrete"] > 1e-3
+    assert conv.face_stats(skew, a)["chi2_p_vs_discrete"] < 1e-10
+    fr = conv.face_stats(a, None)["fractions"]
     assert sum(f["fraction"] for f in fr.values()) == pytest.approx(1.0)
     assert all(f["block_stderr"] > 0 for f in fr.values())
 
@@ -112,7 +112,7 @@ def test_settle_stats_border_and_interior():
     t = np.full(g.shape, 0.5)
     t[:, 9:11] = 1.5  # slow along the border
     s = SimpleNamespace(labels=g, t_settle_s=t)
-    st = k.settle_stats(s)
+    st = conv.settle_stats(s)
     assert st["border_mean"] == pytest.approx(1.5) and st["interior_mean"] == pytest.approx(0.5)
     assert st["n_unsettled"] == 0 and st["median"] == pytest.approx(0.5) and st["max"] == pytest.approx(1.5)
 
@@ -145,9 +145,9 @@ def reduced_run(tmp_path_factory):
 @pytest.mark.slow
 def test_reduced_run_measures_every_window_and_model(reduced_run):
     out, _, R = reduced_run
-    assert R["res"] == 9 and R["windows"] == list(k.WINDOWS)
-    for w in k.WINDOWS:
-        for m in k.MODEL_NAMES:
+    assert R["res"] == 9 and R["windows"] == list(conv.WINDOWS)
+    for w in conv.WINDOWS:
+        for m in conv.MODEL_NAMES:
             r = R["by"][w][m]
             assert r["res"] == 9 and r["cells"]["n_nodes"] == 81
             assert 0 <= r["certificate"]["fraction"] <= 1 and 0 <= r["floor"]["fraction"] <= 1
@@ -161,9 +161,9 @@ def test_reduced_run_measures_every_window_and_model(reduced_run):
         assert R["by"][w]["converged"]["tight_tol"] == pytest.approx(R["by"][w]["converged"]["tol"] / 10)
         assert R["by"][w]["discrete"]["tight_dt_s"] == pytest.approx(R["by"][w]["discrete"]["dt_s"] / 10)
         assert "agreement_with_discrete" in R["by"][w]["converged"]
-    for name in ("k_maps", "k_uncertainty", "k_alpha"):
+    for name in ("l_maps", "l_uncertainty", "l_alpha"):
         assert (out / R["figures"][name]["path"]).stat().st_size < 300_000
-    for w in k.WINDOWS:
+    for w in conv.WINDOWS:
         assert R["tables"][f"window_{w}"].count("\n") > 30
     assert "converged-seed maps certified" in R["tables"]["answer_alpha"]
 
@@ -171,8 +171,8 @@ def test_reduced_run_measures_every_window_and_model(reduced_run):
 @pytest.mark.slow
 def test_rerender_reproduces_the_tables_without_simulating(reduced_run):
     out, opts, R = reduced_run
-    path = k.rerender(out, opts)
+    path = conv.rerender(out, opts)
     again = json.loads(path.read_text())
     assert again["tables"] == json.loads(json.dumps(R["tables"]))
     with pytest.raises(RuntimeError, match="not in"):
-        k.rerender(out, Options(quick=True, res=9, tol=1e-6))  # other grids: not cached
+        conv.rerender(out, Options(quick=True, res=9, tol=1e-6))  # other grids: not cached

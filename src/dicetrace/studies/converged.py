@@ -1,4 +1,4 @@
-"""Study k (converged): converged maps beside the discrete ones: every measure of a map, side by side, with certificates.
+"""Study l (converged): converged maps beside the discrete ones: every measure of a map, side by side, with certificates.
 
 For the windows home [0, .1]², zoom-out [0, 1]², more-out [0, 10]² and red
 sea [1, 2]×[3.5, 4.5], one grid (201² in the full run) is simulated with
