@@ -39,3 +39,20 @@ def test_chaos_sweep_orders_smooth_and_fractal():
     assert math.isnan(fr.alpha_perturbation)
     for col in ("boundary_fraction_block_stderr", "alpha_stderr", "alpha_block_stderr", "Sb_stderr", "Sbb_stderr"):
         assert np.isfinite(table[col]).all() and (table[col] >= 0).all()
+
+
+def test_a_map_without_borders_has_no_alpha():
+    """A map of one outcome has no uncertain box and no uncertain pair: α is undefined (NaN),
+    the boundary fraction 0, and the sweep goes on to the other maps."""
+    one = np.full((41, 41), 3)
+    half = np.where(np.arange(41)[None, :] < 20, 1, 2).repeat(41, axis=0)
+    pts = np.random.default_rng(0).random((200, 2))
+    table = chaos_sweep(
+        {"one": one, "half": half},
+        classifiers={"one": lambda p: np.full(len(p), 3), "half": lambda p: np.where(p[:, 0] < 0.5, 1, 2)},
+        points=pts, eps_list=[1e-3, 1e-2, 1e-1], rng=np.random.default_rng(1), param_name="map", n_boot=10,
+    ).set_index("map")
+    assert table.loc["one", "boundary_fraction"] == 0.0
+    assert np.isnan(table.loc["one", "alpha"]) and np.isnan(table.loc["one", "alpha_perturbation"])
+    assert np.isfinite(table.loc["half", "alpha"])
+    assert np.isfinite(table.loc["half", "alpha_perturbation"]) and table.loc["half", "boundary_fraction"] > 0

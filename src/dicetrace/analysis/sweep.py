@@ -81,7 +81,11 @@ def chaos_measures(
     arr = as_label_grid(grid)
     rng = np.random.default_rng() if rng is None else rng
     bf = float(boundary_mask(arr).mean())
-    ue = uncertainty_exponent(arr, box_sizes=box_sizes, spacing=spacing)
+    try:
+        ue = uncertainty_exponent(arr, box_sizes=box_sizes, spacing=spacing)
+        alpha, alpha_se, dim = ue.alpha, ue.alpha_stderr, ue.dimension
+    except ValueError:  # no uncertain box at any size (a map of one outcome): α is undefined
+        alpha = alpha_se = dim = math.nan
     be = basin_entropy(arr, entropy_box_size, exclude=exclude)
     ent = be.box_entropies
     boot_sb, boot_sbb = [], []
@@ -109,10 +113,10 @@ def chaos_measures(
     return {
         "boundary_fraction": bf,
         "boundary_fraction_block_stderr": sem(bf_b),
-        "alpha": ue.alpha,
-        "alpha_stderr": ue.alpha_stderr,
+        "alpha": alpha,
+        "alpha_stderr": alpha_se,
         "alpha_block_stderr": sem(al_b),
-        "dimension": ue.dimension,
+        "dimension": dim,
         "Sb": be.Sb,
         "Sb_stderr": float(np.std(boot_sb, ddof=1)) if len(boot_sb) > 1 else math.nan,
         "Sbb": be.Sbb,
@@ -168,9 +172,11 @@ def chaos_sweep(
         if classifiers is not None and value in classifiers:
             if points is None or eps_list is None:
                 raise ValueError("classifiers need points and eps_list")
-            ue = uncertainty_exponent_perturbation(classifiers[value], points, eps_list, rng)
-            row["alpha_perturbation"] = ue.alpha
-            row["alpha_perturbation_stderr"] = ue.alpha_stderr
+            try:
+                ue = uncertainty_exponent_perturbation(classifiers[value], points, eps_list, rng)
+                row["alpha_perturbation"], row["alpha_perturbation_stderr"] = ue.alpha, ue.alpha_stderr
+            except ValueError:  # no uncertain pair at any ε: α is undefined
+                row["alpha_perturbation"] = row["alpha_perturbation_stderr"] = math.nan
         rows.append(row)
     out = pd.DataFrame(rows)
     try:

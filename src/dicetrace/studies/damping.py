@@ -1,7 +1,9 @@
 """Study e (damping): damping and chaos (writeup 5.2).
 
 The home window at γ = 0.005 s/cm (the writeup's) and 0.01 s/cm (its
-comparison), plus 0.0025 and 0.02: outcome maps and the chaos measures of
+comparison), plus 0.0025 and 0.02, in the program's discrete model and,
+on a smaller grid, with its force law integrated to convergence
+(``CONVERGED``): outcome maps and the chaos measures of
 ``chaos_sweep`` with error bars — boundary fraction, uncertainty exponent
 (box counting on the grid, and random-pair perturbation with the
 simulator), basin entropies — and the mean settle time and number of
@@ -20,6 +22,10 @@ NAME = "damping"
 GAMMAS = (0.0025, 0.005, 0.01, 0.02)
 #: The program's dt and half of it (the time-step check), s.
 DT_CHECK = (0.001, 0.0005)
+#: The program's force law integrated to convergence: the same sweep on the converged die
+#: (DOP853 at this tolerance agrees with tol 1e-11 on every one of the accuracy study's 300
+#: zoom-out throws of the seed preset; study l certifies the seed law's maps at this accuracy).
+CONVERGED = {"integrator": "contact-dop853", "tol": 1e-7}
 
 
 def _contact_counts(ctx: Context, extra: dict) -> None:
@@ -87,8 +93,38 @@ def compute(ctx: Context) -> Computed:
     table = chaos_sweep(grids, classifiers=classifiers, points=pts, eps_list=eps, rng=ctx.rng,
                         param_name="gamma", spacing=0.1 / (res - 1), n_blocks=4, n_boot=200)
     rows = [{**rec, **extra[rec["gamma"]]} for rec in table.to_dict("records")]
-    results = {"dt_check": dt_rows, "sweep": rows, "perturbation": {"npts": npts, "eps": eps}, "res": res}
+    results = {"dt_check": dt_rows, "sweep": rows, "perturbation": {"npts": npts, "eps": eps}, "res": res,
+               "converged": _converged_sweep(ctx, eps)}
     return Computed(results, {"grids": grids, "sweep_table": table})
+
+
+def _converged_sweep(ctx: Context, eps) -> dict:
+    """The sweep again with the force law integrated to convergence (``CONVERGED``), on a smaller grid."""
+    from dicetrace.analysis import chaos_sweep
+    from dicetrace.analysis.simulator import classify_on_slice
+
+    res = ctx.res(201, 41)
+    grids, classifiers, extra = {}, {}, {}
+    for gam in GAMMAS:
+        s = ctx.sample("home", res, gamma=gam, **CONVERGED)
+        grids[gam] = s.labels
+        classifiers[gam] = classify_on_slice("seed", gamma=gam, **CONVERGED)
+        extra[gam] = {"mean_settle_s": float(s.t_settle_s[s.labels >= 0].mean()),
+                      "n_unsettled": int((s.labels == -1).sum())}
+        ctx.log(f"converged γ={gam}: mean settle {extra[gam]['mean_settle_s']:.3f} s")
+    npts = ctx.pick(1000, 150)
+    pts = ctx.rng.random((npts, 2)) * 0.1
+    table = chaos_sweep(grids, classifiers=classifiers, points=pts, eps_list=eps, rng=ctx.rng,
+                        param_name="gamma", spacing=0.1 / (res - 1), n_blocks=4, n_boot=200)
+    rows = [{**rec, **extra[rec["gamma"]]} for rec in table.to_dict("records")]
+    bf = [r["boundary_fraction"] for r in rows]
+    ap = [r.get("alpha_perturbation", np.nan) for r in rows]
+    trend = ("falls monotonically" if all(a > b for a, b in zip(bf, bf[1:])) else "does not fall monotonically")
+    answer = (f"{'Yes' if bf[-1] < bf[0] else 'No'}, on the converged die too ({res}² grids, {CONVERGED['integrator']} "
+              f"at tol {CONVERGED['tol']:g}): from γ = {' → '.join(str(g) for g in GAMMAS)} s/cm the border fraction "
+              f"{trend}, {' → '.join(f'{v:.2f}' for v in bf)}, and α (perturbation) goes "
+              f"{' → '.join(f'{v:.2f}' for v in ap)}; γ = 0.02 is stable here.")
+    return {"sweep": rows, "res": res, "npts": npts, **CONVERGED, "answer": answer}
 
 
 def render(c: Computed, out: Output) -> None:
@@ -153,3 +189,15 @@ def render(c: Computed, out: Output) -> None:
         ("a", "α box", ""), ("ap", "α perturbation", ""), ("Sb", "Sb", ""), ("Sbb", "Sbb", ""),
         ("t", "mean settle (s)", ".3f"), ("nc", "contact changes", ""), ("uns", "not settled", "d"),
         ("blow", "of which blow-ups", "d")])
+    conv = R["converged"]
+    out.tables["converged_answer"] = conv["answer"]
+    out.tables["sweep_converged"] = md_table([{
+        "gamma": r["gamma"],
+        "bf": pm(r["boundary_fraction"], r["boundary_fraction_block_stderr"], ".3f"),
+        "a": pm(r["alpha"], r["alpha_block_stderr"], ".3f"),
+        "ap": pm(r.get("alpha_perturbation", np.nan), r.get("alpha_perturbation_stderr"), ".3f"),
+        "Sb": pm(r["Sb"], r["Sb_stderr"], ".3f"), "Sbb": pm(r["Sbb"], r["Sbb_stderr"], ".3f"),
+        "t": r["mean_settle_s"], "uns": r["n_unsettled"],
+    } for r in conv["sweep"]], [
+        ("gamma", "γ (s/cm)", ""), ("bf", "boundary fraction", ""), ("a", "α box", ""), ("ap", "α perturbation", ""),
+        ("Sb", "Sb", ""), ("Sbb", "Sbb", ""), ("t", "mean settle (s)", ".3f"), ("uns", "not settled", "d")])
