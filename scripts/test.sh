@@ -2,8 +2,7 @@
 # Install dicetrace with its test extras into .venv and run the whole test suite.
 # As root on Debian it also installs Xvfb and Mesa's software Vulkan, so the
 # test that renders a recording with the real Rerun viewer runs (it is skipped
-# where xvfb-run is missing), and tesseract, with which that test reads the face
-# numbers off the screenshot (that check is skipped where tesseract is missing).
+# where xvfb-run is missing; it counts the faces' pips on the screenshot).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if ! command -v xvfb-run >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
@@ -15,10 +14,6 @@ fi
 if ! command -v chromium >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
     (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium >/dev/null) \
         || echo "note: could not install chromium; the explorer's browser tests will be skipped"
-fi
-if ! command -v tesseract >/dev/null 2>&1 && command -v apt-get >/dev/null 2>&1 && [ "$(id -u)" = 0 ]; then
-    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends tesseract-ocr >/dev/null) \
-        || echo "note: could not install tesseract; the viewer test will not read the face numbers"
 fi
 python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip

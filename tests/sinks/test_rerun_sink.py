@@ -134,15 +134,62 @@ def test_box_pose_matches_the_centre_of_mass_and_has_unit_quaternions(roll, temp
     np.testing.assert_allclose(rotated, roll.trace.node_offsets, atol=2e-6)
 
 
+def _die_pose(temporal) -> tuple[np.ndarray, np.ndarray]:
+    """World-from-body rotation matrices and translations of ``world/die/faces``' transform, per step."""
+    from scipy.spatial.transform import Rotation
+
+    faces = temporal["/world/die/faces"]
+    q = values(faces, "Transform3D:quaternion", 4)[:, 0].astype(np.float64)
+    return Rotation.from_quat(q).as_matrix(), values(faces, "Transform3D:translation", 3)[:, 0].astype(np.float64)
+
+
 def test_face_plates_sit_on_their_faces_in_the_writeup_colours(roll, temporal, static):
+    from dicetrace.sinks.rerun import FACE_NODES
+
     faces = static["/world/die/faces"]
     colors = np.array(faces.column("Boxes3D:colors").to_pylist()[0], dtype=np.uint64)
     rgb = np.stack([(colors >> 24) & 0xFF, (colors >> 16) & 0xFF, (colors >> 8) & 0xFF], axis=1)
     np.testing.assert_array_equal(rgb, FACE_COLORS)
     assert faces.column("Boxes3D:labels").to_pylist()[0] == ["1", "2", "3", "4", "5", "6"]
-    centres = values(temporal["/world/die/faces"], "Boxes3D:centers", 3)
+    assert faces.column("Boxes3D:show_labels").to_pylist()[0] == [False]  # drawn over everything: on hover only
+    # static body-frame plates under the die's pose: in the world they sit on the traced faces
+    rot, trans = _die_pose(temporal)
+    np.testing.assert_array_equal(trans, roll.trace.cm_pos.astype(np.float32))
+    body = values(faces, "Boxes3D:centers", 3)[0].astype(np.float64)
+    centres = trans[:, None, :] + np.einsum("nij,kj->nki", rot, body)
+    half = roll.config.preset.half_side_cm
+    traced = roll.trace.node_offsets[:, FACE_NODES, :].mean(axis=2) * (np.linalg.norm(body, axis=1)[:, None] / half)
+    np.testing.assert_allclose(centres, roll.trace.cm_pos[:, None, :] + traced, atol=1e-5)
     # at the end the plate of the outcome face is the highest one
     assert int(np.argmax(centres[-1, :, 2])) + 1 == roll.outcome
+
+
+def test_pips_number_each_face_and_move_with_it(roll, temporal, static):
+    """Face k carries k pips, flat on its plate, inside it; at rest the outcome face's pips are on top."""
+    from dicetrace.sinks.rerun import FACE_NORMALS
+
+    pips = static["/world/die/faces/pips"]  # a child of the plates: their transform carries it
+    assert "/world/die/faces/pips" not in temporal
+    pos = values(pips, "Ellipsoids3D:centers", 3)[0].astype(np.float64)
+    sizes = values(pips, "Ellipsoids3D:half_sizes", 3)[0].astype(np.float64)
+    face = np.array([int(t.split()[-1]) for t in texts(pips, "Ellipsoids3D:labels")])
+    plates = static["/world/die/faces"]
+    plate_c = values(plates, "Boxes3D:centers", 3)[0].astype(np.float64)
+    plate_h = values(plates, "Boxes3D:half_sizes", 3)[0].astype(np.float64)
+    np.testing.assert_array_equal(np.bincount(face, minlength=7)[1:], [1, 2, 3, 4, 5, 6])
+    for k in range(1, 7):
+        n = FACE_NORMALS[k - 1]
+        on = pos[face == k]
+        top = plate_c[k - 1] @ n + plate_h[k - 1] @ np.abs(n)  # the plate's outer surface along the normal
+        np.testing.assert_allclose(on @ n, top, rtol=1e-6)  # centred on it: half in, half out
+        thin = sizes[face == k] @ np.abs(n)
+        assert (thin < 0.05 * roll.config.preset.half_side_cm).all()  # flat discs
+        inplane = np.abs(on - np.outer(on @ n, n)) + (sizes[face == k] - np.outer(thin, np.abs(n)))
+        assert (inplane <= plate_h[k - 1] + 1e-6).all(), f"face {k}: a pip reaches past its plate"
+        assert len({tuple(p) for p in np.round(on, 6)}) == k  # k distinct pips
+    rot, trans = _die_pose(temporal)
+    world_z = trans[-1, 2] + pos @ rot[-1][2]
+    assert set(face[world_z > trans[-1, 2] + 0.9 * roll.config.preset.half_side_cm]) == {roll.outcome}
 
 
 def test_face_tables_agree_with_the_node_numbering():
@@ -251,7 +298,8 @@ def blueprint_views(rows: dict[str, dict]) -> dict[str, tuple[str, str]]:
 
 # The view class that shows each archetype the sink logs.
 VIEW_OF_ARCHETYPE = {
-    "Points3D": "3D", "Boxes3D": "3D", "LineStrips3D": "3D", "ViewCoordinates": "3D",
+    "Points3D": "3D", "Boxes3D": "3D", "Ellipsoids3D": "3D", "Transform3D": "3D", "LineStrips3D": "3D",
+    "ViewCoordinates": "3D",
     "Scalars": "TimeSeries", "SeriesLines": "TimeSeries", "TextLog": "TextLog", "TextDocument": "TextDocument",
 }  # fmt: skip
 

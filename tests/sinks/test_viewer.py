@@ -3,9 +3,10 @@
 Skipped where ``xvfb-run`` or the ``rerun`` CLI is missing.  The recording's
 blueprint puts the viewer at the last step ("following"), so the die lies on
 the ground with its outcome face up: for the seed slice at (1.65, 3.9) that
-is face 3, red in the writeup's colours.  The face numbers are read back from
-the screenshot by OCR (Debian's ``tesseract``; that check is skipped where it
-is missing).
+is face 3, red in the writeup's colours.  The face numbers are pips: on the
+screenshot, each face turned towards the camera must carry its value's count
+of pips, and nothing from a face turned away (a pip, a label) may show; at
+rest (faces 1, 2, 3) and mid-throw (faces 4, 5, 6).
 """
 
 from __future__ import annotations
@@ -14,7 +15,6 @@ import os
 import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -25,47 +25,91 @@ pytestmark = [pytest.mark.viewer, pytest.mark.slow]
 RERUN_CLI = Path(sys.executable).parent / "rerun"
 XVFB = shutil.which("xvfb-run")
 RERUN = str(RERUN_CLI) if RERUN_CLI.exists() else shutil.which("rerun")
-TESSERACT = shutil.which("tesseract")
 
 
-def _ocr_digit(img: np.ndarray) -> str:
-    """The digit 1..6 that tesseract reads in a grey image (dark glyph on white), '' if none."""
-    from PIL import Image
+def _of_color(view: np.ndarray, color) -> np.ndarray:
+    """Pixels of ``color`` however the viewer shades it: the same chromaticity, saturated (black: just dark)."""
+    color = np.asarray(color, dtype=float)
+    mx, mn = view.max(axis=-1), view.min(axis=-1)
+    if color.max() < 60:
+        return mx < 50
+    chroma = view / np.maximum(view.sum(axis=-1, keepdims=True), 1)
+    return (np.abs(chroma - color / color.sum()).sum(axis=-1) < 0.12) & (mx - mn > 60)
 
-    with tempfile.TemporaryDirectory() as d:
-        Image.fromarray(img).save(Path(d) / "glyph.png")
-        res = subprocess.run([TESSERACT, str(Path(d) / "glyph.png"), "-", "--psm", "10", "-c",
-                              "tessedit_char_whitelist=123456"], capture_output=True, text=True, timeout=30)
-    return res.stdout.strip()
+
+def _hull_mask(blob: np.ndarray) -> np.ndarray:
+    """The convex hull of a blob's pixels (a face plate is a convex quadrilateral on screen)."""
+    from scipy.spatial import Delaunay
+
+    pts = np.argwhere(blob)
+    (y0, x0), (y1, x1) = pts.min(axis=0), pts.max(axis=0) + 1
+    box = np.argwhere(np.ones((y1 - y0, x1 - x0), dtype=bool)) + [y0, x0]
+    out = np.zeros(blob.shape, dtype=bool)
+    out[box[:, 0], box[:, 1]] = Delaunay(pts).find_simplex(box) >= 0
+    return out
 
 
-def face_numbers_read(view: np.ndarray, colors) -> dict[int, list[str]]:
-    """Face value → what OCR reads in each glyph-sized blob of exactly that face's colour.
+def pips_seen(view: np.ndarray, colors, faces, trail_color) -> dict[int, tuple[int, float]]:
+    """Face value → (pips counted on its plate, fraction of the plate's pixels that are neither face, pip nor trail).
 
-    The viewer draws each face's label in the face's colour over a dark box.
-    For face k the image is turned into its distance from face k's colour
-    (the glyph black, everything else white), each glyph-sized connected blob
-    of near-exact pixels is cut out with a margin, scaled up 3x and read as
-    one character.
+    For each face in ``faces``, its plate is the convex hull of the largest blob of the face's
+    colour; a pip is a blob of at least 20 pixels of the pip colour (white, shaded: grey, hence
+    any bright neutral pixel) inside it.  Anything else on the plate (a label, a glyph, its dark
+    box, a hidden face's colour) counts as foreign, away from the rims of the plate, the pips and
+    the orange centre-of-mass path (which may cross a plate).
     """
-    from PIL import Image
     from scipy import ndimage
 
+    pip_px = (view.max(axis=-1) - view.min(axis=-1) <= 12) & (view.mean(axis=-1) >= 90)
+    trail = _of_color(view, trail_color)
     out = {}
-    for k, color in enumerate(np.asarray(colors, dtype=int), start=1):
-        dist = np.abs(view - color).sum(axis=-1)
-        lab, _ = ndimage.label(dist <= 24, structure=np.ones((3, 3)))
-        reads = []
-        for sl in ndimage.find_objects(lab):
-            hh, ww = sl[0].stop - sl[0].start, sl[1].stop - sl[1].start
-            if not (12 <= hh <= 60 and 2 <= ww <= 45 and hh >= 0.8 * ww):  # a glyph of the label font (2x scale)
-                continue
-            y0, x0 = max(sl[0].start - 10, 0), max(sl[1].start - 10, 0)
-            sub = np.clip(dist[y0 : sl[0].stop + 10, x0 : sl[1].stop + 10] * 2.5, 0, 255).astype(np.uint8)
-            big = Image.fromarray(sub).resize((3 * sub.shape[1], 3 * sub.shape[0]), Image.BICUBIC)
-            reads.append(_ocr_digit(np.asarray(big)))
-        out[k] = reads
+    for k in faces:
+        face = _of_color(view, colors[k - 1])
+        lab, n = ndimage.label(face)
+        if n == 0:
+            out[k] = (0, 1.0)
+            continue
+        sizes = ndimage.sum(face, lab, range(1, n + 1))
+        plate = _hull_mask(lab == int(np.argmax(sizes)) + 1)
+        pl, npip = ndimage.label(pip_px & plate, structure=np.ones((3, 3)))
+        areas = ndimage.sum(pip_px & plate, pl, range(1, npip + 1))
+        # anti-aliased rims (of the plate, the pips and the path) are mixed colours: not counted as foreign
+        core = ndimage.binary_erosion(plate, iterations=3)
+        rims = ndimage.binary_dilation((pip_px & plate) | trail, iterations=2)
+        foreign = core & ~face & ~rims
+        out[k] = (int((areas >= 20).sum()), float(foreign.sum() / core.sum()) if core.any() else 1.0)
     return out
+
+
+def screenshot(rrd: Path, folder: Path) -> Path:
+    """The viewer's screenshot of ``rrd`` in a 1400x900 window under Xvfb (``folder/shot.png``)."""
+    png = folder / "shot.png"
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(folder)}
+    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
+           "--window-size", "1400x900"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=folder)
+    assert res.returncode == 0, res.stderr[-2000:]
+    return png
+
+
+def assert_pips_show_the_facing_numbers(roll, im: np.ndarray) -> list[int]:
+    """Each face turned towards the camera shows its value's pips, and nothing from a face turned away shows.
+
+    A face turned away would show through as its pips, its label or its colour on the visible
+    plates: their pip counts or their foreign pixels catch it.  Returns the faces checked.
+    """
+    from dicetrace.sinks.rerun import CM_COLOR, FACE_COLORS, _eye_for
+
+    h, w, _ = im.shape
+    eye = np.asarray(_eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm)).position.as_arrow_array()
+                     .to_pylist()[0])
+    facing = faces_towards(roll, eye)
+    seen = pips_seen(im[int(0.07 * h) : int(0.95 * h), : int(0.55 * w)], FACE_COLORS, facing, CM_COLOR)
+    wrong = {k: n for k, (n, _) in seen.items() if n != k}
+    assert not wrong, f"pips counted on the faces turned towards the camera {facing} (face: count, foreign): {seen}"
+    cluttered = {k: f for k, (_, f) in seen.items() if f > 0.01}
+    assert not cluttered, f"foreign pixels on the visible plates (face: count, foreign fraction): {seen}"
+    return facing
 
 
 def faces_towards(roll, eye) -> list[int]:
@@ -87,17 +131,11 @@ def test_viewer_screenshot_shows_the_die_on_the_ground(tmp_path):
 
     from dicetrace.ics import seed_slice
     from dicetrace.simulate import Record, simulate
-    from dicetrace.sinks.rerun import FACE_COLORS, GROUND_COLOR, _eye_for, write_rrd
+    from dicetrace.sinks.rerun import GROUND_COLOR, write_rrd
 
     roll = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True))
     assert roll.outcome == 3
-    rrd = write_rrd(roll, tmp_path / "throw.rrd")
-    png = tmp_path / "shot.png"
-    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
-    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
-           "--window-size", "1400x900"]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
-    assert res.returncode == 0, res.stderr[-2000:]
+    png = screenshot(write_rrd(roll, tmp_path / "throw.rrd"), tmp_path)
     assert png.exists() and png.stat().st_size > 10_000
 
     im = np.asarray(Image.open(png).convert("RGB")).astype(int)
@@ -121,16 +159,25 @@ def test_viewer_screenshot_shows_the_die_on_the_ground(tmp_path):
     panels = im[int(0.1 * h) : int(0.9 * h), int(0.65 * w) :]
     assert (panels.sum(axis=-1) < 150).mean() > 0.3
 
-    # the face numbers: each face turned towards the camera has its number, in its colour, read by OCR
-    if TESSERACT is None:
-        pytest.skip("tesseract not on PATH: the face numbers were not read (apt-get install tesseract-ocr)")
-    eye = np.asarray(_eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm)).position.as_arrow_array()
-                     .to_pylist()[0])
-    facing = faces_towards(roll, eye)
+    # the face numbers as pips: at rest faces 1, 2 and 3 (up) are turned towards the camera
+    facing = assert_pips_show_the_facing_numbers(roll, im)
     assert 3 in facing and 4 not in facing and 2 <= len(facing) <= 3, facing
-    read = face_numbers_read(im[int(0.07 * h) : int(0.95 * h), : int(0.55 * w)], FACE_COLORS)
-    missing = [k for k in facing if str(k) not in read[k]]
-    assert not missing, f"face numbers {missing} not read on the die (OCR read, by face colour: {read})"
+
+
+@pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
+@pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+def test_viewer_screenshot_numbers_the_faces_of_the_die_in_flight(tmp_path):
+    """The throw cut at 0.33 s (330 steps), mid-throw: faces 4, 5 and 6 (magenta, yellow, black) face the camera."""
+    from PIL import Image
+
+    from dicetrace.ics import seed_slice
+    from dicetrace.simulate import Record, simulate
+    from dicetrace.sinks.rerun import write_rrd
+
+    roll = simulate(seed_slice(1.65, 3.9), t_max_s=0.33, record=Record(states=True, energy=True))
+    png = screenshot(write_rrd(roll, tmp_path / "throw.rrd"), tmp_path)
+    im = np.asarray(Image.open(png).convert("RGB")).astype(int)
+    assert sorted(assert_pips_show_the_facing_numbers(roll, im)) == [4, 5, 6]
 
 
 @pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
@@ -147,12 +194,7 @@ def test_viewer_screenshot_shows_the_compare_view(tmp_path):
     b = simulate(a.ic * (1 + 1e-6), record=Record(states=True, energy=True))
     rrd = tmp_path / "compare.rrd"
     rrd.write_bytes(encode_compare_rrd([a, b], ["throw 0", "nudged"]))
-    png = tmp_path / "shot.png"
-    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
-    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
-           "--window-size", "1400x900"]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
-    assert res.returncode == 0, res.stderr[-2000:]
+    png = screenshot(rrd, tmp_path)
     im = np.asarray(Image.open(png).convert("RGB")).astype(int)
     h, w, _ = im.shape
     Image.fromarray(im.astype(np.uint8)).save(tmp_path / "copy.png")

@@ -10,8 +10,11 @@ Entities (world frame: z up, cm):
 
 ``world/ground``            static thin box whose top face is the plane z = 0
 ``world/die/body``          the die, a solid box (centre + quaternion per step)
-``world/die/faces``         six thin coloured plates on the faces, their numbers 1..6 shown
-                            (1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black)
+``world/die/faces``         six thin coloured plates on the faces (1 blue, 2 green, 3 red,
+                            4 magenta, 5 yellow, 6 black), static in the body frame under
+                            the die's pose (a transform per step), numbered on hover
+``world/die/faces/pips``    each face's number as white pips (1..6 dots, a real die's
+                            layout): depth-tested, so a hidden face's pips are hidden
 ``world/die/nodes``         the eight corner nodes, labelled 1..8 (on hover); red while at
                             or below the ground (z ≤ 0), grey otherwise
 ``world/cm``                the centre of mass
@@ -48,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from dicetrace.sinks._common import Destination, destination, write_bytes
+from dicetrace.sinks.rerun_pips import log_pips
 
 #: Face colours of the writeup: 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black (RGB).
 FACE_COLORS = np.array(
@@ -338,31 +342,23 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     )
     rec.send_columns("world/die/body", indexes=index, columns=rr.Boxes3D.columns(centers=cm, quaternions=quat))
 
-    plate_half = np.empty((6, 3))
+    # the face plates and their pips: static in the body frame, carried by the die's pose (one transform per step)
     plate_t = 0.02 * half
-    for f in range(6):
-        plate_half[f] = np.where(FACE_NORMALS[f] != 0, plate_t, 0.62 * half)
+    plate_half = np.where(FACE_NORMALS != 0, plate_t, 0.62 * half)
     rec.log(
         "world/die/faces",
         rr.Boxes3D.from_fields(
+            centers=FACE_NORMALS * (half + plate_t),
             half_sizes=plate_half,
             colors=FACE_COLORS,
             fill_mode="solid",
             labels=[str(v) for v in range(1, 7)],
-            show_labels=True,  # the face numbers, drawn on the plates
+            show_labels=False,  # on hover only: a label is drawn over everything, a hidden face's too
         ),
         static=True,
     )
-    # face centre offsets straight from the traced nodes: the mean of each face's four offsets
-    face_off = off[:, FACE_NODES, :].mean(axis=2)  # (nrow, 6, 3), length = half
-    plate_centres = cm[:, None, :] + face_off * ((half + plate_t) / half)
-    rec.send_columns(
-        "world/die/faces",
-        indexes=index,
-        columns=rr.Boxes3D.columns(
-            centers=plate_centres.reshape(-1, 3), quaternions=np.repeat(quat, 6, axis=0)
-        ).partition(np.full(nrow, 6)),
-    )
+    rec.send_columns("world/die/faces", indexes=index, columns=rr.Transform3D.columns(translation=cm, quaternion=quat))
+    log_pips(rec, "world/die/faces/pips", FACE_NORMALS, half, lift=half + 2 * plate_t)
 
     # -- nodes: red while in contact -------------------------------------------------------------
     rec.log(
