@@ -25,7 +25,8 @@ slice and measures against a converged reference:
   step before the first contact, E with the dynamics' inertia (median);
 - **blow-ups** (a failed :class:`~dicetrace.Status`) and time caps;
 - **CPU time per IC** (ms): process CPU time of ``simulate_batch`` on one
-  numba thread after a warm-up (compilation excluded).
+  numba thread after a warm-up (compilation excluded), best of
+  ``TIMING_REPEAT`` runs.
 
 Fitted convergence orders: the slope of log(first-impact error) against
 log(dt) over the points where the error converges (monotone, above
@@ -76,6 +77,8 @@ FLOOR_REL = 1e-12
 TARGET_AGREEMENT = {"seed": 0.97, "physical": 0.93}
 #: The integrator every other's cheapest converged setting is compared with.
 BASELINE_INTEGRATOR = "contact-adaptive"
+#: Timed runs: best of this many (quick: 1); one run moved by up to ~1.5x on a loaded machine.
+TIMING_REPEAT = 3
 #: Failed statuses (never an outcome), as codes.
 FAILED = tuple(int(s) for s in Status if s.failed)
 
@@ -341,10 +344,10 @@ def _reference(preset, ics, ref_spec: Reference, second: Reference, floor_ics, n
 
 
 def _run_row(preset, integ, dt, tol, ics, ref: Runs, ref_row: dict, horizons, ref_traj, ref_spec, window, seed,
-             floor_ics, threads):
+             floor_ics, threads, repeat):
     """One timed run of the study against the reference, and its own floor: its CSV row and CPU cost."""
     cfg = config_for(preset, integ, dt, tol=tol)
-    runs = run_batch(ics, cfg, timed=True)
+    runs = run_batch(ics, cfg, timed=True, repeat=repeat)
     flips = own_floor(floor_ics, cfg, seed, threads=threads)
     both = runs.settled & ref.settled
     t_err = runs.t_settle_s[both] - ref.t_settle_s[both]
@@ -439,7 +442,7 @@ def study(
             for dt, tol in runs_at:
                 say(f"[{preset}] {integ} dt={dt:g} s" + ("" if tol is None else f" tol={tol:g}"))
                 row = _run_row(preset, integ, dt, tol, ics, ref, ref_row, horizons, ref_traj, ref_spec, window, seed,
-                               floor_ics, threads)
+                               floor_ics, threads, 1 if quick else TIMING_REPEAT)
                 rows.append(row)
                 errs.append(row["first_impact_error_cm"])
                 if preset == "seed" and integ == program.integrator and dt == program.dt_s:

@@ -93,11 +93,10 @@ def summary_markdown(res: StudyResult, command: str) -> str:
     ]
     for preset in _presets(res):
         zero = zero_floor_settings(res.rows, preset)
-        by_integ = {}
-        for r in zero:
-            by_integ.setdefault(r["integrator"], []).append(setting(r))
-        names = "; ".join(f"{i} at {', '.join(v)}" for i, v in by_integ.items()) or "none"
-        lines.append(f"- `{preset}`, settings whose floor is 0: {names}.")
+        mine = [r for r in res.rows if r["preset"] == preset]
+        others = ", ".join(f"{r['integrator']} {setting(r)} ({r['own_floor_flips']})" for r in mine if r not in zero)
+        lines.append(f"- `{preset}`, settings whose floor is 0 ({len(zero)} of {len(mine)}): {_settings_text(zero)}."
+                     + (f" Not 0 (flips): {others}." if others else ""))
     lines += [
         "",
         "## All runs",
@@ -161,6 +160,19 @@ def summary_markdown(res: StudyResult, command: str) -> str:
     for note in res.notes:
         lines += ["", note]
     return "\n".join(lines) + "\n"
+
+
+def _settings_text(rows: list[dict]) -> str:
+    """Runs named compactly, per integrator: ``rk4 at dt = 0.002, 0.001 s``; ``contact-adaptive at dt = 0.001 s, tol = 1e-06, 1e-07``."""
+    groups: dict[tuple, list[str]] = {}
+    for r in rows:
+        tol = r.get("tol", float("nan"))
+        if tol is not None and np.isfinite(tol):
+            groups.setdefault((r["integrator"], f"dt = {r['dt_s']:g} s, tol = "), []).append(f"{tol:g}")
+        else:
+            groups.setdefault((r["integrator"], "dt = "), []).append(f"{r['dt_s']:g}")
+    parts = [f"{integ} at {head}{', '.join(vals)}" + ("" if "tol" in head else " s") for (integ, head), vals in groups.items()]
+    return "; ".join(parts) or "none"
 
 
 def _presets(res: StudyResult) -> list[str]:
