@@ -1,66 +1,84 @@
-"""Cost per throw of the contact-aware integrators, against the seed path.
+"""Cost per throw and outcome agreement of the integrators, against the seed path, in one run.
 
 On the accuracy study's ICs (300 seeded points of the zoom-out window; L
-negated for ``physical``), one numba thread, best of ``--repeat`` runs of
-``simulate_batch``: CPU ms per throw for
+negated for ``physical``), for both presets:
 
-* ``seed`` with the program's semi-implicit Euler at dt = 1 ms (the seed's cost),
-* ``contact-substep`` at dt = 1 ms and 2 ms (8 fixed sub-steps per dt in contact),
-* ``contact-adaptive`` at dt = 1 ms and tol = 1e-4 … 1e-7,
+* a converged reference, computed here (untimed): the accuracy study's
+  second reference (``contact-adaptive`` at dt = 1 ms, tol = 1e-10; change
+  the tolerance with ``--reference-tol``);
+* timed, on one numba thread, best of ``--repeat`` runs of
+  ``simulate_batch`` (the study's ``run_batch``): the program's semi-implicit Euler at dt = 1 ms (on
+  ``seed``: the seed path, the unit of cost), ``contact-substep`` at dt =
+  1 ms, and every error-controlled scheme of the integrator table
+  (``contact-adaptive``, ``contact-dop853``, ...) at
+  dt = 1 ms and each of its study tolerances within ``--tol-range``.
 
-for both presets.  Outcome agreement at these settings is the accuracy
-study's (``analysis/accuracy/summary.md``); this script measures cost only,
-more steadily (best of several runs).
+Each line: CPU ms per throw, its ratio to the seed path measured in this
+run, the outcome agreement with the reference (an unsettled run disagrees)
+and the unsettled count.  CPU time is process time (steady under load,
+unlike wall time).
 
-Usage: ``python benchmarks/bench_integrators.py [--n 300] [--repeat 3]``.
+Usage: ``python benchmarks/bench_integrators.py [--n 300] [--repeat 3]
+[--tol-range 1e-9,1e-5] [--integrators contact-adaptive,contact-dop853]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import time
 
 import numba
 import numpy as np
 
-from dicetrace.studies.accuracy import sample_ics
-from dicetrace.params import make_config
-from dicetrace.simulate import simulate_batch
+from dicetrace.integrators import INTEGRATORS
+from dicetrace.params import convert_l, get_preset, make_config
+from dicetrace.studies.accuracy import SECOND_REFERENCE, T_MAX_S, agreement, run_batch, sample_ics
 
-RUNS = [
-    ("semi-implicit-euler", 1e-3, None),
-    ("contact-substep", 2e-3, None),
-    ("contact-substep", 1e-3, None),
-    ("contact-adaptive", 1e-3, 1e-4),
-    ("contact-adaptive", 1e-3, 1e-5),
-    ("contact-adaptive", 1e-3, 1e-6),
-    ("contact-adaptive", 1e-3, 1e-7),
-]
+PRESETS = ("seed", "physical")
+SEED_PATH = ("semi-implicit-euler", 1e-3, None)
+
+
+def runs(tol_range, only) -> list[tuple[str, float, float | None]]:
+    """(integrator, dt, tol) of every timed line: the seed scheme, contact-substep, each adaptive scheme's tolerances."""
+    lo, hi = tol_range
+    out = [SEED_PATH, ("contact-substep", 1e-3, None)]
+    for name, spec in INTEGRATORS.items():
+        if spec.adaptive and (not only or name in only):
+            out += [(name, 1e-3, tol) for tol in spec.study_tol if lo <= tol <= hi]
+    return [r for r in out if not only or r[0] in only or r == SEED_PATH]
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=300)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--reference-tol", type=float, default=SECOND_REFERENCE.tol)
+    ap.add_argument("--tol-range", default="1e-9,1e-5", help="lo,hi: the adaptive schemes' study tolerances within it")
+    ap.add_argument("--integrators", default="", help="comma-separated: only these (the seed path always runs)")
     args = ap.parse_args()
+    tol_range = tuple(float(v) for v in args.tol_range.split(","))
+    only = {v.strip() for v in args.integrators.split(",") if v.strip()}
     numba.set_num_threads(1)
-    ics = sample_ics(n=args.n)
-    print(f"{args.n} zoom-out ICs, 1 thread, CPU ms per throw (best of {args.repeat})")
-    for preset in ("seed", "physical"):
-        x = ics.copy()
-        if preset == "physical":
-            x[:, 3:] *= -1.0
-        for integ, dt, tol in RUNS:
-            cfg = make_config(preset, integrator=integ, dt_s=dt, t_max_s=20.0, tol=tol)
-            simulate_batch(x[:2], config=cfg)  # compile / load the cache
-            best = np.inf
-            for _ in range(args.repeat):
-                t0 = time.process_time()
-                r = simulate_batch(x, config=cfg)
-                best = min(best, time.process_time() - t0)
+    ics_prog = sample_ics(n=args.n)
+    ref_name, ref_dt = SECOND_REFERENCE.integrator, SECOND_REFERENCE.dt_s
+    print(f"{args.n} zoom-out ICs, 1 thread, CPU ms per throw (best of {args.repeat}); agreement with "
+          f"{ref_name} dt={ref_dt:g} s tol={args.reference_tol:g} (computed here)")
+    seed_ms = None
+    lines = runs(tol_range, only)
+    for preset in PRESETS:
+        ics = convert_l(ics_prog, "program", get_preset(preset).l_convention)
+        ref = run_batch(ics, make_config(preset, integrator=ref_name, dt_s=ref_dt, t_max_s=T_MAX_S, tol=args.reference_tol))
+        for integ, dt, tol in lines:
+            cfg = make_config(preset, integrator=integ, dt_s=dt, t_max_s=T_MAX_S, tol=tol)
+            r = run_batch(ics, cfg, timed=True, repeat=args.repeat)
+            ms = r.cpu_ms_per_ic
+            if preset == "seed" and (integ, dt, tol) == SEED_PATH:
+                seed_ms = ms
+            settled = r.settled
+            agree = agreement(r, ref)
             label = f"{integ} dt={dt:g}" + ("" if tol is None else f" tol={tol:g}")
-            bad = int(np.sum(r.status != "settled"))
-            print(f"  {preset:<9} {label:<38} {best / args.n * 1e3:8.3f} ms/throw   unsettled {bad}")
+            ratio = f"{ms / seed_ms:7.3g}x" if seed_ms else "       "
+            print(f"  {preset:<9} {label:<38} {ms:8.3f} ms/throw {ratio} seed   agreement {agree:.3f}   "
+                  f"unsettled {int(np.sum(~settled))}", flush=True)
 
 
 if __name__ == "__main__":

@@ -48,8 +48,18 @@ def test_quick_study_cli_runs_under_a_minute(tmp_path):
         assert float(r["cpu_ms_per_ic"]) > 0
         for rel in ("1e-12", "1e-09", "1e-06"):
             assert 0.0 <= float(r[f"chaos_floor_{rel}"]) <= 1.0
+        assert int(r["own_floor_n"]) == acc.QUICK_FLOOR_N and 0 <= int(r["own_floor_flips"]) <= acc.QUICK_FLOOR_N
+    with open(tmp_path / "reference.csv") as f:
+        refs = list(csv.DictReader(f))
+    assert [r["preset"] for r in refs] == list(acc.PRESETS)
+    for r in refs:
+        assert r["second_reference"] == acc.QUICK_SECOND_REFERENCE.label
+        lo, frac, hi = (float(r[k]) for k in ("references_agreement_lo", "references_agreement", "references_agreement_hi"))
+        assert 0.0 <= lo <= frac <= hi <= 1.0
     text = (tmp_path / "summary.md").read_text()
     assert "Best method for a time budget" in text and "chaos floor" in text.lower()
+    assert "## Own numerical floor of each setting" in text and "settings whose floor is 0" in text
+    assert "## Cheapest setting of each integrator at the target agreement" in text
     # compile time aside (the kernels are cached by the rest of the suite), well under a minute
     assert elapsed < 120
 
@@ -136,3 +146,37 @@ def test_quick_run_may_not_overwrite_committed_results(tmp_path):
         assert res.returncode == 2, (cmd, res.stderr)
         assert "committed full-run results" in res.stderr and res.stderr.count("\n") == 1
         assert not target.exists()
+
+
+def _row(integ, ms, agree, flips=0, preset="physical"):
+    return {"preset": preset, "integrator": integ, "cpu_ms_per_ic": ms, "outcome_agreement": agree,
+            "own_floor_flips": flips, "dt_s": 1e-3, "tol": float("nan")}
+
+
+def test_cheapest_at_target_and_ratio_to_the_baseline():
+    base = acc.BASELINE_INTEGRATOR
+    other = next(i for i in INTEGRATORS if i != base)
+    rows = [_row(base, 0.8, 0.95), _row(base, 0.6, 0.94), _row(base, 0.4, 0.90),
+            _row(other, 0.3, 0.93), _row(other, 0.1, 0.92), _row(base, 0.01, 1.0, preset="seed")]
+    got = {c["integrator"]: c for c in acc.cheapest_at_target(rows, "physical")}
+    assert set(got) == {base, other}
+    assert got[base]["run"]["cpu_ms_per_ic"] == 0.6 and got[base]["ratio"] == pytest.approx(1.0)
+    assert got[other]["run"]["cpu_ms_per_ic"] == 0.3 and got[other]["ratio"] == pytest.approx(0.5)
+    assert got[other]["target"] == acc.TARGET_AGREEMENT["physical"]
+    none = {c["integrator"]: c for c in acc.cheapest_at_target(rows, "physical", target=0.99)}
+    assert none[base]["run"] is None and np.isnan(none[other]["ratio"])
+
+
+def test_zero_floor_settings():
+    rows = [_row("rk4", 1.0, 0.5, flips=0), _row("rk4", 2.0, 0.5, flips=3), _row("rk4", 1.0, 0.5, flips=0, preset="seed")]
+    assert acc.zero_floor_settings(rows, "physical") == [rows[0]]
+
+
+def test_own_floor_counts_flips_of_the_setting_itself():
+    """No perturbation: no flip (runs are deterministic); a large one on a chaotic window: flips."""
+    from dicetrace.params import make_config
+
+    cfg = make_config("seed", t_max_s=acc.T_MAX_S)
+    ics = acc.sample_ics("zoom-out", 20, seed=0)
+    assert acc.own_floor(ics, cfg, 0, rel=0.0) == 0
+    assert acc.own_floor(ics, cfg, 0, rel=0.2) > 0

@@ -11,6 +11,12 @@ slice and measures against a converged reference:
 - the **chaos floor**: the agreement of the reference itself when every IC
   is perturbed by a relative 1e-12, 1e-9 and 1e-6 (IC + δ·|IC|·ξ, ξ a seeded
   random unit vector in the 6-D IC space): the best any method can do;
+- each setting's **own numerical floor**: how many of ``FLOOR_N`` ICs of
+  the resolved ``home`` window change outcome (or status) when moved by a
+  relative 1e-12 (:func:`perturb`), run by that very setting.  The model is
+  continuous there; a scheme need not be (step-size decisions, contact
+  events), and a bisection to 1e-12 with a scheme whose floor is not 0
+  measures the scheme;
 - **first-impact trajectory error**: largest node-position error (cm) 20 ms
   after the reference's first contact (median over a subsample of ICs);
 - **settle-time bias** (s) and **contact-count bias** (contact-set changes)
@@ -19,13 +25,16 @@ slice and measures against a converged reference:
   step before the first contact, E with the dynamics' inertia (median);
 - **blow-ups** (a failed :class:`~dicetrace.Status`) and time caps;
 - **CPU time per IC** (ms): process CPU time of ``simulate_batch`` on one
-  numba thread after a warm-up (compilation excluded).
+  numba thread after a warm-up (compilation excluded), best of
+  ``TIMING_REPEAT`` runs.
 
 Fitted convergence orders: the slope of log(first-impact error) against
 log(dt) over the points where the error converges (monotone, above
 rounding).  The reference is stated with its evidence of convergence: the
 same method at half its step agrees with it on (almost) every IC, closer
-than the 1e-9 chaos floor allows a perturbation to.
+than the 1e-9 chaos floor allows a perturbation to, and a second reference
+from a different integrator (``SECOND_REFERENCE``) agrees with it (the
+fraction and its Wilson interval).
 
 It returns a :class:`StudyResult`; :mod:`dicetrace.studies.accuracy_render`
 writes it (CSV, plot, Markdown).
@@ -59,31 +68,53 @@ HORIZON_GRID_S = 0.008
 #: ICs of the trajectory subsample (first-impact error, energy drift).
 N_TRAJ = 24
 QUICK_N_TRAJ = 4
+#: The own numerical floor of every setting: ICs of a resolved window, moved by a relative FLOOR_REL.
+FLOOR_WINDOW = "home"
+FLOOR_N = 300
+QUICK_FLOOR_N = 12
+FLOOR_REL = 1e-12
+#: Agreement a setting must reach to count as converged, per preset (the summary's cheapest-setting table).
+TARGET_AGREEMENT = {"seed": 0.97, "physical": 0.93}
+#: The integrator every other's cheapest converged setting is compared with.
+BASELINE_INTEGRATOR = "contact-adaptive"
+#: Timed runs: best of this many (quick: 1); one run moved by up to ~1.5x on a loaded machine.
+TIMING_REPEAT = 3
 #: Failed statuses (never an outcome), as codes.
 FAILED = tuple(int(s) for s in Status if s.failed)
 
 
 @dataclass(frozen=True)
 class Reference:
-    """The converged reference: an integrator at a step, checked at half that step."""
+    """The converged reference: an integrator at a step (and tolerance), checked at half that step."""
 
     integrator: str = "contact-substep"
     dt_s: float = 1e-4
+    tol: float | None = None
 
     @property
     def check_dt_s(self) -> float:
         return self.dt_s / 2.0
 
+    @property
+    def label(self) -> str:
+        return f"{self.integrator} dt={self.dt_s:g} s" + ("" if self.tol is None else f" tol={self.tol:g}")
+
+    def config(self, preset: str) -> Config:
+        return config_for(preset, self.integrator, self.dt_s, tol=self.tol)
+
 
 REFERENCE = Reference("contact-substep", 1e-4)
 QUICK_REFERENCE = Reference("contact-substep", 2.5e-4)
+#: The second, independent reference: error-controlled sub-steps instead of a fixed grid.
+SECOND_REFERENCE = Reference("contact-adaptive", 1e-3, 1e-10)
+QUICK_SECOND_REFERENCE = Reference("contact-adaptive", 1e-3, 1e-8)
 
 #: CSV columns of the study, in order.
 STUDY_COLUMNS = (
     "preset", "integrator", "order", "dt_s", "tol", "n_ics", "cpu_ms_per_ic", "outcome_agreement",
     "settled_fraction", "settle_time_bias_s", "settle_time_mae_s", "contact_count_bias", "first_impact_error_cm",
-    "free_flight_energy_drift", "blow_ups", "time_caps", "chaos_floor_1e-12", "chaos_floor_1e-09",
-    "chaos_floor_1e-06", "reference_integrator", "reference_dt_s", "reference_self_agreement", "window", "seed",
+    "free_flight_energy_drift", "blow_ups", "time_caps", "own_floor_flips", "own_floor_n", "chaos_floor_1e-12",
+    "chaos_floor_1e-09", "chaos_floor_1e-06", "reference_integrator", "reference_dt_s", "reference_self_agreement", "window", "seed",
 )
 
 
@@ -138,18 +169,20 @@ class Runs:
         return self.status == int(Status.SETTLED)
 
 
-def run_batch(ics_preset: np.ndarray, cfg: Config, *, threads: int | None = None, timed: bool = False) -> Runs:
-    """``simulate_batch`` over ICs already in the preset's convention (timed on request, on one thread)."""
+def run_batch(ics_preset: np.ndarray, cfg: Config, *, threads: int | None = None, timed: bool = False,
+              repeat: int = 1) -> Runs:
+    """``simulate_batch`` over ICs already in the preset's convention (timed on request: one thread, best of ``repeat``)."""
     from dicetrace.simulate import BATCH_BLOCK, simulate_batch
 
     cpu = float("nan")
     if timed:
-        # warm-up: compile / load the cache of the path the timed call takes (more
-        # than BATCH_BLOCK ICs go through the batch kernel, fewer one by one)
+        # warm-up: compile / load the batch kernel (up to BATCH_BLOCK ICs run the single-throw loop instead)
         simulate_batch(ics_preset[: BATCH_BLOCK + 1], config=cfg, threads=1)
-        t0 = time.process_time()
-        r = simulate_batch(ics_preset, config=cfg, threads=1)
-        cpu = (time.process_time() - t0) / len(ics_preset) * 1e3
+        cpu = math.inf
+        for _ in range(max(1, int(repeat))):
+            t0 = time.process_time()
+            r = simulate_batch(ics_preset, config=cfg, threads=1)
+            cpu = min(cpu, (time.process_time() - t0) / len(ics_preset) * 1e3)
     else:
         r = simulate_batch(ics_preset, config=cfg, threads=threads)
     m = len(r)
@@ -166,6 +199,13 @@ def run_batch(ics_preset: np.ndarray, cfg: Config, *, threads: int | None = None
         t_first_contact_s=t_first,
         cpu_ms_per_ic=cpu,
     )
+
+
+def own_floor(ics_preset: np.ndarray, cfg: Config, seed: int, *, rel: float = FLOOR_REL, threads=None) -> int:
+    """ICs whose outcome or status changes when moved by a relative ``rel``, both runs by ``cfg``: the setting's own floor."""
+    a = run_batch(ics_preset, cfg, threads=threads)
+    b = run_batch(perturb(ics_preset, rel, seed), cfg, threads=threads)
+    return int(np.sum((a.outcome != b.outcome) | (a.status != b.status)))
 
 
 def agreement(a: Runs, ref: Runs) -> float:
@@ -261,13 +301,19 @@ class StudyResult:
         return pd.DataFrame(self.rows, columns=list(STUDY_COLUMNS))
 
 
-def _reference(preset, ics, ref_spec: Reference, n_traj: int, seed: int, threads, say):
+def _reference(preset, ics, ref_spec: Reference, second: Reference, floor_ics, n_traj: int, seed: int, threads, say):
     """The reference runs of one preset: its summary row, runs, chaos floors and trajectory subsample."""
-    say(f"[{preset}] reference {ref_spec.integrator} dt={ref_spec.dt_s:g} s on {len(ics)} ICs")
-    ref_cfg = config_for(preset, ref_spec.integrator, ref_spec.dt_s)
-    chk_cfg = config_for(preset, ref_spec.integrator, ref_spec.check_dt_s)
+    from dicetrace.analysis.agreement import agreement as wilson_agreement
+
+    say(f"[{preset}] reference {ref_spec.label} on {len(ics)} ICs")
+    ref_cfg = ref_spec.config(preset)
+    chk_cfg = config_for(preset, ref_spec.integrator, ref_spec.check_dt_s, tol=ref_spec.tol)
     ref = run_batch(ics, ref_cfg, threads=threads)
     chk = run_batch(ics, chk_cfg, threads=threads)
+    say(f"[{preset}] second reference {second.label}")
+    two = run_batch(ics, second.config(preset), threads=threads)
+    # an unsettled run of either reference counts as disagreement (as in `agreement`)
+    both = wilson_agreement(np.where(two.settled, two.outcome, -1), np.where(ref.settled, ref.outcome, -2))
     floors = {}
     for rel in PERTURBATIONS:
         say(f"[{preset}] chaos floor {rel:g}")
@@ -283,6 +329,12 @@ def _reference(preset, ics, ref_spec: Reference, n_traj: int, seed: int, threads
         "check_dt_s": ref_spec.check_dt_s,
         "self_agreement": agreement(chk, ref),
         "check_first_impact_error_cm": _traj_error(ics, chk_cfg, horizons, ref_traj)[0],
+        "second_reference": second.label,
+        "references_agreement": both.fraction,
+        "references_agreement_lo": both.ci[0],
+        "references_agreement_hi": both.ci[1],
+        "own_floor_flips": own_floor(floor_ics, ref_cfg, seed, threads=threads),
+        "own_floor_n": len(floor_ics),
         "settled_fraction": float(np.mean(ref.settled)),
         "mean_settle_time_s": _mean(ref.t_settle_s[ref.settled]),
         "mean_contact_changes": float(np.mean(ref.n_changes)),
@@ -291,10 +343,12 @@ def _reference(preset, ics, ref_spec: Reference, n_traj: int, seed: int, threads
     return row, ref, horizons, ref_traj
 
 
-def _run_row(preset, integ, dt, tol, ics, ref: Runs, ref_row: dict, horizons, ref_traj, ref_spec, window, seed):
-    """One timed run of the study against the reference: its CSV row and CPU cost."""
+def _run_row(preset, integ, dt, tol, ics, ref: Runs, ref_row: dict, horizons, ref_traj, ref_spec, window, seed,
+             floor_ics, threads, repeat):
+    """One timed run of the study against the reference, and its own floor: its CSV row and CPU cost."""
     cfg = config_for(preset, integ, dt, tol=tol)
-    runs = run_batch(ics, cfg, timed=True)
+    runs = run_batch(ics, cfg, timed=True, repeat=repeat)
+    flips = own_floor(floor_ics, cfg, seed, threads=threads)
     both = runs.settled & ref.settled
     t_err = runs.t_settle_s[both] - ref.t_settle_s[both]
     c_err = runs.n_changes[both] - ref.n_changes[both]
@@ -316,6 +370,8 @@ def _run_row(preset, integ, dt, tol, ics, ref: Runs, ref_row: dict, horizons, re
         "free_flight_energy_drift": drift,
         "blow_ups": int(np.sum(np.isin(runs.status, FAILED))),
         "time_caps": int(np.sum(runs.status == int(Status.TIME_CAP))),
+        "own_floor_flips": flips,
+        "own_floor_n": len(floor_ics),
         "chaos_floor_1e-12": ref_row["chaos_floor_1e-12"],
         "chaos_floor_1e-09": ref_row["chaos_floor_1e-09"],
         "chaos_floor_1e-06": ref_row["chaos_floor_1e-06"],
@@ -337,6 +393,7 @@ def study(
     integrators=None,
     reference: Reference | None = None,
     n_traj: int | None = None,
+    floor_n: int | None = None,
     threads: int | None = 2,
     progress=None,
 ) -> StudyResult:
@@ -349,7 +406,9 @@ def study(
     n
         ICs in the sample (default 300; ``quick``: 12).
     quick
-        CI size: fewer ICs, each integrator's quick steps, a coarser reference.
+        CI size: fewer ICs, each integrator's quick steps, coarser references.
+    floor_n
+        ICs of the ``home`` window for each setting's own floor (default 300; ``quick``: 12).
     threads
         numba threads for the untimed runs (reference, floors); timed runs use one.
     progress
@@ -363,14 +422,18 @@ def study(
     for p in presets:
         get_preset(p)
     ref_spec = reference or (QUICK_REFERENCE if quick else REFERENCE)
+    second = QUICK_SECOND_REFERENCE if quick else SECOND_REFERENCE
+    floor_n = int(floor_n if floor_n is not None else (QUICK_FLOOR_N if quick else FLOOR_N))
     n_traj = min(n, int(n_traj if n_traj is not None else (QUICK_N_TRAJ if quick else N_TRAJ)))
     program = make_config("seed").numerics  # the 2019 program's scheme and step: the cost unit
     ics_prog = sample_ics(window, n, seed)
+    floor_prog = sample_ics(FLOOR_WINDOW, floor_n, seed)
     rows, orders, references, ref_runs = [], [], [], {}
     seed_cost = float("nan")
     for preset in presets:
         ics = convert_l(ics_prog, "program", get_preset(preset).l_convention)
-        ref_row, ref, horizons, ref_traj = _reference(preset, ics, ref_spec, n_traj, seed, threads, say)
+        floor_ics = convert_l(floor_prog, "program", get_preset(preset).l_convention)
+        ref_row, ref, horizons, ref_traj = _reference(preset, ics, ref_spec, second, floor_ics, n_traj, seed, threads, say)
         references.append(ref_row)
         ref_runs[preset] = ref
         for integ in integrators:
@@ -378,7 +441,8 @@ def study(
             errs = []
             for dt, tol in runs_at:
                 say(f"[{preset}] {integ} dt={dt:g} s" + ("" if tol is None else f" tol={tol:g}"))
-                row = _run_row(preset, integ, dt, tol, ics, ref, ref_row, horizons, ref_traj, ref_spec, window, seed)
+                row = _run_row(preset, integ, dt, tol, ics, ref, ref_row, horizons, ref_traj, ref_spec, window, seed,
+                               floor_ics, threads, 1 if quick else TIMING_REPEAT)
                 rows.append(row)
                 errs.append(row["first_impact_error_cm"])
                 if preset == "seed" and integ == program.integrator and dt == program.dt_s:
@@ -474,8 +538,36 @@ def budget_table(res: StudyResult, factors=(1.0, 10.0)) -> list[dict]:
                         "cpu_ms_per_ic": b["cpu_ms_per_ic"] if b else float("nan"),
                         "outcome_agreement": b["outcome_agreement"] if b else float("nan"),
                         "settle_time_bias_s": b["settle_time_bias_s"] if b else float("nan"),
+                        "own_floor_flips": b["own_floor_flips"] if b else None,
                         "chaos_floor_1e-12": ref["chaos_floor_1e-12"],
                         "chaos_floor_1e-09": ref["chaos_floor_1e-09"],
                     }
                 )
     return out
+
+
+def cheapest_at_target(rows: list[dict], preset: str, target: float | None = None) -> list[dict]:
+    """Per integrator, its cheapest run reaching ``target`` agreement (default TARGET_AGREEMENT[preset]).
+
+    Each entry: the integrator, its run (None when no run reaches the target)
+    and ``ratio``, its CPU time over the cheapest such run of
+    BASELINE_INTEGRATOR (NaN when either is missing).
+    """
+    target = TARGET_AGREEMENT[preset] if target is None else target
+    integs = [i for i in INTEGRATORS if any(r["integrator"] == i and r["preset"] == preset for r in rows)]
+    best = {}
+    for integ in integs:
+        ok = [r for r in rows if r["preset"] == preset and r["integrator"] == integ and r["outcome_agreement"] >= target]
+        best[integ] = min(ok, key=lambda r: r["cpu_ms_per_ic"]) if ok else None
+    base = best.get(BASELINE_INTEGRATOR)
+    out = []
+    for integ in integs:
+        b = best[integ]
+        ratio = b["cpu_ms_per_ic"] / base["cpu_ms_per_ic"] if b and base else float("nan")
+        out.append({"integrator": integ, "run": b, "ratio": ratio, "target": target})
+    return out
+
+
+def zero_floor_settings(rows: list[dict], preset: str) -> list[dict]:
+    """The runs of ``preset`` whose own floor is 0 (no outcome flips at FLOOR_REL)."""
+    return [r for r in rows if r["preset"] == preset and r.get("own_floor_flips") == 0]

@@ -10,7 +10,19 @@ from __future__ import annotations
 import numpy as np
 
 from dicetrace.params import INTEGRATORS
-from dicetrace.studies.accuracy import PERTURBATIONS, PRESETS, T_MAX_S, StudyResult, best_within_budget, budget_table
+from dicetrace.studies.accuracy import (
+    BASELINE_INTEGRATOR,
+    FLOOR_REL,
+    FLOOR_WINDOW,
+    PERTURBATIONS,
+    PRESETS,
+    T_MAX_S,
+    StudyResult,
+    best_within_budget,
+    budget_table,
+    cheapest_at_target,
+    zero_floor_settings,
+)
 from dicetrace.studies.text import fmt
 
 
@@ -40,13 +52,16 @@ def summary_markdown(res: StudyResult, command: str) -> str:
         "## Reference and chaos floor",
         "",
         "| preset | reference | check at dt/2: outcome agreement | check: first-impact error (cm) | "
+        "second reference | agreement of the two (95 % Wilson) | own floor (flips) | "
         "floor 1e-12 | floor 1e-9 | floor 1e-6 | mean settle time (s) |",
-        "|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in res.references:
         lines.append(
             f"| {r['preset']} | {r['integrator']} dt={r['dt_s']:g} s | {r['self_agreement']:.3f} | "
-            f"{_fmt(r['check_first_impact_error_cm'], '.2e')} | {r['chaos_floor_1e-12']:.3f} | "
+            f"{_fmt(r['check_first_impact_error_cm'], '.2e')} | {r['second_reference']} | "
+            f"{r['references_agreement']:.3f} [{r['references_agreement_lo']:.3f}, {r['references_agreement_hi']:.3f}] | "
+            f"{r['own_floor_flips']}/{r['own_floor_n']} | {r['chaos_floor_1e-12']:.3f} | "
             f"{r['chaos_floor_1e-09']:.3f} | {r['chaos_floor_1e-06']:.3f} | {r['mean_settle_time_s']:.3f} |"
         )
     pc = res.preset_comparison
@@ -65,20 +80,38 @@ def summary_markdown(res: StudyResult, command: str) -> str:
         "",
         "The chaos floor is the outcome agreement of the reference with itself when every IC is moved by a relative "
         "δ (random direction): no method can be expected to agree better than the floor at the size of its own error. "
-        "The reference counts as converged when halving its step changes fewer outcomes than a 1e-9 perturbation does.",
+        "The reference counts as converged when halving its step changes fewer outcomes than a 1e-9 perturbation does, "
+        "and when a second reference from another integrator agrees with it as well.",
+        "",
+        "## Own numerical floor of each setting",
+        "",
+        f"Each setting, run on {_floor_n(res)} ICs of the `{FLOOR_WINDOW}` window (a resolved window, where the model's "
+        f"outcome is continuous in the IC) and on the same ICs moved by a relative {FLOOR_REL:g}: the number of outcomes "
+        "that change (column *own floor* below). A scheme can be discontinuous where the model is not (step-size "
+        "decisions, contact events); a bisection to 1e-12 with a setting whose floor is not 0 measures the scheme.",
+        "",
+    ]
+    for preset in _presets(res):
+        zero = zero_floor_settings(res.rows, preset)
+        mine = [r for r in res.rows if r["preset"] == preset]
+        others = ", ".join(f"{r['integrator']} {setting(r)} ({r['own_floor_flips']})" for r in mine if r not in zero)
+        lines.append(f"- `{preset}`, settings whose floor is 0 ({len(zero)} of {len(mine)}): {_settings_text(zero)}."
+                     + (f" Not 0 (flips): {others}." if others else ""))
+    lines += [
         "",
         "## All runs",
         "",
         "| preset | integrator | dt (s) | tol | CPU ms/IC | agreement | settle-time bias (s) | contact-count bias | "
-        "first-impact error (cm) | free-flight energy drift | blow-ups | time caps |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "first-impact error (cm) | free-flight energy drift | blow-ups | time caps | own floor (flips) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in res.rows:
         lines.append(
             f"| {r['preset']} | {r['integrator']} | {r['dt_s']:g} | {_fmt(r.get('tol'), 'g')} | {r['cpu_ms_per_ic']:.3g} | "
             f"{r['outcome_agreement']:.3f} | {_fmt(r['settle_time_bias_s'], '+.4f')} | "
             f"{_fmt(r['contact_count_bias'], '+.2f')} | {_fmt(r['first_impact_error_cm'], '.2e')} | "
-            f"{_fmt(r['free_flight_energy_drift'], '.1e')} | {r['blow_ups']} | {r['time_caps']} |"
+            f"{_fmt(r['free_flight_energy_drift'], '.1e')} | {r['blow_ups']} | {r['time_caps']} | "
+            f"{r['own_floor_flips']}/{r['own_floor_n']} |"
         )
     lines += ["", "## Fitted convergence orders (first-impact error against dt; for contact-adaptive against tol)", ""]
     lines += ["| preset | integrator | declared order | against | fitted exponent |", "|---|---|---|---|---|"]
@@ -95,17 +128,19 @@ def summary_markdown(res: StudyResult, command: str) -> str:
             "",
             "Best run of each integrator whose CPU time per IC is within the budget.",
             "",
-            "| preset | budget | integrator | dt (s) | tol | CPU ms/IC | agreement | settle-time bias (s) | floor 1e-12 | floor 1e-9 |",
-            "|---|---|---|---|---|---|---|---|---|---|",
+            "| preset | budget | integrator | dt (s) | tol | CPU ms/IC | agreement | settle-time bias (s) | own floor (flips) | "
+            "floor 1e-12 | floor 1e-9 |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
         ]
         for b in bt:
             lines.append(
                 f"| {b['preset']} | {b['budget']} | {b['integrator']} | {_fmt(b['dt_s'], 'g')} | {_fmt(b['tol'], 'g')} | "
                 f"{_fmt(b['cpu_ms_per_ic'], '.3g')} | {_fmt(b['outcome_agreement'], '.3f')} | "
-                f"{_fmt(b['settle_time_bias_s'], '+.4f')} | {b['chaos_floor_1e-12']:.3f} | {b['chaos_floor_1e-09']:.3f} |"
+                f"{_fmt(b['settle_time_bias_s'], '+.4f')} | {_fmt(b['own_floor_flips'], 'd')} | "
+                f"{b['chaos_floor_1e-12']:.3f} | {b['chaos_floor_1e-09']:.3f} |"
             )
     lines += ["", "## Best method for a time budget", ""]
-    for preset in sorted({r["preset"] for r in res.rows}, key=list(PRESETS).index):
+    for preset in _presets(res):
         costs = sorted({r["cpu_ms_per_ic"] for r in res.rows if r["preset"] == preset})
         budgets = _budget_points(costs, res.seed_cost_ms)
         for bud in budgets:
@@ -121,9 +156,58 @@ def summary_markdown(res: StudyResult, command: str) -> str:
                     f"- `{preset}`, {bud:.3g} ms per throw: **{best['integrator']}** at {setting(best)} "
                     f"(agreement {best['outcome_agreement']:.3f}, {best['cpu_ms_per_ic']:.3g} ms)."
                 )
+    lines += _cheapest_lines(res)
     for note in res.notes:
         lines += ["", note]
     return "\n".join(lines) + "\n"
+
+
+def _settings_text(rows: list[dict]) -> str:
+    """Runs named compactly, per integrator: ``rk4 at dt = 0.002, 0.001 s``; ``contact-adaptive at dt = 0.001 s, tol = 1e-06, 1e-07``."""
+    groups: dict[tuple, list[str]] = {}
+    for r in rows:
+        tol = r.get("tol", float("nan"))
+        if tol is not None and np.isfinite(tol):
+            groups.setdefault((r["integrator"], f"dt = {r['dt_s']:g} s, tol = "), []).append(f"{tol:g}")
+        else:
+            groups.setdefault((r["integrator"], "dt = "), []).append(f"{r['dt_s']:g}")
+    parts = [f"{integ} at {head}{', '.join(vals)}" + ("" if "tol" in head else " s") for (integ, head), vals in groups.items()]
+    return "; ".join(parts) or "none"
+
+
+def _presets(res: StudyResult) -> list[str]:
+    return sorted({r["preset"] for r in res.rows}, key=list(PRESETS).index)
+
+
+def _floor_n(res: StudyResult) -> str:
+    ns = sorted({r["own_floor_n"] for r in res.rows})
+    return "/".join(str(n) for n in ns) or "0"
+
+
+def _cheapest_lines(res: StudyResult) -> list[str]:
+    """The cheapest setting of each integrator that reaches its preset's target agreement."""
+    lines = [
+        "",
+        "## Cheapest setting of each integrator at the target agreement",
+        "",
+        f"Target: agreement ≥ 0.97 on `seed`, ≥ 0.93 on `physical`; ratio: CPU time over {BASELINE_INTEGRATOR}'s "
+        "cheapest such setting (same run of the study).",
+        "",
+        "| preset | integrator | setting | CPU ms/IC | agreement | own floor (flips) | ratio to "
+        f"{BASELINE_INTEGRATOR} |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for preset in _presets(res):
+        for c in cheapest_at_target(res.rows, preset):
+            r = c["run"]
+            if r is None:
+                lines.append(f"| {preset} | {c['integrator']} | none reaches {c['target']:g} | — | — | — | — |")
+                continue
+            lines.append(
+                f"| {preset} | {c['integrator']} | {setting(r)} | {r['cpu_ms_per_ic']:.3g} | {r['outcome_agreement']:.3f} | "
+                f"{r['own_floor_flips']}/{r['own_floor_n']} | {_fmt(c['ratio'], '.2f')} |"
+            )
+    return lines
 
 
 def _budget_points(costs, seed_cost):

@@ -48,8 +48,10 @@ FRICTION_THETA = 1.0
 #: Largest inverse effective mass of a node along the ground, 1/8 + 3·3/16 ...
 #: bounded by 1/8 + |r|²/I with |r|² = 3 half², I = 16/3 half²: 11/16.
 INV_MASS_NODE = 11.0 / 16.0
-#: A sub-step is never cut shorter than this fraction of itself (a node that
-#: sits on the ground to rounding would otherwise be chased forever).
+#: A sub-step is never cut shorter than this fraction of dt / substeps (a node
+#: that sits on the ground to rounding would otherwise be chased forever): a
+#: crossing closer than that to the sub-step's start is ignored, and the cut
+#: goes to the next node's crossing, if any.
 MIN_CUT = 1e-6
 #: Error control of ``contact-adaptive`` (kp.tol > 0): first sub-step of an
 #: impact as ω·h with ω = √k; safety factor and bounds of the step-size ratio
@@ -242,8 +244,14 @@ def drive(st, kp, h, contact):
             last = True
             limited = True
         SUBSTEP(st, kp, hs, f0, f1, f2, t0, t1, t2)
-        # nodes that changed side within the sub-step: cut at the first crossing
+        # nodes that changed side within the sub-step: cut at the first crossing.
+        # A crossing within MIN_CUT of the start (a node left on the ground to
+        # rounding by the previous cut) is no crossing: it is left out of the
+        # minimum, not allowed to veto the cut of another node's real crossing
+        # later in the sub-step (that veto hung on the sign of a 1e-16 height
+        # and was contact-substep's 1e-12 outcome floor; tests/core).
         cut = 2.0
+        cmin = MIN_CUT * hmax / hs
         for k in range(8):
             zs = Xw[2] + offw[k, 2]
             ze = Xn[2] + offn[k, 2]
@@ -254,9 +262,9 @@ def drive(st, kp, h, contact):
                 th = hermite_root(zs, vs, ze, ve, hs)
                 if th < 0.0:
                     th = zs / (zs - ze)
-                if th < cut:
+                if cmin < th < cut:
                     cut = th
-        if cut < 1.0 and cut * hs > MIN_CUT * hmax:
+        if cut < 1.0:
             hs = cut * hs
             last = False
             limited = True
