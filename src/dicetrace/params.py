@@ -157,9 +157,9 @@ class Preset:
         Euler blows up on a third of throws there — error-controlled sub-steps
         reach 0.8–1.0 outcome agreement 1.5–3× cheaper than fixed ones, and at
         the default tolerance the order-8 pair is the cheaper of the two
-        error-controlled schemes (0.86 against 1.05 ms per throw, 0.96
-        agreement) with no outcome flipped by a 1e-12 nudge of the IC on 300
-        home-window throws; see analysis/accuracy).
+        error-controlled schemes (0.85 against 1.14 ms per throw in the
+        accuracy study, agreement 0.957 with the converged reference); see
+        analysis/accuracy).
     """
 
     name: str = "seed"
