@@ -503,12 +503,13 @@ def _traj_error(ics, cfg, horizons, ref_traj):
 # -- budgets ------------------------------------------------------------------------------------
 
 
-def best_within_budget(rows: list[dict], preset: str, integrator: str, budget_ms: float) -> dict | None:
-    """The most accurate run (highest agreement) of an integrator that costs ≤ budget_ms per IC."""
+def best_within_budget(rows: list[dict], preset: str, integrator: str | None, budget_ms: float) -> dict | None:
+    """The most accurate run (highest agreement; of equals, the cheapest) that costs ≤ budget_ms per IC,
+    of one integrator or (``integrator=None``) of all."""
     cand = [
         r
         for r in rows
-        if r["preset"] == preset and r["integrator"] == integrator and r["cpu_ms_per_ic"] <= budget_ms
+        if r["preset"] == preset and integrator in (None, r["integrator"]) and r["cpu_ms_per_ic"] <= budget_ms
     ]
     if not cand:
         return None

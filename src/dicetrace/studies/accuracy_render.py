@@ -144,11 +144,7 @@ def summary_markdown(res: StudyResult, command: str) -> str:
         costs = sorted({r["cpu_ms_per_ic"] for r in res.rows if r["preset"] == preset})
         budgets = _budget_points(costs, res.seed_cost_ms)
         for bud in budgets:
-            best = None
-            for integ in INTEGRATORS:
-                b = best_within_budget(res.rows, preset, integ, bud)
-                if b and (best is None or b["outcome_agreement"] > best["outcome_agreement"]):
-                    best = b
+            best = best_within_budget(res.rows, preset, None, bud)
             if best is None:
                 lines.append(f"- `{preset}`, {bud:.3g} ms per throw: no run fits.")
             else:
