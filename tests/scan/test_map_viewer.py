@@ -2,14 +2,9 @@
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from viewer_shot import RERUN, XVFB, screenshot
 
 from dicetrace.ics import Grid
 from dicetrace.scan import label_grid, scan
@@ -17,10 +12,6 @@ from dicetrace.scan.map_rrd import AXIS_RGB, BACKGROUND_RGB, legend_order, write
 from dicetrace.scan.maps import OUTCOME_RGB
 
 pytestmark = [pytest.mark.viewer, pytest.mark.slow]
-
-RERUN_CLI = Path(sys.executable).parent / "rerun"
-XVFB = shutil.which("xvfb-run")
-RERUN = str(RERUN_CLI) if RERUN_CLI.exists() else shutil.which("rerun")
 
 
 def _runs(mask: np.ndarray, axis: int, frac: float) -> np.ndarray:
@@ -38,12 +29,7 @@ def test_the_viewer_shows_the_map_upright_framed_and_with_its_legend(tmp_path):
     scan(Grid("seed", "red-sea", (nx, ny)), out)
     rrd = tmp_path / "map.rrd"
     write_scan_rrd(out, rrd)
-    png = tmp_path / "shot.png"
-    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
-    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
-           "--window-size", "1400x900"]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=tmp_path)
-    assert res.returncode == 0, res.stderr[-2000:]
+    png = screenshot(rrd, tmp_path)
     im = np.asarray(Image.open(png).convert("RGB")).astype(int)
     h, w, _ = im.shape
 

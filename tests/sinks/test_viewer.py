@@ -11,20 +11,11 @@ rest (faces 1, 2, 3) and mid-throw (faces 4, 5, 6).
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from viewer_shot import RERUN, XVFB, screenshot
 
 pytestmark = [pytest.mark.viewer, pytest.mark.slow]
-
-RERUN_CLI = Path(sys.executable).parent / "rerun"
-XVFB = shutil.which("xvfb-run")
-RERUN = str(RERUN_CLI) if RERUN_CLI.exists() else shutil.which("rerun")
 
 
 def _of_color(view: np.ndarray, color) -> np.ndarray:
@@ -79,17 +70,6 @@ def pips_seen(view: np.ndarray, colors, faces, trail_color) -> dict[int, tuple[i
         foreign = core & ~face & ~rims
         out[k] = (int((areas >= 20).sum()), float(foreign.sum() / core.sum()) if core.any() else 1.0)
     return out
-
-
-def screenshot(rrd: Path, folder: Path) -> Path:
-    """The viewer's screenshot of ``rrd`` in a 1400x900 window under Xvfb (``folder/shot.png``)."""
-    png = folder / "shot.png"
-    env = {**os.environ, "XDG_RUNTIME_DIR": str(folder)}
-    cmd = [XVFB, "-a", "-s", "-screen 0 1400x900x24", RERUN, str(rrd), "--new", "--screenshot-to", str(png),
-           "--window-size", "1400x900"]
-    res = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=env, cwd=folder)
-    assert res.returncode == 0, res.stderr[-2000:]
-    return png
 
 
 def assert_pips_show_the_facing_numbers(roll, im: np.ndarray) -> list[int]:
