@@ -18,8 +18,16 @@ run, the outcome agreement with the reference (an unsettled run disagrees)
 and the unsettled count.  CPU time is process time (steady under load,
 unlike wall time).
 
+``--budget`` adds, under each contact scheme's line, its sub-steps per
+throw by what ended them (``Roll.substeps``: the error controller, the
+longest sub-step, the friction law's stability bound, the end of a step, a
+contact change; then rejected and redone attempts), counted in a separate,
+untimed run.  ``--v-reg`` sets ``physical``'s friction regularisation
+(cm/s; the reference too).
+
 Usage: ``python benchmarks/bench_integrators.py [--n 300] [--repeat 3]
-[--tol-range 1e-9,1e-5] [--integrators contact-adaptive,contact-dop853]``.
+[--tol-range 1e-9,1e-5] [--integrators contact-adaptive,contact-dop853]
+[--presets seed,physical] [--budget] [--v-reg 10]``.
 """
 
 from __future__ import annotations
@@ -29,8 +37,10 @@ import argparse
 import numba
 import numpy as np
 
+from dicetrace.core.state import SUBSTEP_CAUSES
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import convert_l, get_preset, make_config
+from dicetrace.simulate import simulate
 from dicetrace.studies.accuracy import SECOND_REFERENCE, T_MAX_S, agreement, run_batch, sample_ics
 
 PRESETS = ("seed", "physical")
@@ -47,6 +57,15 @@ def runs(tol_range, only) -> list[tuple[str, float, float | None]]:
     return [r for r in out if not only or r[0] in only or r == SEED_PATH]
 
 
+def budget(ics, cfg) -> dict[str, float]:
+    """Mean sub-steps per throw by cause (``Roll.substeps``) over ``ics``."""
+    total = dict.fromkeys(SUBSTEP_CAUSES, 0)
+    for ic in ics:
+        for cause, count in simulate(ic, config=cfg).substeps.items():
+            total[cause] += count
+    return {cause: count / len(ics) for cause, count in total.items()}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=300)
@@ -54,6 +73,9 @@ def main() -> None:
     ap.add_argument("--reference-tol", type=float, default=SECOND_REFERENCE.tol)
     ap.add_argument("--tol-range", default="1e-9,1e-5", help="lo,hi: the adaptive schemes' study tolerances within it")
     ap.add_argument("--integrators", default="", help="comma-separated: only these (the seed path always runs)")
+    ap.add_argument("--presets", default=",".join(PRESETS), help="comma-separated presets, in this order")
+    ap.add_argument("--budget", action="store_true", help="print each contact scheme's sub-steps per throw by cause")
+    ap.add_argument("--v-reg", type=float, default=None, help="physical's v_reg_cm_s (default: the preset's)")
     args = ap.parse_args()
     tol_range = tuple(float(v) for v in args.tol_range.split(","))
     only = {v.strip() for v in args.integrators.split(",") if v.strip()}
@@ -64,11 +86,13 @@ def main() -> None:
           f"{ref_name} dt={ref_dt:g} s tol={args.reference_tol:g} (computed here)")
     seed_ms = None
     lines = runs(tol_range, only)
-    for preset in PRESETS:
+    for preset in args.presets.split(","):
+        extra = {"v_reg_cm_s": args.v_reg} if args.v_reg is not None and preset == "physical" else {}
         ics = convert_l(ics_prog, "program", get_preset(preset).l_convention)
-        ref = run_batch(ics, make_config(preset, integrator=ref_name, dt_s=ref_dt, t_max_s=T_MAX_S, tol=args.reference_tol))
+        ref_cfg = make_config(preset, integrator=ref_name, dt_s=ref_dt, t_max_s=T_MAX_S, tol=args.reference_tol, **extra)
+        ref = run_batch(ics, ref_cfg)
         for integ, dt, tol in lines:
-            cfg = make_config(preset, integrator=integ, dt_s=dt, t_max_s=T_MAX_S, tol=tol)
+            cfg = make_config(preset, integrator=integ, dt_s=dt, t_max_s=T_MAX_S, tol=tol, **extra)
             r = run_batch(ics, cfg, timed=True, repeat=args.repeat)
             ms = r.cpu_ms_per_ic
             if preset == "seed" and (integ, dt, tol) == SEED_PATH:
@@ -79,6 +103,11 @@ def main() -> None:
             ratio = f"{ms / seed_ms:7.3g}x" if seed_ms else "       "
             print(f"  {preset:<9} {label:<38} {ms:8.3f} ms/throw {ratio} seed   agreement {agree:.3f}   "
                   f"unsettled {int(np.sum(~settled))}", flush=True)
+            if args.budget and integ.startswith("contact-"):
+                b = budget(ics, cfg)
+                accepted = sum(b[c] for c in SUBSTEP_CAUSES[:5])
+                parts = "  ".join(f"{c} {b[c]:.0f}" for c in SUBSTEP_CAUSES)
+                print(f"  {'':<9}   sub-steps/throw {accepted:.0f}: {parts}", flush=True)
 
 
 if __name__ == "__main__":

@@ -265,3 +265,38 @@ def test_status_labels_round_trip_through_the_rolls_table():
         assert set(df["status"]) == want
         back = [Status.from_label(s) for s in df["status"]]
         assert back == [Status(int(c)) for c in batch.status_code]
+
+
+# -- the contact schemes' sub-step budget ------------------------------------------------------------
+
+PHYSICAL_IC = [60.0, -40.0, 150.0, 3000.0, -2000.0, 1500.0]
+
+
+def test_substeps_are_zero_for_the_programs_scheme_and_counted_for_contact_schemes():
+    """``Roll.substeps`` names every cause; the program's scheme has none, a contact scheme has them."""
+    seed = simulate([1.65, 3.9, 0, 0, 0, 0], preset="seed")
+    assert set(seed.substeps) == {"error", "cap", "friction", "end", "cut", "rejected", "redone"}
+    assert not any(seed.substeps.values())
+    fixed = simulate(PHYSICAL_IC, preset="physical", integrator="contact-substep")
+    s = fixed.substeps
+    assert fixed.settled and s["cap"] > 0 and s["cut"] > 0
+    # no error control: nothing rejected, no length from the controller, and every
+    # cut is a sub-step computed again, shorter, ending where the node crossed
+    assert s["error"] == s["rejected"] == 0 and s["cut"] == s["redone"]
+    # at least one cut per contact change after the first entry (each is located on a sub-step boundary)
+    assert s["cut"] >= fixed.n_contact_changes - 1
+
+
+def test_substeps_of_the_error_controlled_scheme_and_the_friction_bound():
+    """DOP853's sub-steps come from its controller; the smaller v_reg, the more the friction law bounds them."""
+    counts = {
+        v: simulate(PHYSICAL_IC, preset="physical", integrator="contact-dop853", tol=1e-7, v_reg_cm_s=v).substeps
+        for v in (10.0, 1.0)
+    }
+    assert counts[10.0]["error"] > 0 and counts[10.0]["redone"] >= counts[10.0]["cut"] > 0
+    # the law's stiffness μ·P/(m·v_reg) grows tenfold: far more sub-steps sit on its bound
+    assert counts[1.0]["friction"] > 3 * counts[10.0]["friction"] > 0
+    # the summary is the same whether or not it is counted (counting never steers)
+    batch = simulate_batch([PHYSICAL_IC], preset="physical", integrator="contact-dop853", tol=1e-7)
+    single = simulate(PHYSICAL_IC, preset="physical", integrator="contact-dop853", tol=1e-7)
+    assert (int(batch.outcome[0]), int(batch.steps[0])) == (single.outcome, single.steps)

@@ -16,6 +16,7 @@ import numba
 
 from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
+from dicetrace.core.state import SUBSTEP_CAUSES, new_states
 from dicetrace.ics import validate_ic, validate_ics
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
 from dicetrace.status import Status
@@ -133,6 +134,13 @@ class Roll:
     steps : steps integrated; ``t_settle_s = steps·dt``.
     contact_sets : uint8 bitmasks (bit k = node k+1 at or below the ground).
     contact_steps : step at which each set was first seen (0 for the initial empty set).
+    substeps : the contact schemes' sub-steps by what ended them: accepted
+        sub-steps whose length the error control chose (``error``), at the
+        longest sub-step dt / substeps (``cap``), shortened by the friction
+        law's stability bound (``friction``), to the end of a step (``end``)
+        or to a node entering or leaving the ground (``cut``); attempts
+        rejected by the error control (``rejected``) and attempts computed
+        again, shorter, at a cut (``redone``).  All zero for the other schemes.
     """
 
     ic: np.ndarray
@@ -145,6 +153,7 @@ class Roll:
     contact_steps: np.ndarray
     config: Config
     trace: Trace | None = field(default=None, repr=False)
+    substeps: dict = field(default_factory=dict, repr=False)
 
     @property
     def settled(self) -> bool:
@@ -258,14 +267,16 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
     kin = cfg.kernel_inputs(ic, orientation=orientation)
     empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     cap = DEFAULT_CAP
+    S = new_states(1)
     while True:
         sets = np.zeros(cap, dtype=np.uint8)
         set_steps = np.zeros(cap, dtype=np.int32)
-        summary = run_roll(*kin, sets, set_steps, *empty)
+        summary = run_roll(*kin, sets, set_steps, *empty, states=S)
         if summary[0] != Status.BUFFER_FULL:
             break
         cap *= CAP_GROWTH
     status, n, outcome, nsets = summary
+    substeps = dict(zip(SUBSTEP_CAUSES, (int(c) for c in S[0]["substeps"])))
     trace = None
     if record is not None:
         # The summary told how many rows the trace needs; the trace run is the
@@ -298,6 +309,7 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         contact_steps=set_steps[:nsets].copy(),
         config=cfg,
         trace=trace,
+        substeps=substeps,
     )
 
 

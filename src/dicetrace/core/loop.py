@@ -297,14 +297,17 @@ def batch_kernel(integ: int):
     return _KERNELS[key]
 
 
-def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy):
+def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy, states=None):
     """Integrate one throw with integrator ``integ`` (kernel id) in its tracing loop; see ``_roll``.
 
     The trace arrays (float64, 0 or n+1 rows) get the channels that have
     rows; with none, only the summary is returned (the same arithmetic as
-    the summary loop: tracing writes, never steers).
+    the summary loop: tracing writes, never steers).  ``states``: a (1,)
+    ``STATE`` array to run in (its final state, e.g. the sub-step counts,
+    can then be read); a fresh one by default.
     """
-    return roll_kernel(integ, True)(ic, off0, kp, new_states(1), sets, set_steps, tr_state, tr_force, tr_energy)
+    S = new_states(1) if states is None else states
+    return roll_kernel(integ, True)(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)
 
 
 def run_summary(ic, off0, kp, integ, sets, set_steps):

@@ -21,6 +21,9 @@ scheme keeps from one step to the next:
     the work area of the embedded Runge–Kutta pairs (``schemes.erk``):
     stage derivatives, stage point, sub-step start of y = (X, U, L, q) and
     a weighted sum of stages.
+``substeps``
+    the sub-steps of a contact scheme in this throw, by what ended them
+    (:data:`SUBSTEP_CAUSES`); zero for the other schemes.
 
 A record costs no reference counting when it crosses a call (numba passes
 a pointer; its fields are views without a reference count), unlike the
@@ -40,6 +43,17 @@ from dicetrace.core.contacts import record_set
 from dicetrace.status import Status
 
 _F8 = np.float64
+
+#: What ended each sub-step of a contact scheme (``contact_substep.drive``),
+#: counted per throw in ``STATE.substeps`` in this order: accepted sub-steps
+#: whose length the error controller chose ("error"), that ran at the
+#: longest sub-step dt / substeps ("cap"), that the friction law's stability
+#: bound shortened ("friction"), that ended at the end of the macro step
+#: ("end") or where a node enters or leaves the ground ("cut"); then the
+#: attempts the error control rejected ("rejected") and those computed again,
+#: shorter, because a node crossed the ground inside them ("redone").
+SUBSTEP_CAUSES = ("error", "cap", "friction", "end", "cut", "rejected", "redone")
+SUBSTEP_CAUSES_N = len(SUBSTEP_CAUSES)
 
 STATE = np.dtype(
     [
@@ -72,6 +86,7 @@ STATE = np.dtype(
         ("rk_y", _F8, 13),
         ("rk_y0", _F8, 13),
         ("rk_acc", _F8, 13),
+        ("substeps", np.int64, 7),
     ],
     align=True,
 )
@@ -109,6 +124,8 @@ def init_state(st, ic, off0, kp):
     st.rot_h = -1.0
     st.rot_ok = False
     st.h_next = 0.0
+    for j in range(SUBSTEP_CAUSES_N):
+        st.substeps[j] = 0
 
 
 @jit(inline="always")

@@ -40,6 +40,7 @@ from dicetrace.core.free_flight import (
     locate_entry,
 )
 from dicetrace.core.schemes.rk4 import accept_substep, begin_substeps, cf4, cf4_error, end_substeps
+from dicetrace.core.state import SUBSTEP_CAUSES
 from dicetrace.params import FRICTION_SPECTRAL
 
 #: Largest RK4 sub-step for the friction law, in units of 1/λ_f (λ_f the
@@ -62,6 +63,14 @@ ADAPT_SAFETY = 0.9
 ADAPT_FAC_MIN = 0.2
 ADAPT_FAC_MAX = 4.0
 ADAPT_HMIN = 1e-9
+#: Indices of ``STATE.substeps`` (``state.SUBSTEP_CAUSES``): what ended a sub-step.
+CAUSE_ERROR = SUBSTEP_CAUSES.index("error")
+CAUSE_CAP = SUBSTEP_CAUSES.index("cap")
+CAUSE_FRICTION = SUBSTEP_CAUSES.index("friction")
+CAUSE_END = SUBSTEP_CAUSES.index("end")
+CAUSE_CUT = SUBSTEP_CAUSES.index("cut")
+CAUSE_REJECTED = SUBSTEP_CAUSES.index("rejected")
+CAUSE_REDONE = SUBSTEP_CAUSES.index("redone")
 #: Most sub-steps in one macro step (a safety valve: beyond it the state is
 #: set to NaN, which the loop reports as ``non_finite``).
 MAX_SUBSTEPS = 100000
@@ -157,7 +166,8 @@ def drive(st, kp, h, contact):
     enters or leaves the ground (root of the cubic Hermite interpolant of its
     height), until no node is below the ground.  The sub-step method's
     order in dt at fixed ``substeps``; error-controlled sub-steps with
-    ``kp.tol > 0``.
+    ``kp.tol > 0``.  Every sub-step is counted in ``st.substeps`` by what
+    ended it (``state.SUBSTEP_CAUSES``).
     """
     W = st.W
     if not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
@@ -228,21 +238,25 @@ def drive(st, kp, h, contact):
             continue
         entering = False
         hs = hmax
+        cause = CAUSE_CAP
         if adaptive:
             if st.h_next <= 0.0:
                 st.h_next = h0
             if st.h_next < hs:
                 hs = st.h_next
+                cause = CAUSE_ERROR
         limited = hs < st.h_next
         lam = friction_rate(z, uk, P, kp)
         if lam * hs > THETA:
             hs = THETA / lam
             limited = True
+            cause = CAUSE_FRICTION
         last = False
         if hs >= rest * (1.0 - 1e-12):
             hs = rest
             last = True
             limited = True
+            cause = CAUSE_END
         SUBSTEP(st, kp, hs, f0, f1, f2, t0, t1, t2)
         # nodes that changed side within the sub-step: cut at the first crossing.
         # A crossing within MIN_CUT of the start (a node left on the ground to
@@ -268,6 +282,8 @@ def drive(st, kp, h, contact):
             hs = cut * hs
             last = False
             limited = True
+            cause = CAUSE_CUT
+            st.substeps[CAUSE_REDONE] += 1
             SUBSTEP(st, kp, hs, f0, f1, f2, t0, t1, t2)
         if adaptive:
             # embedded order-3 estimate (FSAL): y4 - y3 = h/6·(k4 - k5), k5 the
@@ -284,6 +300,7 @@ def drive(st, kp, h, contact):
                 fac = ADAPT_SAFETY * err ** (-ERR_EXP)
             if err > 1.0 and hs > ADAPT_HMIN * h:
                 st.h_next = hs * max(ADAPT_FAC_MIN, fac)
+                st.substeps[CAUSE_REJECTED] += 1
                 nsub += 1
                 # the scratch now holds the rejected candidate's forces: redo the start
                 continue
@@ -293,6 +310,7 @@ def drive(st, kp, h, contact):
             st.h_next = hn
             cached = True
         accept_substep(st, kp)
+        st.substeps[cause] += 1
         t = h if last else t + hs
     if t < h:
         # the sub-step budget ran out before the end of the step: never return a
