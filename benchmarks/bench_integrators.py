@@ -103,7 +103,7 @@ def main() -> None:
             ratio = f"{ms / seed_ms:7.3g}x" if seed_ms else "       "
             print(f"  {preset:<9} {label:<38} {ms:8.3f} ms/throw {ratio} seed   agreement {agree:.3f}   "
                   f"unsettled {int(np.sum(~settled))}", flush=True)
-            if args.budget and integ.startswith("contact-"):
+            if args.budget and INTEGRATORS[integ].substepped:
                 b = budget(ics, cfg)
                 accepted = sum(b[c] for c in SUBSTEP_CAUSES[:5])
                 parts = "  ".join(f"{c} {b[c]:.0f}" for c in SUBSTEP_CAUSES)

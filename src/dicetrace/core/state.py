@@ -86,7 +86,7 @@ STATE = np.dtype(
         ("rk_y", _F8, 13),
         ("rk_y0", _F8, 13),
         ("rk_acc", _F8, 13),
-        ("substeps", np.int64, 7),
+        ("substeps", np.int64, SUBSTEP_CAUSES_N),
     ],
     align=True,
 )
