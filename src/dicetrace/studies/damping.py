@@ -64,8 +64,18 @@ def _dt_check(ctx: Context) -> list[dict]:
     return rows
 
 
+def _chaos_rows(ctx: Context, grids, classifiers, extra, npts: int, eps, res: int):
+    """``chaos_sweep`` over the γ grids at ``npts`` random points of the window; (table, rows with ``extra``)."""
+    from dicetrace.analysis import chaos_sweep
+
+    pts = ctx.rng.random((npts, 2)) * 0.1
+    table = chaos_sweep(grids, classifiers=classifiers, points=pts, eps_list=eps, rng=ctx.rng,
+                        param_name="gamma", spacing=0.1 / (res - 1), n_blocks=4, n_boot=200)
+    return table, [{**rec, **extra[rec["gamma"]]} for rec in table.to_dict("records")]
+
+
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import boundary_fraction, chaos_sweep
+    from dicetrace.analysis import boundary_fraction
     from dicetrace.analysis.simulator import classify_on_slice
 
     res = ctx.res(401, 41)
@@ -88,11 +98,8 @@ def compute(ctx: Context) -> Computed:
     _contact_counts(ctx, extra)
     dt_rows = _dt_check(ctx)
     npts = ctx.pick(3000, 150)
-    pts = ctx.rng.random((npts, 2)) * 0.1
     eps = 0.1 * (np.logspace(-7, -2, 6) if not ctx.quick else np.logspace(-4, -1, 4))
-    table = chaos_sweep(grids, classifiers=classifiers, points=pts, eps_list=eps, rng=ctx.rng,
-                        param_name="gamma", spacing=0.1 / (res - 1), n_blocks=4, n_boot=200)
-    rows = [{**rec, **extra[rec["gamma"]]} for rec in table.to_dict("records")]
+    table, rows = _chaos_rows(ctx, grids, classifiers, extra, npts, eps, res)
     results = {"dt_check": dt_rows, "sweep": rows, "perturbation": {"npts": npts, "eps": eps}, "res": res,
                "converged": _converged_sweep(ctx, eps)}
     return Computed(results, {"grids": grids, "sweep_table": table})
@@ -100,7 +107,6 @@ def compute(ctx: Context) -> Computed:
 
 def _converged_sweep(ctx: Context, eps) -> dict:
     """The sweep again with the force law integrated to convergence (``CONVERGED``), on a smaller grid."""
-    from dicetrace.analysis import chaos_sweep
     from dicetrace.analysis.simulator import classify_on_slice
 
     res = ctx.res(201, 41)
@@ -113,10 +119,7 @@ def _converged_sweep(ctx: Context, eps) -> dict:
                       "n_unsettled": int((s.labels == -1).sum())}
         ctx.log(f"converged γ={gam}: mean settle {extra[gam]['mean_settle_s']:.3f} s")
     npts = ctx.pick(1000, 150)
-    pts = ctx.rng.random((npts, 2)) * 0.1
-    table = chaos_sweep(grids, classifiers=classifiers, points=pts, eps_list=eps, rng=ctx.rng,
-                        param_name="gamma", spacing=0.1 / (res - 1), n_blocks=4, n_boot=200)
-    rows = [{**rec, **extra[rec["gamma"]]} for rec in table.to_dict("records")]
+    _, rows = _chaos_rows(ctx, grids, classifiers, extra, npts, eps, res)
     bf = [r["boundary_fraction"] for r in rows]
     ap = [r.get("alpha_perturbation", np.nan) for r in rows]
     trend = ("falls monotonically" if all(a > b for a, b in zip(bf, bf[1:])) else "does not fall monotonically")
