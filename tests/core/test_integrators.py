@@ -492,3 +492,58 @@ def test_dop853_resting_die_is_stiff_stable():
     assert np.abs(st["U"]).max() < 1e-6 and np.abs(st["L"]).max() < 1e-6
     assert np.abs(Xs[-1] - Xs[n // 2]).max() < 1e-8  # no drift over the last 5 s
     assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
+
+
+# -- the high-order scheme's shortcuts are the full computation, bit for bit --------------------
+
+
+@pytest.mark.parametrize("friction", ["per-node", "spectral"])
+def test_stage_wrench_is_rotation_then_wrench_at(friction):
+    """``erk.stage_wrench`` (third row of R for every node, the rest only below the ground)
+    gives the force sum and torque of ``quat_rotate`` + ``wrench_at`` exactly, on tilted,
+    moving dice with 0 to 4 nodes in the ground, for both friction laws."""
+    from dicetrace.core.forces import wrench_at
+    from dicetrace.core.schemes.erk import quat_rotate, stage_wrench
+
+    kp = kparams(friction=friction, clamp_normal=friction == "per-node", v_reg_cm_s=10.0)
+    off = np.zeros((8, 3))
+    init_offsets(kp.half_side_cm, off)
+    rng = np.random.default_rng(11)
+    scratch = [np.zeros((8, 3)), np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8)]
+    below_counts = set()
+    for _ in range(400):
+        q = rng.normal(size=4) * rng.uniform(0.5, 2.0)  # any norm: both sides read q/|q|
+        y = np.concatenate([[0.1, -0.2], [rng.uniform(0.9, 1.8)], rng.normal(0, 80, 3), rng.normal(0, 200, 3), q])
+        got = stage_wrench(y, off, kp, *scratch)
+        offs = np.zeros((8, 3))
+        quat_rotate(q[0], q[1], q[2], q[3], off, offs)
+        below_counts.add(int(np.sum(y[2] + offs[:, 2] < 0)))
+        I = kp.inertia
+        F, uk, z, P = np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8)
+        _, *want = wrench_at(y[2], y[3], y[4], y[5], y[6] / I, y[7] / I, y[8] / I, offs, kp, F, uk, z, P)
+        assert got == tuple(want)
+    assert {0, 1, 2} <= below_counts and max(below_counts) >= 3
+
+
+@pytest.mark.parametrize("preset", ["physical", "seed"])
+def test_contact_step_ends_with_the_forces_of_its_state(preset):
+    """A contact-dop853 step reuses forces it already has (the previous step's end, its last
+    sub-step's error evaluation) instead of evaluating them again: after every step of a
+    throw, the forces, heights and contact mask it leaves are exactly what ``eval_forces``
+    computes afresh at its state."""
+    cfg = make_config(preset, integrator="contact-dop853", tol=1e-6)
+    kp = cfg.kernel_params()
+    ic = np.array([80.0, -40.0, 0.0, 300.0, -500.0, 150.0])
+    S = state(kp, [0.0, 0.0, 2.0], ic[:3], ic[3:] if preset == "seed" else -ic[3:], cfg.initial_offsets())
+    step = step_of(INTEGRATORS["contact-dop853"])
+    contact, mask = eval_forces(S[0], kp)
+    in_contact = 0
+    for _ in range(600):
+        contact, mask = step(S[0], kp, 1e-3, contact)
+        fresh = S.copy()
+        want = eval_forces(fresh[0], kp)
+        assert (contact, mask) == want
+        for name in ("F", "P", "z") + (("uk",) if contact else ()):
+            assert np.array_equal(S[0][name], fresh[0][name], equal_nan=True), name
+        in_contact += contact
+    assert in_contact > 50

@@ -151,6 +151,26 @@ def eval_forces(st, kp):
 
 
 @jit(inline="always")
+def ended_forces(st, below):
+    """What :func:`eval_forces` returns when the scratch already holds the forces at the state.
+
+    ``below``: what :func:`forces_at` found there (when False, F and P are
+    zeroed as eval_forces does); z must be the heights at the state.
+    """
+    mask = 0
+    for k in range(8):
+        if st.z[k] <= 0.0:
+            mask |= 1 << k
+    if not below:
+        for k in range(8):
+            st.F[k, 0] = 0.0
+            st.F[k, 1] = 0.0
+            st.F[k, 2] = 0.0
+            st.P[k] = 0.0
+    return below, mask
+
+
+@jit(inline="always")
 def sum_wrench(F, off, nodes, from_zero):
     """Σ F_k and τ = Σ F_k × x_k (program convention) over the nodes in the bitmask ``nodes``.
 

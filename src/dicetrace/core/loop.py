@@ -174,8 +174,10 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
         ended, status, nsets, last_mask = after_step(finite, n, mask, last_mask, sets, set_steps, nsets)
         if ended:
             break
+        e_dyn = math.nan
         if contact:
-            if energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest > e_blow:
+            e_dyn = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
+            if e_dyn > e_blow:
                 status = Status.BLOW_UP
                 if tracing:  # the state is finite: keep it for inspection
                     _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
@@ -202,7 +204,7 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
             else:
                 e = kp.e_stop + 1.0
         else:
-            e = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
+            e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
         if tracing:
             _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
         if not math.isfinite(e):

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 
 from dicetrace.core._jit import jit, specialise
-from dicetrace.core.forces import eval_forces, wrench_at
+from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
 from dicetrace.core.free_flight import (
     free_advance,
     free_flight,
@@ -195,9 +195,15 @@ def drive(st, kp, h, contact):
     t = 0.0
     nsub = 0
     entering = False
-    cached = False
-    c5 = False
+    # In contact, the forces at the step's start are those the last step ended
+    # with (``eval_forces``, or the last sub-step's own evaluation): their sums
+    # are the first sub-step's first stage, bit for bit (nodes without a force
+    # hold exact zeros, which leave a sum from +0.0 unchanged).
+    cached = contact
+    c5 = contact
     g0 = g1 = g2 = q0 = q1 = q2 = 0.0
+    if contact:
+        g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
     while t < h and nsub < MAX_SUBSTEPS:
         nsub += 1
         rest = h - t
@@ -316,7 +322,13 @@ def drive(st, kp, h, contact):
         # the sub-step budget ran out before the end of the step: never return a
         # silently shorter step; the loop reports the NaN as "non_finite"
         Xw[2] = math.nan
+        cached = False
     end_substeps(st, kp)
+    if cached:
+        # the step ended on an accepted sub-step, whose forces at the new state
+        # (the error estimate's evaluation) are in the scratch: what
+        # eval_forces would compute again, from the same X, U, ω = L/I and offsets
+        return ended_forces(st, c5)
     return eval_forces(st, kp)
 
 

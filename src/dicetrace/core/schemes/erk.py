@@ -30,9 +30,11 @@ import math
 import numpy as np
 
 from dicetrace.core._jit import jit, specialise
-from dicetrace.core.forces import acceleration, wrench_at
+from dicetrace.core.forces import acceleration, normal_force, wrench_at
+from dicetrace.core.model import offset_cross_omega
 from dicetrace.core.free_flight import CIRCUM
 from dicetrace.core.schemes.rk4 import error_speed
+from dicetrace.params import FRICTION_SPECTRAL
 
 #: Components of the sub-step state y = (X, U, L, q).
 NY = 13
@@ -81,6 +83,77 @@ def quat_rotate(q0, q1, q2, q3, off, out):
         out[k, 0] = r00 * a + r01 * b + r02 * c
         out[k, 1] = r10 * a + r11 * b + r12 * c
         out[k, 2] = r20 * a + r21 * b + r22 * c
+
+
+@jit(inline="always")
+def stage_wrench(y, off, kp, offs, F, uk, z, P):
+    """Contact force sum and torque at the stage point y (sums from 0.0 over the nodes with a force).
+
+    What ``quat_rotate`` then ``forces.wrench_at`` give, in the same
+    arithmetic, bit for bit, for the per-node friction law: a node's height
+    needs only the third row of R, so the other two rows are applied only to
+    the nodes below the ground (at most four of eight, mostly one or two),
+    and their velocities, forces and moments are summed as they are found
+    (node 1 → 8), never stored.  The program's spectral law couples every
+    node's velocity (σ): it goes through ``wrench_at`` with all offsets.
+    """
+    I = kp.inertia
+    q0 = y[9]
+    q1 = y[10]
+    q2 = y[11]
+    q3 = y[12]
+    if kp.friction_mode == FRICTION_SPECTRAL:
+        quat_rotate(q0, q1, q2, q3, off, offs)
+        below, f0, f1, f2, t0, t1, t2 = wrench_at(
+            y[2], y[3], y[4], y[5], y[6] / I, y[7] / I, y[8] / I, offs, kp, F, uk, z, P
+        )
+        return f0, f1, f2, t0, t1, t2
+    n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    s = 2.0 / n
+    r20 = s * (q1 * q3 - q0 * q2)
+    r21 = s * (q2 * q3 + q0 * q1)
+    r22 = 1.0 - s * (q1 * q1 + q2 * q2)
+    Xz = y[2]
+    f0 = f1 = f2 = t0 = t1 = t2 = 0.0
+    found = False
+    for k in range(8):
+        a = off[k, 0]
+        b = off[k, 1]
+        c = off[k, 2]
+        x2 = r20 * a + r21 * b + r22 * c
+        zk = Xz + x2
+        if not zk < 0.0:
+            continue
+        if not found:
+            found = True
+            r00 = 1.0 - s * (q2 * q2 + q3 * q3)
+            r01 = s * (q1 * q2 - q0 * q3)
+            r02 = s * (q1 * q3 + q0 * q2)
+            r10 = s * (q1 * q2 + q0 * q3)
+            r11 = 1.0 - s * (q1 * q1 + q3 * q3)
+            r12 = s * (q2 * q3 - q0 * q1)
+            w0 = y[6] / I
+            w1 = y[7] / I
+            w2 = y[8] / I
+        x0 = r00 * a + r01 * b + r02 * c
+        x1 = r10 * a + r11 * b + r12 * c
+        c0, c1, c2 = offset_cross_omega(x0, x1, x2, w0, w1, w2)
+        u0 = y[3] + c0
+        u1 = y[4] + c1
+        u2 = y[5] + c2
+        p = normal_force(zk, u2, kp)
+        if p == 0.0:
+            continue
+        sn = math.sqrt(u0 * u0 + u1 * u1 + kp.v_reg_cm_s * kp.v_reg_cm_s)
+        a0 = -kp.mu * p * u0 / sn
+        a1 = -kp.mu * p * u1 / sn
+        f0 += a0
+        f1 += a1
+        f2 += p
+        t0 += a1 * x2 - p * x1
+        t1 += p * x0 - a0 * x2
+        t2 += a0 * x1 - a1 * x0
+    return f0, f1, f2, t0, t1, t2
 
 
 @jit(inline="always")
@@ -179,10 +252,7 @@ def erk_template(st, kp, h, f0, f1, f2, t0, t1, t2):
     derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
     for i in range(1, NS):
         _combine(A[i], i, K, y0, h, y)
-        quat_rotate(y[9], y[10], y[11], y[12], off, offs)
-        below, g0, g1, g2, q0, q1, q2 = wrench_at(
-            y[2], y[3], y[4], y[5], y[6] / I, y[7] / I, y[8] / I, offs, kp, st.F, st.uk, st.z, st.P
-        )
+        g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
         derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
     _combine(B, NS, K, y0, h, y)
     qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
