@@ -23,11 +23,14 @@ throw by what ended them (``Roll.substeps``: the error controller, the
 longest sub-step, the friction law's stability bound, the end of a step, a
 contact change; then rejected and redone attempts), counted in a separate,
 untimed run.  ``--v-reg`` sets ``physical``'s friction regularisation
-(cm/s; the reference too).
+(cm/s; the reference too); ``--set NAME=VALUE`` any other field of the
+``physical`` preset (repeatable; the reference too), e.g. ``--set mu=0``
+to see what the sub-steps cost without friction; ``--dt`` the step of the
+contact schemes (the seed path and the reference keep 1 ms).
 
 Usage: ``python benchmarks/bench_integrators.py [--n 300] [--repeat 3]
 [--tol-range 1e-9,1e-5] [--integrators contact-adaptive,contact-dop853]
-[--presets seed,physical] [--budget] [--v-reg 10]``.
+[--presets seed,physical] [--budget] [--v-reg 10] [--set mu=0] [--dt 0.001]``.
 """
 
 from __future__ import annotations
@@ -47,13 +50,13 @@ PRESETS = ("seed", "physical")
 SEED_PATH = ("semi-implicit-euler", 1e-3, None)
 
 
-def runs(tol_range, only) -> list[tuple[str, float, float | None]]:
+def runs(tol_range, only, dt=1e-3) -> list[tuple[str, float, float | None]]:
     """(integrator, dt, tol) of every timed line: the seed scheme, contact-substep, each adaptive scheme's tolerances."""
     lo, hi = tol_range
-    out = [SEED_PATH, ("contact-substep", 1e-3, None)]
+    out = [SEED_PATH, ("contact-substep", dt, None)]
     for name, spec in INTEGRATORS.items():
         if spec.adaptive and (not only or name in only):
-            out += [(name, 1e-3, tol) for tol in spec.study_tol if lo <= tol <= hi]
+            out += [(name, dt, tol) for tol in spec.study_tol if lo <= tol <= hi]
     return [r for r in out if not only or r[0] in only or r == SEED_PATH]
 
 
@@ -66,6 +69,24 @@ def budget(ics, cfg) -> dict[str, float]:
     return {cause: count / len(ics) for cause, count in total.items()}
 
 
+def physical_fields(args, ap) -> dict[str, float]:
+    """The ``physical`` preset's overridden fields from ``--v-reg`` and ``--set NAME=VALUE`` (bad ones: exit 2)."""
+    extra = {} if args.v_reg is None else {"v_reg_cm_s": args.v_reg}
+    for item in args.set:
+        name, sep, value = item.partition("=")
+        if not sep:
+            ap.error(f"--set {item!r}: expected NAME=VALUE")
+        try:
+            extra[name.strip()] = float(value)
+        except ValueError:
+            ap.error(f"--set {item!r}: the value is not a number")
+    try:
+        make_config("physical", **extra)
+    except (TypeError, ValueError) as exc:
+        ap.error(f"--set: {exc}")
+    return extra
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=300)
@@ -76,7 +97,11 @@ def main() -> None:
     ap.add_argument("--presets", default=",".join(PRESETS), help="comma-separated presets, in this order")
     ap.add_argument("--budget", action="store_true", help="print each contact scheme's sub-steps per throw by cause")
     ap.add_argument("--v-reg", type=float, default=None, help="physical's v_reg_cm_s (default: the preset's)")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="another field of the physical preset, e.g. mu=0 (repeatable)")
+    ap.add_argument("--dt", type=float, default=1e-3, help="the contact schemes' step, s (default 0.001)")
     args = ap.parse_args()
+    extra_physical = physical_fields(args, ap)
     tol_range = tuple(float(v) for v in args.tol_range.split(","))
     only = {v.strip() for v in args.integrators.split(",") if v.strip()}
     numba.set_num_threads(1)
@@ -84,10 +109,12 @@ def main() -> None:
     ref_name, ref_dt = SECOND_REFERENCE.integrator, SECOND_REFERENCE.dt_s
     print(f"{args.n} zoom-out ICs, 1 thread, CPU ms per throw (best of {args.repeat}); agreement with "
           f"{ref_name} dt={ref_dt:g} s tol={args.reference_tol:g} (computed here)")
+    if extra_physical:
+        print("physical with " + ", ".join(f"{k} = {v:g}" for k, v in extra_physical.items()))
     seed_ms = None
-    lines = runs(tol_range, only)
+    lines = runs(tol_range, only, args.dt)
     for preset in args.presets.split(","):
-        extra = {"v_reg_cm_s": args.v_reg} if args.v_reg is not None and preset == "physical" else {}
+        extra = extra_physical if preset == "physical" else {}
         ics = convert_l(ics_prog, "program", get_preset(preset).l_convention)
         ref_cfg = make_config(preset, integrator=ref_name, dt_s=ref_dt, t_max_s=T_MAX_S, tol=args.reference_tol, **extra)
         ref = run_batch(ics, ref_cfg)
