@@ -54,6 +54,19 @@ def spectral_norm_xy(uk):
 
 
 @jit(inline="always")
+def node_friction(p, u0, u1, kp):
+    """The per-node law's friction (F_x, F_y) on a node with normal force p and horizontal velocity u."""
+    s = math.sqrt(u0 * u0 + u1 * u1 + kp.v_reg_cm_s * kp.v_reg_cm_s)
+    return -kp.mu * p * u0 / s, -kp.mu * p * u1 / s
+
+
+@jit(inline="always")
+def moment(a0, a1, a2, x0, x1, x2):
+    """The torque F × x of a force a at the offset x (program convention, docs/model.md §5.5)."""
+    return a1 * x2 - a2 * x1, a2 * x0 - a0 * x2, a0 * x1 - a1 * x0
+
+
+@jit(inline="always")
 def friction_forces(uk, kp, F, P):
     """Horizontal friction F_xy from the velocities uk and the normal forces P.
 
@@ -84,15 +97,12 @@ def friction_forces(uk, kp, F, P):
             F[k, 0] = -mu * (P[k] * (uk[k, 0] / sig))
             F[k, 1] = -mu * (P[k] * (uk[k, 1] / sig))
         return False
-    vr2 = kp.v_reg_cm_s * kp.v_reg_cm_s
     for k in range(8):
         if P[k] == 0.0:
             F[k, 0] = 0.0
             F[k, 1] = 0.0
         else:
-            s = math.sqrt(uk[k, 0] * uk[k, 0] + uk[k, 1] * uk[k, 1] + vr2)
-            F[k, 0] = -mu * P[k] * uk[k, 0] / s
-            F[k, 1] = -mu * P[k] * uk[k, 1] / s
+            F[k, 0], F[k, 1] = node_friction(P[k], uk[k, 0], uk[k, 1], kp)
     return True
 
 
@@ -191,9 +201,7 @@ def sum_wrench(F, off, nodes, from_zero):
         a0 = F[k, 0]
         a1 = F[k, 1]
         a2 = F[k, 2]
-        c0 = a1 * off[k, 2] - a2 * off[k, 1]
-        c1 = a2 * off[k, 0] - a0 * off[k, 2]
-        c2 = a0 * off[k, 1] - a1 * off[k, 0]
+        c0, c1, c2 = moment(a0, a1, a2, off[k, 0], off[k, 1], off[k, 2])
         if first:
             f0 = a0
             f1 = a1

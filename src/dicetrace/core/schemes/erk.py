@@ -30,7 +30,7 @@ import math
 import numpy as np
 
 from dicetrace.core._jit import jit, specialise
-from dicetrace.core.forces import acceleration, normal_force, wrench_at
+from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
 from dicetrace.core.model import offset_cross_omega
 from dicetrace.core.free_flight import CIRCUM
 from dicetrace.core.schemes.rk4 import error_speed
@@ -63,8 +63,8 @@ DOP853_E3 = np.array([-0.18980075407240762, 0.0, 0.0, 0.0, 0.0, 4.45031289275240
 
 
 @jit(inline="always")
-def quat_rotate(q0, q1, q2, q3, off, out):
-    """out_k = R(q/|q|)·off_k for the eight nodes (q = (w, x, y, z), any non-zero norm)."""
+def quat_matrix(q0, q1, q2, q3):
+    """R(q/|q|) as its nine entries row by row (q = (w, x, y, z), any non-zero norm)."""
     n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
     s = 2.0 / n
     r00 = 1.0 - s * (q2 * q2 + q3 * q3)
@@ -76,6 +76,13 @@ def quat_rotate(q0, q1, q2, q3, off, out):
     r20 = s * (q1 * q3 - q0 * q2)
     r21 = s * (q2 * q3 + q0 * q1)
     r22 = 1.0 - s * (q1 * q1 + q2 * q2)
+    return r00, r01, r02, r10, r11, r12, r20, r21, r22
+
+
+@jit(inline="always")
+def quat_rotate(q0, q1, q2, q3, off, out):
+    """out_k = R(q/|q|)·off_k for the eight nodes (q = (w, x, y, z), any non-zero norm)."""
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_matrix(q0, q1, q2, q3)
     for k in range(8):
         a = off[k, 0]
         b = off[k, 1]
@@ -108,14 +115,12 @@ def stage_wrench(y, off, kp, offs, F, uk, z, P):
             y[2], y[3], y[4], y[5], y[6] / I, y[7] / I, y[8] / I, offs, kp, F, uk, z, P
         )
         return f0, f1, f2, t0, t1, t2
-    n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
-    s = 2.0 / n
-    r20 = s * (q1 * q3 - q0 * q2)
-    r21 = s * (q2 * q3 + q0 * q1)
-    r22 = 1.0 - s * (q1 * q1 + q2 * q2)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_matrix(q0, q1, q2, q3)
+    w0 = y[6] / I
+    w1 = y[7] / I
+    w2 = y[8] / I
     Xz = y[2]
     f0 = f1 = f2 = t0 = t1 = t2 = 0.0
-    found = False
     for k in range(8):
         a = off[k, 0]
         b = off[k, 1]
@@ -124,17 +129,6 @@ def stage_wrench(y, off, kp, offs, F, uk, z, P):
         zk = Xz + x2
         if not zk < 0.0:
             continue
-        if not found:
-            found = True
-            r00 = 1.0 - s * (q2 * q2 + q3 * q3)
-            r01 = s * (q1 * q2 - q0 * q3)
-            r02 = s * (q1 * q3 + q0 * q2)
-            r10 = s * (q1 * q2 + q0 * q3)
-            r11 = 1.0 - s * (q1 * q1 + q3 * q3)
-            r12 = s * (q2 * q3 - q0 * q1)
-            w0 = y[6] / I
-            w1 = y[7] / I
-            w2 = y[8] / I
         x0 = r00 * a + r01 * b + r02 * c
         x1 = r10 * a + r11 * b + r12 * c
         c0, c1, c2 = offset_cross_omega(x0, x1, x2, w0, w1, w2)
@@ -144,15 +138,14 @@ def stage_wrench(y, off, kp, offs, F, uk, z, P):
         p = normal_force(zk, u2, kp)
         if p == 0.0:
             continue
-        sn = math.sqrt(u0 * u0 + u1 * u1 + kp.v_reg_cm_s * kp.v_reg_cm_s)
-        a0 = -kp.mu * p * u0 / sn
-        a1 = -kp.mu * p * u1 / sn
+        a0, a1 = node_friction(p, u0, u1, kp)
+        c0, c1, c2 = moment(a0, a1, p, x0, x1, x2)
         f0 += a0
         f1 += a1
         f2 += p
-        t0 += a1 * x2 - p * x1
-        t1 += p * x0 - a0 * x2
-        t2 += a0 * x1 - a1 * x0
+        t0 += c0
+        t1 += c1
+        t2 += c2
     return f0, f1, f2, t0, t1, t2
 
 
