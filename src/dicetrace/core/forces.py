@@ -152,12 +152,18 @@ def eval_forces(st, kp):
         st.X[2], st.U[0], st.U[1], st.U[2], st.W[0], st.W[1], st.W[2], st.off, kp, st.F, st.uk, st.z, st.P
     )
     if not below:
-        for k in range(8):
-            st.F[k, 0] = 0.0
-            st.F[k, 1] = 0.0
-            st.F[k, 2] = 0.0
-            st.P[k] = 0.0
+        clear_forces(st)
     return below, mask
+
+
+@jit(inline="always")
+def clear_forces(st):
+    """F = P = 0 on every node (no node below the ground)."""
+    for k in range(8):
+        st.F[k, 0] = 0.0
+        st.F[k, 1] = 0.0
+        st.F[k, 2] = 0.0
+        st.P[k] = 0.0
 
 
 @jit(inline="always")
@@ -172,11 +178,7 @@ def ended_forces(st, below):
         if st.z[k] <= 0.0:
             mask |= 1 << k
     if not below:
-        for k in range(8):
-            st.F[k, 0] = 0.0
-            st.F[k, 1] = 0.0
-            st.F[k, 2] = 0.0
-            st.P[k] = 0.0
+        clear_forces(st)
     return below, mask
 
 
