@@ -16,7 +16,7 @@ of the step.  :func:`erk_template` and :func:`erk_error_template` are
 specialised (``_jit.specialise``) on a tableau: ``NS`` stages, ``A``, ``B``
 (the system is autonomous: no nodes ``C``) and the error weights ``E5``, ``E3`` (NS + 1 entries: the last weighs
 the derivative at the new state, which the driver evaluates anyway as the
-next sub-step's first stage).  Error norm as in ``rk4.cf4_error`` (position
+next sub-step's first stage).  Error norm ``rk4.error_norm``, as contact-adaptive's (position
 over the half side, velocity over ``error_speed``), with the rotation's
 error counted as the node displacement it causes, combined as DOP853 does
 (Hairer, Nørsett & Wanner, *Solving ODEs I*, II.10):
@@ -32,8 +32,7 @@ import numpy as np
 from dicetrace.core._jit import jit, specialise
 from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
 from dicetrace.core.model import offset_cross_omega
-from dicetrace.core.free_flight import CIRCUM
-from dicetrace.core.schemes.rk4 import error_speed
+from dicetrace.core.schemes.rk4 import error_norm, error_speed
 from dicetrace.params import FRICTION_SPECTRAL
 
 #: Components of the sub-step state y = (X, U, L, q).
@@ -275,12 +274,10 @@ def erk_error_template(st, kp, h, g0, g1, g2, q0, q1, q2):
     s3u = e3[3] * e3[3] + e3[4] * e3[4] + e3[5] * e3[5]
     s3l = e3[6] * e3[6] + e3[7] * e3[7] + e3[8] * e3[8]
     s3q = e3[9] * e3[9] + e3[10] * e3[10] + e3[11] * e3[11] + e3[12] * e3[12]
-    half = kp.half_side_cm
-    rn = CIRCUM * half
     vs = error_speed(st.new_U, st.new_L, kp)
-    # a rotation error |e_q| turns the die by 2|e_q| and moves a corner by 2·rn·|e_q|
-    k5 = max(math.sqrt(s5x) / half + 2.0 * CIRCUM * math.sqrt(s5q), (math.sqrt(s5u) + rn * math.sqrt(s5l) / kp.inertia) / vs)
-    k3 = max(math.sqrt(s3x) / half + 2.0 * CIRCUM * math.sqrt(s3q), (math.sqrt(s3u) + rn * math.sqrt(s3l) / kp.inertia) / vs)
+    I = kp.inertia
+    k5 = error_norm(math.sqrt(s5x), math.sqrt(s5q), math.sqrt(s5u), math.sqrt(s5l) / I, vs, kp)
+    k3 = error_norm(math.sqrt(s3x), math.sqrt(s3q), math.sqrt(s3u), math.sqrt(s3l) / I, vs, kp)
     r5 = abs(h) * k5
     r3 = abs(h) * k3
     if r5 == 0.0:

@@ -144,6 +144,20 @@ def error_speed(U, L, kp):
 
 
 @jit(inline="always")
+def error_norm(ex, eq, eu, el, vs, kp):
+    """The contact schemes' error norm of a sub-step, before ``kp.tol``.
+
+    The largest of the position error over the half side, ``ex / half``, plus
+    the corner displacement of a rotation error ``eq`` (a quaternion error
+    turns the die by 2·eq and moves a corner by 2·√3·half·eq), and the
+    velocity error ``(eu + √3·half·el) / vs``: ``eu`` of U, ``el`` of ω
+    (|e_L| / I), ``vs`` the speed of :func:`error_speed`.
+    """
+    rn = CIRCUM * kp.half_side_cm
+    return max(ex / kp.half_side_cm + 2.0 * CIRCUM * eq, (eu + rn * el) / vs)
+
+
+@jit(inline="always")
 def cf4_error(st, kp, h, g0, g1, g2, q0, q1, q2):
     """Local error of the last ``cf4`` step over ``kp.tol`` (contact-adaptive's estimate).
 
@@ -156,7 +170,6 @@ def cf4_error(st, kp, h, g0, g1, g2, q0, q1, q2):
     I = kp.inertia
     Un = st.new_U
     Ln = st.new_L
-    rn = CIRCUM * kp.half_side_cm
     u4 = st.stage4_u
     a4 = st.stage4_a
     t4 = st.stage4_t
@@ -167,8 +180,7 @@ def cf4_error(st, kp, h, g0, g1, g2, q0, q1, q2):
     d2 = a4[2] - (g2 / 8.0 + kp.g)
     eu = h6 * math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
     el = (h6 / I) * math.sqrt((t4[0] - q0) ** 2 + (t4[1] - q1) ** 2 + (t4[2] - q2) ** 2)
-    vs = error_speed(Un, Ln, kp)
-    return max(ex / kp.half_side_cm, (eu + rn * el) / vs) / kp.tol
+    return error_norm(ex, 0.0, eu, el, error_speed(Un, Ln, kp), kp) / kp.tol
 
 
 @jit(inline="always")
