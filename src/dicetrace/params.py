@@ -157,7 +157,7 @@ class Preset:
         Euler blows up on a third of throws there — error-controlled sub-steps
         reach 0.8–1.0 outcome agreement 1.5–3× cheaper than fixed ones, and at
         the default tolerance the order-8 pair is the cheaper of the two
-        error-controlled schemes (0.61 against 0.97 ms per throw in the
+        error-controlled schemes (0.53 against 1.18 ms per throw in the
         accuracy study, agreement 0.957 with the converged reference); see
         analysis/accuracy).
     """
