@@ -17,6 +17,16 @@ from dicetrace.core._jit import jit
 
 
 @jit(inline="always")
+def contact_mask(z):
+    """The contact set of the node heights ``z`` (8,): bit k set when node k+1 is at or below the ground."""
+    mask = 0
+    for k in range(8):
+        if z[k] <= 0.0:
+            mask |= 1 << k
+    return mask
+
+
+@jit(inline="always")
 def record_set(n, mask, last_mask, sets, set_steps, nsets):
     """Append ``mask`` seen at step ``n`` if it is new.
 
@@ -46,11 +56,7 @@ def contact_sets_from_heights(z_steps, sets, set_steps):
     nsets = 1
     last = 0
     for n in range(1, z_steps.shape[0]):
-        mask = 0
-        for k in range(8):
-            if z_steps[n, k] <= 0.0:
-                mask |= 1 << k
-        nsets, last, ok = record_set(n, mask, last, sets, set_steps, nsets)
+        nsets, last, ok = record_set(n, contact_mask(z_steps[n]), last, sets, set_steps, nsets)
         if not ok:
             return -1
     return nsets

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 from dicetrace.core._jit import jit
+from dicetrace.core.contacts import contact_mask
 from dicetrace.core.model import node_heights, node_velocities
 from dicetrace.params import FRICTION_SPECTRAL
 
@@ -173,13 +174,9 @@ def ended_forces(st, below):
     ``below``: what :func:`forces_at` found there (when False, F and P are
     zeroed as eval_forces does); z must be the heights at the state.
     """
-    mask = 0
-    for k in range(8):
-        if st.z[k] <= 0.0:
-            mask |= 1 << k
     if not below:
         clear_forces(st)
-    return below, mask
+    return below, contact_mask(st.z)
 
 
 @jit(inline="always")

@@ -201,9 +201,7 @@ def drive(st, kp, h, contact):
     # hold exact zeros, which leave a sum from +0.0 unchanged).
     cached = contact
     c5 = contact
-    g0 = g1 = g2 = q0 = q1 = q2 = 0.0
-    if contact:
-        g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
+    g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
     while t < h and nsub < MAX_SUBSTEPS:
         nsub += 1
         rest = h - t
