@@ -31,7 +31,8 @@ class IntegratorSpec:
     stability_bound
         Linear stability bound of ω·h on the undamped penalty spring
         (ω = √k per unit mass); 0 when the scheme has none (forward Euler
-        amplifies every oscillation by √(1 + ω²h²) per step).  For the
+        amplifies every oscillation by √(1 + ω²h²) per step), infinite when it
+        is A-stable (an implicit scheme).  For the
         sub-stepping schemes h is the sub-step.
     substepped
         Its contact steps are sub-steps of dt (``Numerics.substeps`` of them
@@ -124,6 +125,19 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
             substepped=True,
             adaptive=True,
             study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
+            quick_tol=(1e-6, 1e-8),
+        ),
+        IntegratorSpec(
+            "contact-rosenbrock", 7, 3, math.inf,
+            "contact-adaptive's sub-stepping with a linearly implicit Rosenbrock-W pair (ROS34PW2): "
+            "no stability bound from the stiff friction and damping",
+            "tab:cyan",
+            scheme="contact_rosenbrock",
+            study_dt_s=(1e-3,),
+            quick_dt_s=(1e-3,),
+            substepped=True,
+            adaptive=True,
+            study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9),
             quick_tol=(1e-6, 1e-8),
         ),
     )

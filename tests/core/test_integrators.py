@@ -357,7 +357,11 @@ def test_adaptive_undamped_bounce_tolerance_proportional():
 
 #: Per error-controlled scheme: tolerances, and the restitution error the tightest must reach
 #: (DOP853 reaches 2e-12 at tol 1e-10, a 4e-9 at 1e-6; RK4's estimate is looser).
-RESTITUTION_TOLS = {"contact-adaptive": ((1e-5, 1e-7, 1e-9), 1e-8), "contact-dop853": ((1e-6, 1e-8, 1e-10), 2e-11)}
+RESTITUTION_TOLS = {
+    "contact-adaptive": ((1e-5, 1e-7, 1e-9), 1e-8),
+    "contact-dop853": ((1e-6, 1e-8, 1e-10), 2e-11),
+    "contact-rosenbrock": ((1e-6, 1e-8, 1e-10), 1e-8),
+}
 
 
 @pytest.mark.parametrize("integ", ADAPTIVE)
@@ -547,3 +551,126 @@ def test_contact_step_ends_with_the_forces_of_its_state(preset):
             assert np.array_equal(S[0][name], fresh[0][name], equal_nan=True), name
         in_contact += contact
     assert in_contact > 50
+
+
+# -- contact-rosenbrock: the linearly implicit pair ------------------------------------------------
+
+
+def rosenbrock_fixed(**preset):
+    """Kernel parameters of contact-rosenbrock with fixed sub-steps of one macro step (tol = 0)."""
+    return kparams(integrator="contact-rosenbrock", **preset)._replace(tol=0.0, substeps=1.0)
+
+
+def test_rosenbrock_tableau_is_order_3_w_method():
+    """ROS34PW2's coefficients: stiffly accurate (b = last row of α + γ), order 3 with the
+    exact Jacobian and with none (J = 0: a W-method keeps its order), embedded order 2,
+    on a pendulum with cubic damping against scipy's DOP853 at 1e-13."""
+    from scipy.integrate import solve_ivp
+
+    from dicetrace.core.schemes import contact_rosenbrock as ros
+
+    a, g, b, bh, gam = ros.ROS_ALPHA, ros.ROS_GAMMAS, ros.ROS_B, ros.ROS_BHAT, ros.ROS_GAMMA
+    np.testing.assert_allclose(b, a[-1] + g[-1] + gam * np.eye(4)[-1], rtol=0, atol=1e-15)
+    assert b.sum() == pytest.approx(1, abs=1e-15) and bh.sum() == pytest.approx(1, abs=1e-15)
+
+    def f(y):
+        return np.array([y[1], -np.sin(y[0]) - 0.3 * y[1] ** 3])
+
+    def jac(y):
+        return np.array([[0.0, 1.0], [-np.cos(y[0]), -0.9 * y[1] ** 2]])
+
+    def step(y0, h, J, w):
+        M = np.eye(2) - gam * h * J
+        k = []
+        for i in range(4):
+            yi = y0 + sum(a[i, j] * k[j] for j in range(i))
+            s = sum(g[i, j] * k[j] for j in range(i)) if i else 0 * y0
+            k.append(np.linalg.solve(M, h * f(yi) + h * J @ s))
+        return y0 + sum(w[i] * k[i] for i in range(4))
+
+    y0, T = np.array([1.0, 0.5]), 1.0
+    ref = solve_ivp(lambda t, y: f(y), (0, T), y0, method="DOP853", rtol=1e-13, atol=1e-14).y[:, -1]
+    for exact_j, w, order in ((True, b, 3), (False, b, 3), (True, bh, 2)):
+        errs = []
+        ns = [10, 20, 40, 80]
+        for n in ns:
+            y = y0.copy()
+            for _ in range(n):
+                y = step(y, T / n, jac(y) if exact_j else np.zeros((2, 2)), w)
+            errs.append(np.abs(y - ref).max())
+        s = slopes(T / np.array(ns), np.array(errs))
+        assert np.all(np.abs(s - order) < 0.1), (exact_j, order, errs, s)
+
+
+def test_rosenbrock_smooth_contact_order_3():
+    """The smooth sliding, spinning, rocking contact of ``test_smooth_contact_order`` with
+    fixed ROS34PW2 steps: the error against contact-substep at T/2¹⁰ falls at order 3
+    (through the kernel's finite-difference Jacobian and its LU solves)."""
+    smooth = dict(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
+    kr = kparams(**smooth)
+    d_eq = 8 * 980.0 / (4 * kr.k)
+    T = 2.0**-5
+    X0, U0, L0 = [0, 0, 1 - d_eq], [3.0, -2.0, 0.3], [0.8, -0.6, 12.0]
+    Xr, Ur, Lr, offr, *_ = run("contact-substep", kr, T / 2**10, T, X0, U0, L0)
+    kp = rosenbrock_fixed(**smooth)
+    hs = T / 2.0 ** np.arange(4, 9)
+    errs = []
+    for h in hs:
+        X, U, L, off, zmin, zmax = run("contact-rosenbrock", kp, h, T, X0, U0, L0)
+        assert zmax[[0, 2, 4, 6]].max() < 0 and zmin[[1, 3, 5, 7]].min() > 0
+        errs.append(max(np.abs(X - Xr).max(), np.abs(U - Ur).max() / 100, np.abs(L - Lr).max() / 100, np.abs(off - offr).max()))
+    s = slopes(hs, np.array(errs))
+    assert np.all(s[-3:] > 2.8) and np.all(s[-3:] < 3.6), (errs, s)
+
+
+def test_rosenbrock_undamped_bounce_converges():
+    """The undamped flat bounce with fixed ROS34PW2 steps: exit/entry speed ratio → 1 at order 3."""
+    kp = rosenbrock_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
+    v = 100.0
+    hs = T_CONTACT / 2.0 ** np.arange(4, 9)
+    ratio_err = []
+    for h in hs:
+        X, U, L, off, zmin, zmax = run("contact-rosenbrock", kp, h, 2 * T_CONTACT, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+        assert zmin[[0, 2, 4, 6]].max() < 0 and zmax[[1, 3, 5, 7]].min() > 0
+        ratio_err.append(abs(U[2] / v - 1.0))
+    s = slopes(hs, np.array(ratio_err))
+    assert np.all(s[-3:] > 2.8), (ratio_err, s)
+
+
+def test_rosenbrock_resting_die_is_stable_beyond_the_explicit_friction_bound():
+    """A die set down on a face (too deep, sliding, spinning) for 10 s in FIXED sub-steps of
+    5 ms, with friction regularised at 0.5 cm/s: λ_f·h ≈ 16 for the friction law at rest
+    (μ·P/v_reg per unit effective mass, P = 8·|g|/4), where DOP853 needs ≤ 3 and RK4 ≤ 1
+    (``FRICTION_THETA``).  With no error control at all the energy never rises, the die
+    comes to rest at the equilibrium penetration 8·|g|/(4k) and stays there without drift.
+
+    (Not much further: the step linearises the friction law at its start, and where |u|
+    crosses v_reg inside a step much longer than 1/λ_f the linearisation fails; at 0.5 cm/s
+    fixed steps of 15 ms blow up, a known limit of linearly implicit methods.  Under error
+    control the sub-steps shrink there instead; docs/model.md §9.)"""
+    from dicetrace.core.schemes.contact_substep import INV_MASS_NODE
+
+    kp = rosenbrock_fixed(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=0.5)
+    d_eq = 8 * abs(kp.g) / (4 * kp.k)
+    h = 0.005
+    lam_f = kp.mu * (8 * abs(kp.g) / 4) * INV_MASS_NODE / kp.v_reg_cm_s
+    assert lam_f * h > 5 * 3.0
+    S = state(kp, [0, 0, 1 - 1.5 * d_eq], [2.0, -1.0, 0.0], [0.0, 0.0, 3.0])
+    n = int(round(10.0 / h))
+    E = np.zeros(n)
+    Xs = np.zeros((n, 3))
+    step = step_of(INTEGRATORS["contact-rosenbrock"])
+    zmin, zmax = np.full(8, np.inf), np.full(8, -np.inf)
+    for i in range(n):
+        assert _drive(step, kp, h, 1, S, zmin, zmax)
+        st = S[0]
+        E[i] = energy_dynamic(*st["U"], *st["W"], st["z"], kp)
+        Xs[i] = st["X"]
+    assert np.all(np.isfinite(E))
+    assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])
+    st = S[0]
+    assert abs(st["X"][2] - (1 - d_eq)) < 1e-9
+    assert np.abs(st["U"]).max() < 1e-8 and np.abs(st["L"]).max() < 1e-8
+    assert np.abs(Xs[-1] - Xs[n // 2]).max() < 1e-10
+    assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
+    assert zmax[[0, 2, 4, 6]].max() < 0  # the face never left the ground

@@ -21,6 +21,10 @@ scheme keeps from one step to the next:
     the work area of the embedded Runge–Kutta pairs (``schemes.erk``):
     stage derivatives, stage point, sub-step start of y = (X, U, L, q) and
     a weighted sum of stages.
+``ros_j``, ``ros_lu``, ``ros_piv``
+    the work area of the Rosenbrock–W scheme (``schemes.contact_rosenbrock``):
+    the Jacobian of y' = f(y) at the sub-step start, the LU factors of
+    I − γ·h·J and their row pivots.
 ``substeps``
     the sub-steps of a contact scheme in this throw, by what ended them
     (:data:`SUBSTEP_CAUSES`); zero for the other schemes.
@@ -86,6 +90,9 @@ STATE = np.dtype(
         ("rk_y", _F8, 13),
         ("rk_y0", _F8, 13),
         ("rk_acc", _F8, 13),
+        ("ros_j", _F8, (13, 13)),
+        ("ros_lu", _F8, (13, 13)),
+        ("ros_piv", np.int64, 13),
         ("substeps", np.int64, SUBSTEP_CAUSES_N),
     ],
     align=True,
