@@ -34,8 +34,8 @@ import numpy as np
 
 from dicetrace.core._jit import jit, specialise
 from dicetrace.core.schemes.contact_substep import drive
-from dicetrace.core.schemes.erk import NY, derivative_row, quat_rotate, stage_wrench
-from dicetrace.core.schemes.rk4 import error_norm, error_speed
+from dicetrace.core.schemes.erk import NY, derivative_row, stage_wrench, state_error_norm, substep_end, substep_start
+from dicetrace.core.schemes.rk4 import error_speed
 
 #: ROS34PW2 (Rang & Angermann, BIT 45, 2005), in the classical form above.
 ROS_STAGES = 4
@@ -188,14 +188,7 @@ def ros_substep(st, kp, h, f0, f1, f2, t0, t1, t2):
     M = st.ros_lu
     piv = st.ros_piv
     b = st.rk_acc
-    for j in range(3):
-        y0[j] = st.sub_X[j]
-        y0[3 + j] = st.sub_U[j]
-        y0[6 + j] = st.sub_L[j]
-    y0[9] = 1.0
-    y0[10] = 0.0
-    y0[11] = 0.0
-    y0[12] = 0.0
+    substep_start(st, y0)
     jacobian(st, kp, y0, f0, f1, f2, t0, t1, t2, J)
     gh = ROS_GAMMA * h
     for r in range(NY):
@@ -239,26 +232,13 @@ def ros_substep(st, kp, h, f0, f1, f2, t0, t1, t2):
             e += (ROS_B[i] - ROS_BHAT[i]) * K[i, c]
         y[c] = s
         b[c] = e
-    qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
-    for c in range(9, NY):
-        y[c] = y[c] / qn
-    for j in range(3):
-        st.new_X[j] = y[j]
-        st.new_U[j] = y[3 + j]
-        st.new_L[j] = y[6 + j]
-    quat_rotate(y[9], y[10], y[11], y[12], off, st.new_off)
+    substep_end(st, y)
 
 
 @jit
 def ros_error(st, kp, h, g0, g1, g2, q0, q1, q2):
     """Local error of the last :func:`ros_substep` over ``kp.tol`` (the embedded order-2 solution's distance)."""
-    e = st.rk_acc
-    ex = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
-    eu = math.sqrt(e[3] * e[3] + e[4] * e[4] + e[5] * e[5])
-    el = math.sqrt(e[6] * e[6] + e[7] * e[7] + e[8] * e[8]) / kp.inertia
-    eq = math.sqrt(e[9] * e[9] + e[10] * e[10] + e[11] * e[11] + e[12] * e[12])
-    vs = error_speed(st.new_U, st.new_L, kp)
-    return error_norm(ex, eq, eu, el, vs, kp) / kp.tol
+    return state_error_norm(st.rk_acc, error_speed(st.new_U, st.new_L, kp), kp) / kp.tol
 
 
 step = jit(

@@ -216,6 +216,42 @@ def _combine(w, n, K, y0, h, y):
     y[12] = y0[12] + h * a12
 
 
+@jit(inline="always")
+def substep_start(st, y0):
+    """y0 = (X, U, L, q = 1) from the sub-step start ``st.sub_*``."""
+    for j in range(3):
+        y0[j] = st.sub_X[j]
+        y0[3 + j] = st.sub_U[j]
+        y0[6 + j] = st.sub_L[j]
+    y0[9] = 1.0
+    y0[10] = 0.0
+    y0[11] = 0.0
+    y0[12] = 0.0
+
+
+@jit(inline="always")
+def substep_end(st, y):
+    """``st.new_*`` from the step's result y: q normalised (in y), the offsets turned exactly by it."""
+    qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
+    for c in range(9, NY):
+        y[c] = y[c] / qn
+    for j in range(3):
+        st.new_X[j] = y[j]
+        st.new_U[j] = y[3 + j]
+        st.new_L[j] = y[6 + j]
+    quat_rotate(y[9], y[10], y[11], y[12], st.sub_off, st.new_off)
+
+
+@jit(inline="always")
+def state_error_norm(e, vs, kp):
+    """``rk4.error_norm`` of an error vector e of y = (X, U, L, q) (Euclidean norm of each part; ω's as |e_L| / I)."""
+    sx = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    su = e[3] * e[3] + e[4] * e[4] + e[5] * e[5]
+    sl = e[6] * e[6] + e[7] * e[7] + e[8] * e[8]
+    sq = e[9] * e[9] + e[10] * e[10] + e[11] * e[11] + e[12] * e[12]
+    return error_norm(math.sqrt(sx), math.sqrt(sq), math.sqrt(su), math.sqrt(sl) / kp.inertia, vs, kp)
+
+
 def erk_template(st, kp, h, f0, f1, f2, t0, t1, t2):
     """One step of the tableau (NS, A, B) from the sub-step start ``st.sub_*`` to ``st.new_*``.
 
@@ -227,34 +263,16 @@ def erk_template(st, kp, h, f0, f1, f2, t0, t1, t2):
     K = st.rk_k
     y = st.rk_y
     y0 = st.rk_y0
-    X = st.sub_X
-    U = st.sub_U
-    L = st.sub_L
     off = st.sub_off
     offs = st.stage_off
-    I = kp.inertia
-    for j in range(3):
-        y0[j] = X[j]
-        y0[3 + j] = U[j]
-        y0[6 + j] = L[j]
-    y0[9] = 1.0
-    y0[10] = 0.0
-    y0[11] = 0.0
-    y0[12] = 0.0
+    substep_start(st, y0)
     derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
     for i in range(1, NS):
         _combine(A[i], i, K, y0, h, y)
         g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
         derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
     _combine(B, NS, K, y0, h, y)
-    qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
-    for c in range(9, NY):
-        y[c] = y[c] / qn
-    for j in range(3):
-        st.new_X[j] = y[j]
-        st.new_U[j] = y[3 + j]
-        st.new_L[j] = y[6 + j]
-    quat_rotate(y[9], y[10], y[11], y[12], off, st.new_off)
+    substep_end(st, y)
 
 
 def erk_error_template(st, kp, h, g0, g1, g2, q0, q1, q2):
@@ -266,18 +284,9 @@ def erk_error_template(st, kp, h, g0, g1, g2, q0, q1, q2):
     e3 = st.rk_y0  # the sub-step start is no longer needed
     _combine(E5, NS + 1, K, ZERO, 1.0, e5)
     _combine(E3, NS + 1, K, ZERO, 1.0, e3)
-    s5x = e5[0] * e5[0] + e5[1] * e5[1] + e5[2] * e5[2]
-    s5u = e5[3] * e5[3] + e5[4] * e5[4] + e5[5] * e5[5]
-    s5l = e5[6] * e5[6] + e5[7] * e5[7] + e5[8] * e5[8]
-    s5q = e5[9] * e5[9] + e5[10] * e5[10] + e5[11] * e5[11] + e5[12] * e5[12]
-    s3x = e3[0] * e3[0] + e3[1] * e3[1] + e3[2] * e3[2]
-    s3u = e3[3] * e3[3] + e3[4] * e3[4] + e3[5] * e3[5]
-    s3l = e3[6] * e3[6] + e3[7] * e3[7] + e3[8] * e3[8]
-    s3q = e3[9] * e3[9] + e3[10] * e3[10] + e3[11] * e3[11] + e3[12] * e3[12]
     vs = error_speed(st.new_U, st.new_L, kp)
-    I = kp.inertia
-    k5 = error_norm(math.sqrt(s5x), math.sqrt(s5q), math.sqrt(s5u), math.sqrt(s5l) / I, vs, kp)
-    k3 = error_norm(math.sqrt(s3x), math.sqrt(s3q), math.sqrt(s3u), math.sqrt(s3l) / I, vs, kp)
+    k5 = state_error_norm(e5, vs, kp)
+    k3 = state_error_norm(e3, vs, kp)
     r5 = abs(h) * k5
     r3 = abs(h) * k3
     if r5 == 0.0:
