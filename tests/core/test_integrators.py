@@ -425,24 +425,43 @@ def dop853_fixed(**preset):
     return kparams(integrator="contact-dop853", **preset)._replace(tol=0.0, substeps=1.0)
 
 
+#: The smooth contact of ``test_smooth_contact_order`` (per-node friction, all four bottom corners in the ground).
+SMOOTH = dict(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
+SMOOTH_T = 2.0**-5
+
+
+def smooth_contact_errors(integ, kp, hs):
+    """Errors of ``integ`` (kernel parameters kp) at the steps hs over SMOOTH_T of the smooth
+    contact, against contact-substep at SMOOTH_T/2¹⁰ (the contact stays smooth throughout)."""
+    kr = kparams(**SMOOTH)
+    d_eq = 8 * 980.0 / (4 * kr.k)
+    X0, U0, L0 = [0, 0, 1 - d_eq], [3.0, -2.0, 0.3], [0.8, -0.6, 12.0]
+    Xr, Ur, Lr, offr, *_ = run("contact-substep", kr, SMOOTH_T / 2**10, SMOOTH_T, X0, U0, L0)
+    errs = []
+    for h in hs:
+        X, U, L, off, zmin, zmax = run(integ, kp, h, SMOOTH_T, X0, U0, L0)
+        assert zmax[[0, 2, 4, 6]].max() < 0 and zmin[[1, 3, 5, 7]].min() > 0
+        errs.append(max(np.abs(X - Xr).max(), np.abs(U - Ur).max() / 100, np.abs(L - Lr).max() / 100, np.abs(off - offr).max()))
+    return np.array(errs)
+
+
+def bounce_ratio_errors(integ, kp, hs, v=100.0):
+    """|exit/entry speed − 1| of the undamped flat bounce of test_undamped_bounce_order at the steps hs."""
+    out = []
+    for h in hs:
+        X, U, L, off, zmin, zmax = run(integ, kp, h, 2 * T_CONTACT, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+        assert zmin[[0, 2, 4, 6]].max() < 0 and zmax[[1, 3, 5, 7]].min() > 0
+        out.append(abs(U[2] / v - 1.0))
+    return np.array(out)
+
+
 def test_dop853_smooth_contact_order_8():
     """The smooth sliding, spinning, rocking contact of ``test_smooth_contact_order`` with
     fixed DOP853 steps: the error against contact-substep at T/2¹³ sub-steps falls at
     order 8 (local slopes 8.2–8.8 measured) until it nears that reference's own error."""
-    smooth = dict(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
-    kr = kparams(**smooth)
-    d_eq = 8 * 980.0 / (4 * kr.k)
-    T = 2.0**-5
-    X0, U0, L0 = [0, 0, 1 - d_eq], [3.0, -2.0, 0.3], [0.8, -0.6, 12.0]
-    Xr, Ur, Lr, offr, *_ = run("contact-substep", kr, T / 2**10, T, X0, U0, L0)
-    kp = dop853_fixed(**smooth)
-    hs = T / 2.0 ** np.arange(2, 6)
-    errs = []
-    for h in hs:
-        X, U, L, off, zmin, zmax = run("contact-dop853", kp, h, T, X0, U0, L0)
-        assert zmax[[0, 2, 4, 6]].max() < 0 and zmin[[1, 3, 5, 7]].min() > 0
-        errs.append(max(np.abs(X - Xr).max(), np.abs(U - Ur).max() / 100, np.abs(L - Lr).max() / 100, np.abs(off - offr).max()))
-    s = slopes(hs, np.array(errs))
+    hs = SMOOTH_T / 2.0 ** np.arange(2, 6)
+    errs = smooth_contact_errors("contact-dop853", dop853_fixed(**SMOOTH), hs)
+    s = slopes(hs, errs)
     assert np.all(s > 7.8) and np.all(s < 9.5), (errs, s)
     assert errs[-1] < 1e-10
 
@@ -455,15 +474,9 @@ def test_dop853_undamped_bounce_converges():
     node's height, so the steps next to a contact change carry a
     lower-order error (measured slopes 5.1, 5.8, 6.0).
     """
-    kp = dop853_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
-    v = 100.0
     hs = T_CONTACT / 2.0 ** np.arange(2, 6)
-    ratio_err = []
-    for h in hs:
-        X, U, L, off, zmin, zmax = run("contact-dop853", kp, h, 2 * T_CONTACT, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
-        assert zmin[[0, 2, 4, 6]].max() < 0 and zmax[[1, 3, 5, 7]].min() > 0
-        ratio_err.append(abs(U[2] / v - 1.0))
-    s = slopes(hs, np.array(ratio_err))
+    ratio_err = bounce_ratio_errors("contact-dop853", dop853_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
+    s = slopes(hs, ratio_err)
     assert np.all(s[-2:] > 5.5), (ratio_err, s)
     assert ratio_err[-1] < 1e-11
 
@@ -606,34 +619,17 @@ def test_rosenbrock_smooth_contact_order_3():
     """The smooth sliding, spinning, rocking contact of ``test_smooth_contact_order`` with
     fixed ROS34PW2 steps: the error against contact-substep at T/2¹⁰ falls at order 3
     (through the kernel's finite-difference Jacobian and its LU solves)."""
-    smooth = dict(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
-    kr = kparams(**smooth)
-    d_eq = 8 * 980.0 / (4 * kr.k)
-    T = 2.0**-5
-    X0, U0, L0 = [0, 0, 1 - d_eq], [3.0, -2.0, 0.3], [0.8, -0.6, 12.0]
-    Xr, Ur, Lr, offr, *_ = run("contact-substep", kr, T / 2**10, T, X0, U0, L0)
-    kp = rosenbrock_fixed(**smooth)
-    hs = T / 2.0 ** np.arange(4, 9)
-    errs = []
-    for h in hs:
-        X, U, L, off, zmin, zmax = run("contact-rosenbrock", kp, h, T, X0, U0, L0)
-        assert zmax[[0, 2, 4, 6]].max() < 0 and zmin[[1, 3, 5, 7]].min() > 0
-        errs.append(max(np.abs(X - Xr).max(), np.abs(U - Ur).max() / 100, np.abs(L - Lr).max() / 100, np.abs(off - offr).max()))
-    s = slopes(hs, np.array(errs))
+    hs = SMOOTH_T / 2.0 ** np.arange(4, 9)
+    errs = smooth_contact_errors("contact-rosenbrock", rosenbrock_fixed(**SMOOTH), hs)
+    s = slopes(hs, errs)
     assert np.all(s[-3:] > 2.8) and np.all(s[-3:] < 3.6), (errs, s)
 
 
 def test_rosenbrock_undamped_bounce_converges():
     """The undamped flat bounce with fixed ROS34PW2 steps: exit/entry speed ratio → 1 at order 3."""
-    kp = rosenbrock_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
-    v = 100.0
     hs = T_CONTACT / 2.0 ** np.arange(4, 9)
-    ratio_err = []
-    for h in hs:
-        X, U, L, off, zmin, zmax = run("contact-rosenbrock", kp, h, 2 * T_CONTACT, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
-        assert zmin[[0, 2, 4, 6]].max() < 0 and zmax[[1, 3, 5, 7]].min() > 0
-        ratio_err.append(abs(U[2] / v - 1.0))
-    s = slopes(hs, np.array(ratio_err))
+    ratio_err = bounce_ratio_errors("contact-rosenbrock", rosenbrock_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
+    s = slopes(hs, ratio_err)
     assert np.all(s[-3:] > 2.8), (ratio_err, s)
 
 
