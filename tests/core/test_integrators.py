@@ -481,6 +481,25 @@ def test_dop853_undamped_bounce_converges():
     assert ratio_err[-1] < 1e-11
 
 
+def set_down_on_a_face(integ, kp, h, t_end=10.0):
+    """A die set down on a face 1.5× too deep, sliding and spinning, stepped by ``integ`` in
+    steps of h for t_end: the state, the dynamics' energy and the CM after each step, and
+    each node's highest point."""
+    d_eq = 8 * abs(kp.g) / (4 * kp.k)
+    S = state(kp, [0, 0, 1 - 1.5 * d_eq], [2.0, -1.0, 0.0], [0.0, 0.0, 3.0])
+    n = int(round(t_end / h))
+    E = np.zeros(n)
+    Xs = np.zeros((n, 3))
+    step = step_of(INTEGRATORS[integ])
+    zmin, zmax = np.full(8, np.inf), np.full(8, -np.inf)
+    for i in range(n):  # one step per call
+        assert _drive(step, kp, h, 1, S, zmin, zmax)
+        st = S[0]
+        E[i] = energy_dynamic(*st["U"], *st["W"], st["z"], kp)
+        Xs[i] = st["X"]
+    return S, E, Xs, zmax
+
+
 def test_dop853_resting_die_is_stiff_stable():
     """A die set down on a face (too deep, sliding, spinning) for 10 s of simulated time,
     in macro steps of 100 ms: ω·dt = 50 (ω = √(4k/8) on a face), eight times DOP853's
@@ -491,17 +510,8 @@ def test_dop853_resting_die_is_stiff_stable():
     d_eq = 8 * abs(kp.g) / (4 * kp.k)
     h = 0.1
     assert math.sqrt(kp.k / 2.0) * h > 8 * INTEGRATORS["contact-dop853"].stability_bound
-    S = state(kp, [0, 0, 1 - 1.5 * d_eq], [2.0, -1.0, 0.0], [0.0, 0.0, 3.0])
-    n = int(round(10.0 / h))
-    E = np.zeros(n)
-    Xs = np.zeros((n, 3))
-    step = step_of(INTEGRATORS["contact-dop853"])
-    zmin, zmax = np.full(8, np.inf), np.full(8, -np.inf)
-    for i in range(n):  # one step per call: the dynamics' energy and the CM after each step
-        assert _drive(step, kp, h, 1, S, zmin, zmax)
-        st = S[0]
-        E[i] = energy_dynamic(*st["U"], *st["W"], st["z"], kp)
-        Xs[i] = st["X"]
+    S, E, Xs, zmax = set_down_on_a_face("contact-dop853", kp, h)
+    n = len(E)
     assert np.all(np.isfinite(E))
     assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])  # monotone to rounding
     st = S[0]
@@ -651,17 +661,8 @@ def test_rosenbrock_resting_die_is_stable_beyond_the_explicit_friction_bound():
     h = 0.005
     lam_f = kp.mu * (8 * abs(kp.g) / 4) * INV_MASS_NODE / kp.v_reg_cm_s
     assert lam_f * h > 5 * 3.0
-    S = state(kp, [0, 0, 1 - 1.5 * d_eq], [2.0, -1.0, 0.0], [0.0, 0.0, 3.0])
-    n = int(round(10.0 / h))
-    E = np.zeros(n)
-    Xs = np.zeros((n, 3))
-    step = step_of(INTEGRATORS["contact-rosenbrock"])
-    zmin, zmax = np.full(8, np.inf), np.full(8, -np.inf)
-    for i in range(n):
-        assert _drive(step, kp, h, 1, S, zmin, zmax)
-        st = S[0]
-        E[i] = energy_dynamic(*st["U"], *st["W"], st["z"], kp)
-        Xs[i] = st["X"]
+    S, E, Xs, zmax = set_down_on_a_face("contact-rosenbrock", kp, h)
+    n = len(E)
     assert np.all(np.isfinite(E))
     assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])
     st = S[0]
