@@ -176,3 +176,15 @@ def test_rerender_reproduces_the_tables_without_simulating(reduced_run):
     assert again["tables"] == json.loads(json.dumps(R["tables"]))
     with pytest.raises(RuntimeError, match="not in"):
         conv.rerender(out, Options(quick=True, res=9, tol=1e-6))  # other grids: not cached
+
+
+def test_alpha_pert_change_says_whether_it_passes_the_threshold():
+    """The section-l sentence on α by perturbation follows the z of the home and zoom-out changes."""
+    from dicetrace.studies.converged import _alpha_pert_change
+
+    def by(zh, zz):
+        return {w: {"changes": [{"key": "alpha_pert", "z": z}]} for w, z in (("home", zh), ("zoom-out", zz))}
+
+    assert _alpha_pert_change(by(2.2, 1.3)) == "by 2.2 and 1.3 standard errors, not beyond the 3 σ threshold"
+    assert _alpha_pert_change(by(3.8, 2.1)) == "by 3.8 and 2.1 standard errors, beyond the 3 σ threshold in home"
+    assert _alpha_pert_change(by(None, 2.1)) == "(no error bar on one of them)"

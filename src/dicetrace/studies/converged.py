@@ -302,14 +302,28 @@ def _summary(by: dict) -> dict:
         rows = [by[w][m] for w in WINDOWS]
         a = [r.get("alpha_pert") for r in rows if r.get("alpha_pert") is not None and math.isfinite(r["alpha_pert"])]
         d = [r["dim_mask"] for r in rows if r.get("dim_mask") is not None and math.isfinite(r["dim_mask"])]
+        cert = [r["certificate"]["fraction"] for r in rows]
         out[m] = {
             "alpha_pert_min": min(a) if a else None, "alpha_pert_max": max(a) if a else None,
             "dim_mask_min": min(d) if d else None, "dim_mask_max": max(d) if d else None,
+            "certificate_min": min(cert), "certificate_max": max(cert),
             "n_converged": sum(bool(r["converged"]) for r in rows), "n_maps": len(rows),
             "converged_windows": [w for w in WINDOWS if by[w][m]["converged"]],
         }
     out["changed"] = {w: [c["measure"] for c in by[w]["changes"] if c["changed"]] for w in WINDOWS}
+    out["alpha_pert_change"] = _alpha_pert_change(by)
     return out
+
+
+def _alpha_pert_change(by: dict) -> str:
+    """How far α by perturbation moves from the discrete to the converged map in home and zoom-out, in words."""
+    z = {w: next(c["z"] for c in by[w]["changes"] if c["key"] == "alpha_pert") for w in ("home", "zoom-out")}
+    if any(v is None or not math.isfinite(v) for v in z.values()):
+        return "(no error bar on one of them)"
+    beyond = [w for w, v in z.items() if v > CHANGE_SIGMA]
+    verdict = (f"not beyond the {CHANGE_SIGMA:g} σ threshold" if not beyond
+               else f"beyond the {CHANGE_SIGMA:g} σ threshold in {' and '.join(beyond)}")
+    return f"by {z['home']:.1f} and {z['zoom-out']:.1f} standard errors, {verdict}"
 
 
 # ----------------------------------------------------------------------------------------------- render

@@ -180,10 +180,50 @@ def alpha_unsaturated(ctx: Context) -> dict:
                            local_stderr=list(u.slopes.stderr))
             except ValueError as e:
                 row.update(alpha=None, error=str(e))
+            row.update(_alpha_text(row), eps_first_change_rel=_first_change(row))
             out[f"{w}/{model}"] = row
             ctx.log(f"alpha {w} {model}: all-range {ue.alpha:.2f}, unsaturated {row.get('alpha')}, "
                     f"ε_c/width {row.get('eps_c_rel')}")
     return out
+
+
+def _alpha_text(row: dict) -> dict:
+    """The unsaturated α as the verdict quotes it ('0.88 ± 0.01'; a fit with no error bar says over how many scales)."""
+    from dicetrace.studies.text import pm
+
+    if row.get("alpha") is None:
+        return {"alpha_text": "none (too few changes)", "n_scales": 0}
+    n = int(sum(row["used"]))
+    text = pm(row["alpha"], row.get("alpha_stderr"), ".2f")
+    e = row.get("alpha_stderr")
+    if e is None or not math.isfinite(e):
+        text += f" ({n} scales, no error bar)"
+    return {"alpha_text": text, "n_scales": n}
+
+
+def _first_change(row: dict) -> float | None:
+    """The smallest ε / width at which any point changed outcome (None: none did)."""
+    hit = [e for e, f in zip(row["eps_rel"], row["f"]) if f > 0]
+    return hit[0] if hit else None
+
+
+#: The verdict's "smallest scales": ε below this fraction of the window width.
+SMALL_EPS = 1e-5
+
+
+def alpha_small_scale_note(alpha: dict) -> str:
+    """What the converged models' f(ε) does below ``SMALL_EPS``, in one sentence of the verdict ('' if not measured)."""
+    conv = [r for k, r in alpha.items() if k.endswith("/converged")]
+    n = conv[0]["n"]
+    small = [(e, f) for r in conv for e, f in zip(r["eps_rel"], r["f"]) if e < 0.99 * SMALL_EPS]
+    if not small:
+        return ""
+    worst = max(f for _, f in small)
+    if worst == 0:
+        return (f"Below 10⁻⁵ of the width no point in {n} changes outcome in either window (f = 0 from "
+                f"{min(e for e, _ in small):.0e} up): the converged integration fixes every outcome at those scales.")
+    return (f"Below 10⁻⁵ of the width up to {round(worst * n)} point(s) in {n} still change outcome (f flat): "
+            "throws whose outcome the integration itself does not fix at that scale.")
 
 
 # --------------------------------------------------------------------------- 4. lambda
@@ -423,6 +463,7 @@ def compute(ctx: Context) -> Computed:
     results["vertices"], plot["vertex_maps"] = vertices(ctx)
     results["floor"] = chaos_floors(ctx)
     results["alpha"] = alpha_unsaturated(ctx)
+    results["alpha_note"] = alpha_small_scale_note(results["alpha"])
     results["lambda"] = edge_rates(ctx)
     results["onecell"] = one_cell(ctx)
     results["entropy"] = entropy(ctx)
