@@ -76,7 +76,7 @@ def test_alpha_verdict_text_follows_the_data():
     """The k3 verdict quotes α with its error, or the number of scales when a two-scale fit has
     none, and says what f(ε) does at the smallest scales: flat at zero (no point changes), or
     a few points that still change (a numerical floor)."""
-    from dicetrace.studies.referee import _alpha_text, _first_change, alpha_small_scale_note
+    from dicetrace.studies.referee import _alpha_text, _zero_up_to, alpha_small_scale_note
 
     eps = [1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3]
     clean = {"n": 2000, "eps_rel": eps, "f": [0, 0, 0, 0, 0.004, 0.04], "alpha": 0.71, "alpha_stderr": None,
@@ -85,11 +85,10 @@ def test_alpha_verdict_text_follows_the_data():
     assert _alpha_text(clean) == {"alpha_text": "0.71 (2 scales, no error bar)", "n_scales": 2}
     assert _alpha_text(noisy)["alpha_text"] == "0.93 ± 0.01"
     assert _alpha_text({"alpha": None}) == {"alpha_text": "none (too few changes)", "n_scales": 0}
-    assert _first_change(clean) == 1e-4 and _first_change(noisy) == 1e-8
-    rows = {"home/converged": clean, "zoom-out/converged": clean, "home/discrete": noisy}
-    assert alpha_small_scale_note(rows).startswith("Below 10⁻⁵ of the width no point in 2000 changes outcome")
+    assert _zero_up_to(clean) == 1e-5 and _zero_up_to(noisy) is None
+    rows = {"home/converged": clean, "zoom-out/converged": dict(clean, f=[0, 0, 0.001, 0.002, 0.005, 0.04]),
+            "home/discrete": noisy}
+    assert alpha_small_scale_note(rows).startswith("No point in 2000 changes outcome at ε ≤ 1e-07 of the width")
     rows["zoom-out/converged"] = noisy
-    assert "up to 2 point(s) in 2000 still change" in alpha_small_scale_note(rows)
+    assert alpha_small_scale_note(rows).startswith("At the smallest ε (1e-08 of the width) 2 point(s) in 2000")
     assert _alpha_text(dict(clean, alpha_stderr=float("nan")))["alpha_text"] == "0.71 (2 scales, no error bar)"
-    quick = {k: dict(r, eps_rel=[1e-4, 1e-3, 1e-2, 1e-1], f=[0, 0.1, 0.3, 0.7]) for k, r in rows.items()}
-    assert alpha_small_scale_note(quick) == ""  # no ε below 1e-5 measured

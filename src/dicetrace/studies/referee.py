@@ -180,7 +180,7 @@ def alpha_unsaturated(ctx: Context) -> dict:
                            local_stderr=list(u.slopes.stderr))
             except ValueError as e:
                 row.update(alpha=None, error=str(e))
-            row.update(_alpha_text(row), eps_first_change_rel=_first_change(row))
+            row.update(_alpha_text(row))
             out[f"{w}/{model}"] = row
             ctx.log(f"alpha {w} {model}: all-range {ue.alpha:.2f}, unsaturated {row.get('alpha')}, "
                     f"ε_c/width {row.get('eps_c_rel')}")
@@ -201,29 +201,32 @@ def _alpha_text(row: dict) -> dict:
     return {"alpha_text": text, "n_scales": n}
 
 
-def _first_change(row: dict) -> float | None:
-    """The smallest ε / width at which any point changed outcome (None: none did)."""
-    hit = [e for e, f in zip(row["eps_rel"], row["f"]) if f > 0]
-    return hit[0] if hit else None
-
-
-#: The verdict's "smallest scales": ε below this fraction of the window width.
-SMALL_EPS = 1e-5
+def _zero_up_to(row: dict) -> float | None:
+    """The largest ε / width up to which no point changed outcome (None: some changed at the smallest ε)."""
+    last = None
+    for e, f in zip(row["eps_rel"], row["f"]):
+        if f > 0:
+            break
+        last = e
+    return last
 
 
 def alpha_small_scale_note(alpha: dict) -> str:
-    """What the converged models' f(ε) does below ``SMALL_EPS``, in one sentence of the verdict ('' if not measured)."""
+    """What the converged models' f(ε) does at the smallest scales measured, in one sentence of the verdict.
+
+    A numerical floor shows as a few points that change outcome at the smallest ε (f flat); without
+    one, f is 0 there and grows with ε as the border law says."""
     conv = [r for k, r in alpha.items() if k.endswith("/converged")]
     n = conv[0]["n"]
-    small = [(e, f) for r in conv for e, f in zip(r["eps_rel"], r["f"]) if e < 0.99 * SMALL_EPS]
-    if not small:
-        return ""
-    worst = max(f for _, f in small)
-    if worst == 0:
-        return (f"Below 10⁻⁵ of the width no point in {n} changes outcome in either window (f = 0 from "
-                f"{min(e for e, _ in small):.0e} up): the converged integration fixes every outcome at those scales.")
-    return (f"Below 10⁻⁵ of the width up to {round(worst * n)} point(s) in {n} still change outcome (f flat): "
-            "throws whose outcome the integration itself does not fix at that scale.")
+    smallest = min(r["eps_rel"][0] for r in conv)
+    zeros = [_zero_up_to(r) for r in conv]
+    if all(z is not None for z in zeros):
+        return (f"No point in {n} changes outcome at ε ≤ {min(zeros):.0e} of the width in either window (f = 0 from "
+                f"{smallest:.0e}): at those scales the integration fixes every outcome, and above them f grows "
+                "with ε as the border law says.")
+    worst = max(r["f"][0] for r in conv)
+    return (f"At the smallest ε ({smallest:.0e} of the width) {round(worst * n)} point(s) in {n} still change outcome "
+            "(f flat): throws whose outcome the integration itself does not fix at that scale.")
 
 
 # --------------------------------------------------------------------------- 4. lambda
