@@ -34,7 +34,16 @@ import numpy as np
 
 from dicetrace.core._jit import jit, specialise
 from dicetrace.core.schemes.contact_substep import drive
-from dicetrace.core.schemes.erk import NY, derivative_row, stage_wrench, state_error_norm, substep_end, substep_start
+from dicetrace.core.schemes.erk import (
+    NY,
+    ZERO,
+    combine,
+    derivative_row,
+    stage_wrench,
+    state_error_norm,
+    substep_end,
+    substep_start,
+)
 from dicetrace.core.schemes.rk4 import error_speed
 
 #: ROS34PW2 (Rang & Angermann, BIT 45, 2005), in the classical form above.
@@ -54,6 +63,8 @@ ROS_GAMMAS = np.array([
 ])
 ROS_B = np.array([2.4212380706095346e-01, -1.2232505839045147e+00, 1.5452602553351020e+00, 4.3586652150845900e-01])
 ROS_BHAT = np.array([3.7810903145819369e-01, -9.6042292212423178e-02, 0.5, 2.1793326075422950e-01])
+#: Weights of the error estimate, b − b̂.
+ROS_E = ROS_B - ROS_BHAT
 #: Relative size of a forward-difference step (√ of the double's epsilon).
 FD_EPS = 1.4901161193847656e-08
 #: No stability bound for the friction law (it is in the Jacobian), no limit on λ_f·h.
@@ -198,23 +209,15 @@ def ros_substep(st, kp, h, f0, f1, f2, t0, t1, t2):
     lu_factor(M, piv)
     off = st.sub_off
     for i in range(ROS_STAGES):
-        # stage point y_i and f(y_i)
-        for c in range(NY):
-            s = y0[c]
-            for j in range(i):
-                s += ROS_ALPHA[i, j] * K[j, c]
-            y[c] = s
+        # stage point y_i = y0 + Σ_{j<i} α_ij·k_j and f(y_i)
+        combine(ROS_ALPHA[i], i, K, y0, 1.0, y)
         if i == 0:
             derivative_row(K, 4, y, f0, f1, f2, t0, t1, t2, kp)
         else:
             g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, st.stage_off, st.F, st.uk, st.z, st.P)
             derivative_row(K, 4 + i, y, g0, g1, g2, q0, q1, q2, kp)
-        # b = h·f(y_i) + h·J·Σ_{j<i} γ_ij·k_j
-        for c in range(NY):
-            s = 0.0
-            for j in range(i):
-                s += ROS_GAMMAS[i, j] * K[j, c]
-            y[c] = s  # the stage point is no longer needed
+        # b = h·f(y_i) + h·J·Σ_{j<i} γ_ij·k_j (y, the stage point, is no longer needed)
+        combine(ROS_GAMMAS[i], i, K, ZERO, 1.0, y)
         for r in range(NY):
             s = 0.0
             if i > 0:
@@ -224,14 +227,8 @@ def ros_substep(st, kp, h, f0, f1, f2, t0, t1, t2):
         lu_solve(M, piv, b)
         for c in range(NY):
             K[i, c] = b[c]
-    for c in range(NY):
-        s = y0[c]
-        e = 0.0
-        for i in range(ROS_STAGES):
-            s += ROS_B[i] * K[i, c]
-            e += (ROS_B[i] - ROS_BHAT[i]) * K[i, c]
-        y[c] = s
-        b[c] = e
+    combine(ROS_B, ROS_STAGES, K, y0, 1.0, y)
+    combine(ROS_E, ROS_STAGES, K, ZERO, 1.0, b)
     substep_end(st, y)
 
 

@@ -177,7 +177,7 @@ def derivative_row(K, i, y, f0, f1, f2, t0, t1, t2, kp):
 
 
 @jit(inline="always")
-def _combine(w, n, K, y0, h, y):
+def combine(w, n, K, y0, h, y):
     """y = y0 + h·Σ_{j<n} w_j·K_j (zero weights skipped).
 
     The 13 sums are kept in scalars: accumulating into an array would go
@@ -268,10 +268,10 @@ def erk_template(st, kp, h, f0, f1, f2, t0, t1, t2):
     substep_start(st, y0)
     derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
     for i in range(1, NS):
-        _combine(A[i], i, K, y0, h, y)
+        combine(A[i], i, K, y0, h, y)
         g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
         derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
-    _combine(B, NS, K, y0, h, y)
+    combine(B, NS, K, y0, h, y)
     substep_end(st, y)
 
 
@@ -282,8 +282,8 @@ def erk_error_template(st, kp, h, g0, g1, g2, q0, q1, q2):
     derivative_row(K, NS, y, g0, g1, g2, q0, q1, q2, kp)
     e5 = st.rk_acc
     e3 = st.rk_y0  # the sub-step start is no longer needed
-    _combine(E5, NS + 1, K, ZERO, 1.0, e5)
-    _combine(E3, NS + 1, K, ZERO, 1.0, e3)
+    combine(E5, NS + 1, K, ZERO, 1.0, e5)
+    combine(E3, NS + 1, K, ZERO, 1.0, e3)
     vs = error_speed(st.new_U, st.new_L, kp)
     k5 = state_error_norm(e5, vs, kp)
     k3 = state_error_norm(e3, vs, kp)
