@@ -361,6 +361,7 @@ RESTITUTION_TOLS = {
     "contact-adaptive": ((1e-5, 1e-7, 1e-9), 1e-8),
     "contact-dop853": ((1e-6, 1e-8, 1e-10), 2e-11),
     "contact-rosenbrock": ((1e-6, 1e-8, 1e-10), 1e-8),
+    "contact-tsit5": ((1e-6, 1e-8, 1e-10), 2e-10),
 }
 
 
@@ -519,6 +520,114 @@ def test_dop853_resting_die_is_stiff_stable():
     assert np.abs(st["U"]).max() < 1e-6 and np.abs(st["L"]).max() < 1e-6
     assert np.abs(Xs[-1] - Xs[n // 2]).max() < 1e-8  # no drift over the last 5 s
     assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
+
+
+# -- contact-tsit5: Tsitouras' 5(4) pair on the quaternion state -------------------------------------
+
+
+def tsit5_fixed(**preset):
+    """Kernel parameters of contact-tsit5 with fixed sub-steps of one macro step (tol = 0: no error control)."""
+    return kparams(integrator="contact-tsit5", **preset)._replace(tol=0.0, substeps=1.0)
+
+
+def butcher_conditions(A, b):
+    """Residuals of the 17 order conditions of orders 1–5 (Butcher's rooted trees), c = A·1."""
+    c = A.sum(axis=1)
+    Ac, Ac2, Ac3 = A @ c, A @ c**2, A @ c**3
+    AAc = A @ Ac
+    return {
+        1: [b.sum() - 1],
+        2: [b @ c - 1 / 2],
+        3: [b @ c**2 - 1 / 3, b @ Ac - 1 / 6],
+        4: [b @ c**3 - 1 / 4, b @ (c * Ac) - 1 / 8, b @ Ac2 - 1 / 12, b @ AAc - 1 / 24],
+        5: [
+            b @ c**4 - 1 / 5, b @ (c**2 * Ac) - 1 / 10, b @ (c * Ac2) - 1 / 15, b @ (c * AAc) - 1 / 30,
+            b @ (Ac * Ac) - 1 / 20, b @ Ac3 - 1 / 20, b @ (A @ (c * Ac)) - 1 / 40, b @ (A @ Ac2) - 1 / 60,
+            b @ (A @ AAc) - 1 / 120,
+        ],
+    }
+
+
+def test_tsit5_tableau_is_a_5_4_pair():
+    """Tsit5's coefficients: the solution satisfies all 17 order conditions up to order 5,
+    the embedded one (b̂ = b − E on the seven stages, the seventh the derivative at the new
+    state: first same as last) all 8 up to order 4 and not those of order 5.  Its stability
+    function reaches −3.51 on the real axis (the friction bound ``FRICTION_THETA`` sits
+    inside) and the table's ``stability_bound`` is where one step amplifies an undamped
+    oscillation by 1e-3."""
+    from dicetrace.core.schemes import contact_tsit5
+    from dicetrace.core.schemes.erk import TSIT5_A, TSIT5_B, TSIT5_E
+
+    A, b, E = TSIT5_A, TSIT5_B, TSIT5_E
+    assert A.shape == (6, 6) and b.shape == (6,) and E.shape == (7,)
+    assert np.all(np.triu(A) == 0)  # explicit
+    for order, res in butcher_conditions(A, b).items():  # to the rounding of the tabulated digits
+        assert np.abs(res).max() < 3e-14, (order, res)
+    A7 = np.zeros((7, 7))
+    A7[:6, :6] = A
+    A7[6, :6] = b  # the seventh stage: the derivative at the new state
+    bhat = np.append(b, 0.0) - E
+    cond = butcher_conditions(A7, bhat)
+    for order in (1, 2, 3, 4):
+        assert np.abs(cond[order]).max() < 3e-14, (order, cond[order])
+    assert np.abs(cond[5]).max() > 1e-4  # an order-4 estimate, not another order-5 solution
+
+    def R(z):
+        return 1 + z * b @ np.linalg.solve(np.eye(6) - z * A, np.ones(6))
+
+    assert abs(R(-3.50)) <= 1 < abs(R(-3.52))
+    assert contact_tsit5.FRICTION_THETA < 3.50
+    bound = INTEGRATORS["contact-tsit5"].stability_bound
+    assert abs(R(1j * (bound - 0.01))) < 1 + 1e-3 < abs(R(1j * (bound + 0.01)))
+
+
+def test_tsit5_smooth_contact_order_5():
+    """The smooth sliding, spinning, rocking contact of ``test_smooth_contact_order`` with
+    fixed Tsit5 steps: the error against contact-substep at T/2¹⁰ sub-steps falls at order 5
+    (local slopes 5.4, 4.9 measured; at longer steps 6.3–7.3: Tsitouras chose the pair to
+    make its order-6 error terms small, so the h⁵ term takes over only at short steps)."""
+    hs = SMOOTH_T / 2.0 ** np.arange(6, 9)
+    errs = smooth_contact_errors("contact-tsit5", tsit5_fixed(**SMOOTH), hs)
+    s = slopes(hs, errs)
+    assert np.all(s > 4.6) and np.all(s < 5.7), (errs, s)
+    assert errs[-1] < 2e-10
+
+
+def test_tsit5_undamped_bounce_converges():
+    """The undamped flat bounce with fixed Tsit5 steps: exit/entry speed ratio → 1 at order 5."""
+    hs = T_CONTACT / 2.0 ** np.arange(4, 8)
+    ratio_err = bounce_ratio_errors("contact-tsit5", tsit5_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
+    s = slopes(hs, ratio_err)
+    assert np.all(s > 4.6) and np.all(s < 5.5), (ratio_err, s)  # 4.8, 5.0, 5.0 measured
+    assert ratio_err[-1] < 1e-11
+
+
+def test_tsit5_resting_die_is_stiff_stable():
+    """A die set down on a face (too deep, sliding, spinning) for 10 s of simulated time, in
+    macro steps of 100 ms: ω·dt = 50 (ω = √(4k/8) on a face), 39 times Tsit5's bound.  The
+    error control keeps every sub-step stable: the energy never rises (beyond rounding), the
+    die comes to rest at the equilibrium penetration 8·|g|/(4k), and at rest it does not drift.
+
+    Unlike DOP853 (stable on the imaginary axis up to 5.96, which damps the ringing to
+    rounding), Tsit5 amplifies an undamped oscillation by 1 + O((ωh)⁶) per step, and the
+    controller holds the face's ringing at the level of the tolerance instead: at tol = 1e-9
+    the rest height is off by 8e-10 cm and the die vibrates at ~3e-6 cm/s (at 1e-8: 2e-8 cm,
+    3e-5 cm/s), far below anything the stop test or the outcome sees."""
+    tol = 1e-9
+    kp = kparams(integrator="contact-tsit5", tol=tol, friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
+    d_eq = 8 * abs(kp.g) / (4 * kp.k)
+    h = 0.1
+    assert math.sqrt(kp.k / 2.0) * h > 30 * INTEGRATORS["contact-tsit5"].stability_bound
+    S, E, Xs, zmax = set_down_on_a_face("contact-tsit5", kp, h)
+    n = len(E)
+    assert np.all(np.isfinite(E))
+    assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])  # monotone to rounding
+    st = S[0]
+    assert abs(st["X"][2] - (1 - d_eq)) < 3 * tol
+    assert np.abs(st["U"]).max() < 1e-5 and np.abs(st["L"]).max() < 1e-6
+    assert np.abs(Xs[-1] - Xs[n // 2]).max() < 30 * tol  # no drift over the last 5 s
+    assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
+    assert zmax[[0, 2, 4, 6]].max() < 0  # the face never left the ground
 
 
 # -- the high-order scheme's shortcuts are the full computation, bit for bit --------------------

@@ -1,7 +1,7 @@
 """Embedded explicit Runge–Kutta pairs on the die's state with a unit quaternion (docs/model.md §9).
 
-The sub-step method of the high-order contact scheme ``contact_dop853``.
-The state of a sub-step is y = (X, U, L, q) ∈ R¹³: centre of mass,
+The sub-step methods of the contact schemes ``contact_dop853`` (DOP853,
+order 8) and ``contact_tsit5`` (Tsitouras 5(4)).  The state of a sub-step is y = (X, U, L, q) ∈ R¹³: centre of mass,
 velocity, angular momentum (program convention) and a quaternion q that
 rotates the sub-step's starting node offsets, q = 1 at the start::
 
@@ -12,15 +12,17 @@ The quaternion's flow keeps |q| = 1 exactly, so any Runge–Kutta tableau
 integrates it at its full order; the stages read R(q/|q|), and the accepted
 step normalises q (a projection, which keeps the order) and sets the
 offsets to R(q)·x_k(0): the die stays rigid to rounding whatever the error
-of the step.  :func:`erk_template` and :func:`erk_error_template` are
-specialised (``_jit.specialise``) on a tableau: ``NS`` stages, ``A``, ``B``
-(the system is autonomous: no nodes ``C``) and the error weights ``E5``, ``E3`` (NS + 1 entries: the last weighs
-the derivative at the new state, which the driver evaluates anyway as the
-next sub-step's first stage).  Error norm ``rk4.error_norm``, as contact-adaptive's (position
-over the half side, velocity over ``error_speed``), with the rotation's
-error counted as the node displacement it causes, combined as DOP853 does
-(Hairer, Nørsett & Wanner, *Solving ODEs I*, II.10):
-err = e₅² / √(e₅² + 0.01·e₃²).
+of the step.  :func:`erk_template` is specialised (``_jit.specialise``) on
+a tableau: ``NS`` stages, ``A``, ``B`` (the system is autonomous: no nodes
+``C``); the error estimates on its error weights (NS + 1 entries: the last
+weighs the derivative at the new state, which the driver evaluates anyway
+as the next sub-step's first stage).  Error norm ``rk4.error_norm``, as
+contact-adaptive's (position over the half side, velocity over
+``error_speed``), with the rotation's error counted as the node
+displacement it causes: :func:`erk_error1_template` for a pair with one
+estimate ``E`` = b − b̂ (Tsit5), :func:`erk_error_template` for DOP853's two
+(``E5``, ``E3``), combined as DOP853 does (Hairer, Nørsett & Wanner,
+*Solving ODEs I*, II.10): err = e₅² / √(e₅² + 0.01·e₃²).
 """
 
 from __future__ import annotations
@@ -40,7 +42,6 @@ NY = 13
 ZERO = np.zeros(NY)
 
 #: DOP853 (Hairer, Nørsett & Wanner), the coefficients as tabulated in scipy.integrate._ivp.dop853_coefficients.
-#: DOP853 (Hairer, Nørsett & Wanner), the coefficients as tabulated in scipy.integrate._ivp.dop853_coefficients.
 DOP853_STAGES = 12
 DOP853_A = np.array([
     [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
@@ -59,6 +60,26 @@ DOP853_A = np.array([
 DOP853_B = np.array([0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259])
 DOP853_E5 = np.array([0.01312004499419488, 0.0, 0.0, 0.0, 0.0, -1.2251564463762044, -0.4957589496572502, 1.6643771824549864, -0.35032884874997366, 0.3341791187130175, 0.08192320648511571, -0.022355307863886294, 0.0])
 DOP853_E3 = np.array([-0.18980075407240762, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, -0.4226823213237919, -0.1521609496625161, 0.20136540080403034, 0.02265179219836082, 0.0])
+
+
+#: Tsitouras' 5(4) pair (Ch. Tsitouras, "Runge–Kutta pairs of order 5(4) satisfying only the first
+#: column simplifying assumption", Comput. Math. Appl. 62 (2011) 770–775), the coefficients as
+#: tabulated in OrdinaryDiffEq.jl and diffrax.  Six stages per step; the seventh (A₇ = B) is the
+#: derivative at the new state (first same as last).  TSIT5_E = b − b̂ on the seven stages.
+TSIT5_STAGES = 6
+TSIT5_A = np.array([
+    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.161, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [-0.008480655492356989, 0.335480655492357, 0.0, 0.0, 0.0, 0.0],
+    [2.8971530571054935, -6.359448489975075, 4.3622954328695815, 0.0, 0.0, 0.0],
+    [5.325864828439257, -11.748883564062828, 7.4955393428898365, -0.09249506636175525, 0.0, 0.0],
+    [5.86145544294642, -12.92096931784711, 8.159367898576159, -0.071584973281401, -0.028269050394068383, 0.0],
+])
+TSIT5_B = np.array([0.09646076681806523, 0.01, 0.4798896504144996, 1.379008574103742, -3.290069515436081, 2.324710524099774])
+TSIT5_E = np.array([
+    0.001780011052226, 0.000816434459657, -0.007880878010262, 0.144711007173263,
+    -0.582357165452555, 0.458082105929187, -1.0 / 66.0,
+])
 
 
 @jit(inline="always")
@@ -294,10 +315,29 @@ def erk_error_template(st, kp, h, g0, g1, g2, q0, q1, q2):
     return r5 * r5 / math.sqrt(r5 * r5 + 0.01 * r3 * r3) / kp.tol
 
 
+def erk_error1_template(st, kp, h, g0, g1, g2, q0, q1, q2):
+    """Local error of the last step of a pair with one embedded estimate, E = b − b̂ (NS + 1 entries), over ``kp.tol``."""
+    K = st.rk_k
+    y = st.rk_y
+    derivative_row(K, NS, y, g0, g1, g2, q0, q1, q2, kp)
+    e = st.rk_acc
+    combine(E, NS + 1, K, ZERO, 1.0, e)
+    vs = error_speed(st.new_U, st.new_L, kp)
+    return abs(h) * state_error_norm(e, vs, kp) / kp.tol
+
+
 #: DOP853's sub-step and its error estimate (order 8; the estimate's exponent 1/8).
 dop853_substep = jit(
     specialise(erk_template, "dop853_substep", NS=DOP853_STAGES, A=DOP853_A, B=DOP853_B)
 )
 dop853_error = jit(
     specialise(erk_error_template, "dop853_error", NS=DOP853_STAGES, E5=DOP853_E5, E3=DOP853_E3)
+)
+
+#: Tsit5's sub-step and its error estimate (order 5, estimate of order 4: the exponent 1/5).
+tsit5_substep = jit(
+    specialise(erk_template, "tsit5_substep", NS=TSIT5_STAGES, A=TSIT5_A, B=TSIT5_B)
+)
+tsit5_error = jit(
+    specialise(erk_error1_template, "tsit5_error", NS=TSIT5_STAGES, E=TSIT5_E)
 )
