@@ -237,7 +237,7 @@ def test_kernel_inputs_flip_L_exactly_for_the_physical_convention_only():
     one = seed.kernel_inputs(np.asfortranarray(ics)[0])
     assert one.ics.shape == (6,) and one.ics.flags.c_contiguous
     # the rest of the door: this config's offsets, parameters and kernel id
-    assert k_phys.integrator_id == INTEGRATORS["contact-dop853"].kernel_id
+    assert k_phys.integrator_id == INTEGRATORS["contact-tsit5"].kernel_id
     assert k_phys.params == phys.kernel_params()
     np.testing.assert_array_equal(k_phys.off0, phys.initial_offsets())
 
@@ -289,7 +289,7 @@ def test_make_config_applies_overrides_to_the_named_preset():
     cfg = make_config("physical", gamma=0.01, integrator="rk4", dt_s=5e-4, t_max_s=2.0)
     assert cfg.preset == get_preset("physical").with_(gamma=0.01)
     assert (cfg.numerics.integrator, cfg.numerics.dt_s, cfg.numerics.t_max_s) == ("rk4", 5e-4, 2.0)
-    assert make_config("physical").numerics.integrator == "contact-dop853"  # the preset's own default
+    assert make_config("physical").numerics.integrator == "contact-tsit5"  # the preset's own default
     with pytest.raises(TypeError):
         make_config("seed", gravity=-981.0)  # not a Preset field
 
