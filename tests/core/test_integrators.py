@@ -501,6 +501,23 @@ def set_down_on_a_face(integ, kp, h, t_end=10.0):
     return S, E, Xs, zmax
 
 
+def assert_comes_to_rest(integ, kp, h, *, z_tol, v_tol, drift_tol):
+    """``set_down_on_a_face`` by ``integ`` in steps of h for 10 s: finite, energy monotone to
+    rounding, at rest at the equilibrium penetration 8·|g|/(4k) (to z_tol cm, |U| and |L| below
+    v_tol), no drift over the last 5 s (drift_tol cm), after sliding; the face never left the ground."""
+    d_eq = 8 * abs(kp.g) / (4 * kp.k)
+    S, E, Xs, zmax = set_down_on_a_face(integ, kp, h)
+    n = len(E)
+    assert np.all(np.isfinite(E))
+    assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])  # monotone to rounding
+    st = S[0]
+    assert abs(st["X"][2] - (1 - d_eq)) < z_tol
+    assert np.abs(st["U"]).max() < v_tol and np.abs(st["L"]).max() < v_tol
+    assert np.abs(Xs[-1] - Xs[n // 2]).max() < drift_tol  # no drift over the last 5 s
+    assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
+    assert zmax[[0, 2, 4, 6]].max() < 0  # the face never left the ground
+
+
 def test_dop853_resting_die_is_stiff_stable():
     """A die set down on a face (too deep, sliding, spinning) for 10 s of simulated time,
     in macro steps of 100 ms: ω·dt = 50 (ω = √(4k/8) on a face), eight times DOP853's
@@ -508,18 +525,9 @@ def test_dop853_resting_die_is_stiff_stable():
     (beyond rounding), the die comes to rest at the equilibrium penetration
     8·|g| / (4k), and once at rest it does not drift."""
     kp = kparams(integrator="contact-dop853", tol=1e-8, friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
-    d_eq = 8 * abs(kp.g) / (4 * kp.k)
     h = 0.1
     assert math.sqrt(kp.k / 2.0) * h > 8 * INTEGRATORS["contact-dop853"].stability_bound
-    S, E, Xs, zmax = set_down_on_a_face("contact-dop853", kp, h)
-    n = len(E)
-    assert np.all(np.isfinite(E))
-    assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])  # monotone to rounding
-    st = S[0]
-    assert abs(st["X"][2] - (1 - d_eq)) < 1e-8
-    assert np.abs(st["U"]).max() < 1e-6 and np.abs(st["L"]).max() < 1e-6
-    assert np.abs(Xs[-1] - Xs[n // 2]).max() < 1e-8  # no drift over the last 5 s
-    assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
+    assert_comes_to_rest("contact-dop853", kp, h, z_tol=1e-8, v_tol=1e-6, drift_tol=1e-8)
 
 
 # -- contact-tsit5: Tsitouras' 5(4) pair on the quaternion state -------------------------------------
@@ -615,19 +623,9 @@ def test_tsit5_resting_die_is_stiff_stable():
     3e-5 cm/s), far below anything the stop test or the outcome sees."""
     tol = 1e-9
     kp = kparams(integrator="contact-tsit5", tol=tol, friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=10.0)
-    d_eq = 8 * abs(kp.g) / (4 * kp.k)
     h = 0.1
     assert math.sqrt(kp.k / 2.0) * h > 30 * INTEGRATORS["contact-tsit5"].stability_bound
-    S, E, Xs, zmax = set_down_on_a_face("contact-tsit5", kp, h)
-    n = len(E)
-    assert np.all(np.isfinite(E))
-    assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])  # monotone to rounding
-    st = S[0]
-    assert abs(st["X"][2] - (1 - d_eq)) < 3 * tol
-    assert np.abs(st["U"]).max() < 1e-5 and np.abs(st["L"]).max() < 1e-6
-    assert np.abs(Xs[-1] - Xs[n // 2]).max() < 30 * tol  # no drift over the last 5 s
-    assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
-    assert zmax[[0, 2, 4, 6]].max() < 0  # the face never left the ground
+    assert_comes_to_rest("contact-tsit5", kp, h, z_tol=3 * tol, v_tol=1e-5, drift_tol=30 * tol)
 
 
 # -- the high-order scheme's shortcuts are the full computation, bit for bit --------------------
@@ -766,17 +764,7 @@ def test_rosenbrock_resting_die_is_stable_beyond_the_explicit_friction_bound():
     from dicetrace.core.schemes.contact_substep import INV_MASS_NODE
 
     kp = rosenbrock_fixed(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=0.5)
-    d_eq = 8 * abs(kp.g) / (4 * kp.k)
     h = 0.005
     lam_f = kp.mu * (8 * abs(kp.g) / 4) * INV_MASS_NODE / kp.v_reg_cm_s
     assert lam_f * h > 5 * 3.0
-    S, E, Xs, zmax = set_down_on_a_face("contact-rosenbrock", kp, h)
-    n = len(E)
-    assert np.all(np.isfinite(E))
-    assert np.max(np.diff(E)) <= 1e-12 * abs(E[0])
-    st = S[0]
-    assert abs(st["X"][2] - (1 - d_eq)) < 1e-9
-    assert np.abs(st["U"]).max() < 1e-8 and np.abs(st["L"]).max() < 1e-8
-    assert np.abs(Xs[-1] - Xs[n // 2]).max() < 1e-10
-    assert np.abs(Xs[-1, :2]).max() > 1e-3  # it did slide before it stopped
-    assert zmax[[0, 2, 4, 6]].max() < 0  # the face never left the ground
+    assert_comes_to_rest("contact-rosenbrock", kp, h, z_tol=1e-9, v_tol=1e-8, drift_tol=1e-10)
