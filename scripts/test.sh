@@ -19,4 +19,7 @@ python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e ".[test]"
 .venv/bin/lint-imports
+# Compile the numba kernels into numba's cache once, on every CPU, before pytest's workers would
+# each compile the ones they meet first (a few seconds when the cache is warm).
+.venv/bin/python tests/compile_kernels.py
 .venv/bin/python -m pytest -n 2 "$@"

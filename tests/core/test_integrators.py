@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 import pytest
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
+from dicetrace.core._jit import _core_digest, jit, specialise
 from dicetrace.core.forces import eval_forces
 from dicetrace.core.model import energy_dynamic, init_offsets
 from dicetrace.core.schemes import step_of
@@ -35,17 +35,39 @@ BY_DT = tuple(name for name, spec in INTEGRATORS.items() if not spec.adaptive)
 ADAPTIVE = tuple(name for name, spec in INTEGRATORS.items() if spec.adaptive)
 
 
-@numba.njit(cache=False)
-def _drive(step, kp, h, nstep, S, zmin, zmax):
-    """Step ``nstep`` times from the state S[0] in place; track each node's height range."""
+def _drive(kp, h, nstep, S, zmin, zmax):
+    """Step ``nstep`` times from the state S[0] in place with the scheme's ``STEP``; track each node's height range.
+
+    Compiled per scheme by :func:`driver` (``STEP`` a compile-time constant).
+    """
     st = S[0]
-    contact, mask = eval_forces(st, kp)
+    below, mask = eval_forces(st, kp)
+    # through an array, as the run loop does: the step then compiles for a plain bool only, not
+    # also for the literal False that type inference sees first (a second compile of every step)
+    flag = np.empty(1, np.bool_)
+    flag[0] = below
+    contact = flag[0]
     for _ in range(nstep):
-        contact, mask = step(st, kp, h, contact)
+        contact, mask = STEP(st, kp, h, contact)
         for k in range(8):
             zmin[k] = min(zmin[k], st.z[k])
             zmax[k] = max(zmax[k], st.z[k])
     return True
+
+
+#: Named by the digest of dicetrace.core (what ``_jit`` stamps core's own cached kernels with), so a
+#: change to a scheme compiles a new driver instead of loading one that has the old step linked in.
+_CORE = _core_digest()[:16]
+_DRIVERS: dict = {}
+
+
+def driver(integ):
+    """``_drive`` compiled for the scheme of ``integ`` (cached on disk like the kernels, built on first use)."""
+    scheme = INTEGRATORS[integ].scheme
+    if scheme not in _DRIVERS:
+        fn = specialise(_drive, f"drive_{scheme}_{_CORE}", STEP=step_of(INTEGRATORS[integ]))
+        _DRIVERS[scheme] = jit(fn)
+    return _DRIVERS[scheme]
 
 
 def state(kp, X0, U0, L0, off=None):
@@ -75,7 +97,7 @@ def run(integ, kp, h, t_end, X0, U0, L0):
     zmax = np.full(8, -np.inf)
     n = int(round(t_end / h))
     assert abs(n * h - t_end) < 1e-12 * t_end
-    assert _drive(step_of(INTEGRATORS[integ]), kp, h, n, S, zmin, zmax)
+    assert driver(integ)(kp, h, n, S, zmin, zmax)
     st = S[0]
     return st["X"].copy(), st["U"].copy(), st["L"].copy(), st["off"].copy(), zmin, zmax
 
@@ -107,7 +129,6 @@ def test_every_table_row_has_a_compiled_step():
 # -- free flight: parabola and exact rotation ---------------------------------------------------
 
 
-@pytest.mark.slow  # ~10 s each: the stepping driver is compiled afresh per scheme (first-class function, no cache)
 @pytest.mark.parametrize("integ", ALL)
 def test_free_flight_order(integ):
     """Free flight: X = X0 + U0·t + g·t²/2, offsets turned by ω·t (ω = −L_program/I).
@@ -491,10 +512,10 @@ def set_down_on_a_face(integ, kp, h, t_end=10.0):
     n = int(round(t_end / h))
     E = np.zeros(n)
     Xs = np.zeros((n, 3))
-    step = step_of(INTEGRATORS[integ])
+    drive = driver(integ)
     zmin, zmax = np.full(8, np.inf), np.full(8, -np.inf)
     for i in range(n):  # one step per call
-        assert _drive(step, kp, h, 1, S, zmin, zmax)
+        assert drive(kp, h, 1, S, zmin, zmax)
         st = S[0]
         E[i] = energy_dynamic(*st["U"], *st["W"], st["z"], kp)
         Xs[i] = st["X"]

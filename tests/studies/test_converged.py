@@ -1,14 +1,15 @@
-"""Study k (converged): the model table, the certificate verdict, the side-by-side measures and a reduced run.
+"""Study l (converged): the model table, the certificate verdict, the side-by-side measures and its quick run.
 
-The reduced run (9² grids, CI-sized perturbations) checks the pipeline end to
-end and that :func:`~dicetrace.studies.converged.rerender` reproduces the
-run's tables from its JSON and cached grids (render changes no number). The
-full run is ``dicetrace analyze converged --out analysis``.
+The quick run (its part of the shared ``dicetrace analyze all --quick``, tests/studies/conftest.py: 21²
+grids, CI-sized perturbations) checks the pipeline end to end and that
+:func:`~dicetrace.studies.converged.rerender` reproduces the run's tables from its JSON and cached
+grids (render changes no number). The full run is ``dicetrace analyze converged --out analysis``.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 from types import SimpleNamespace
 
 import numpy as np
@@ -132,28 +133,29 @@ def test_certify_map_reuses_a_given_base_map():
         certify_map("home", 5, config=cfg, base=s.labels[:2])
 
 
-@pytest.fixture(scope="module")
-def reduced_run(tmp_path_factory):
-    from dicetrace.studies.runner import run_study
+#: The grid of the quick run of study l.
+QUICK_RES = 21
 
-    out = tmp_path_factory.mktemp("converged")
-    opts = Options(quick=True, res=9)
-    res = run_study("converged", opts, out)
-    return out, opts, res
+
+@pytest.fixture
+def study_l(quick_run):
+    """The output folder, options and results of study l in the shared quick run."""
+    out, results = quick_run
+    return out, Options(quick=True), results["converged"]
 
 
 @pytest.mark.slow
-def test_reduced_run_measures_every_window_and_model(reduced_run):
-    out, _, R = reduced_run
-    assert R["res"] == 9 and R["windows"] == list(conv.WINDOWS)
+def test_quick_run_measures_every_window_and_model(study_l):
+    out, _, R = study_l
+    assert R["res"] == QUICK_RES and R["windows"] == list(conv.WINDOWS)
     for w in conv.WINDOWS:
         for m in conv.MODEL_NAMES:
             r = R["by"][w][m]
-            assert r["res"] == 9 and r["cells"]["n_nodes"] == 81
+            assert r["res"] == QUICK_RES and r["cells"]["n_nodes"] == QUICK_RES**2
             assert 0 <= r["certificate"]["fraction"] <= 1 and 0 <= r["floor"]["fraction"] <= 1
             assert r["certificate"]["ci"][0] <= r["certificate"]["fraction"] <= r["certificate"]["ci"][1]
             assert isinstance(r["converged"], bool)
-            assert sum(f["count"] for f in r["fractions"].values()) + r["settle"]["n_unsettled"] <= 81
+            assert sum(f["count"] for f in r["fractions"].values()) + r["settle"]["n_unsettled"] <= QUICK_RES**2
             for key in ("boundary_fraction", "alpha", "Sb", "Sbb", "dim_mask"):
                 assert key in r
             assert set(r["repetition"]) >= {"outcome_offcentre_max_corr", "texture_periods"}
@@ -169,13 +171,16 @@ def test_reduced_run_measures_every_window_and_model(reduced_run):
 
 
 @pytest.mark.slow
-def test_rerender_reproduces_the_tables_without_simulating(reduced_run):
-    out, opts, R = reduced_run
+def test_rerender_reproduces_the_tables_without_simulating(study_l, tmp_path):
+    run_out, opts, R = study_l
+    out = tmp_path / "analysis"  # a copy: rerender rewrites the run's JSON and figures, which other tests read
+    for part in ("results", "cache"):
+        shutil.copytree(run_out / part, out / part)
     path = conv.rerender(out, opts)
     again = json.loads(path.read_text())
     assert again["tables"] == json.loads(json.dumps(R["tables"]))
     with pytest.raises(RuntimeError, match="not in"):
-        conv.rerender(out, Options(quick=True, res=9, tol=1e-6))  # other grids: not cached
+        conv.rerender(out, Options(quick=True, tol=1e-6))  # other grids: not cached
 
 
 def test_alpha_pert_change_says_whether_it_passes_the_threshold():

@@ -1,4 +1,6 @@
-"""Study k (referee), CI-sized: ``dicetrace analyze referee --quick`` into a temporary folder, and its numbers.
+"""Study k (referee), CI-sized: its part of the shared ``dicetrace analyze all --quick`` run (tests/studies/conftest.py),
+and its numbers (those of ``dicetrace analyze referee --quick`` alone: each study seeds its own generator, and a grid
+it finds in the run's cache is the grid it would have simulated).
 
 The full run (``dicetrace analyze referee --out analysis``) regenerates the committed results; this quick run
 checks that every part runs and that the answers the controls know come out.
@@ -6,22 +8,15 @@ checks that every part runs and that the answers the controls know come out.
 
 from __future__ import annotations
 
-import json
 import math
-import subprocess
-import sys
 
 import pytest
 
 
-@pytest.fixture(scope="module")
-def referee(tmp_path_factory):
-    here = tmp_path_factory.mktemp("referee")
-    proc = subprocess.run([sys.executable, "-m", "dicetrace.cli", "analyze", "referee", "--quick"], cwd=here,
-                          capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    out = here / "dicetrace-results" / "analysis"
-    return out, json.loads((out / "results" / "referee.json").read_text())
+@pytest.fixture
+def referee(quick_run):
+    out, results = quick_run
+    return out, results["referee"]
 
 
 @pytest.mark.slow

@@ -9,7 +9,6 @@ regenerates the committed results) takes minutes.
 from __future__ import annotations
 
 import csv
-import json
 import math
 import subprocess
 import sys
@@ -28,19 +27,9 @@ def _dicetrace(*args, cwd, timeout=300):
                           timeout=timeout)
 
 
-@pytest.fixture(scope="module")
-def quick_run(tmp_path_factory):
-    here = tmp_path_factory.mktemp("studies")
-    proc = _dicetrace("analyze", "all", "--quick", cwd=here, timeout=900)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    out = here / "dicetrace-results" / "analysis"  # the default output folder
-    results = {p.stem: json.loads(p.read_text()) for p in (out / "results").glob("*.json")}
-    return out, results, proc
-
-
 @pytest.mark.slow
 def test_every_study_wrote_results_and_figures(quick_run):
-    out, results, _ = quick_run
+    out, results = quick_run
     for name in WRITEUP_STUDIES:
         assert name in results, f"no results/{name}.json"
         r = results[name]
@@ -60,7 +49,7 @@ def test_every_study_wrote_results_and_figures(quick_run):
 
 @pytest.mark.slow
 def test_report_is_assembled(quick_run):
-    out, _, _ = quick_run
+    out, _ = quick_run
     text = (out / "REPORT.md").read_text()
     assert text.startswith("> **Quick run.**")
     for name in ("figures/a_zoom_ladder.png", "figures/g_settle_divergence.png", "figures/i_redsea_z.gif"):
@@ -70,7 +59,7 @@ def test_report_is_assembled(quick_run):
 
 @pytest.mark.slow
 def test_numbers_are_sane(quick_run):
-    _, R, _ = quick_run
+    _, R = quick_run
     for w, d in R["cells"]["windows"].items():
         fr = d["fractions"]
         assert sum(f["fraction"] for f in fr) == pytest.approx(1.0)

@@ -1,0 +1,110 @@
+"""Compile the numba kernels the test suite runs into numba's on-disk cache, each once, before pytest starts.
+
+``scripts/test.sh`` runs it (``python tests/compile_kernels.py [--jobs N]``).  On a cold cache (a fresh
+clone) one scheme's step takes 5-60 s to compile and each run loop around it a few seconds more.  Left
+to pytest, its two workers and the subprocesses of the command-line tests compile whichever kernels
+they meet first, side by side, often the same ones at the same time (numba's cache is written when a
+compile ends, so a second process that starts before then compiles again).  Here ``--jobs`` processes
+(default: one per CPU) compile them once each, the costliest schemes first; pytest then only loads
+them.  On a warm cache this takes a few seconds (loading, nothing compiled).
+
+Nothing is asserted here: a kernel that fails to compile or run fails its tests, which say why.
+
+Phase 1, every integrator of the table (one task per scheme): the step with the test stepping driver
+around it (``tests/core/test_integrators.py``) and the tracing run loop (``simulate``).  Phase 2, once
+every tracing loop is cached: ``run_roll_general`` (the chain of all of them) and the summary and
+batch loops of the schemes the suite runs batches or summaries with (``SUMMARY_INTEGRATORS``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+#: Integrators whose summary loop and batch kernel the suite runs (the others' only through their
+#: tracing loop): the presets' defaults, contact-substep (the accuracy study's reference), rk4 and
+#: verlet (tests/test_simulate.py, tests/core/test_kernel_speed_equivalence.py).
+SUMMARY_INTEGRATORS = ("semi-implicit-euler", "rk4", "contact-substep", "contact-dop853", "verlet")
+
+
+def _ic():
+    from dicetrace.ics import seed_slice
+
+    return seed_slice(1.65, 3.9)
+
+
+def _phase1(name: str) -> str:
+    """The step (through the test driver) and the tracing loop of integrator ``name``."""
+    sys.path.insert(0, str(HERE / "core"))
+    import test_integrators as ti
+
+    from dicetrace.simulate import Record, simulate
+
+    ti.run(name, ti.kparams(integrator=name), 1e-3, 1e-3, [0.0, 0.0, 15.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0])
+    simulate(_ic(), integrator=name, t_max_s=0.05, record=Record(states=True))
+    return name
+
+
+def _phase2(task: str) -> str:
+    """``general``: run_roll_general; an integrator's name: its summary loop and batch kernel."""
+    import numpy as np
+
+    from dicetrace.core import loop
+    from dicetrace.params import make_config
+    from dicetrace.simulate import BATCH_BLOCK, simulate_batch
+
+    if task == "general":
+        cfg = make_config("seed")
+        empty = (np.zeros((0, loop.STATE_COLS)), np.zeros((0, loop.FORCE_COLS)), np.zeros((0, loop.ENERGY_COLS)))
+        loop.run_roll_general(_ic(), cfg.initial_offsets(), cfg.kernel_params(), cfg.numerics.integrator_id,
+                              np.zeros(64, np.uint8), np.zeros(64, np.int32), *empty)
+    else:
+        cfg = make_config("seed", integrator=task, t_max_s=0.05)
+        loop.run_summary(cfg.kernel_inputs(_ic()).ics, cfg.initial_offsets(), cfg.kernel_params(),
+                         cfg.numerics.integrator_id, np.zeros(64, np.uint8), np.zeros(64, np.int32))
+        simulate_batch(np.tile(_ic(), (BATCH_BLOCK + 1, 1)), config=cfg, threads=1)
+    return task
+
+
+def _costliest_first(names):
+    """One integrator per scheme, the error-controlled and sub-stepping schemes first, then by falling order."""
+    from dicetrace.integrators import INTEGRATORS
+
+    by_scheme = {}
+    for name, spec in INTEGRATORS.items():
+        by_scheme.setdefault(spec.scheme, name)
+    chosen = [n for n in by_scheme.values() if n in names]
+    return sorted(chosen, key=lambda n: (not INTEGRATORS[n].substepped, -INTEGRATORS[n].order))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="processes (default: one per CPU)")
+    args = ap.parse_args(argv)
+
+    from dicetrace.core._jit import CACHE
+    from dicetrace.integrators import INTEGRATORS
+
+    if not CACHE:
+        print("compile_kernels: DICETRACE_CACHE is off, nothing to keep; skipped")
+        return 0
+    t0 = time.perf_counter()
+    first = _costliest_first(INTEGRATORS)
+    second = ["general"] + [n for n in _costliest_first(SUMMARY_INTEGRATORS) if n in INTEGRATORS]
+    with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=get_context("spawn")) as pool:
+        for tasks, fn in ((first, _phase1), (second, _phase2)):
+            for done in pool.map(fn, tasks):
+                print(f"compile_kernels: {done} ready ({time.perf_counter() - t0:.0f} s)", flush=True)
+    print(f"compile_kernels: every kernel compiled or loaded in {time.perf_counter() - t0:.0f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
