@@ -31,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 #: Integrators whose summary loop and batch kernel the suite runs (the others' only through their
 #: tracing loop): the presets' defaults, contact-substep (the accuracy study's reference), rk4 and
 #: verlet (tests/test_simulate.py, tests/core/test_kernel_speed_equivalence.py).
-SUMMARY_INTEGRATORS = ("semi-implicit-euler", "rk4", "contact-substep", "contact-dop853", "verlet")
+SUMMARY_INTEGRATORS = ("semi-implicit-euler", "rk4", "contact-substep", "contact-tsit5", "contact-dop853", "verlet")
 
 
 def _ic():
