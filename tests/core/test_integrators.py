@@ -442,9 +442,9 @@ def test_adaptive_matches_reference_on_throws():
 # -- contact-dop853: the order-8 pair on the quaternion state ---------------------------------------
 
 
-def dop853_fixed(**preset):
-    """Kernel parameters of contact-dop853 with fixed sub-steps of one macro step (tol = 0: no error control)."""
-    return kparams(integrator="contact-dop853", **preset)._replace(tol=0.0, substeps=1.0)
+def fixed_substeps(integ, **preset):
+    """Kernel parameters of the error-controlled ``integ`` with fixed sub-steps of one macro step (tol = 0: no error control)."""
+    return kparams(integrator=integ, **preset)._replace(tol=0.0, substeps=1.0)
 
 
 #: The smooth contact of ``test_smooth_contact_order`` (per-node friction, all four bottom corners in the ground).
@@ -482,7 +482,7 @@ def test_dop853_smooth_contact_order_8():
     fixed DOP853 steps: the error against contact-substep at T/2¹³ sub-steps falls at
     order 8 (local slopes 8.2–8.8 measured) until it nears that reference's own error."""
     hs = SMOOTH_T / 2.0 ** np.arange(2, 6)
-    errs = smooth_contact_errors("contact-dop853", dop853_fixed(**SMOOTH), hs)
+    errs = smooth_contact_errors("contact-dop853", fixed_substeps("contact-dop853", **SMOOTH), hs)
     s = slopes(hs, errs)
     assert np.all(s > 7.8) and np.all(s < 9.5), (errs, s)
     assert errs[-1] < 1e-10
@@ -497,7 +497,7 @@ def test_dop853_undamped_bounce_converges():
     lower-order error (measured slopes 5.1, 5.8, 6.0).
     """
     hs = T_CONTACT / 2.0 ** np.arange(2, 6)
-    ratio_err = bounce_ratio_errors("contact-dop853", dop853_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
+    ratio_err = bounce_ratio_errors("contact-dop853", fixed_substeps("contact-dop853", k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
     s = slopes(hs, ratio_err)
     assert np.all(s[-2:] > 5.5), (ratio_err, s)
     assert ratio_err[-1] < 1e-11
@@ -552,11 +552,6 @@ def test_dop853_resting_die_is_stiff_stable():
 
 
 # -- contact-tsit5: Tsitouras' 5(4) pair on the quaternion state -------------------------------------
-
-
-def tsit5_fixed(**preset):
-    """Kernel parameters of contact-tsit5 with fixed sub-steps of one macro step (tol = 0: no error control)."""
-    return kparams(integrator="contact-tsit5", **preset)._replace(tol=0.0, substeps=1.0)
 
 
 def butcher_conditions(A, b):
@@ -616,7 +611,7 @@ def test_tsit5_smooth_contact_order_5():
     (local slopes 5.4, 4.9 measured; at longer steps 6.3–7.3: Tsitouras chose the pair to
     make its order-6 error terms small, so the h⁵ term takes over only at short steps)."""
     hs = SMOOTH_T / 2.0 ** np.arange(6, 9)
-    errs = smooth_contact_errors("contact-tsit5", tsit5_fixed(**SMOOTH), hs)
+    errs = smooth_contact_errors("contact-tsit5", fixed_substeps("contact-tsit5", **SMOOTH), hs)
     s = slopes(hs, errs)
     assert np.all(s > 4.6) and np.all(s < 5.7), (errs, s)
     assert errs[-1] < 2e-10
@@ -625,7 +620,7 @@ def test_tsit5_smooth_contact_order_5():
 def test_tsit5_undamped_bounce_converges():
     """The undamped flat bounce with fixed Tsit5 steps: exit/entry speed ratio → 1 at order 5."""
     hs = T_CONTACT / 2.0 ** np.arange(4, 8)
-    ratio_err = bounce_ratio_errors("contact-tsit5", tsit5_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
+    ratio_err = bounce_ratio_errors("contact-tsit5", fixed_substeps("contact-tsit5", k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
     s = slopes(hs, ratio_err)
     assert np.all(s > 4.6) and np.all(s < 5.5), (ratio_err, s)  # 4.8, 5.0, 5.0 measured
     assert ratio_err[-1] < 1e-11
@@ -707,11 +702,6 @@ def test_contact_step_ends_with_the_forces_of_its_state(preset):
 # -- contact-rosenbrock: the linearly implicit pair ------------------------------------------------
 
 
-def rosenbrock_fixed(**preset):
-    """Kernel parameters of contact-rosenbrock with fixed sub-steps of one macro step (tol = 0)."""
-    return kparams(integrator="contact-rosenbrock", **preset)._replace(tol=0.0, substeps=1.0)
-
-
 def test_rosenbrock_tableau_is_order_3_w_method():
     """ROS34PW2's coefficients: stiffly accurate (b = last row of α + γ), order 3 with the
     exact Jacobian and with none (J = 0: a W-method keeps its order), embedded order 2,
@@ -758,7 +748,7 @@ def test_rosenbrock_smooth_contact_order_3():
     fixed ROS34PW2 steps: the error against contact-substep at T/2¹⁰ falls at order 3
     (through the kernel's finite-difference Jacobian and its LU solves)."""
     hs = SMOOTH_T / 2.0 ** np.arange(4, 9)
-    errs = smooth_contact_errors("contact-rosenbrock", rosenbrock_fixed(**SMOOTH), hs)
+    errs = smooth_contact_errors("contact-rosenbrock", fixed_substeps("contact-rosenbrock", **SMOOTH), hs)
     s = slopes(hs, errs)
     assert np.all(s[-3:] > 2.8) and np.all(s[-3:] < 3.6), (errs, s)
 
@@ -766,7 +756,7 @@ def test_rosenbrock_smooth_contact_order_3():
 def test_rosenbrock_undamped_bounce_converges():
     """The undamped flat bounce with fixed ROS34PW2 steps: exit/entry speed ratio → 1 at order 3."""
     hs = T_CONTACT / 2.0 ** np.arange(4, 9)
-    ratio_err = bounce_ratio_errors("contact-rosenbrock", rosenbrock_fixed(k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
+    ratio_err = bounce_ratio_errors("contact-rosenbrock", fixed_substeps("contact-rosenbrock", k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
     s = slopes(hs, ratio_err)
     assert np.all(s[-3:] > 2.8), (ratio_err, s)
 
@@ -784,7 +774,7 @@ def test_rosenbrock_resting_die_is_stable_beyond_the_explicit_friction_bound():
     control the sub-steps shrink there instead; docs/model.md §9.)"""
     from dicetrace.core.schemes.contact_substep import INV_MASS_NODE
 
-    kp = rosenbrock_fixed(friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=0.5)
+    kp = fixed_substeps("contact-rosenbrock", friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=0.5)
     h = 0.005
     lam_f = kp.mu * (8 * abs(kp.g) / 4) * INV_MASS_NODE / kp.v_reg_cm_s
     assert lam_f * h > 5 * 3.0
