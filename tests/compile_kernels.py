@@ -28,10 +28,17 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 
-#: Integrators whose summary loop and batch kernel the suite runs (the others' only through their
-#: tracing loop): the presets' defaults, contact-substep (the accuracy study's reference), rk4 and
-#: verlet (tests/test_simulate.py, tests/core/test_kernel_speed_equivalence.py).
-SUMMARY_INTEGRATORS = ("semi-implicit-euler", "rk4", "contact-substep", "contact-tsit5", "contact-dop853", "verlet")
+#: Integrators besides the presets' defaults whose summary loop and batch kernel the suite runs (the
+#: others' only through their tracing loop): contact-substep (the accuracy study's reference),
+#: contact-dop853, rk4 and verlet (tests/test_simulate.py, tests/core/test_kernel_speed_equivalence.py).
+SUMMARY_INTEGRATORS = ("rk4", "contact-substep", "contact-dop853", "verlet")
+
+
+def _summary_integrators():
+    """SUMMARY_INTEGRATORS and every preset's default integrator."""
+    from dicetrace.params import PRESETS
+
+    return {p.integrator for p in PRESETS.values()} | set(SUMMARY_INTEGRATORS)
 
 
 def _ic():
@@ -98,7 +105,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     first = _costliest_first(INTEGRATORS)
     # semi-implicit Euler's summary loop holds core/fast.py's specialised kernel: the costliest after the chain
-    summaries = sorted(_costliest_first(SUMMARY_INTEGRATORS), key=lambda n: n != "semi-implicit-euler")
+    summaries = sorted(_costliest_first(_summary_integrators()), key=lambda n: n != "semi-implicit-euler")
     second = ["general"] + summaries
     with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=get_context("spawn")) as pool:
         for tasks, fn in ((first, _phase1), (second, _phase2)):

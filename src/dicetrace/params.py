@@ -412,9 +412,8 @@ class Config:
         integrator's kernel id.
         """
         conv = self.preset.l_convention if l_convention is None else l_convention
-        kics = np.ascontiguousarray(convert_l(ics, conv, KERNEL_L_CONVENTION), dtype=np.float64)
-        if not kics.flags.writeable:  # numba types a read-only array apart: it would compile the kernels again
-            kics = kics.copy()
+        # writeable too: numba types a read-only array (pandas 3's views) apart and would compile the kernels again
+        kics = np.require(convert_l(ics, conv, KERNEL_L_CONVENTION), dtype=np.float64, requirements=["C", "W"])
         return KernelInputs(kics, self.initial_offsets(orientation), self.kernel_params(), self.numerics.integrator_id)
 
     def to_preset_convention(self, ics, l_convention: str) -> np.ndarray:
