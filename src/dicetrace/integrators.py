@@ -120,7 +120,7 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
         ),
         IntegratorSpec(
             "contact-dop853", 6, 8, 5.96,
-            "contact-adaptive's sub-stepping with the order-8 Dormand-Prince pair (DOP853; default for physical)",
+            "contact-adaptive's sub-stepping with the order-8 Dormand-Prince pair (DOP853)",
             "tab:pink",
             scheme="contact_dop853",
             study_dt_s=(1e-3,),

@@ -45,6 +45,9 @@ def test_every_study_wrote_results_and_figures(quick_run):
     assert timing["total_s"] > 0
     with open(out / "results" / "damping_sweep.csv") as f:
         assert [float(r["gamma"]) for r in csv.DictReader(f)] == [0.0025, 0.005, 0.01, 0.02]
+    # nothing the run drew warned (an empty legend was once held and printed at the end as a warning)
+    log = (out.parent.parent / "log.txt").read_text()
+    assert "warning:" not in log, log[log.index("warning:") - 200:][:600]
 
 
 @pytest.mark.slow

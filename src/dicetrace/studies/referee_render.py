@@ -124,7 +124,11 @@ def _alpha(R: dict, out: Output) -> None:
     axes[1].axhline(1, color="k", lw=0.5)
     axes[1].set_xlabel("ε / window width")
     axes[1].set_ylabel("local slope d log f / d log ε")
-    axes[1].legend(fontsize=7)
+    if axes[1].get_legend_handles_labels()[0]:
+        axes[1].legend(fontsize=7)
+    else:  # no window has an unsaturated range of ε (the quick run's small grids)
+        axes[1].text(0.5, 0.5, "no window has a range of ε\nbelow saturation to fit", ha="center", va="center",
+                     transform=axes[1].transAxes, fontsize=9)
     fig.tight_layout()
     out.save_fig(fig, "k_alpha", caption="Uncertain fraction f(ε) by perturbation (left) and its local slope with "
                  "binomial 1σ bars (right); a smooth border has slope 1, saturation slope 0.")
