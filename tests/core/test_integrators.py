@@ -779,3 +779,34 @@ def test_rosenbrock_resting_die_is_stable_beyond_the_explicit_friction_bound():
     lam_f = kp.mu * (8 * abs(kp.g) / 4) * INV_MASS_NODE / kp.v_reg_cm_s
     assert lam_f * h > 5 * 3.0
     assert_comes_to_rest("contact-rosenbrock", kp, h, z_tol=1e-9, v_tol=1e-8, drift_tol=1e-10)
+
+
+def test_hermite_root_is_the_first_crossing():
+    """``contact_substep.hermite_root`` (where a sub-step is cut): on random cubic Hermite
+    height data it returns a root of the cubic to rounding (one of numpy's roots of the same
+    cubic) in the first eighth of (0, 1) where the cubic changes sign, and −1 exactly when it
+    changes sign in none."""
+    from dicetrace.core.schemes.contact_substep import hermite_root
+
+    rng = np.random.default_rng(5)
+    found = 0
+    for _ in range(3000):
+        z0, z1 = rng.normal(size=2)
+        v0, v1 = rng.normal(size=2) * 3
+        h = rng.uniform(0.1, 2.0)
+        c = [z0, h * v0, 3 * (z1 - z0) - 2 * h * v0 - h * v1, 2 * (z0 - z1) + h * v0 + h * v1]
+        r = np.roots(c[::-1])
+        r = np.sort(r[np.abs(r.imag) < 1e-12].real)
+        r = r[(r > 0) & (r < 1)]
+        grid = np.polynomial.polynomial.polyval(np.arange(9) / 8, c)
+        changes = np.nonzero(np.diff(np.sign(grid)))[0]
+        th = hermite_root(z0, v0, z1, v1, h)
+        if len(changes) == 0:
+            assert th == -1.0
+            continue
+        found += 1
+        lo = changes[0] / 8
+        assert lo <= th <= lo + 1 / 8
+        assert abs(np.polynomial.polynomial.polyval(th, c)) < 1e-13 * max(1.0, np.abs(c).max())
+        assert np.isclose(th, r[(r >= lo - 1e-12) & (r <= lo + 1 / 8 + 1e-12)]).any()
+    assert found > 1000

@@ -82,47 +82,61 @@ def hermite_root(z0, v0, z1, v1, h):
 
     z0, z1: heights at the ends of a step of length h; v0, v1: their time
     derivatives.  Returns the fraction θ, or -1 when the interpolant has no
-    sign change (then the caller cuts at the linear estimate).
+    sign change (then the caller cuts at the linear estimate).  A coarse grid
+    of eighths brackets the first sign change (the cubic may dip and
+    return); Newton's method, kept inside the bracket (bisection when it
+    would leave it), converges there to rounding in a few iterations.
     """
-    # p(θ) = h00 z0 + h10 h v0 + h01 z1 + h11 h v1
-    # bracketed Newton/bisection on [0, 1]
+    if z0 == 0.0:
+        return 0.0
+    # p(θ) = z0·h00 + h·v0·h10 + z1·h01 + h·v1·h11 = a0 + a1·θ + a2·θ² + a3·θ³
+    hv0 = h * v0
+    hv1 = h * v1
+    a0 = z0
+    a1 = hv0
+    a2 = 3.0 * (z1 - z0) - 2.0 * hv0 - hv1
+    a3 = 2.0 * (z0 - z1) + hv0 + hv1
     lo = 0.0
     hi = 1.0
     plo = z0
-    if plo == 0.0:
-        return 0.0
-    # locate a sign change on a coarse grid first (the cubic may dip and return)
     prev_t = 0.0
     prev_p = z0
     found = False
     for i in range(1, 9):
         t = i / 8.0
-        t2 = t * t
-        t3 = t2 * t
-        p = (2 * t3 - 3 * t2 + 1) * z0 + (t3 - 2 * t2 + t) * h * v0 + (-2 * t3 + 3 * t2) * z1 + (t3 - t2) * h * v1
+        p = a0 + t * (a1 + t * (a2 + t * a3))
         if (p < 0.0) != (prev_p < 0.0):
             lo = prev_t
             hi = t
             plo = prev_p
+            phi = p
             found = True
             break
         prev_t = t
         prev_p = p
     if not found:
         return -1.0
+    # regula falsi start, then bracketed Newton
+    t = lo + (hi - lo) * (plo / (plo - phi))
     for it in range(60):
-        t = 0.5 * (lo + hi)
-        t2 = t * t
-        t3 = t2 * t
-        p = (2 * t3 - 3 * t2 + 1) * z0 + (t3 - 2 * t2 + t) * h * v0 + (-2 * t3 + 3 * t2) * z1 + (t3 - t2) * h * v1
+        p = a0 + t * (a1 + t * (a2 + t * a3))
+        if p == 0.0:
+            return t
         if (p < 0.0) == (plo < 0.0):
             lo = t
             plo = p
         else:
             hi = t
-        if hi - lo < 1e-15:
-            break
-    return 0.5 * (lo + hi)
+        dp = a1 + t * (2.0 * a2 + t * 3.0 * a3)
+        tn = 0.5 * (lo + hi)
+        if dp != 0.0:
+            tn = t - p / dp
+            if not (lo < tn < hi):
+                tn = 0.5 * (lo + hi)
+        if abs(tn - t) <= 1e-15 or hi - lo < 1e-15:
+            return tn
+        t = tn
+    return t
 
 
 @jit(inline="always")
