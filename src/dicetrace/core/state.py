@@ -25,6 +25,15 @@ scheme keeps from one step to the next:
     the work area of the Rosenbrock–W scheme (``schemes.contact_rosenbrock``):
     the Jacobian of y' = f(y) at the sub-step start, the LU factors of
     I − γ·h·J and their row pivots.
+``ahead``, ``fr_*``, ``dn_*``
+    a scheme with dense output (``contact-tsit5``) lets its last sub-step
+    of a step run past the step's end: ``ahead`` is how far the integration
+    front (kept in ``sub_*``) lies beyond the state (s; 0: the front is the
+    state), ``fr_*`` what the front's next sub-step starts from (whether a
+    node is below the ground there, the force sum and torque, the friction
+    law's stiffness), ``dn_*`` what the state at a step end inside the last
+    sub-step is interpolated from with the stages in ``rk_k``, ``rk_y0``
+    (the sub-step's starting offsets and length, and scratch weights).
 ``substeps``
     the sub-steps of a contact scheme in this throw, by what ended them
     (:data:`SUBSTEP_CAUSES`); zero for the other schemes.
@@ -90,6 +99,13 @@ STATE = np.dtype(
         ("rk_y", _F8, 13),
         ("rk_y0", _F8, 13),
         ("rk_acc", _F8, 13),
+        ("ahead", _F8),
+        ("fr_below", np.bool_),
+        ("fr_wrench", _F8, 6),
+        ("fr_lam", _F8),
+        ("dn_off", _F8, (8, 3)),
+        ("dn_h", _F8),
+        ("dn_w", _F8, 7),
         ("ros_j", _F8, (13, 13)),
         ("ros_lu", _F8, (13, 13)),
         ("ros_piv", np.int64, 13),
@@ -131,6 +147,7 @@ def init_state(st, ic, off0, kp):
     st.rot_h = -1.0
     st.rot_ok = False
     st.h_next = 0.0
+    st.ahead = 0.0
     for j in range(SUBSTEP_CAUSES_N):
         st.substeps[j] = 0
 

@@ -71,6 +71,28 @@ CAUSE_END = SUBSTEP_CAUSES.index("end")
 CAUSE_CUT = SUBSTEP_CAUSES.index("cut")
 CAUSE_REJECTED = SUBSTEP_CAUSES.index("rejected")
 CAUSE_REDONE = SUBSTEP_CAUSES.index("redone")
+#: Dense output (``DENSE`` schemes): a sub-step that would overshoot the end of
+#: the step by less than this fraction of what is left is shortened to end
+#: there instead of leaving a front a rounding error ahead.
+DENSE_SNAP = 1e-9
+
+
+@jit(inline="always")
+def _no_dense_keep(st, h):
+    pass
+
+
+@jit(inline="always")
+def _no_dense_state(st, kp, theta):
+    pass
+
+
+#: What ``drive`` is specialised on for dense output (``contact_tsit5``): whether the
+#: last sub-step of a step may run past its end, how the sub-step is kept, and the
+#: state at a fraction θ of it.  Off by default.
+DENSE = False
+DENSE_KEEP = _no_dense_keep
+DENSE_STATE = _no_dense_state
 #: Most sub-steps in one macro step (a safety valve: beyond it the state is
 #: set to NaN, which the loop reports as ``non_finite``).
 MAX_SUBSTEPS = 100000
@@ -140,6 +162,19 @@ def hermite_root(z0, v0, z1, v1, h):
 
 
 @jit(inline="always")
+def front_keep(st, below, f0, f1, f2, t0, t1, t2, lam):
+    """Keep what the front's next sub-step starts from: whether a node is below, the force sum and torque, λ_f."""
+    st.fr_below = below
+    st.fr_wrench[0] = f0
+    st.fr_wrench[1] = f1
+    st.fr_wrench[2] = f2
+    st.fr_wrench[3] = t0
+    st.fr_wrench[4] = t1
+    st.fr_wrench[5] = t2
+    st.fr_lam = lam
+
+
+@jit(inline="always")
 def friction_rate(z, uk, P, kp):
     """Stiffness of the friction law near the current state, 1/s.
 
@@ -170,7 +205,12 @@ def drive(st, kp, h, contact):
     q1, q2)`` (its local error estimate over ``kp.tol``, given the force sum
     and torque at the new state), ``ERR_EXP`` (the step-size exponent,
     1 / (estimator order + 1)), ``THETA`` (the largest λ_f·h of the friction
-    law) and ``H0`` (an impact's first sub-step as ω·h).
+    law), ``H0`` (an impact's first sub-step as ω·h) and, for a pair with a
+    continuous extension, ``DENSE`` with ``DENSE_KEEP`` and ``DENSE_STATE``:
+    the last error-controlled sub-step of the step is not shortened to end
+    at h but runs past it; the state at h is interpolated in it and the
+    integration front stays in ``st.sub_*`` (``st.ahead`` beyond the state)
+    for the next step to go on from.
 
     Free flight (no node below the ground) is integrated exactly, in pieces
     of at most dt / ``substeps`` near the ground; the moment the lowest node
@@ -184,15 +224,24 @@ def drive(st, kp, h, contact):
     ended it (``state.SUBSTEP_CAUSES``).
     """
     W = st.W
-    if not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
+    if DENSE and st.ahead > 0.0:
+        if st.ahead > h:
+            # the step ends inside the sub-step the front came from: interpolate
+            st.ahead -= h
+            DENSE_STATE(st, kp, 1.0 - st.ahead / st.dn_h)
+            return eval_forces(st, kp)
+    elif not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
         free_flight(st, kp, h)
         return eval_forces(st, kp)
     I = kp.inertia
     hmax = h / max(kp.substeps, 1.0)
     adaptive = kp.tol > 0.0
     h0 = H0 / math.sqrt(kp.k)
-    # the state lives in the sub-step start during the step (see rk4.cf4)
-    begin_substeps(st)
+    # the state lives in the sub-step start during the step (see rk4.cf4); a
+    # front left by the last step (DENSE) is there already
+    resume = DENSE and st.ahead > 0.0
+    if not resume:
+        begin_substeps(st)
     Xn = st.new_X
     Un = st.new_U
     Ln = st.new_L
@@ -209,19 +258,36 @@ def drive(st, kp, h, contact):
     t = 0.0
     nsub = 0
     entering = False
+    ahead = False  # the last accepted sub-step ran past the end of the step (DENSE)
     # In contact, the forces at the step's start are those the last step ended
     # with (``eval_forces``, or the last sub-step's own evaluation): their sums
     # are the first sub-step's first stage, bit for bit (nodes without a force
     # hold exact zeros, which leave a sum from +0.0 unchanged).
     cached = contact
     c5 = contact
-    g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
+    kept = False  # this sub-step starts at the front: λ_f as kept there (the scratch holds the state's forces)
+    if resume:
+        # the sub-steps go on from the front, with the forces kept there
+        t = st.ahead
+        st.ahead = 0.0
+        for j in range(3):
+            W[j] = Lw[j] / I
+        cached = t < h  # at t = h the loop ends at once: the forces at the front are evaluated afresh
+        kept = True
+        c5 = st.fr_below
+        w = st.fr_wrench
+        g0, g1, g2, q0, q1, q2 = w[0], w[1], w[2], w[3], w[4], w[5]
+    else:
+        g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
     while t < h and nsub < MAX_SUBSTEPS:
         nsub += 1
         rest = h - t
+        at_front = False
         if cached:
             # the accepted sub-step's last force evaluation is this one's first
             cached = False
+            at_front = kept
+            kept = False
             below = c5
             f0 = g0
             f1 = g1
@@ -264,13 +330,16 @@ def drive(st, kp, h, contact):
                 hs = st.h_next
                 cause = CAUSE_ERROR
         limited = hs < st.h_next
-        lam = friction_rate(z, uk, P, kp)
+        if at_front:
+            lam = st.fr_lam
+        else:
+            lam = friction_rate(z, uk, P, kp)
         if lam * hs > THETA:
             hs = THETA / lam
             limited = True
             cause = CAUSE_FRICTION
         last = False
-        if hs >= rest * (1.0 - 1e-12):
+        if hs >= rest * (1.0 - 1e-12) and not (DENSE and adaptive and hs > rest * (1.0 + DENSE_SNAP)):
             hs = rest
             last = True
             limited = True
@@ -327,9 +396,23 @@ def drive(st, kp, h, contact):
                 hn = st.h_next
             st.h_next = hn
             cached = True
+        if DENSE and adaptive and not last and hs > rest:
+            # past the end of the step: keep this sub-step for the step ends inside it
+            DENSE_KEEP(st, hs)
+            ahead = True
         accept_substep(st, kp)
         st.substeps[cause] += 1
+        if ahead:
+            break
         t = h if last else t + hs
+    if ahead:
+        # the front stays in the sub-step start, with what its next sub-step
+        # starts from; the state at the end of the step is interpolated in
+        # the last sub-step
+        st.ahead = t + hs - h
+        front_keep(st, c5, g0, g1, g2, q0, q1, q2, friction_rate(z, uk, P, kp))
+        DENSE_STATE(st, kp, rest / hs)
+        return eval_forces(st, kp)
     if t < h:
         # the sub-step budget ran out before the end of the step: never return a
         # silently shorter step; the loop reports the NaN as "non_finite"

@@ -5,16 +5,19 @@ node enters or leaves the ground, error control, the friction law's
 stability bound) on Tsit5 sub-steps (``erk``: order 5 with an embedded
 order-4 estimate, first same as last, on the state with a unit quaternion).
 In the die's contacts a sub-step is seldom as long as its error allows: it
-ends at the macro step, at the friction law's stability bound or where a
-node enters or leaves the ground.  Six stages then buy more than DOP853's
-twelve: at the accuracy that decides a throw's outcome it needs less work.
+ends at the friction law's stability bound or where a node enters or leaves
+the ground.  Six stages then buy more than DOP853's twelve: at the accuracy
+that decides a throw's outcome it needs less work.  With dense output
+(``DENSE``): the last sub-step of a step runs its full length past the
+step's end, the state at the end is Tsit5's continuous extension there
+(``erk.dense_state``), and the next step goes on from the front.
 """
 
 from __future__ import annotations
 
 from dicetrace.core._jit import jit, specialise
 from dicetrace.core.schemes.contact_substep import drive
-from dicetrace.core.schemes.erk import tsit5_error, tsit5_substep
+from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsit5_substep
 
 #: Largest λ_f·h of the friction law (Tsit5's interval on the negative real
 #: axis reaches −3.51; a margin for the law's non-linearity).
@@ -26,5 +29,6 @@ step = jit(
     specialise(
         drive, "step_tsit5", "contact-tsit5: ``contact_substep.drive`` on Tsit5 sub-steps (``erk``).",
         SUBSTEP=tsit5_substep, ERROR=tsit5_error, ERR_EXP=1.0 / 5.0, THETA=FRICTION_THETA, H0=H0,
+        DENSE=True, DENSE_KEEP=dense_keep, DENSE_STATE=dense_state,
     )
 )

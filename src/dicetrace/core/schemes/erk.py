@@ -81,6 +81,20 @@ TSIT5_E = np.array([
     -0.582357165452555, 0.458082105929187, -1.0 / 66.0,
 ])
 
+#: Tsit5's continuous extension (order 4, Tsitouras 2011; the expanded coefficients as
+#: OrdinaryDiffEq.jl tabulates them): the state at θ·h into a step is y0 + h·Σ b_i(θ)·k_i over
+#: the seven stages, b_i(θ) = θ·(R[i,0] + θ·(R[i,1] + θ·(R[i,2] + θ·R[i,3]))); b_i(1) = B_i
+#: (b_7(1) = 0), so θ = 1 is the step's own result.
+TSIT5_DENSE = np.array([
+    [1.0, -2.763706197274826, 2.9132554618219126, -1.0530884977290216],
+    [0.0, 0.13169999999999998, -0.2234, 0.1017],
+    [0.0, 3.9302962368947516, -5.941033872131505, 2.490627285651253],
+    [0.0, -12.411077166933676, 30.33818863028232, -16.548102889244902],
+    [0.0, 37.50931341651104, -88.1789048947664, 47.37952196281928],
+    [0.0, -27.896526289197286, 65.09189467479366, -34.87065786149661],
+    [0.0, 1.5, -4.0, 2.5],
+])
+
 
 @jit(inline="always")
 def quat_matrix(q0, q1, q2, q3):
@@ -341,3 +355,40 @@ tsit5_substep = jit(
 tsit5_error = jit(
     specialise(erk_error1_template, "tsit5_error", NS=TSIT5_STAGES, E=TSIT5_E)
 )
+
+
+@jit(inline="always")
+def dense_keep(st, h):
+    """Keep what :func:`dense_state` needs of the sub-step just computed (length h) besides its stages.
+
+    The stages stay in ``st.rk_k`` (row 6: the derivative at the new state,
+    from the error estimate) and the start in ``st.rk_y0`` until the next
+    sub-step; its starting offsets ``st.sub_off`` are copied.
+    """
+    for k in range(8):
+        for j in range(3):
+            st.dn_off[k, j] = st.sub_off[k, j]
+    st.dn_h = h
+
+
+@jit(inline="always")
+def dense_state(st, kp, theta):
+    """X, U, L, ω and the offsets of ``st`` at θ·h into the kept sub-step (Tsit5's continuous extension).
+
+    The quaternion is normalised and the offsets are its exact rotation of
+    the sub-step's starting ones: the die stays rigid to rounding.
+    """
+    w = st.dn_w
+    for i in range(TSIT5_STAGES + 1):
+        w[i] = theta * (TSIT5_DENSE[i, 0] + theta * (TSIT5_DENSE[i, 1] + theta * (
+            TSIT5_DENSE[i, 2] + theta * TSIT5_DENSE[i, 3])))
+    y = st.rk_acc
+    combine(w, TSIT5_STAGES + 1, st.rk_k, st.rk_y0, st.dn_h, y)
+    qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
+    for j in range(3):
+        st.X[j] = y[j]
+        st.U[j] = y[3 + j]
+        st.L[j] = y[6 + j]
+        st.W[j] = y[6 + j] / kp.inertia
+    quat_rotate(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
+    st.rot_h = -1.0
