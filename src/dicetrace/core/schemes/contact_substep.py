@@ -265,7 +265,6 @@ def drive(st, kp, h, contact):
     # hold exact zeros, which leave a sum from +0.0 unchanged).
     cached = contact
     c5 = contact
-    kept = False  # this sub-step starts at the front: λ_f as kept there (the scratch holds the state's forces)
     if resume:
         # the sub-steps go on from the front, with the forces kept there
         t = st.ahead
@@ -273,7 +272,6 @@ def drive(st, kp, h, contact):
         for j in range(3):
             W[j] = Lw[j] / I
         cached = t < h  # at t = h the loop ends at once: the forces at the front are evaluated afresh
-        kept = True
         c5 = st.fr_below
         w = st.fr_wrench
         g0, g1, g2, q0, q1, q2 = w[0], w[1], w[2], w[3], w[4], w[5]
@@ -282,12 +280,9 @@ def drive(st, kp, h, contact):
     while t < h and nsub < MAX_SUBSTEPS:
         nsub += 1
         rest = h - t
-        at_front = False
         if cached:
             # the accepted sub-step's last force evaluation is this one's first
             cached = False
-            at_front = kept
-            kept = False
             below = c5
             f0 = g0
             f1 = g1
@@ -330,7 +325,9 @@ def drive(st, kp, h, contact):
                 hs = st.h_next
                 cause = CAUSE_ERROR
         limited = hs < st.h_next
-        if at_front:
+        if resume and nsub == 1:
+            # the first pass of a resumed step starts at the front, whose λ_f
+            # was kept there (the scratch holds the state's forces now)
             lam = st.fr_lam
         else:
             lam = friction_rate(z, uk, P, kp)
