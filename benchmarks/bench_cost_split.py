@@ -1,0 +1,228 @@
+"""Where a converged throw's time goes: the cost of each part of ``contact-tsit5``, in one run.
+
+A part's cost is measured by a variant of the scheme that does that part
+twice on the same inputs and keeps the second result (the first is summed
+into a scratch cell that the step never reads, so the compiler cannot drop
+it).  The trajectory is then the same, bit for bit: every variant's
+statuses, step counts and outcomes are hashed and checked against the
+plain scheme's, and a variant that changed them is flagged.  Its extra time
+over the plain scheme, measured interleaved in one process on one thread
+(best of ``--repeat`` rounds), is the part's own cost.  The parts:
+
+* ``substep``: a whole Tsit5 sub-step (five stage force evaluations, the
+  stage and result combinations, the new node offsets);
+* ``stages``: only its five stage force evaluations (``erk.stage_wrench``);
+* ``error``: the embedded error estimate;
+* ``end forces``: the forces at a sub-step's end (its first-same-as-last
+  stage, which the error estimate needs);
+* ``cut test``: the test for a node that entered or left the ground inside
+  the sub-step (the root of its height's Hermite interpolant when one did);
+* ``interpolation``: the state at a step's end inside a sub-step that runs
+  past it (Tsit5's continuous extension);
+* ``step-end forces``: the node heights, velocities and forces there;
+* ``flight piece``: the lowest node's height after a piece of exact free
+  flight near the ground;
+* ``impact search``: locating the moment the lowest node reaches the ground.
+
+Also printed: the attempts per throw (``Roll.substeps``, all causes) and the
+macro steps per throw, so that a part's cost can be read per attempt or per
+step.  The plain scheme is timed twice a round: the gap between its two
+best times is the noise floor, below which a part's figure means nothing
+(a few hundredths of a ms per throw on a shared 2-core machine; raise
+``--repeat`` to lower it).  Each variant compiles for about a minute
+(nothing is cached).
+
+Usage: ``python benchmarks/bench_cost_split.py [--n 300] [--repeat 5]
+[--preset physical] [--tol 1e-7] [--parts substep,stages,...]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import inspect
+import sys
+import textwrap
+import time
+
+import numba
+import numpy as np
+
+from dicetrace.core import loop
+from dicetrace.core._jit import specialise
+from dicetrace.core.schemes import contact_substep, contact_tsit5, erk
+from dicetrace.core.state import new_states
+from dicetrace.params import convert_l, make_config
+from dicetrace.simulate import simulate
+from dicetrace.studies.accuracy import T_MAX_S, sample_ics
+
+#: A scratch cell of the state that the step never reads before writing it
+#: (``erk.dense_state`` sets all of ``dn_w`` first): where a repeated part's
+#: first result goes.
+SINK = "st.dn_w[6] += "
+
+
+def _jit(fn):
+    return numba.njit(cache=False, fastmath=False, error_model="numpy", nogil=True)(fn)
+
+
+def _edited(fn, name: str, old: str, new: str):
+    """``fn``'s source with ``old`` replaced once by ``new``, compiled in ``fn``'s module as ``name``."""
+    src = textwrap.dedent(inspect.getsource(fn))
+    if old not in src:
+        sys.exit(f"bench_cost_split: {fn.__name__}'s source no longer contains {old.strip()!r}; update this script")
+    src = src.replace(f"def {fn.__name__}(", f"def {name}(", 1).replace(old, new, 1)
+    env = dict(fn.__globals__)
+    exec(compile(src, inspect.getsourcefile(fn), "exec"), env)
+    return env[name]
+
+
+def _twice(line: str, result: str) -> str:
+    """A source line, its result sunk, the line again (same indentation)."""
+    indent = line[: len(line) - len(line.lstrip())]
+    return line + f"{indent}{SINK}{result}\n" + line
+
+
+def _drive_twice(name: str, line: str, result: str):
+    return _edited(contact_substep.drive, name, line, _twice(line, result))
+
+
+def _step_constants() -> dict:
+    """What ``contact_tsit5.step`` specialises ``contact_substep.drive`` on."""
+    return dict(
+        SUBSTEP=erk.tsit5_substep, ERROR=erk.tsit5_error, ERR_EXP=1.0 / 5.0, THETA=contact_tsit5.FRICTION_THETA,
+        H0=contact_tsit5.H0, DENSE=True, DENSE_KEEP=erk.dense_keep, DENSE_STATE=erk.dense_state,
+    )
+
+
+def variants() -> dict:
+    """name -> (drive template, constants replaced in it) for the plain scheme and every part."""
+    tsub = erk.tsit5_substep
+    terr = erk.tsit5_error
+
+    @_jit
+    def substep_twice(st, kp, h, f0, f1, f2, t0, t1, t2):
+        tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
+        st.dn_w[6] += st.new_X[2]
+        tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
+
+    @_jit
+    def error_twice(st, kp, h, g0, g1, g2, q0, q1, q2):
+        st.dn_w[6] += terr(st, kp, h, g0, g1, g2, q0, q1, q2)
+        return terr(st, kp, h, g0, g1, g2, q0, q1, q2)
+
+    stage = "        g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)\n"
+    stages_tmpl = _edited(erk.erk_template, "erk_stages_twice", stage, _twice(stage, "g0 + q1"))
+    stages_twice = _jit(specialise(stages_tmpl, "tsit5_stages_twice", NS=erk.TSIT5_STAGES, A=erk.TSIT5_A,
+                                       B=erk.TSIT5_B))
+
+    drive = contact_substep.drive
+    src = textwrap.dedent(inspect.getsource(drive))
+    end_forces = ("            c5, g0, g1, g2, q0, q1, q2 = wrench_at(\n"
+                  "                Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P\n"
+                  "            )\n")
+    i0 = src.find("        cut = 2.0\n")
+    i1 = src.find("        if cut < 1.0:\n")
+    cut_loop = src[i0:i1] if 0 <= i0 < i1 else "        cut = 2.0 (the cut loop)\n"
+    interp = "            DENSE_STATE(st, kp, 1.0 - st.ahead / st.dn_h)\n"
+    interp_forces = interp + "            return eval_forces(st, kp)\n"
+    return {
+        "plain": (drive, {}),
+        "substep": (drive, dict(SUBSTEP=substep_twice)),
+        "stages": (drive, dict(SUBSTEP=stages_twice)),
+        "error": (drive, dict(ERROR=error_twice)),
+        "end forces": (_edited(drive, "drive_end_forces", end_forces, end_forces + f"            {SINK}g0\n" + end_forces), {}),
+        "cut test": (_edited(drive, "drive_cut", cut_loop, cut_loop + f"        {SINK}cut\n" + cut_loop), {}),
+        "interpolation": (_edited(drive, "drive_interp", interp, interp + interp), {}),
+        "step-end forces": (_edited(drive, "drive_interp_forces", interp_forces,
+                                    interp + f"            eval_forces(st, kp)\n            {SINK}st.z[0]\n"
+                                    "            return eval_forces(st, kp)\n"), {}),
+        "flight piece": (_drive_twice("drive_piece", "            m1 = free_min_height(Xw, Uw, W, offw, kp, hs)\n", "m1"), {}),
+        "impact search": (_drive_twice("drive_search", "            tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)\n",
+                                       "tau"), {}),
+    }
+
+
+@numba.njit(cache=False)
+def _all(roll, ics, off0, kp, S, status, steps, outcome):
+    cap = 1 << 16
+    sets = np.zeros(cap, np.uint8)
+    set_steps = np.zeros(cap, np.int32)
+    e0 = np.zeros((0, loop.STATE_COLS))
+    e1 = np.zeros((0, loop.FORCE_COLS))
+    e2 = np.zeros((0, loop.ENERGY_COLS))
+    for i in range(ics.shape[0]):
+        status[i], steps[i], outcome[i], _ = roll(ics[i], off0, kp, S, sets, set_steps, e0, e1, e2)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=300)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--preset", default="physical")
+    ap.add_argument("--tol", type=float, default=None, help="contact-tsit5's tolerance (default: the preset's)")
+    ap.add_argument("--parts", default="", help="comma-separated parts (default: all)")
+    args = ap.parse_args()
+    try:
+        cfg = make_config(args.preset, integrator="contact-tsit5", dt_s=1e-3, t_max_s=T_MAX_S, tol=args.tol)
+    except (TypeError, ValueError) as exc:
+        ap.error(str(exc))
+    if args.n < 1:
+        ap.error(f"--n must be at least 1, got {args.n}")
+    table = variants()
+    only = [p.strip() for p in args.parts.split(",") if p.strip()]
+    unknown = [p for p in only if p not in table]
+    if unknown:
+        ap.error(f"unknown part(s) {', '.join(unknown)}; choose from {', '.join(list(table)[1:])}")
+    names = ["plain"] + [p for p in table if p != "plain" and (not only or p in only)]
+    numba.set_num_threads(1)
+    ics = convert_l(sample_ics(n=args.n), "program", cfg.preset.l_convention)
+    kin = cfg.kernel_inputs(ics)
+    S = new_states(1)
+    m = len(ics)
+    out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
+    constants = _step_constants()
+    kernels = {}
+    t0 = time.perf_counter()
+    for name in names:
+        template, over = table[name]
+        tag = name.replace(" ", "_").replace("-", "_")
+        step = _jit(specialise(template, f"step_split_{tag}", **{**constants, **over}))
+        kernels[name] = _jit(specialise(loop._roll, f"roll_split_{tag}", STEP=step, TRACE=False,
+                                            FAST_APPLIES=loop._never, FAST=loop._no_kernel))
+    hashes = {}
+    for name in names:  # compile (numba compiles on the first call) and check the trajectory
+        _all(kernels[name], kin.ics, kin.off0, kin.params, S, *out)
+        hashes[name] = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()[:12]
+    print(f"compiled {len(names)} variants in {time.perf_counter() - t0:.0f} s", flush=True)
+    # the plain scheme runs twice a round: the gap between its two best times is the noise floor
+    rounds = names + ["plain again"]
+    kernels["plain again"] = kernels["plain"]
+    best = dict.fromkeys(rounds, np.inf)
+    for _ in range(max(1, args.repeat)):
+        for name in rounds:
+            c0 = time.process_time()
+            _all(kernels[name], kin.ics, kin.off0, kin.params, S, *out)
+            best[name] = min(best[name], (time.process_time() - c0) / m * 1e3)
+    attempts = macro = 0.0
+    for ic in ics:
+        r = simulate(ic, config=cfg)
+        attempts += sum(r.substeps.values())
+        macro += r.steps
+    attempts /= m
+    macro /= m
+    base = best["plain"]
+    tol = cfg.numerics.tol
+    print(f"contact-tsit5 on {args.preset}, tol {tol:g}, {m} zoom-out ICs, 1 thread, CPU ms per throw "
+          f"(best of {args.repeat}, interleaved); {attempts:.0f} sub-step attempts and {macro:.0f} steps per throw")
+    noise = abs(best["plain again"] - base)
+    print(f"  {'plain':<16} {base:7.3f} ms/throw; run again {best['plain again']:.3f} (noise floor {noise:.3f} ms/throw)")
+    print(f"  {'part':<16} {'ms/throw':>8} {'share':>7} {'ns/attempt':>11} {'ns/step':>8}  trajectory")
+    for name in names[1:]:
+        d = best[name] - base
+        same = "same" if hashes[name] == hashes["plain"] else "CHANGED (not a valid split)"
+        print(f"  {name:<16} {d:8.3f} {d / base * 100:6.1f}% {d * 1e6 / attempts:11.0f} {d * 1e6 / macro:8.0f}  {same}")
+
+
+if __name__ == "__main__":
+    main()
