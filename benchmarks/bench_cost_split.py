@@ -49,7 +49,7 @@ import numba
 import numpy as np
 
 from dicetrace.core import loop
-from dicetrace.core._jit import specialise
+from dicetrace.core._jit import jit, specialise
 from dicetrace.core.schemes import contact_substep, contact_tsit5, erk
 from dicetrace.core.state import new_states
 from dicetrace.params import convert_l, make_config
@@ -63,7 +63,8 @@ SINK = "st.dn_w[6] += "
 
 
 def _jit(fn):
-    return numba.njit(cache=False, fastmath=False, error_model="numpy", nogil=True)(fn)
+    """dicetrace's jit, uncached: the variants are this run's only."""
+    return jit(fn, cache=False)
 
 
 def _edited(fn, name: str, old: str, new: str):
@@ -133,7 +134,7 @@ def variants() -> dict:
         "error": (drive, dict(ERROR=error_twice)),
         "end forces": (_edited(drive, "drive_end_forces", end_forces, end_forces + f"            {SINK}g0\n" + end_forces), {}),
         "cut test": (_edited(drive, "drive_cut", cut_loop, cut_loop + f"        {SINK}cut\n" + cut_loop), {}),
-        "interpolation": (_edited(drive, "drive_interp", interp, interp + interp), {}),
+        "interpolation": (_edited(drive, "drive_interp", interp, interp + f"            {SINK}st.U[2] + st.off[7, 2]\n" + interp), {}),
         "step-end forces": (_edited(drive, "drive_interp_forces", interp_forces,
                                     interp + f"            eval_forces(st, kp)\n            {SINK}st.z[0]\n"
                                     "            return eval_forces(st, kp)\n"), {}),
