@@ -85,15 +85,8 @@ def _twice(line: str, result: str) -> str:
 
 
 def _drive_twice(name: str, line: str, result: str):
+    """``contact_substep.drive`` with ``line`` (one or more lines) done twice, the first result sunk."""
     return _edited(contact_substep.drive, name, line, _twice(line, result))
-
-
-def _step_constants() -> dict:
-    """What ``contact_tsit5.step`` specialises ``contact_substep.drive`` on."""
-    return dict(
-        SUBSTEP=erk.tsit5_substep, ERROR=erk.tsit5_error, ERR_EXP=1.0 / 5.0, THETA=contact_tsit5.FRICTION_THETA,
-        H0=contact_tsit5.H0, DENSE=True, DENSE_KEEP=erk.dense_keep, DENSE_STATE=erk.dense_state,
-    )
 
 
 def variants() -> dict:
@@ -132,9 +125,9 @@ def variants() -> dict:
         "substep": (drive, dict(SUBSTEP=substep_twice)),
         "stages": (drive, dict(SUBSTEP=stages_twice)),
         "error": (drive, dict(ERROR=error_twice)),
-        "end forces": (_edited(drive, "drive_end_forces", end_forces, end_forces + f"            {SINK}g0\n" + end_forces), {}),
-        "cut test": (_edited(drive, "drive_cut", cut_loop, cut_loop + f"        {SINK}cut\n" + cut_loop), {}),
-        "interpolation": (_edited(drive, "drive_interp", interp, interp + f"            {SINK}st.U[2] + st.off[7, 2]\n" + interp), {}),
+        "end forces": (_drive_twice("drive_end_forces", end_forces, "g0"), {}),
+        "cut test": (_drive_twice("drive_cut", cut_loop, "cut"), {}),
+        "interpolation": (_drive_twice("drive_interp", interp, "st.U[2] + st.off[7, 2]"), {}),
         "step-end forces": (_edited(drive, "drive_interp_forces", interp_forces,
                                     interp + f"            eval_forces(st, kp)\n            {SINK}st.z[0]\n"
                                     "            return eval_forces(st, kp)\n"), {}),
@@ -182,7 +175,7 @@ def main() -> None:
     S = new_states(1)
     m = len(ics)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
-    constants = _step_constants()
+    constants = contact_tsit5.DRIVE_CONSTANTS
     kernels = {}
     t0 = time.perf_counter()
     for name in names:

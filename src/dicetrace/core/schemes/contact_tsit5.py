@@ -25,10 +25,15 @@ FRICTION_THETA = 2.5
 #: An impact's first sub-step, as ω·h with ω = √k.
 H0 = 0.2
 
+#: What ``drive`` is specialised on for this scheme (also what a benchmark's variants of it start from).
+DRIVE_CONSTANTS = dict(
+    SUBSTEP=tsit5_substep, ERROR=tsit5_error, ERR_EXP=1.0 / 5.0, THETA=FRICTION_THETA, H0=H0,
+    DENSE=True, DENSE_KEEP=dense_keep, DENSE_STATE=dense_state,
+)
+
 step = jit(
     specialise(
         drive, "step_tsit5", "contact-tsit5: ``contact_substep.drive`` on Tsit5 sub-steps (``erk``).",
-        SUBSTEP=tsit5_substep, ERROR=tsit5_error, ERR_EXP=1.0 / 5.0, THETA=FRICTION_THETA, H0=H0,
-        DENSE=True, DENSE_KEEP=dense_keep, DENSE_STATE=dense_state,
+        **DRIVE_CONSTANTS,
     )
 )
