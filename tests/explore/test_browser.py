@@ -129,13 +129,25 @@ def test_back_and_reset_walk_the_history_of_views(browser, explorer, tmp_path):
     assert abs((x1 - x0) / (a1 - a0) - 0.25) < 1e-9 and abs((y1 - y0) / (b1 - b0) - 0.25) < 1e-9
     zoomed = _window_of(page)
     np.testing.assert_array_equal(page_outcomes(page), scan_outcomes(tmp_path, zoomed, RES, name="wheel"))
-    before = page.url
+    # back: the URL changes at once, the view is asked for after; while that answer is held
+    # back the page must not still say "ready" (a test waiting on it would read the old map)
+    held = []
+    page.route("**/api/view?*", lambda route: held.append(route))
     page.click("#back")
-    page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
-                           timeout=120_000)
+    for _ in range(600):
+        if held:
+            break
+        page.wait_for_timeout(50)
+    assert held, "going back asked for no view"
+    assert page.evaluate("document.body.dataset.state") == "computing"
+    for route in held:
+        route.continue_()
+    page.unroute("**/api/view?*")
     wait_ready(page)
-    x0b, x1b, _, _ = map(float, _window_of(page).split(","))
+    back = _window_of(page)
+    x0b, x1b, _, _ = map(float, back.split(","))
     assert abs((x1b - x0b) / (a1 - a0) - 0.5) < 1e-9  # one zoom back
+    np.testing.assert_array_equal(page_outcomes(page), scan_outcomes(tmp_path, back, RES, name="back"))
     before = page.url
     page.click("#reset")
     page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",

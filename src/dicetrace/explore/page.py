@@ -117,16 +117,17 @@ function setStatus(text, busy) { $("status").textContent = text; $("status").cla
 
 async function load(q, push) {
   const my = ++seq;
+  document.body.dataset.state = "computing";  // at once: the back button changes the URL before this load asks for its view
   showError("");
   let r = await fetch("/api/view?" + qs(q));
   let j = await r.json();
+  if (my !== seq) return;                        // a newer view took over while this one was checked
   if (!r.ok) { showError("Bad view parameter " + (j.param || "") + ": " + j.error); setStatus("", false); document.body.dataset.state = "error"; return; }
   view = j.query; window4 = [j.window[0][0], j.window[0][1], j.window[1][0], j.window[1][1]]; res = j.res;
   if (push) history.pushState(view, "", "?" + qs(view));
   else history.replaceState(view, "", "?" + qs(view));
   fillControls();
   tellParent("view", {view});
-  document.body.dataset.state = "computing";
   document.body.dataset.strips = "";
   const c = $("map");
   if (c.width !== res[0] || c.height !== res[1]) { c.width = res[0]; c.height = res[1]; }
