@@ -27,10 +27,14 @@ untimed run.  ``--v-reg`` sets ``physical``'s friction regularisation
 ``physical`` preset (repeatable; the reference too), e.g. ``--set mu=0``
 to see what the sub-steps cost without friction; ``--dt`` the step of the
 contact schemes (the seed path and the reference keep 1 ms).
+``--graded RATE:TOL`` (repeatable) adds, for each error-controlled scheme
+shown, a line at tolerance TOL loosening at RATE per second over the throw
+(``tol_growth``, docs/model.md §9).
 
 Usage: ``python benchmarks/bench_integrators.py [--n 300] [--repeat 3]
 [--tol-range 1e-9,1e-5] [--integrators contact-adaptive,contact-dop853]
-[--presets seed,physical] [--budget] [--v-reg 10] [--set mu=0] [--dt 0.001]``.
+[--presets seed,physical] [--budget] [--v-reg 10] [--set mu=0] [--dt 0.001]
+[--graded 10:2e-8]``.
 """
 
 from __future__ import annotations
@@ -47,17 +51,35 @@ from dicetrace.simulate import simulate
 from dicetrace.studies.accuracy import SECOND_REFERENCE, T_MAX_S, agreement, run_batch, sample_ics
 
 PRESETS = ("seed", "physical")
-SEED_PATH = ("semi-implicit-euler", 1e-3, None)
+SEED_PATH = ("semi-implicit-euler", 1e-3, None, 0.0)
 
 
-def runs(tol_range, only, dt=1e-3) -> list[tuple[str, float, float | None]]:
-    """(integrator, dt, tol) of every timed line: the seed scheme, contact-substep, each adaptive scheme's tolerances."""
+def runs(tol_range, only, dt=1e-3, graded=()) -> list[tuple[str, float, float | None, float]]:
+    """(integrator, dt, tol, tol growth) of every timed line: the seed scheme, contact-substep, each adaptive
+    scheme's tolerances, then its ``graded`` (rate, tol) settings."""
     lo, hi = tol_range
-    out = [SEED_PATH, ("contact-substep", dt, None)]
+    out = [SEED_PATH, ("contact-substep", dt, None, 0.0)]
     for name, spec in INTEGRATORS.items():
         if spec.adaptive and (not only or name in only):
-            out += [(name, dt, tol) for tol in spec.study_tol if lo <= tol <= hi]
+            out += [(name, dt, tol, 0.0) for tol in spec.study_tol if lo <= tol <= hi]
+            out += [(name, dt, tol, rate) for rate, tol in graded]
     return [r for r in out if not only or r[0] in only or r == SEED_PATH]
+
+
+def graded_settings(items, ap) -> list[tuple[float, float]]:
+    """(rate, tol) of each ``--graded RATE:TOL`` (a bad one: exit 2)."""
+    out = []
+    for item in items:
+        rate, sep, tol = item.partition(":")
+        try:
+            if not sep:
+                raise ValueError("expected RATE:TOL")
+            setting = (float(rate), float(tol))
+            make_config("physical", tol=setting[1], tol_growth=setting[0])
+        except ValueError as exc:
+            ap.error(f"--graded {item!r}: {exc}")
+        out.append(setting)
+    return out
 
 
 def budget(ics, cfg) -> dict[str, float]:
@@ -100,8 +122,11 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="another field of the physical preset, e.g. mu=0 (repeatable)")
     ap.add_argument("--dt", type=float, default=1e-3, help="the contact schemes' step, s (default 0.001)")
+    ap.add_argument("--graded", action="append", default=[], metavar="RATE:TOL",
+                    help="also each error-controlled scheme at TOL loosening at RATE /s (tol_growth; repeatable)")
     args = ap.parse_args()
     extra_physical = physical_fields(args, ap)
+    graded = graded_settings(args.graded, ap)
     tol_range = tuple(float(v) for v in args.tol_range.split(","))
     only = {v.strip() for v in args.integrators.split(",") if v.strip()}
     numba.set_num_threads(1)
@@ -112,21 +137,22 @@ def main() -> None:
     if extra_physical:
         print("physical with " + ", ".join(f"{k} = {v:g}" for k, v in extra_physical.items()))
     seed_ms = None
-    lines = runs(tol_range, only, args.dt)
+    lines = runs(tol_range, only, args.dt, graded)
     for preset in args.presets.split(","):
         extra = extra_physical if preset == "physical" else {}
         ics = convert_l(ics_prog, "program", get_preset(preset).l_convention)
         ref_cfg = make_config(preset, integrator=ref_name, dt_s=ref_dt, t_max_s=T_MAX_S, tol=args.reference_tol, **extra)
         ref = run_batch(ics, ref_cfg)
-        for integ, dt, tol in lines:
-            cfg = make_config(preset, integrator=integ, dt_s=dt, t_max_s=T_MAX_S, tol=tol, **extra)
+        for integ, dt, tol, growth in lines:
+            cfg = make_config(preset, integrator=integ, dt_s=dt, t_max_s=T_MAX_S, tol=tol,
+                              tol_growth=growth or None, **extra)
             r = run_batch(ics, cfg, timed=True, repeat=args.repeat)
             ms = r.cpu_ms_per_ic
-            if preset == "seed" and (integ, dt, tol) == SEED_PATH:
+            if preset == "seed" and (integ, dt, tol, growth) == SEED_PATH:
                 seed_ms = ms
             settled = r.settled
             agree = agreement(r, ref)
-            label = f"{integ} dt={dt:g}" + ("" if tol is None else f" tol={tol:g}")
+            label = f"{integ} dt={dt:g}" + ("" if tol is None else f" tol={tol:g}") + (f" +{growth:g}/s" if growth else "")
             ratio = f"{ms / seed_ms:7.3g}x" if seed_ms else "       "
             print(f"  {preset:<9} {label:<38} {ms:8.3f} ms/throw {ratio} seed   agreement {agree:.3f}   "
                   f"unsettled {int(np.sum(~settled))}", flush=True)

@@ -13,6 +13,7 @@ from dicetrace.params import (
     INTEGRATORS,
     KERNEL_L_CONVENTION,
     NODE_SIGNS,
+    TOL_GROWTH_MAX,
     TOL_MIN,
     Config,
     Numerics,
@@ -108,6 +109,10 @@ def test_get_preset_and_get_integrator_name_the_choices():
         pytest.param({"tol": 1.0}, "tolerance tol", id="tol=1"),
         pytest.param({"tol": TOL_MIN / 2}, "tolerance tol", id="tol<TOL_MIN"),
         pytest.param({"tol": math.nan}, "tolerance tol", id="tol=nan"),
+        pytest.param({"tol_growth": -1.0}, "tolerance growth tol_growth", id="tol_growth<0"),
+        pytest.param({"tol_growth": math.inf}, "tolerance growth tol_growth", id="tol_growth=inf"),
+        pytest.param({"tol_growth": TOL_GROWTH_MAX * 2}, "tolerance growth tol_growth", id="tol_growth>max"),
+        pytest.param({"tol_growth": True}, "tolerance growth tol_growth", id="tol_growth=True"),
         pytest.param({"integrator": "magic"}, "unknown integrator 'magic'", id="integrator"),
     ],
 )
@@ -268,7 +273,8 @@ def test_initial_offsets_number_the_nodes_and_turn_with_the_orientation():
 
 def test_config_as_dict_rebuilds_the_same_config():
     """File metadata (as_dict) is enough to rebuild the configuration a scan or a recording used."""
-    for cfg in (make_config("seed"), make_config("physical", tol=1e-9, gamma=0.01), make_config("seed", integrator="rk4", dt_s="auto")):
+    for cfg in (make_config("seed"), make_config("physical", tol=1e-9, gamma=0.01), make_config("seed", integrator="rk4", dt_s="auto"),
+                make_config("physical", tol=2e-8, tol_growth=10.0)):
         d = cfg.as_dict()
         assert Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"])) == cfg
 
@@ -286,6 +292,17 @@ def test_tol_reaches_only_the_adaptive_kernel():
     with pytest.warns(UserWarning, match="no effect on contact-substep"):
         assert run("contact-substep", 1e-3) == run("contact-substep", 1e-10)
     assert run("contact-adaptive", 1e-3) != run("contact-adaptive", 1e-10)
+
+
+def test_tol_growth_reaches_only_the_adaptive_kernels():
+    with pytest.warns(UserWarning, match="tol_growth .*no effect on rk4"):
+        assert make_config("physical", integrator="rk4", tol_growth=10.0).kernel_params().tol_growth == 0.0
+    assert make_config("physical", tol_growth=10.0).kernel_params().tol_growth == 10.0
+    assert make_config("physical").kernel_params().tol_growth == 0.0  # off by default
+    # a scan written before the field existed still reads: its numerics lack it
+    d = make_config("physical").as_dict()
+    del d["numerics"]["tol_growth"]
+    assert Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"])) == make_config("physical")
 
 
 def test_make_config_applies_overrides_to_the_named_preset():

@@ -110,6 +110,7 @@ class KernelParams(NamedTuple):
     blowup_abs: float
     substeps: float  # sub-steps per step while in contact (contact-substep)
     tol: float = 0.0  # local error tolerance of the sub-steps (the adaptive integrators); 0: fixed sub-steps
+    tol_growth: float = 0.0  # 1/s: the tolerance at time t is tol·exp(tol_growth·t), at most TOL_LOOSEST (Numerics)
 
 
 @dataclass(frozen=True)
@@ -268,6 +269,10 @@ def get_preset(name: str) -> Preset:
 
 #: Smallest ``Numerics.tol``: below it the error estimate is rounding.
 TOL_MIN = 1e-14
+#: The loosest tolerance ``Numerics.tol_growth`` lets the tolerance reach.
+TOL_LOOSEST = 1e-4
+#: Largest ``Numerics.tol_growth``, 1/s (a hundred times the die's Lyapunov exponent).
+TOL_GROWTH_MAX = 1000.0
 
 
 @dataclass(frozen=True)
@@ -297,6 +302,16 @@ class Numerics:
         units of the half side, velocity error in units of the die's current
         speed |U| + √3·half·|ω| + √(|g|·half)), in [``TOL_MIN``, 1).  Their
         sub-steps are at most dt long.
+    tol_growth
+        The error-controlled integrators only: a rate, 1/s, at which their
+        tolerance loosens over a throw.  At time t after the start the
+        tolerance is ``tol·exp(tol_growth·t)``, never looser than
+        :data:`TOL_LOOSEST` (nor looser than ``tol`` itself when that is
+        looser).  0 (the default): the same tolerance throughout.  A local
+        error made at time t reaches the outcome amplified by about
+        exp(λ·(T − t)), λ the die's Lyapunov exponent (12–15 /s): late errors
+        matter less, and a rate near 5λ/6 spends the error budget where it
+        buys the outcome (docs/model.md §9).  In [0, ``TOL_GROWTH_MAX``].
     """
 
     integrator: str = "semi-implicit-euler"
@@ -304,6 +319,7 @@ class Numerics:
     t_max_s: float = 60.0
     substeps: int = 8
     tol: float = 1e-7
+    tol_growth: float = 0.0
 
     def __post_init__(self) -> None:
         get_integrator(self.integrator)
@@ -330,6 +346,11 @@ class Numerics:
         if not _is_number(self.tol) or not math.isfinite(self.tol) or not TOL_MIN <= self.tol < 1:
             raise ValueError(f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {_show(self.tol)}")
         object.__setattr__(self, "tol", _plain(self.tol))
+        gr = self.tol_growth
+        if not _is_number(gr) or not math.isfinite(gr) or not 0 <= gr <= TOL_GROWTH_MAX:
+            raise ValueError(f"tolerance growth tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] (1/s), "
+                             f"got {_show(gr)}")
+        object.__setattr__(self, "tol_growth", _plain(gr))
 
     @property
     def max_steps(self) -> int:
@@ -385,6 +406,7 @@ class Config:
             blowup_abs=BLOWUP_ABS_FRACTION * p.e_rest,
             substeps=1.0 if n.spec.adaptive else float(n.substeps),
             tol=float(n.tol) if n.spec.adaptive else 0.0,
+            tol_growth=float(n.tol_growth) if n.spec.adaptive else 0.0,
         )
 
     def initial_offsets(self, orientation=None) -> np.ndarray:
@@ -435,6 +457,7 @@ def make_config(
     t_max_s: float | None = None,
     v_impact_cm_s: float | None = None,
     tol: float | None = None,
+    tol_growth: float | None = None,
     **overrides,
 ) -> Config:
     """Build a :class:`Config` from a preset name and optional overrides.
@@ -443,7 +466,9 @@ def make_config(
     ``dt_s="auto"`` picks the step with :func:`auto_dt` for impacts at
     ``v_impact_cm_s`` (cm/s; see :func:`impact_speed_cm_s`), or raises
     ValueError when no step fits the budget.  ``tol``: the local error
-    tolerance of the error-controlled integrators (default ``Numerics.tol``).
+    tolerance of the error-controlled integrators (default ``Numerics.tol``);
+    ``tol_growth``: the rate, 1/s, at which it loosens over a throw (default
+    0, see :class:`Numerics`).
     """
     if isinstance(preset, str):
         p = get_preset(preset)
@@ -462,16 +487,18 @@ def make_config(
     kw = {"integrator": p.integrator if integrator is None else integrator}
     integrator = kw["integrator"]
     spec = get_integrator(integrator)
-    if tol is not None and not spec.adaptive:
-        import warnings
+    for name, what, value in (("tol", "the error tolerance", tol), ("tol_growth", "the growth of the error tolerance",
+                                                                     tol_growth)):
+        if value is not None and not spec.adaptive:
+            import warnings
 
-        warnings.warn(
-            f"tol (the error tolerance of the error-controlled sub-steps of "
-            f"{', '.join(n for n, sp in INTEGRATORS.items() if sp.adaptive)}) has no effect on {integrator}, "
-            "whose steps are fixed",
-            UserWarning,
-            stacklevel=2,
-        )
+            warnings.warn(
+                f"{name} ({what} of the error-controlled sub-steps of "
+                f"{', '.join(n for n, sp in INTEGRATORS.items() if sp.adaptive)}) has no effect on {integrator}, "
+                "whose steps are fixed",
+                UserWarning,
+                stacklevel=2,
+            )
     if v_impact_cm_s is not None and (not _is_number(v_impact_cm_s) or not math.isfinite(v_impact_cm_s)
                                       or v_impact_cm_s < 0):
         raise ValueError(f"v_impact_cm_s must be a finite number >= 0, got {_show(v_impact_cm_s)}")
@@ -491,6 +518,8 @@ def make_config(
         kw["t_max_s"] = t_max_s
     if tol is not None:
         kw["tol"] = tol
+    if tol_growth is not None:
+        kw["tol_growth"] = tol_growth
     return Config(preset=p, numerics=Numerics(**kw))
 
 
@@ -499,7 +528,7 @@ def resolve_config(config: "Config | str | None" = None, /, **options) -> Config
 
     Every entry point (``simulate``, ``simulate_batch``, ``scan``, the
     studies) takes ``config=`` or the keyword options of :func:`make_config`
-    (``preset``, ``integrator``, ``dt_s``, ``t_max_s``, ``tol``,
+    (``preset``, ``integrator``, ``dt_s``, ``t_max_s``, ``tol``, ``tol_growth``,
     ``v_impact_cm_s`` and :class:`Preset` field overrides), never both: a
     given Config already fixes them.  ``config`` may also be a preset name.
     Options whose value is None count as not given.

@@ -78,6 +78,8 @@ BAD = [
     # silent acceptance (item 9)
     case([*AT, "--tol", "1e-5"], "--tol", "contact-adaptive"),
     case([*AT, "--integrator", "verlet", "--tol", "1e-6"], "--tol", "verlet"),
+    case([*AT, "--tol-growth", "10"], "--tol-growth", "contact-adaptive"),
+    case([*AT, "--preset", "physical", "--tol-growth", "-3"], "--tol-growth", "[0, 1000]"),
     case([*AT, "--preset", "physical", "--integrator", "magic"], "--integrator", "'magic'"),
     case([*AT, "--preset", "Physical"], "--preset", "'Physical'"),
     # ICs

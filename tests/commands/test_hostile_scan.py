@@ -105,6 +105,8 @@ BAD = [
     # the model and the numerics (items 4, 9)
     case([*HOME3, "--dt", "auto", "--integrator", "forward-euler", "--set", "k=5e7"], "--dt auto", "k = 5e+07"),
     case([*HOME3, "--tol", "1e-5"], "--tol", "contact-adaptive"),
+    case([*HOME3, "--tol-growth", "10"], "--tol-growth", "contact-adaptive"),
+    case([*HOME3, "--preset", "physical", "--tol-growth", "1e4"], "--tol-growth", "[0, 1000]"),
     case([*HOME3, "--dt", "2", "--t-max", "1"], "--dt", "--t-max", "longer than the time cap"),
     case([*HOME3, "--max-chunks", "-1"], "--max-chunks", ">= 0"),
     case([*HOME3, "--set", "g=980"], "--set", "gravity g"),

@@ -71,6 +71,10 @@ BAD = [
     case(["--ic", IC, "--tol", "1e-5"], "--tol", "contact-adaptive", "semi-implicit-euler"),
     case(["--ic", IC, "--integrator", "rk4", "--tol", "1e-5"], "--tol", "rk4"),
     case(["--ic", IC, "--preset", "physical", "--tol", "1e-20"], "--tol", "[1e-14, 1)"),
+    case(["--ic", IC, "--tol-growth", "10"], "--tol-growth", "contact-adaptive", "semi-implicit-euler"),
+    case(["--ic", IC, "--preset", "physical", "--tol-growth", "-1"], "--tol-growth", "[0, 1000]", "'-1'"),
+    case(["--ic", IC, "--preset", "physical", "--tol-growth", "inf"], "--tol-growth", "'inf'"),
+    case(["--ic", IC, "--preset", "physical", "--tol-growth", "fast"], "--tol-growth", "'fast'"),
     case(["--ic", IC, "--integrator", "RK4"], "--integrator", "'RK4'"),
     case(["--ic", IC, "--preset", ""], "--preset", "''"),
     # ICs: overflow is one line (no numpy warning before it), every source names itself
@@ -303,6 +307,7 @@ _VALUES = {
     "--dt": ["0.001", "0.002", "auto", "0", "-1", "nan", "2", "1e-300", "fast"],
     "--t-max": ["0.3", "1", "0", "-1", "inf", "1e12", "x"],
     "--tol": ["1e-6", "1e-3", "0", "1", "1e-300", "x"],
+    "--tol-growth": ["10", "0", "-1", "nan", "x"],
     "--format": ["table", "csv", "json", "xml"],
     "--out": ["out.csv", "sub/out.json", "adir", "afile/x", "/proc/x", "-", "loop"],
 }

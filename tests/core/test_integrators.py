@@ -85,14 +85,16 @@ def state(kp, X0, U0, L0, off=None):
     return S
 
 
-def kparams(substeps: int = 8, integrator: str = "semi-implicit-euler", tol: float = 1e-7, **preset):
-    numerics = Numerics(integrator=integrator, substeps=substeps, tol=tol)
+def kparams(substeps: int = 8, integrator: str = "semi-implicit-euler", tol: float = 1e-7, tol_growth: float = 0.0,
+            **preset):
+    numerics = Numerics(integrator=integrator, substeps=substeps, tol=tol, tol_growth=tol_growth)
     return Config(preset=Preset(name="test", **preset), numerics=numerics).kernel_params()
 
 
-def run(integ, kp, h, t_end, X0, U0, L0):
-    """State after t_end (a multiple of h): X, U, L, offsets, node z ranges."""
+def run(integ, kp, h, t_end, X0, U0, L0, clock=0.0):
+    """State after t_end (a multiple of h): X, U, L, offsets, node z ranges (``clock``: the throw's time at the start)."""
     S = state(kp, X0, U0, L0)
+    S["clock"] = clock
     zmin = np.full(8, np.inf)
     zmax = np.full(8, -np.inf)
     n = int(round(t_end / h))
@@ -374,6 +376,38 @@ def test_adaptive_undamped_bounce_tolerance_proportional():
         assert np.all(np.diff(errs) < 0), errs
         assert 0.6 < np.polyfit(np.log(tols), np.log(errs), 1)[0] < 1.3, (errs, s)
     assert ratio_err[-1] < 1e-9
+
+
+@pytest.mark.parametrize("integ", ["contact-adaptive", "contact-tsit5"])
+def test_tol_growth_loosens_the_tolerance_with_the_throws_clock(integ):
+    """tol_growth: a step starting at time t of the throw weighs its error estimates by exp(−rate·t).
+
+    The undamped bounce of the test above, run with tol 1e-9 and a slow rate
+    late on the clock (t = ln(100)/rate), is the bounce at a uniform tol of
+    1e-7; later still it is held at TOL_LOOSEST (1e-4); at t = 0 it is the
+    bounce at 1e-9.  The clock advances by each step.
+    """
+    from dicetrace.params import TOL_LOOSEST
+
+    v, rate = 100.0, 1e-3
+
+    def bounce_error(tol, growth=0.0, clock=0.0):
+        kp = kparams(integrator=integ, tol=tol, tol_growth=growth, k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
+        X, U, *_ = run(integ, kp, T_CONTACT / 2, 2 * T_CONTACT, [0, 0, 1.0], [0, 0, -v], [0, 0, 0], clock=clock)
+        return abs(U[2] / v - 1.0)
+
+    tight, loose, loosest = bounce_error(1e-9), bounce_error(1e-7), bounce_error(TOL_LOOSEST)
+    assert loose > 10 * tight and loosest > 10 * loose  # the three tolerances give three different bounces
+    late = bounce_error(1e-9, rate, clock=math.log(100.0) / rate)
+    later = bounce_error(1e-9, rate, clock=math.log(1e8) / rate)  # 1e-1 unbounded: held at 1e-4
+    start = bounce_error(1e-9, rate, clock=0.0)
+    assert abs(math.log(late / loose)) < 0.1, (late, loose)
+    assert abs(math.log(later / loosest)) < 0.1, (later, loosest)
+    assert abs(math.log(start / tight)) < 0.1, (start, tight)
+    kp = kparams(integrator=integ, tol=1e-9, tol_growth=rate, k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
+    S = state(kp, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
+    driver(integ)(kp, T_CONTACT / 2, 4, S, np.full(8, np.inf), np.full(8, -np.inf))
+    assert S["clock"][0] == pytest.approx(2 * T_CONTACT, rel=1e-12)
 
 
 #: Per error-controlled scheme: tolerances, and the restitution error the tightest must reach

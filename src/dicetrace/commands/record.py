@@ -42,6 +42,7 @@ from dicetrace.commands.simulate import (
     EXIT_NUMERICAL_FAILURE,
     IC_HELP,
     INTEGRATOR_HELP,
+    TOL_GROWTH_HELP,
     TOL_HELP,
     PRESET_HELP,
     SLICE_HELP,
@@ -222,6 +223,7 @@ def register(app: typer.Typer) -> None:
         dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
+        tol_growth: Optional[str] = typer.Option(None, "--tol-growth", help=TOL_GROWTH_HELP),
         out: Optional[Path] = typer.Option(
             None, "--out", "--save", help="Output .rrd file (default, when no other sink is given: "
             "recordings/<name>.rrd, the name encoding the IC); a character device or FIFO is written directly, "
@@ -282,7 +284,8 @@ def register(app: typer.Typer) -> None:
         if scan is not None:
             if ics or slice_name is not None:
                 fail("give either --scan DIR --at X,Y or --ic / --slice, not both")
-            conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol}
+            conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol,
+                           "--tol-growth": tol_growth}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
             all_ics = [the_ic]
             labels = [ic_label(the_ic, coords, desc)]
@@ -297,7 +300,8 @@ def register(app: typer.Typer) -> None:
             all_ics.append(all_ics[0] * (1.0 + eps))
             labels.append(f"throw 0's IC × (1 + {eps:g})")
         if scan is None:
-            cfg = build_config(preset or "seed", integrator, dt, t_max, ics=np.stack(all_ics), tol=tol)
+            cfg = build_config(preset or "seed", integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
+                               tol_growth=tol_growth)
         name = default_name(the_ic, coords, desc, cfg)
         if comparing:
             name = f"{name}_nudge{fmt_num(eps)}" if eps is not None and len(all_ics) == 2 else f"compare{len(all_ics)}_{name}"

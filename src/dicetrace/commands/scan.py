@@ -39,7 +39,7 @@ import numpy as np
 import typer
 
 from dicetrace.commands._common import fail, output_dir, output_file, parse_floats
-from dicetrace.commands.simulate import EXIT_NUMERICAL_FAILURE, INTEGRATOR_HELP, TOL_HELP, fmt_num
+from dicetrace.commands.simulate import EXIT_NUMERICAL_FAILURE, INTEGRATOR_HELP, TOL_GROWTH_HELP, TOL_HELP, fmt_num
 
 SLICE_HELP = "Slice of IC space: seed (the writeup's 2-D), seed3 (3-D), seed-ortho, seed3-ortho (Gram–Schmidt)."
 WINDOW_HELP = (
@@ -271,6 +271,7 @@ def register(app: typer.Typer) -> None:
         dt: Optional[str] = typer.Option(None, "--dt", help="Time step, s (default 0.001), or 'auto' (chosen from the stiffness k for a 300 cm/s impact; 0.001 for the error-controlled schemes; refused when no step fits)."),
         t_max: Optional[str] = typer.Option(None, "--t-max", help="Time cap, s (default 60)."),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
+        tol_growth: Optional[str] = typer.Option(None, "--tol-growth", help=TOL_GROWTH_HELP),
         sets: Optional[List[str]] = typer.Option(
             None, "--set", help="Override a preset parameter, NAME=VALUE (e.g. gamma=0.01, mu=0.6, k=1e6); repeatable."
         ),
@@ -301,7 +302,8 @@ def register(app: typer.Typer) -> None:
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
-        cfg = build_config(preset, integrator, dt, t_max, tol=tol, overrides=parse_overrides(preset, sets or []))
+        cfg = build_config(preset, integrator, dt, t_max, tol=tol, tol_growth=tol_growth,
+                           overrides=parse_overrides(preset, sets or []))
         if chunk is not None and chunk < 1:
             fail(f"--chunk must be >= 1, got {chunk}")
         if threads is not None and threads < 1:

@@ -29,7 +29,7 @@ import numpy as np
 import typer
 
 from dicetrace.commands._common import fail, output_file, parse_floats
-from dicetrace.params import INTEGRATORS, PRESETS, TOL_MIN, Numerics
+from dicetrace.params import INTEGRATORS, PRESETS, TOL_LOOSEST, TOL_MIN, Numerics
 from dicetrace.status import Status
 
 FORMATS = ("table", "csv", "json")
@@ -54,6 +54,11 @@ ADAPTIVE = ", ".join(name for name, spec in INTEGRATORS.items() if spec.adaptive
 TOL_HELP = (
     f"{ADAPTIVE} only: local error tolerance of their sub-steps, in [{TOL_MIN:g}, 1) "
     f"(default {Numerics.tol:g}; smaller is more accurate and slower)."
+)
+TOL_GROWTH_HELP = (
+    f"{ADAPTIVE} only: the rate, 1/s, at which their tolerance loosens over a throw: tol·exp(RATE·t) at time t, "
+    f"never looser than {TOL_LOOSEST:g} (default 0: the same tolerance throughout; about 10 pairs with a "
+    "tolerance five times tighter for the same outcomes at less cost, docs/model.md §9)."
 )
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable; 0.001 for the error-controlled schemes, whose error control keeps them stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
@@ -87,7 +92,7 @@ def preset_or_fail(name: str):
 
 def build_config(
     preset: str, integrator: str | None, dt: str | None, t_max: str | None, ics=None, tol: str | None = None,
-    overrides: dict | None = None,
+    overrides: dict | None = None, tol_growth: str | None = None,
 ):
     """The validated Config of a command, built once from the options' text, or a one-line failure.
 
@@ -95,10 +100,10 @@ def build_config(
     ``overrides`` applied) and the fastest first impact of ``ics`` (see
     ``dicetrace.params.auto_dt``), or refuses.  Values are validated where
     they enter: numbers here, everything else by ``make_config``; every
-    message names the option(s) at fault.  ``--tol`` with a fixed-step
-    integrator is refused (it would have no effect).
+    message names the option(s) at fault.  ``--tol`` or ``--tol-growth``
+    with a fixed-step integrator is refused (it would have no effect).
     """
-    from dicetrace.params import INTEGRATORS, TOL_MIN, make_config
+    from dicetrace.params import INTEGRATORS, TOL_GROWTH_MAX, TOL_MIN, make_config
     from dicetrace.stepsize import impact_speed_cm_s
 
     base = preset_or_fail(preset)
@@ -128,8 +133,20 @@ def build_config(
     if tol is not None and not INTEGRATORS[integ].adaptive:
         fail(f"--tol {fmt_num(tol)} applies only to the integrators with error-controlled sub-steps ({ADAPTIVE}); "
              f"{integ} has fixed steps: drop --tol")
+    growth = None
+    if tol_growth is not None:
+        try:
+            growth = float(tol_growth.strip())
+        except ValueError:
+            fail(f"--tol-growth must be a number (a rate in 1/s), got {tol_growth!r}")
+        if not (math.isfinite(growth) and 0 <= growth <= TOL_GROWTH_MAX):
+            fail(f"--tol-growth must be a number in [0, {TOL_GROWTH_MAX:g}] (a rate in 1/s), got {tol_growth!r}")
+        if not INTEGRATORS[integ].adaptive:
+            fail(f"--tol-growth {fmt_num(growth)} applies only to the integrators with error-controlled sub-steps "
+                 f"({ADAPTIVE}); {integ} has fixed steps: drop --tol-growth")
     try:
-        return make_config(base, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol, **overrides)
+        return make_config(base, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol,
+                           tol_growth=growth, **overrides)
     except (ValueError, TypeError) as e:
         msg = str(e)
         if "time cap / dt" in msg or "longer than the time cap" in msg:
@@ -462,6 +479,7 @@ def register(app: typer.Typer) -> None:
         dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
         t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
+        tol_growth: Optional[str] = typer.Option(None, "--tol-growth", help=TOL_GROWTH_HELP),
         fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json. On a terminal a table of more "
                                f"than {TTY_ROWS} rows shows the first {TTY_HEAD} and the outcomes of all; a file "
                                "or pipe gets every row."),
@@ -493,7 +511,7 @@ def register(app: typer.Typer) -> None:
             ic_arr = one[None, :]
             coords = None if c is None else c[None, :]
             source = desc
-        cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr, tol=tol)
+        cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth)
 
         batch = run_ics(ic_arr, cfg)
         names, rows = result_rows(batch, coords)

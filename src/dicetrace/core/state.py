@@ -110,6 +110,7 @@ STATE = np.dtype(
         ("ros_lu", _F8, (13, 13)),
         ("ros_piv", np.int64, 13),
         ("substeps", np.int64, SUBSTEP_CAUSES_N),
+        ("clock", _F8),
     ],
     align=True,
 )
@@ -148,6 +149,7 @@ def init_state(st, ic, off0, kp):
     st.rot_ok = False
     st.h_next = 0.0
     st.ahead = 0.0
+    st.clock = 0.0
     for j in range(SUBSTEP_CAUSES_N):
         st.substeps[j] = 0
 
