@@ -51,6 +51,7 @@ def _baked_constants() -> bytes:
         params.ENERGY_RIGID,
         params.NODE_SIGNS.tobytes().hex(),
         params.KernelParams._fields,
+        params.TOL_LOOSEST,
     ]
     return repr((rows, statuses, modes)).encode()
 
