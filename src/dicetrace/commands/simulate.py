@@ -57,8 +57,8 @@ TOL_HELP = (
 )
 TOL_GROWTH_HELP = (
     f"{ADAPTIVE} only: the rate, 1/s, at which their tolerance loosens over a throw: tol·exp(RATE·t) at time t, "
-    f"never looser than {TOL_LOOSEST:g} (default 0: the same tolerance throughout; about 10 pairs with a "
-    "tolerance five times tighter for the same outcomes at less cost, docs/model.md §9)."
+    f"never looser than {TOL_LOOSEST:g} (default 0: the same tolerance throughout; 10 with a five times "
+    "tighter --tol keeps about the default's outcomes at ~1.3x less cost on physical, docs/model.md §9)."
 )
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable; 0.001 for the error-controlled schemes, whose error control keeps them stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
