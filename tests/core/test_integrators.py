@@ -378,7 +378,7 @@ def test_adaptive_undamped_bounce_tolerance_proportional():
     assert ratio_err[-1] < 1e-9
 
 
-@pytest.mark.parametrize("integ", ["contact-adaptive", "contact-tsit5"])
+@pytest.mark.parametrize("integ", ADAPTIVE)
 def test_tol_growth_loosens_the_tolerance_with_the_throws_clock(integ):
     """tol_growth: a step starting at time t of the throw weighs its error estimates by exp(−rate·t).
 
