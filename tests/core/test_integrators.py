@@ -385,7 +385,7 @@ def test_tol_growth_loosens_the_tolerance_with_the_throws_clock(integ):
     The undamped bounce of the test above, run with tol 1e-9 and a slow rate
     late on the clock (t = ln(100)/rate), is the bounce at a uniform tol of
     1e-7; later still it is held at TOL_LOOSEST (1e-5); at t = 0 it is the
-    bounce at 1e-9.  The clock advances by each step.
+    bounce at 1e-9.  The clock advances by each step (while the rate is above 0).
     """
     from dicetrace.params import TOL_LOOSEST
 

@@ -214,7 +214,7 @@ def drive(st, kp, h, contact):
 
     With ``kp.tol_growth`` > 0 the tolerance loosens over the throw: a step
     that starts at time t (``st.clock``, set to 0 by ``init_state`` and
-    advanced by every step) weighs its sub-steps' error estimates by
+    advanced by every step while tol_growth > 0) weighs its sub-steps' error estimates by
     exp(−tol_growth·t), never below kp.tol / ``TOL_LOOSEST`` (weight 1 and
     the same arithmetic, bit for bit, with tol_growth = 0).
 
@@ -234,7 +234,7 @@ def drive(st, kp, h, contact):
     grade = 1.0
     if kp.tol_growth > 0.0:
         grade = max(math.exp(-kp.tol_growth * st.clock), min(1.0, kp.tol / TOL_LOOSEST))
-    st.clock += h
+        st.clock += h
     if DENSE and st.ahead > 0.0:
         if st.ahead > h:
             # the step ends inside the sub-step the front came from: interpolate
