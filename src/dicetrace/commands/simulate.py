@@ -130,9 +130,6 @@ def build_config(
     integ = integrator or model.integrator
     if tol is not None and not TOL_MIN <= tol < 1:
         fail(f"--tol: tolerance tol must be a number in [{TOL_MIN:g}, 1), got {fmt_num(tol)}")
-    if tol is not None and not INTEGRATORS[integ].adaptive:
-        fail(f"--tol {fmt_num(tol)} applies only to the integrators with error-controlled sub-steps ({ADAPTIVE}); "
-             f"{integ} has fixed steps: drop --tol")
     growth = None
     if tol_growth is not None:
         try:
@@ -141,9 +138,10 @@ def build_config(
             fail(f"--tol-growth must be a number (a rate in 1/s), got {tol_growth!r}")
         if not (math.isfinite(growth) and 0 <= growth <= TOL_GROWTH_MAX):
             fail(f"--tol-growth must be a number in [0, {TOL_GROWTH_MAX:g}] (a rate in 1/s), got {tol_growth!r}")
-        if not INTEGRATORS[integ].adaptive:
-            fail(f"--tol-growth {fmt_num(growth)} applies only to the integrators with error-controlled sub-steps "
-                 f"({ADAPTIVE}); {integ} has fixed steps: drop --tol-growth")
+    for option, value in (("--tol", tol), ("--tol-growth", growth)):
+        if value is not None and not INTEGRATORS[integ].adaptive:
+            fail(f"{option} {fmt_num(value)} applies only to the integrators with error-controlled sub-steps "
+                 f"({ADAPTIVE}); {integ} has fixed steps: drop {option}")
     try:
         return make_config(base, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol,
                            tol_growth=growth, **overrides)
