@@ -172,7 +172,7 @@ def test_physical_and_seed_differ_on_the_same_throws():
 def test_tol_growth_spends_fewer_sub_steps_for_the_same_outcomes():
     """physical throws with the tolerance loosening at 10 /s from a five times tighter start
     (docs/model.md §9): the same settled outcomes as the uniform default on nearly every throw,
-    with a third fewer sub-step attempts; the growth changes nothing before the first contact."""
+    with a third fewer sub-step attempts."""
     from dicetrace.studies.accuracy import sample_ics
 
     ics = sample_ics(n=30)
