@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -298,11 +299,54 @@ def test_tol_growth_reaches_only_the_adaptive_kernels():
     with pytest.warns(UserWarning, match="tol_growth .*no effect on rk4"):
         assert make_config("physical", integrator="rk4", tol_growth=10.0).kernel_params().tol_growth == 0.0
     assert make_config("physical", tol_growth=10.0).kernel_params().tol_growth == 10.0
-    assert make_config("physical").kernel_params().tol_growth == 0.0  # off by default
+    assert make_config("seed", integrator="contact-tsit5").kernel_params().tol_growth == 0.0  # off by default
     # a scan written before the field existed still reads: its numerics lack it
-    d = make_config("physical").as_dict()
+    cfg = make_config("seed", integrator="contact-tsit5")
+    d = cfg.as_dict()
     del d["numerics"]["tol_growth"]
-    assert Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"])) == make_config("physical")
+    assert Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"])) == cfg
+
+
+@pytest.mark.parametrize("integrator", ["contact-tsit5", "contact-adaptive", "contact-dop853", "contact-rosenbrock"])
+def test_physical_schedule_is_the_default_of_every_error_controlled_integrator(integrator):
+    num = make_config("physical", integrator=integrator).numerics
+    assert (num.tol, num.tol_growth) == (2e-8, 10.0)
+    assert make_config("physical", integrator=integrator).kernel_params().tol_growth == 10.0
+    # one of the two given: the schedule is off, the other keeps Numerics' default
+    num = make_config("physical", integrator=integrator, tol=1e-6).numerics
+    assert (num.tol, num.tol_growth) == (1e-6, 0.0)
+    num = make_config("physical", integrator=integrator, tol_growth=5.0).numerics
+    assert (num.tol, num.tol_growth) == (Numerics.tol, 5.0)
+    # a preset derived from physical keeps its schedule; seed has none
+    assert make_config("physical", integrator=integrator, v_reg_cm_s=3.0).numerics.tol_growth == 10.0
+    num = make_config("seed", integrator=integrator).numerics
+    assert (num.tol, num.tol_growth) == (Numerics.tol, Numerics.tol_growth) == (1e-7, 0.0)
+
+
+def test_physical_schedule_never_reaches_a_fixed_step_integrator():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing the caller gave, nothing to warn about
+        num = make_config("physical", integrator="contact-substep").numerics
+    assert (num.tol, num.tol_growth) == (Numerics.tol, 0.0)
+    assert make_config("physical", integrator="contact-substep").kernel_params().tol == 0.0
+
+
+@pytest.mark.parametrize("field, value", [("default_tol", 0.0), ("default_tol", 1.0), ("default_tol", float("nan")),
+                                          ("default_tol", "1e-7"), ("default_tol_growth", -1.0),
+                                          ("default_tol_growth", None), ("default_tol_growth", 1e4)])
+def test_preset_schedule_is_validated(field, value):
+    with pytest.raises(ValueError, match=f"preset 'physical': {field} must be"):
+        get_preset("physical").with_(**{field: value})
+
+
+def test_a_physical_config_written_before_the_schedule_still_reads():
+    """A manifest from before the preset's schedule lacks its two fields: they read as 'none'."""
+    d = make_config("physical", tol=1e-7).as_dict()
+    for k in ("default_tol", "default_tol_growth"):
+        del d["preset"][k]
+    old = Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"]))
+    assert old.preset.default_tol is None and old.numerics == make_config("physical", tol=1e-7).numerics
+    assert old != make_config("physical")  # resuming it with today's default is refused
 
 
 def test_make_config_applies_overrides_to_the_named_preset():

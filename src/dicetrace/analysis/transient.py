@@ -198,7 +198,9 @@ def _tightened(cfg: Config, factor: float) -> Config:
 
     num = cfg.numerics
     if INTEGRATORS[num.integrator].adaptive:
-        return replace(cfg, numerics=replace(num, tol=num.tol / factor))
+        # uniform: a tolerance that loosens over the throw (tol_growth) is never tighter than its start,
+        # while both would reach the same loosest tolerance late in a throw
+        return replace(cfg, numerics=replace(num, tol=num.tol / factor, tol_growth=0.0))
     return replace(cfg, numerics=replace(num, dt_s=num.dt_s / factor))
 
 

@@ -51,14 +51,18 @@ INTEGRATOR_HELP = (
 )
 #: The integrators with error-controlled sub-steps (those that take --tol).
 ADAPTIVE = ", ".join(name for name, spec in INTEGRATORS.items() if spec.adaptive)
+#: The presets whose error-controlled integrators loosen their tolerance by default, as help text.
+SCHEDULES = "; ".join(f"{name}: {p.default_tol:g} loosening at {p.default_tol_growth:g}/s"
+                      for name, p in PRESETS.items() if p.default_tol is not None)
 TOL_HELP = (
     f"{ADAPTIVE} only: local error tolerance of their sub-steps, in [{TOL_MIN:g}, 1) "
-    f"(default {Numerics.tol:g}; smaller is more accurate and slower)."
+    f"(default: the preset's schedule when neither --tol nor --tol-growth is given ({SCHEDULES}), "
+    f"else {Numerics.tol:g}; smaller is more accurate and slower)."
 )
 TOL_GROWTH_HELP = (
     f"{ADAPTIVE} only: the rate, 1/s, at which their tolerance loosens over a throw: tol·exp(RATE·t) at time t, "
-    f"never looser than {TOL_LOOSEST:g} (default 0: the same tolerance throughout; 10 with a five times "
-    "tighter --tol keeps about the default's outcomes at ~1.3x less cost on physical, docs/model.md §9)."
+    f"never looser than {TOL_LOOSEST:g} (default: the preset's schedule when neither --tol nor --tol-growth is "
+    f"given ({SCHEDULES}), else 0: the same tolerance throughout; docs/model.md §9)."
 )
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable; 0.001 for the error-controlled schemes, whose error control keeps them stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
