@@ -45,6 +45,9 @@ class IntegratorSpec:
         divides the study's first-impact horizon grid of 8 ms.
     study_tol, quick_tol
         Tolerances of the study (adaptive schemes only).
+    study_graded, quick_graded
+        (tol_growth, tol) pairs of the study: tolerances that loosen over a
+        throw (``Numerics.tol_growth``; adaptive schemes only).
     color
         Its colour in the study's plots (matplotlib name).
     summary
@@ -64,6 +67,8 @@ class IntegratorSpec:
     adaptive: bool = False
     study_tol: tuple[float, ...] = ()
     quick_tol: tuple[float, ...] = ()
+    study_graded: tuple[tuple[float, float], ...] = ()
+    quick_graded: tuple[tuple[float, float], ...] = ()
 
 
 _RK4_BOUND = 2.0 * math.sqrt(2.0)  # RK4's interval on the imaginary axis
@@ -117,6 +122,7 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
             adaptive=True,
             study_tol=(1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
             quick_tol=(1e-4, 1e-6),
+            study_graded=((10.0, 2e-8),),
         ),
         IntegratorSpec(
             "contact-dop853", 6, 8, 5.96,
@@ -155,6 +161,8 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
             adaptive=True,
             study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9),
             quick_tol=(1e-6, 1e-8),
+            study_graded=((10.0, 2e-8), (10.0, 5e-8)),
+            quick_graded=((10.0, 1e-6),),
         ),
     )
 }

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from dicetrace.params import INTEGRATORS
+from dicetrace.params import INTEGRATORS, make_config
 from dicetrace.status import Status
 from dicetrace.studies import accuracy as acc
 
@@ -33,16 +33,19 @@ def test_quick_study_cli_runs_under_a_minute(tmp_path):
     with open(tmp_path / "study.csv") as f:
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == list(acc.STUDY_COLUMNS)
-    # every preset × integrator × quick step (× quick tolerance for an error-controlled one) of its spec
-    per_preset = sum(len(s.quick_dt_s) * max(1, len(s.quick_tol) * s.adaptive) for s in INTEGRATORS.values())
+    # every preset × integrator × quick step (× quick tolerance, uniform or growing, for an error-controlled one)
+    per_preset = sum(len(s.quick_dt_s) * max(1, (len(s.quick_tol) + len(s.quick_graded)) * s.adaptive)
+                     for s in INTEGRATORS.values())
     assert len(rows) == 2 * per_preset
+    assert any(s.quick_graded for s in INTEGRATORS.values())
     for name, spec in INTEGRATORS.items():
         mine = [r for r in rows if r["integrator"] == name]
         assert {float(r["dt_s"]) for r in mine} == set(spec.quick_dt_s)
         if spec.adaptive:
-            assert {float(r["tol"]) for r in mine} == set(spec.quick_tol)
+            settings = {(float(r["tol"]), float(r["tol_growth"])) for r in mine}
+            assert settings == {(t, 0.0) for t in spec.quick_tol} | {(t, g) for g, t in spec.quick_graded}
         else:
-            assert all(r["tol"] in ("", "nan") for r in mine)
+            assert all(r["tol"] in ("", "nan") and r["tol_growth"] in ("", "nan") for r in mine)
     for r in rows:
         assert 0.0 <= float(r["outcome_agreement"]) <= 1.0
         assert float(r["cpu_ms_per_ic"]) > 0
@@ -127,8 +130,12 @@ def test_study_runs_come_from_the_integrator_table():
     """The steps and tolerances of a study run are its spec's, nothing else."""
     adaptive = next(n for n, s in INTEGRATORS.items() if s.adaptive)
     spec = INTEGRATORS[adaptive]
-    assert acc.study_runs(adaptive) == [(dt, tol) for dt in spec.study_dt_s for tol in spec.study_tol]
-    assert acc.study_runs("rk4", quick=True) == [(dt, None) for dt in INTEGRATORS["rk4"].quick_dt_s]
+    assert acc.study_runs(adaptive) == ([(dt, tol, 0.0) for dt in spec.study_dt_s for tol in spec.study_tol]
+                                        + [(dt, tol, g) for dt in spec.study_dt_s for g, tol in spec.study_graded])
+    assert acc.study_runs("rk4", quick=True) == [(dt, None, None) for dt in INTEGRATORS["rk4"].quick_dt_s]
+    # physical's default schedule is one of the study's settings, so the study measures the default
+    phys = make_config("physical").numerics
+    assert (phys.dt_s, phys.tol, phys.tol_growth) in acc.study_runs(phys.integrator)
     with pytest.raises(ValueError, match="unknown integrator"):
         acc.check_integrators(["euler"])
 
@@ -195,3 +202,17 @@ def test_best_within_budget_prefers_the_cheaper_of_equals():
     assert acc.best_within_budget(rows, "seed", "contact-substep", 2.0)["cpu_ms_per_ic"] == 1.06
     assert acc.best_within_budget(rows, "seed", None, 0.5)["cpu_ms_per_ic"] == 0.34
     assert acc.best_within_budget(rows, "seed", None, 0.2) is None
+
+
+def test_a_setting_names_its_tolerance_growth():
+    """A run whose tolerance loosens over the throw is told apart from the uniform one everywhere it is named."""
+    from dicetrace.studies.accuracy_render import _settings_text, setting
+
+    uniform = {"integrator": "contact-tsit5", "dt_s": 1e-3, "tol": 2e-8, "tol_growth": 0.0}
+    graded = dict(uniform, tol_growth=10.0)
+    fixed = {"integrator": "rk4", "dt_s": 1e-3, "tol": float("nan"), "tol_growth": float("nan")}
+    assert setting(uniform) == "dt = 0.001 s, tol = 2e-08"
+    assert setting(graded) == "dt = 0.001 s, tol = 2e-08 growing 10/s"
+    assert setting(fixed) == "dt = 0.001 s"
+    assert _settings_text([uniform, graded, fixed]) == (
+        "contact-tsit5 at dt = 0.001 s, tol = 2e-08, 2e-08 growing 10/s; rk4 at dt = 0.001 s")

@@ -111,19 +111,23 @@ QUICK_SECOND_REFERENCE = Reference("contact-adaptive", 1e-3, 1e-8)
 
 #: CSV columns of the study, in order.
 STUDY_COLUMNS = (
-    "preset", "integrator", "order", "dt_s", "tol", "n_ics", "cpu_ms_per_ic", "outcome_agreement",
+    "preset", "integrator", "order", "dt_s", "tol", "tol_growth", "n_ics", "cpu_ms_per_ic", "outcome_agreement",
     "settled_fraction", "settle_time_bias_s", "settle_time_mae_s", "contact_count_bias", "first_impact_error_cm",
     "free_flight_energy_drift", "blow_ups", "time_caps", "own_floor_flips", "own_floor_n", "chaos_floor_1e-12",
     "chaos_floor_1e-09", "chaos_floor_1e-06", "reference_integrator", "reference_dt_s", "reference_self_agreement", "window", "seed",
 )
 
 
-def study_runs(integrator: str, quick: bool = False) -> list[tuple[float, float | None]]:
-    """(dt, tol) of every run of ``integrator`` in the study: its spec's steps × tolerances (tol None: fixed steps)."""
+def study_runs(integrator: str, quick: bool = False) -> list[tuple[float, float | None, float | None]]:
+    """(dt, tol, tol_growth) of every run of ``integrator`` in the study: its spec's steps × tolerances, uniform
+    (growth 0) then loosening over the throw (``study_graded``); fixed steps: tol and growth None."""
     s = INTEGRATORS[integrator]
     dts = s.quick_dt_s if quick else s.study_dt_s
-    tols = (s.quick_tol if quick else s.study_tol) if s.adaptive else ()
-    return [(dt, tol) for dt in dts for tol in (tols or (None,))]
+    if not s.adaptive:
+        return [(dt, None, None) for dt in dts]
+    tols = s.quick_tol if quick else s.study_tol
+    graded = s.quick_graded if quick else s.study_graded
+    return [(dt, tol, 0.0) for dt in dts for tol in tols] + [(dt, tol, rate) for dt in dts for rate, tol in graded]
 
 
 def check_integrators(integrators) -> tuple[str, ...]:
@@ -149,8 +153,10 @@ def perturb(ics: np.ndarray, rel: float, seed: int) -> np.ndarray:
     return ics + rel * np.linalg.norm(ics, axis=1, keepdims=True) * xi
 
 
-def config_for(preset: str, integrator: str, dt_s: float, t_max_s: float = T_MAX_S, tol: float | None = None) -> Config:
-    return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, tol=tol)
+def config_for(preset: str, integrator: str, dt_s: float, t_max_s: float = T_MAX_S, tol: float | None = None,
+               tol_growth: float | None = None) -> Config:
+    """A run's configuration; an error-controlled integrator without ``tol`` takes the preset's default schedule."""
+    return make_config(preset, integrator=integrator, dt_s=dt_s, t_max_s=t_max_s, tol=tol, tol_growth=tol_growth)
 
 
 @dataclass
@@ -343,10 +349,10 @@ def _reference(preset, ics, ref_spec: Reference, second: Reference, floor_ics, n
     return row, ref, horizons, ref_traj
 
 
-def _run_row(preset, integ, dt, tol, ics, ref: Runs, ref_row: dict, horizons, ref_traj, ref_spec, window, seed,
-             floor_ics, threads, repeat):
+def _run_row(preset, integ, dt, tol, growth, ics, ref: Runs, ref_row: dict, horizons, ref_traj, ref_spec, window,
+             seed, floor_ics, threads, repeat):
     """One timed run of the study against the reference, and its own floor: its CSV row and CPU cost."""
-    cfg = config_for(preset, integ, dt, tol=tol)
+    cfg = config_for(preset, integ, dt, tol=tol, tol_growth=growth)
     runs = run_batch(ics, cfg, timed=True, repeat=repeat)
     flips = own_floor(floor_ics, cfg, seed, threads=threads)
     both = runs.settled & ref.settled
@@ -359,6 +365,7 @@ def _run_row(preset, integ, dt, tol, ics, ref: Runs, ref_row: dict, horizons, re
         "order": INTEGRATORS[integ].order,
         "dt_s": dt,
         "tol": float("nan") if tol is None else tol,
+        "tol_growth": float("nan") if growth is None else growth,
         "n_ics": len(ics),
         "cpu_ms_per_ic": runs.cpu_ms_per_ic,
         "outcome_agreement": agreement(runs, ref),
@@ -439,22 +446,24 @@ def study(
         for integ in integrators:
             runs_at = study_runs(integ, quick)
             errs = []
-            for dt, tol in runs_at:
-                say(f"[{preset}] {integ} dt={dt:g} s" + ("" if tol is None else f" tol={tol:g}"))
-                row = _run_row(preset, integ, dt, tol, ics, ref, ref_row, horizons, ref_traj, ref_spec, window, seed,
-                               floor_ics, threads, 1 if quick else TIMING_REPEAT)
+            for dt, tol, growth in runs_at:
+                say(f"[{preset}] {integ} dt={dt:g} s" + ("" if tol is None else f" tol={tol:g}")
+                    + (f" growing {growth:g}/s" if growth else ""))
+                row = _run_row(preset, integ, dt, tol, growth, ics, ref, ref_row, horizons, ref_traj, ref_spec, window,
+                               seed, floor_ics, threads, 1 if quick else TIMING_REPEAT)
                 rows.append(row)
-                errs.append(row["first_impact_error_cm"])
+                if not growth:  # the order is fitted on the uniform tolerances (or the steps)
+                    errs.append((tol if tol is not None else dt, row["first_impact_error_cm"]))
                 if preset == "seed" and integ == program.integrator and dt == program.dt_s:
                     seed_cost = row["cpu_ms_per_ic"]
-            against_tol = any(t is not None for _, t in runs_at)
+            against_tol = any(t is not None for _, t, _ in runs_at)
             orders.append({
                 "preset": preset,
                 "integrator": integ,
                 "declared_order": INTEGRATORS[integ].order,
                 # error-controlled runs: the exponent of the error against tol at one dt
-                "fitted_order_first_impact": fit_order([t if t is not None else d for d, t in runs_at], errs)
-                if len(runs_at) >= 2 else float("nan"),
+                "fitted_order_first_impact": fit_order([x for x, _ in errs], [e for _, e in errs])
+                if len(errs) >= 2 else float("nan"),
                 "against": "tol" if against_tol else "dt",
             })
     notes = [] if window in WINDOWS else [f"window given as coordinates: {window}"]
@@ -536,6 +545,7 @@ def budget_table(res: StudyResult, factors=(1.0, 10.0)) -> list[dict]:
                         "integrator": integ,
                         "dt_s": b["dt_s"] if b else float("nan"),
                         "tol": b.get("tol", float("nan")) if b else float("nan"),
+                        "tol_growth": b.get("tol_growth", float("nan")) if b else float("nan"),
                         "cpu_ms_per_ic": b["cpu_ms_per_ic"] if b else float("nan"),
                         "outcome_agreement": b["outcome_agreement"] if b else float("nan"),
                         "settle_time_bias_s": b["settle_time_bias_s"] if b else float("nan"),

@@ -30,12 +30,24 @@ def _fmt(v, spec=".3g"):
     return fmt(v, spec, missing="—")
 
 
-def setting(r: dict) -> str:
-    """A run's numerical setting as text: dt, and tol for the error-controlled integrator."""
+def tol_text(r: dict) -> str:
+    """A run's tolerance as text: ``1e-07``, or ``2e-08 growing 10/s`` when it loosens over the throw; '' for none."""
     tol = r.get("tol", float("nan"))
-    if tol is not None and np.isfinite(tol):
-        return f"dt = {r['dt_s']:g} s, tol = {tol:g}"
-    return f"dt = {r['dt_s']:g} s"
+    if tol is None or not np.isfinite(tol):
+        return ""
+    return f"{tol:g}" + (f" growing {r['tol_growth']:g}/s" if _grows(r) else "")
+
+
+def _grows(r: dict) -> bool:
+    """Whether a run's tolerance loosens over the throw."""
+    g = r.get("tol_growth", float("nan"))
+    return g is not None and np.isfinite(g) and g > 0
+
+
+def setting(r: dict) -> str:
+    """A run's numerical setting as text: dt, and tol (and its growth) for the error-controlled integrators."""
+    tol = tol_text(r)
+    return f"dt = {r['dt_s']:g} s" + (f", tol = {tol}" if tol else "")
 
 
 def summary_markdown(res: StudyResult, command: str) -> str:
@@ -107,7 +119,7 @@ def summary_markdown(res: StudyResult, command: str) -> str:
     ]
     for r in res.rows:
         lines.append(
-            f"| {r['preset']} | {r['integrator']} | {r['dt_s']:g} | {_fmt(r.get('tol'), 'g')} | {r['cpu_ms_per_ic']:.3g} | "
+            f"| {r['preset']} | {r['integrator']} | {r['dt_s']:g} | {tol_text(r) or '—'} | {r['cpu_ms_per_ic']:.3g} | "
             f"{r['outcome_agreement']:.3f} | {_fmt(r['settle_time_bias_s'], '+.4f')} | "
             f"{_fmt(r['contact_count_bias'], '+.2f')} | {_fmt(r['first_impact_error_cm'], '.2e')} | "
             f"{_fmt(r['free_flight_energy_drift'], '.1e')} | {r['blow_ups']} | {r['time_caps']} | "
@@ -134,7 +146,7 @@ def summary_markdown(res: StudyResult, command: str) -> str:
         ]
         for b in bt:
             lines.append(
-                f"| {b['preset']} | {b['budget']} | {b['integrator']} | {_fmt(b['dt_s'], 'g')} | {_fmt(b['tol'], 'g')} | "
+                f"| {b['preset']} | {b['budget']} | {b['integrator']} | {_fmt(b['dt_s'], 'g')} | {tol_text(b) or '—'} | "
                 f"{_fmt(b['cpu_ms_per_ic'], '.3g')} | {_fmt(b['outcome_agreement'], '.3f')} | "
                 f"{_fmt(b['settle_time_bias_s'], '+.4f')} | {_fmt(b['own_floor_flips'], 'd')} | "
                 f"{b['chaos_floor_1e-12']:.3f} | {b['chaos_floor_1e-09']:.3f} |"
@@ -162,9 +174,9 @@ def _settings_text(rows: list[dict]) -> str:
     """Runs named compactly, per integrator: ``rk4 at dt = 0.002, 0.001 s``; ``contact-adaptive at dt = 0.001 s, tol = 1e-06, 1e-07``."""
     groups: dict[tuple, list[str]] = {}
     for r in rows:
-        tol = r.get("tol", float("nan"))
-        if tol is not None and np.isfinite(tol):
-            groups.setdefault((r["integrator"], f"dt = {r['dt_s']:g} s, tol = "), []).append(f"{tol:g}")
+        tol = tol_text(r)
+        if tol:
+            groups.setdefault((r["integrator"], f"dt = {r['dt_s']:g} s, tol = "), []).append(tol)
         else:
             groups.setdefault((r["integrator"], "dt = "), []).append(f"{r['dt_s']:g}")
     parts = [f"{integ} at {head}{', '.join(vals)}" + ("" if "tol" in head else " s") for (integ, head), vals in groups.items()]
@@ -228,13 +240,21 @@ def plot_study(res: StudyResult, path) -> None:
         ref = next(x for x in res.references if x["preset"] == preset)
         ax, bx = axes[row]
         for integ in INTEGRATORS:
-            rr = sorted((r for r in res.rows if r["preset"] == preset and r["integrator"] == integ), key=lambda r: r["cpu_ms_per_ic"])
-            if not rr:
+            mine = sorted((r for r in res.rows if r["preset"] == preset and r["integrator"] == integ),
+                          key=lambda r: r["cpu_ms_per_ic"])
+            if not mine:
                 continue
+            graded = [r for r in mine if _grows(r)]
+            rr = [r for r in mine if not _grows(r)]
             c = [r["cpu_ms_per_ic"] for r in rr]
             ax.plot(c, [r["outcome_agreement"] for r in rr], "o-", color=INTEGRATORS[integ].color, label=integ)
-            for r in rr:
+            if graded:
+                ax.plot([r["cpu_ms_per_ic"] for r in graded], [r["outcome_agreement"] for r in graded], "*",
+                        ms=9, color=INTEGRATORS[integ].color, label=f"{integ}, tol growing over the throw")
+            for r in mine:
                 lab = f"{r['tol']:.0e}" if np.isfinite(r.get("tol", float("nan"))) else f"{r['dt_s']:g}"
+                if _grows(r):
+                    lab += f"↑{r['tol_growth']:g}/s"
                 ax.annotate(lab, (r["cpu_ms_per_ic"], r["outcome_agreement"]), fontsize=6,
                             xytext=(2, 2), textcoords="offset points", color=INTEGRATORS[integ].color)
             e = np.array([r["first_impact_error_cm"] for r in rr], float)
