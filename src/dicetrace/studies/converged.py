@@ -180,7 +180,8 @@ def measure_map(ctx: Context, window: str, model: str, opts: dict, res: int, ref
     cs = cell_stats(g)
     cs.pop("sizes")
     row.update(
-        model=model, integrator=cfg.numerics.integrator, tol=cfg.numerics.tol, dt_s=cfg.numerics.dt_s,
+        model=model, integrator=cfg.numerics.integrator, tol=cfg.numerics.tol, tol_growth=cfg.numerics.tol_growth,
+        dt_s=cfg.numerics.dt_s,
         tight_integrator=cert.tight_config.numerics.integrator, tight_tol=cert.tight_config.numerics.tol,
         tight_dt_s=cert.tight_config.numerics.dt_s,
         certificate=_agreement_dict(cert.tightened), floor=_agreement_dict(cert.floor),
@@ -285,7 +286,8 @@ def compute(ctx: Context) -> Computed:
             plot[(w, m)] = s
     summary = _summary(by)
     return Computed({"res": res, "windows": list(WINDOWS), "models": {m: {**opts[m], "integrator": by[WINDOWS[0]][m][
-        "integrator"], "tol": by[WINDOWS[0]][m]["tol"], "dt_s": by[WINDOWS[0]][m]["dt_s"]} for m in MODEL_NAMES},
+        "integrator"], "tol": by[WINDOWS[0]][m]["tol"], "tol_growth": by[WINDOWS[0]][m]["tol_growth"],
+        "dt_s": by[WINDOWS[0]][m]["dt_s"]} for m in MODEL_NAMES},
         "by": by, "summary": summary, "change_sigma": CHANGE_SIGMA}, plot)
 
 
@@ -348,7 +350,8 @@ def _numerics(r: dict) -> str:
     from dicetrace.integrators import INTEGRATORS
 
     if INTEGRATORS[r["integrator"]].adaptive:
-        return f"{r['integrator']}, tol {r['tol']:.0e}"
+        growth = r.get("tol_growth") or 0.0  # rows written before the field: uniform
+        return f"{r['integrator']}, tol {r['tol']:.0e}" + (f" growing {growth:g}/s" if growth > 0 else "")
     return f"{r['integrator']}, dt {1000 * r['dt_s']:g} ms"
 
 
