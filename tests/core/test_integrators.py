@@ -94,7 +94,7 @@ def kparams(substeps: int = 8, integrator: str = "semi-implicit-euler", tol: flo
 def run(integ, kp, h, t_end, X0, U0, L0, clock=0.0):
     """State after t_end (a multiple of h): X, U, L, offsets, node z ranges (``clock``: the throw's time at the start)."""
     S = state(kp, X0, U0, L0)
-    S["clock"] = clock
+    S["tol_weight"] = math.exp(-kp.tol_growth * clock)
     zmin = np.full(8, np.inf)
     zmax = np.full(8, -np.inf)
     n = int(round(t_end / h))
@@ -385,7 +385,7 @@ def test_tol_growth_loosens_the_tolerance_with_the_throws_clock(integ):
     The undamped bounce of the test above, run with tol 1e-9 and a slow rate
     late on the clock (t = ln(100)/rate), is the bounce at a uniform tol of
     1e-7; later still it is held at TOL_LOOSEST (1e-5); at t = 0 it is the
-    bounce at 1e-9.  The clock advances by each step (while the rate is above 0).
+    bounce at 1e-9.  Each step moves the weight on by its length (while the rate is above 0).
     """
     from dicetrace.params import TOL_LOOSEST
 
@@ -407,7 +407,7 @@ def test_tol_growth_loosens_the_tolerance_with_the_throws_clock(integ):
     kp = kparams(integrator=integ, tol=1e-9, tol_growth=rate, k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0)
     S = state(kp, [0, 0, 1.0], [0, 0, -v], [0, 0, 0])
     driver(integ)(kp, T_CONTACT / 2, 4, S, np.full(8, np.inf), np.full(8, -np.inf))
-    assert S["clock"][0] == pytest.approx(2 * T_CONTACT, rel=1e-12)
+    assert S["tol_weight"][0] == pytest.approx(math.exp(-rate * 2 * T_CONTACT), rel=1e-12)
 
 
 #: Per error-controlled scheme: tolerances, and the restitution error the tightest must reach
@@ -676,6 +676,36 @@ def test_tsit5_resting_die_is_stiff_stable():
     h = 0.1
     assert math.sqrt(kp.k / 2.0) * h > 30 * INTEGRATORS["contact-tsit5"].stability_bound
     assert_comes_to_rest("contact-tsit5", kp, h, z_tol=3 * tol, v_tol=1e-5, drift_tol=30 * tol)
+
+
+def test_tsit5_sub_steps_may_span_several_steps():
+    """With dense output a sub-step is bounded by ``DENSE_CAP``·dt, not dt.  A die set down on a
+    face, sliding, then rocking, at a loose tolerance in steps of 1 ms for 0.5 s: Tsit5 covers
+    the 0.5 s with fewer accepted sub-steps than steps (the step ends between are interpolated;
+    at a bound of dt it would need one a step at least), contact-adaptive (no dense output)
+    with more.  Both end where a tolerance of 1e-9 takes the die."""
+    from dicetrace.core.schemes.contact_substep import DENSE_CAP
+    from dicetrace.core.state import SUBSTEP_CAUSES
+
+    assert DENSE_CAP > 1
+    n = 500
+    accepted = SUBSTEP_CAUSES.index("rejected")  # the causes before it end accepted sub-steps
+    def slide(integ, tol):
+        kp = kparams(integrator=integ, tol=tol, friction="per-node", clamp_normal=True, energy="rigid",
+                     v_reg_cm_s=10.0)
+        d_eq = 8 * abs(kp.g) / (4 * kp.k)
+        S = state(kp, [0, 0, 1 - d_eq], [30.0, 0, 0], [0, 0, 0])
+        assert driver(integ)(kp, 1e-3, n, S, np.full(8, np.inf), np.full(8, -np.inf))
+        return S[0]["substeps"][:accepted].sum(), S[0]["X"].copy(), S[0]["U"].copy()
+
+    _, X_ref, U_ref = slide("contact-tsit5", 1e-9)
+    for integ in ("contact-tsit5", "contact-adaptive"):
+        subs, X, U = slide(integ, 1e-5)
+        if integ == "contact-tsit5":
+            assert subs < 0.8 * n, subs
+        else:
+            assert subs >= n, subs
+        assert np.abs(X - X_ref).max() < 5e-4 and np.abs(U - U_ref).max() < 0.05, (integ, X - X_ref, U - U_ref)
 
 
 def tsit5_dense_errors(hs, theta):

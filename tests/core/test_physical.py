@@ -189,3 +189,19 @@ def test_tol_growth_spends_fewer_sub_steps_for_the_same_outcomes():
     ratio = sum(g[1] for g in graded) / sum(u[1] for u in uniform)
     assert same >= 0.8, same
     assert ratio < 0.8, ratio
+
+
+def test_a_throw_is_the_same_whether_its_step_ends_are_traced_or_not():
+    """contact-tsit5 interpolates the state at a step's end; a summary run (``st.lazy``) computes
+    only the node heights there, a traced run also the forces and node velocities.  They steer
+    nothing: status, steps, outcome, the contact-set sequence and every sub-step count agree."""
+    from dicetrace.studies.accuracy import sample_ics
+
+    for ic in sample_ics(n=6, seed=4):
+        a = simulate(ic, preset="physical", l_convention="program")
+        b = simulate(ic, preset="physical", l_convention="program",
+                     record=Record(states=True, energy=True, forces=True))
+        assert (a.status, a.steps, a.outcome) == (b.status, b.steps, b.outcome)
+        assert np.array_equal(a.contact_sets, b.contact_sets) and np.array_equal(a.contact_steps, b.contact_steps)
+        assert a.substeps == b.substeps
+        assert b.trace.forces[1:].any()  # the traced run did compute forces at its step ends

@@ -160,6 +160,8 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
     e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
     point_mass = kp.energy_mode == ENERGY_POINT_MASS
     tracing = TRACE and (tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0)
+    # nothing reads the forces or node velocities at a step's end: an interpolating scheme may skip them
+    st.lazy = not tracing and not point_mass
     if tracing:
         _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
 

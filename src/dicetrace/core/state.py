@@ -37,6 +37,17 @@ scheme keeps from one step to the next:
 ``substeps``
     the sub-steps of a contact scheme in this throw, by what ended them
     (:data:`SUBSTEP_CAUSES`); zero for the other schemes.
+``tol_weight``, ``tol_h``, ``tol_decay``
+    an error-controlled scheme with ``tol_growth`` > 0: exp(−tol_growth·t)
+    at the start of the next step (t its time in the throw, 1 at the
+    start), kept as a product of exp(−tol_growth·h) per step of length h
+    (``tol_decay``, computed again when the step's length ``tol_h``
+    changes): one multiplication a step instead of an exponential.
+``lazy``
+    set by a run loop that reads neither the forces nor the node
+    velocities at a step's end (a summary loop with the ``rigid`` stop-test
+    energy): a scheme whose step ends on an interpolated state
+    (``contact-tsit5``) then computes only the node heights there.
 
 A record costs no reference counting when it crosses a call (numba passes
 a pointer; its fields are views without a reference count), unlike the
@@ -110,15 +121,23 @@ STATE = np.dtype(
         ("ros_lu", _F8, (13, 13)),
         ("ros_piv", np.int64, 13),
         ("substeps", np.int64, SUBSTEP_CAUSES_N),
-        ("clock", _F8),
+        ("tol_weight", _F8),
+        ("tol_h", _F8),
+        ("tol_decay", _F8),
+        ("lazy", np.bool_),
     ],
     align=True,
 )
 
 
 def new_states(n: int = 1) -> np.ndarray:
-    """``n`` zeroed state records (the scratch that a loop or a batch block owns)."""
-    return np.zeros(n, dtype=STATE)
+    """``n`` state records (the scratch that a loop or a batch block owns): zeros, and a throw's start
+    tolerance weight (``init_state`` sets everything a throw reads)."""
+    S = np.zeros(n, dtype=STATE)
+    S["tol_weight"] = 1.0
+    S["tol_h"] = -1.0
+    S["tol_decay"] = 1.0
+    return S
 
 
 @jit(inline="always")
@@ -149,7 +168,10 @@ def init_state(st, ic, off0, kp):
     st.rot_ok = False
     st.h_next = 0.0
     st.ahead = 0.0
-    st.clock = 0.0
+    st.tol_weight = 1.0
+    st.tol_h = -1.0
+    st.tol_decay = 1.0
+    st.lazy = False
     for j in range(SUBSTEP_CAUSES_N):
         st.substeps[j] = 0
 
