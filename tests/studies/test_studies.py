@@ -140,3 +140,25 @@ def test_quick_run_never_touches_the_committed_results():
         assert proc.returncode == 2, (args, proc.stderr)
     after = {p: p.stat().st_mtime_ns for p in (REPO / "analysis").rglob("*") if p.is_file()}
     assert after == before
+
+
+def test_a_cached_grid_is_one_of_the_configuration_that_runs_now(tmp_path, monkeypatch):
+    """The studies' grid cache keys on the whole resolved configuration: when a preset's default
+    changes (here physical's tolerance), a grid cached under the same options is simulated again,
+    not read back; with nothing changed it is read back."""
+    import dataclasses
+
+    from dicetrace import params
+    from dicetrace.studies.context import Context, Options
+
+    ctx = Context("cache", Options(), tmp_path)
+    window, res = ((1.0, 1.2), (3.8, 4.0)), 3
+    a = ctx.sample(window, res, preset="physical")
+    assert ctx.n_throws == 9
+    b = ctx.sample(window, res, preset="physical")
+    assert ctx.n_throws == 9 and (a.labels == b.labels).all()  # read back
+    looser = dataclasses.replace(params.PRESETS["physical"], default_tol=1e-6, default_tol_growth=0.0)
+    monkeypatch.setitem(params.PRESETS, "physical", looser)
+    ctx.sample(window, res, preset="physical")
+    assert ctx.n_throws == 18  # simulated again
+    assert len(list(tmp_path.glob("*.npz"))) == 2

@@ -65,6 +65,20 @@ def _core_digest() -> str:
     return h.hexdigest()
 
 
+_DIGEST: list[str] = []
+
+
+def kernel_digest() -> str:
+    """The digest that stamps the cached kernels (all of ``core/**/*.py`` and the baked constants), once per process.
+
+    What a cache of simulation *results* keys on too: when it changes, the
+    kernels may compute something else.
+    """
+    if not _DIGEST:
+        _DIGEST.append(_core_digest())
+    return _DIGEST[0]
+
+
 def _install_core_locator() -> None:
     try:
         from numba.core import caching
@@ -73,7 +87,7 @@ def _install_core_locator() -> None:
         impl = caching.CacheImpl
     except (ImportError, AttributeError):  # numba internals moved: keep numba's default
         return
-    digest = _core_digest()
+    digest = kernel_digest()
 
     class _CoreCacheLocator(base):
         @classmethod

@@ -104,10 +104,12 @@ class Context:
     def sample(self, window, res, *, slice_spec="seed", sequences=False, **overrides):
         """:func:`dicetrace.analysis.simulator.sample_window`, cached in the cache folder."""
         from dicetrace.analysis.simulator import WindowSample, sample_window
+        from dicetrace.core._jit import kernel_digest
 
         win = window_ranges(window)
         res_t = (int(res),) * len(win) if np.isscalar(res) else tuple(int(r) for r in res)
-        key = json.dumps([slice_spec, win, res_t, bool(sequences), sorted(overrides.items())], sort_keys=True)
+        key = json.dumps([slice_spec, win, res_t, bool(sequences), sorted(overrides.items()),
+                          _resolved(overrides), kernel_digest()], sort_keys=True)
         path = self.cache_dir / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
         if path.exists() and not self.options.no_cache:
             z = np.load(path, allow_pickle=True)
@@ -124,6 +126,20 @@ class Context:
         self.log(f"simulated {window if isinstance(window, str) else win} at {res_t} "
                  f"({s.labels.size} throws, {s.wall_s:.1f} s, {s.labels.size / max(s.wall_s, 1e-9):.0f}/s)")
         return s
+
+
+def _resolved(overrides: dict) -> dict:
+    """The whole configuration a sample with these options runs (so that a cached grid is never one of an
+    older default: a preset's tolerance, a Numerics default)."""
+    import warnings
+
+    from dicetrace.params import make_config
+
+    opts = dict(overrides)
+    preset = opts.pop("preset", "seed")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # make_config's own warnings belong to the run, not to its cache key
+        return make_config(preset, **opts).as_dict()
 
 
 class Output:
