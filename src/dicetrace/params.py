@@ -328,7 +328,7 @@ class Numerics:
         tolerance of their sub-steps (relative: position error per sub-step in
         units of the half side, velocity error in units of the die's current
         speed |U| + √3·half·|ω| + √(|g|·half)), in [``TOL_MIN``, 1).  Their
-        sub-steps are at most dt long.
+        sub-steps are at most dt long (``contact-tsit5``, whose step ends are interpolated: 2·dt).
     tol_growth
         The error-controlled integrators only: a rate, 1/s, at which their
         tolerance loosens over a throw.  At time t after the start the
