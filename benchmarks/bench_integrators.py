@@ -27,9 +27,11 @@ untimed run.  ``--v-reg`` sets ``physical``'s friction regularisation
 ``physical`` preset (repeatable; the reference too), e.g. ``--set mu=0``
 to see what the sub-steps cost without friction; ``--dt`` the step of the
 contact schemes (the seed path and the reference keep 1 ms).
-``--graded RATE:TOL`` (repeatable) adds, for each error-controlled scheme
-shown, a line at tolerance TOL loosening at RATE per second over the throw
-(``tol_growth``, docs/model.md §9).
+Each error-controlled scheme also gets a line at each tolerance of the
+study that loosens over the throw (``IntegratorSpec.study_graded``; ``tol_growth``,
+docs/model.md §9; ``physical``'s default among them, marked "(default)");
+``--graded RATE:TOL`` (repeatable) replaces them by tolerance TOL loosening at
+RATE per second.
 
 Usage: ``python benchmarks/bench_integrators.py [--n 300] [--repeat 3]
 [--tol-range 1e-9,1e-5] [--integrators contact-adaptive,contact-dop853]
@@ -54,15 +56,15 @@ PRESETS = ("seed", "physical")
 SEED_PATH = ("semi-implicit-euler", 1e-3, None, 0.0)
 
 
-def runs(tol_range, only, dt=1e-3, graded=()) -> list[tuple[str, float, float | None, float]]:
+def runs(tol_range, only, dt=1e-3, graded=None) -> list[tuple[str, float, float | None, float]]:
     """(integrator, dt, tol, tol growth) of every timed line: the seed scheme, contact-substep, each adaptive
-    scheme's tolerances, then its ``graded`` (rate, tol) settings."""
+    scheme's tolerances, then its ``graded`` (rate, tol) settings (None: the study's, ``study_graded``)."""
     lo, hi = tol_range
     out = [SEED_PATH, ("contact-substep", dt, None, 0.0)]
     for name, spec in INTEGRATORS.items():
         if spec.adaptive and (not only or name in only):
             out += [(name, dt, tol, 0.0) for tol in spec.study_tol if lo <= tol <= hi]
-            out += [(name, dt, tol, rate) for rate, tol in graded]
+            out += [(name, dt, tol, rate) for rate, tol in (spec.study_graded if graded is None else graded)]
     return [r for r in out if not only or r[0] in only or r == SEED_PATH]
 
 
@@ -123,10 +125,11 @@ def main() -> None:
                     help="another field of the physical preset, e.g. mu=0 (repeatable)")
     ap.add_argument("--dt", type=float, default=1e-3, help="the contact schemes' step, s (default 0.001)")
     ap.add_argument("--graded", action="append", default=[], metavar="RATE:TOL",
-                    help="also each error-controlled scheme at TOL loosening at RATE /s (tol_growth; repeatable)")
+                    help="also each error-controlled scheme at TOL loosening at RATE /s (tol_growth; repeatable; "
+                         "default: each scheme's study_graded, physical's default among them)")
     args = ap.parse_args()
     extra_physical = physical_fields(args, ap)
-    graded = graded_settings(args.graded, ap)
+    graded = graded_settings(args.graded, ap) or None
     tol_range = tuple(float(v) for v in args.tol_range.split(","))
     only = {v.strip() for v in args.integrators.split(",") if v.strip()}
     numba.set_num_threads(1)
@@ -153,6 +156,9 @@ def main() -> None:
             settled = r.settled
             agree = agreement(r, ref)
             label = f"{integ} dt={dt:g}" + ("" if tol is None else f" tol={tol:g}") + (f" +{growth:g}/s" if growth else "")
+            default = make_config(preset, **extra).numerics
+            if (integ, dt, tol, growth) == (default.integrator, default.dt_s, default.tol, default.tol_growth):
+                label += " (default)"
             ratio = f"{ms / seed_ms:7.3g}x" if seed_ms else "       "
             print(f"  {preset:<9} {label:<38} {ms:8.3f} ms/throw {ratio} seed   agreement {agree:.3f}   "
                   f"unsettled {int(np.sum(~settled))}", flush=True)
