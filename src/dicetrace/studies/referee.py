@@ -258,7 +258,7 @@ def edge_rates(ctx: Context) -> dict:
              ("seed, contact-substep dt 0.1 ms", {"preset": "seed", "integrator": "contact-substep", "dt_s": 1e-4}),
              ("seed, contact-substep dt 1 ms", {"preset": "seed", "integrator": "contact-substep"}),
              ("seed, program step dt 1 ms", {"preset": "seed"}),
-             ("physical (contact-adaptive)", {"preset": "physical"}))
+             ("physical (its default numerics)", {"preset": "physical"}))
     for name, opts in cases:
         for tilt0 in (1e-6, 1e-4):
             row = {"model": name, "tilt0": tilt0}
@@ -270,7 +270,7 @@ def edge_rates(ctx: Context) -> dict:
             releases.append(row)
     out["releases"] = releases
     jac = []
-    for name, opts in (("physical (contact-adaptive)", {"preset": "physical"}),
+    for name, opts in (("physical (its default numerics)", {"preset": "physical"}),
                        ("seed, contact-substep dt 0.1 ms", {"preset": "seed", "integrator": "contact-substep",
                                                             "dt_s": 1e-4})):
         j = edge_jacobian_rate(**opts)
