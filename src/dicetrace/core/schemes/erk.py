@@ -376,7 +376,10 @@ def dense_state(st, kp, theta):
     """X, U, L, ω and the offsets of ``st`` at θ·h into the kept sub-step (Tsit5's continuous extension).
 
     The quaternion is normalised and the offsets are its exact rotation of
-    the sub-step's starting ones: the die stays rigid to rounding.
+    the sub-step's starting ones: the die stays rigid to rounding.  With
+    ``st.lazy`` (a run loop that reads only the node heights at a step's
+    end) only the offsets' z components are turned; the next step goes on
+    from the front, never from these offsets.
     """
     w = st.dn_w
     for i in range(TSIT5_STAGES + 1):
@@ -390,5 +393,20 @@ def dense_state(st, kp, theta):
         st.U[j] = y[3 + j]
         st.L[j] = y[6 + j]
         st.W[j] = y[6 + j] / kp.inertia
-    quat_rotate(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
+    if st.lazy:
+        # only the heights are read at this step end: the offsets' third row
+        q0 = y[9] / qn
+        q1 = y[10] / qn
+        q2 = y[11] / qn
+        q3 = y[12] / qn
+        n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+        s2 = 2.0 / n
+        r20 = s2 * (q1 * q3 - q0 * q2)
+        r21 = s2 * (q2 * q3 + q0 * q1)
+        r22 = 1.0 - s2 * (q1 * q1 + q2 * q2)
+        off = st.dn_off
+        for k in range(8):
+            st.off[k, 2] = r20 * off[k, 0] + r21 * off[k, 1] + r22 * off[k, 2]
+    else:
+        quat_rotate(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
     st.rot_h = -1.0
