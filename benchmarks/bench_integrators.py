@@ -160,7 +160,7 @@ def main() -> None:
             if (integ, dt, tol, growth) == (default.integrator, default.dt_s, default.tol, default.tol_growth):
                 label += " (default)"
             ratio = f"{ms / seed_ms:7.3g}x" if seed_ms else "       "
-            print(f"  {preset:<9} {label:<38} {ms:8.3f} ms/throw {ratio} seed   agreement {agree:.3f}   "
+            print(f"  {preset:<9} {label:<50} {ms:8.3f} ms/throw {ratio} seed   agreement {agree:.3f}   "
                   f"unsettled {int(np.sum(~settled))}", flush=True)
             if args.budget and INTEGRATORS[integ].substepped:
                 b = budget(ics, cfg)
