@@ -14,8 +14,8 @@ process) on all the refined view's ICs: what the explorer adds is the difference
 explorer runs in this process, so the CPU time it takes (all threads: ``time.process_time``)
 is printed beside the wall time: on a shared machine it varies much less.
 
-For ``--preset physical`` the preset's own integrator (contact-adaptive) is
-used unless ``--integrator`` says otherwise.
+For ``--preset physical`` the preset's own integrator and tolerance (``contact-tsit5``,
+2e-8 loosening at 10 /s) are used unless ``--integrator`` says otherwise.
 
 Usage: ``python benchmarks/bench_explore.py [--preset seed] [--res 256] [--integrator NAME] [--threads N] [--no-fine]``.
 """
