@@ -394,16 +394,9 @@ def dense_state(st, kp, theta):
         st.L[j] = y[6 + j]
         st.W[j] = y[6 + j] / kp.inertia
     if st.lazy:
-        # only the heights are read at this step end: the offsets' third row
-        q0 = y[9] / qn
-        q1 = y[10] / qn
-        q2 = y[11] / qn
-        q3 = y[12] / qn
-        n = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
-        s2 = 2.0 / n
-        r20 = s2 * (q1 * q3 - q0 * q2)
-        r21 = s2 * (q2 * q3 + q0 * q1)
-        r22 = 1.0 - s2 * (q1 * q1 + q2 * q2)
+        # only the heights are read at this step end: the offsets' third row (the rest of R unused)
+        r = quat_matrix(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn)
+        r20, r21, r22 = r[6], r[7], r[8]
         off = st.dn_off
         for k in range(8):
             st.off[k, 2] = r20 * off[k, 0] + r21 * off[k, 1] + r22 * off[k, 2]
