@@ -133,13 +133,13 @@ def _resolved(overrides: dict) -> dict:
     older default: a preset's tolerance, a Numerics default)."""
     import warnings
 
-    from dicetrace.params import make_config
+    from dicetrace.analysis.simulator import _resolve_config
 
     opts = dict(overrides)
-    preset = opts.pop("preset", "seed")
+    preset = opts.pop("preset", "seed")  # sample_window's default
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # make_config's own warnings belong to the run, not to its cache key
-        return make_config(preset, **opts).as_dict()
+        return _resolve_config(None, preset, opts).as_dict()
 
 
 class Output:
