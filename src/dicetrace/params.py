@@ -124,6 +124,16 @@ TOL_LOOSEST = 1e-5
 TOL_GROWTH_MAX = 1000.0
 
 
+def _valid_tol(v) -> bool:
+    """An error tolerance: a finite number in [TOL_MIN, 1) (``Numerics.tol``, ``Preset.default_tol``)."""
+    return _is_number(v) and math.isfinite(v) and TOL_MIN <= v < 1
+
+
+def _valid_tol_growth(v) -> bool:
+    """A tolerance growth rate, 1/s: a finite number in [0, TOL_GROWTH_MAX] (``Numerics.tol_growth``, ``Preset.default_tol_growth``)."""
+    return _is_number(v) and math.isfinite(v) and 0 <= v <= TOL_GROWTH_MAX
+
+
 @dataclass(frozen=True)
 class Preset:
     """A physical model of the die and the ground.
@@ -239,12 +249,12 @@ class Preset:
             raise ValueError(f"preset {self.name!r}: unknown integrator {self.integrator!r}")
         tol = self.default_tol
         if tol is not None:
-            if not _is_number(tol) or not math.isfinite(tol) or not TOL_MIN <= tol < 1:
+            if not _valid_tol(tol):
                 raise ValueError(f"preset {self.name!r}: default_tol must be None or a number in [{TOL_MIN:g}, 1), "
                                  f"got {_show(tol)}")
             object.__setattr__(self, "default_tol", _plain(tol))
         gr = self.default_tol_growth
-        if not _is_number(gr) or not math.isfinite(gr) or not 0 <= gr <= TOL_GROWTH_MAX:
+        if not _valid_tol_growth(gr):
             raise ValueError(f"preset {self.name!r}: default_tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] "
                              f"(1/s), got {_show(gr)}")
         object.__setattr__(self, "default_tol_growth", _plain(gr))
@@ -370,11 +380,11 @@ class Numerics:
         if not _is_number(sub) or not math.isfinite(sub) or int(sub) != sub or sub < 1:
             raise ValueError(f"substeps must be an integer >= 1, got {_show(sub)}")
         object.__setattr__(self, "substeps", _plain(sub))
-        if not _is_number(self.tol) or not math.isfinite(self.tol) or not TOL_MIN <= self.tol < 1:
+        if not _valid_tol(self.tol):
             raise ValueError(f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {_show(self.tol)}")
         object.__setattr__(self, "tol", _plain(self.tol))
         gr = self.tol_growth
-        if not _is_number(gr) or not math.isfinite(gr) or not 0 <= gr <= TOL_GROWTH_MAX:
+        if not _valid_tol_growth(gr):
             raise ValueError(f"tolerance growth tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] (1/s), "
                              f"got {_show(gr)}")
         object.__setattr__(self, "tol_growth", _plain(gr))
