@@ -19,7 +19,8 @@ over the plain scheme, measured interleaved in one process on one thread
   the sub-step (the root of its height's Hermite interpolant when one did);
 * ``interpolation``: the state at a step's end inside a sub-step that runs
   past it (Tsit5's continuous extension);
-* ``step-end forces``: the node heights, velocities and forces there;
+* ``step-end forces``: what the step hands the run loop there (in a summary
+  loop only the node heights: ``STATE.lazy``);
 * ``flight piece``: the lowest node's height after a piece of exact free
   flight near the ground;
 * ``impact search``: locating the moment the lowest node reaches the ground.
@@ -119,7 +120,7 @@ def variants() -> dict:
     i1 = src.find("        if cut < 1.0:\n")
     cut_loop = src[i0:i1] if 0 <= i0 < i1 else "        cut = 2.0 (the cut loop)\n"
     interp = "            DENSE_STATE(st, kp, 1.0 - st.ahead / st.dn_h)\n"
-    interp_forces = interp + "            return eval_forces(st, kp)\n"
+    interp_forces = interp + "            return dense_end(st, kp)\n"
     return {
         "plain": (drive, {}),
         "substep": (drive, dict(SUBSTEP=substep_twice)),
@@ -127,10 +128,10 @@ def variants() -> dict:
         "error": (drive, dict(ERROR=error_twice)),
         "end forces": (_drive_twice("drive_end_forces", end_forces, "g0"), {}),
         "cut test": (_drive_twice("drive_cut", cut_loop, "cut"), {}),
-        "interpolation": (_drive_twice("drive_interp", interp, "st.U[2] + st.off[7, 2]"), {}),
+        "interpolation": (_drive_twice("drive_interp", interp, "st.X[2] + st.off[7, 2]"), {}),
         "step-end forces": (_edited(drive, "drive_interp_forces", interp_forces,
-                                    interp + f"            eval_forces(st, kp)\n            {SINK}st.z[0]\n"
-                                    "            return eval_forces(st, kp)\n"), {}),
+                                    interp + f"            dense_end(st, kp)\n            {SINK}st.z[0]\n"
+                                    "            return dense_end(st, kp)\n"), {}),
         "flight piece": (_drive_twice("drive_piece", "            m1 = free_min_height(Xw, Uw, W, offw, kp, hs)\n", "m1"), {}),
         "impact search": (_drive_twice("drive_search", "            tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)\n",
                                        "tau"), {}),
