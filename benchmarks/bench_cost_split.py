@@ -45,6 +45,7 @@ import inspect
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -68,12 +69,17 @@ def _jit(fn):
     return jit(fn, cache=False)
 
 
-def _edited(fn, name: str, old: str, new: str):
-    """``fn``'s source with ``old`` replaced once by ``new``, compiled in ``fn``'s module as ``name``."""
+def _edited(fn, name: str, old: str, new: str, *more: str):
+    """``fn``'s source with ``old`` replaced once by ``new`` (and each further (old, new) pair of
+    ``more`` after it), compiled in ``fn``'s module as ``name``."""
     src = textwrap.dedent(inspect.getsource(fn))
-    if old not in src:
-        sys.exit(f"bench_cost_split: {fn.__name__}'s source no longer contains {old.strip()!r}; update this script")
-    src = src.replace(f"def {fn.__name__}(", f"def {name}(", 1).replace(old, new, 1)
+    src = src.replace(f"def {fn.__name__}(", f"def {name}(", 1)
+    pairs = (old, new, *more)
+    for a, b in zip(pairs[::2], pairs[1::2]):
+        if a not in src:
+            sys.exit(f"{Path(sys.argv[0]).stem or 'benchmarks'}: {fn.__name__}'s source no longer contains "
+                     f"{a.strip()!r}; update this script")
+        src = src.replace(a, b, 1)
     env = dict(fn.__globals__)
     exec(compile(src, inspect.getsourcefile(fn), "exec"), env)
     return env[name]

@@ -1,29 +1,34 @@
 """The benchmark scripts that edit the kernels' source still find what they edit.
 
 ``benchmarks/bench_cost_split.py`` measures each part of ``contact-tsit5`` by a
-variant of the driver with that part done twice, made by replacing lines of
-the driver's source.  When the driver changes, a replaced line can vanish and
-the script stops with a message: building the variants (no compiling) is
-enough to catch that here.
+variant of the driver with that part done twice, and
+``benchmarks/bench_step_limits.py`` counts what limits its sub-steps with
+lines added to the driver; both edit the driver's source.  When the driver
+changes, an edited line can vanish and the script stops with a message:
+building the variants (no compiling) is enough to catch that here.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import sys
 from pathlib import Path
 
-BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_cost_split.py"
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-def _load():
-    spec = importlib.util.spec_from_file_location("bench_cost_split", BENCH)
+def _load(name: str):
+    """The benchmark script ``name`` as a module (benchmarks/ on the path, as when it runs)."""
+    if str(BENCHMARKS) not in sys.path:
+        sys.path.insert(0, str(BENCHMARKS))
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
 
 
 def test_cost_split_variants_build():
-    table = _load().variants()
+    table = _load("bench_cost_split").variants()
     assert list(table)[0] == "plain"
     assert {"substep", "stages", "error", "end forces", "cut test", "interpolation", "step-end forces",
             "flight piece", "impact search"} <= set(table)
@@ -32,3 +37,13 @@ def test_cost_split_variants_build():
         if name in ("cut test", "interpolation", "step-end forces", "end forces", "flight piece", "impact search"):
             # an edited copy of the driver, not the driver itself
             assert template.__name__ != "drive", name
+
+
+def test_step_limits_counters_build():
+    mod = _load("bench_step_limits")
+    drive = mod.instrumented_drive()
+    assert drive.__name__ == "drive_limits"
+    # every counter row the script reads lies inside the work area it borrows
+    assert max(mod.ROW_LAM + 2, mod.ROW_OMEGA + 2, mod.ROW_REJECTED, mod.ROW_ACCEPTED) < 13
+    assert len(mod.CONTEXTS) <= 13 and len(mod.LAM_EDGES) + 1 <= 13
+    assert mod._ranges((0.1, 0.3)) == ["≤ 0.1", "0.1–0.3", "> 0.3"]
