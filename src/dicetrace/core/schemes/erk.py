@@ -252,37 +252,6 @@ def combine(w, n, K, y0, h, y):
 
 
 @jit(inline="always")
-def stage_combine(w, n, K, y0, h, y):
-    """:func:`combine` without X_x and X_y, bit for bit: a stage point's forces never read them."""
-    a2 = a3 = a4 = a5 = a6 = a7 = a8 = a9 = a10 = a11 = a12 = 0.0
-    for j in range(n):
-        a = w[j]
-        if a != 0.0:
-            a2 += a * K[j, 2]
-            a3 += a * K[j, 3]
-            a4 += a * K[j, 4]
-            a5 += a * K[j, 5]
-            a6 += a * K[j, 6]
-            a7 += a * K[j, 7]
-            a8 += a * K[j, 8]
-            a9 += a * K[j, 9]
-            a10 += a * K[j, 10]
-            a11 += a * K[j, 11]
-            a12 += a * K[j, 12]
-    y[2] = y0[2] + h * a2
-    y[3] = y0[3] + h * a3
-    y[4] = y0[4] + h * a4
-    y[5] = y0[5] + h * a5
-    y[6] = y0[6] + h * a6
-    y[7] = y0[7] + h * a7
-    y[8] = y0[8] + h * a8
-    y[9] = y0[9] + h * a9
-    y[10] = y0[10] + h * a10
-    y[11] = y0[11] + h * a11
-    y[12] = y0[12] + h * a12
-
-
-@jit(inline="always")
 def substep_start(st, y0):
     """y0 = (X, U, L, q = 1) from the sub-step start ``st.sub_*``."""
     for j in range(3):
@@ -334,7 +303,7 @@ def erk_template(st, kp, h, f0, f1, f2, t0, t1, t2):
     substep_start(st, y0)
     derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
     for i in range(1, NS):
-        stage_combine(A[i], i, K, y0, h, y)
+        combine(A[i], i, K, y0, h, y)
         g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
         derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
     combine(B, NS, K, y0, h, y)
@@ -389,25 +358,6 @@ tsit5_error = jit(
 
 
 @jit(inline="always")
-def heights_combine(w, n, K, y0, h, y):
-    """Components 2 (X_z) and 9..12 (q) of :func:`combine`, in its arithmetic, bit for bit."""
-    a2 = a9 = a10 = a11 = a12 = 0.0
-    for j in range(n):
-        a = w[j]
-        if a != 0.0:
-            a2 += a * K[j, 2]
-            a9 += a * K[j, 9]
-            a10 += a * K[j, 10]
-            a11 += a * K[j, 11]
-            a12 += a * K[j, 12]
-    y[2] = y0[2] + h * a2
-    y[9] = y0[9] + h * a9
-    y[10] = y0[10] + h * a10
-    y[11] = y0[11] + h * a11
-    y[12] = y0[12] + h * a12
-
-
-@jit(inline="always")
 def turn_heights(q0, q1, q2, q3, off0, off):
     """The offsets' z components, R(q)·off0 (R's third row only; q a unit quaternion)."""
     r = quat_matrix(q0, q1, q2, q3)
@@ -438,28 +388,24 @@ def dense_state(st, kp, theta):
     the sub-step's starting ones: the die stays rigid to rounding.  With
     ``st.lazy`` (a run loop that reads only the node heights at a step's
     end) only the offsets' z components are turned; the next step goes on
-    from the front, never from these offsets.
+    from the front, never from these offsets.  With ``st.quiet`` too (the
+    loop skips its stop tests here) only X_z is written, not X_x, X_y, U, L, ω.
     """
     w = st.dn_w
     for i in range(TSIT5_STAGES + 1):
         w[i] = theta * (TSIT5_DENSE[i, 0] + theta * (TSIT5_DENSE[i, 1] + theta * (
             TSIT5_DENSE[i, 2] + theta * TSIT5_DENSE[i, 3])))
     y = st.rk_acc
-    if st.lazy and st.quiet:
-        # the loop reads only the node heights here: X_z and q, as ``combine`` computes them
-        heights_combine(w, TSIT5_STAGES + 1, st.rk_k, st.rk_y0, st.dn_h, y)
-        qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
-        st.X[2] = y[2]
-        turn_heights(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
-        st.rot_h = -1.0
-        return
     combine(w, TSIT5_STAGES + 1, st.rk_k, st.rk_y0, st.dn_h, y)
     qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
-    for j in range(3):
-        st.X[j] = y[j]
-        st.U[j] = y[3 + j]
-        st.L[j] = y[6 + j]
-        st.W[j] = y[6 + j] / kp.inertia
+    if st.lazy and st.quiet:
+        st.X[2] = y[2]  # the loop reads only the node heights here (``STATE.quiet``)
+    else:
+        for j in range(3):
+            st.X[j] = y[j]
+            st.U[j] = y[3 + j]
+            st.L[j] = y[6 + j]
+            st.W[j] = y[6 + j] / kp.inertia
     if st.lazy:
         # only the heights are read at this step end: the offsets' third row (the rest of R unused)
         turn_heights(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
