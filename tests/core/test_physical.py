@@ -192,30 +192,26 @@ def test_tol_growth_spends_fewer_sub_steps_for_the_same_outcomes():
 
 
 def test_the_rigid_energy_never_rises_along_a_physical_throw():
-    """Damping and friction only dissipate, the clamp only removes a pull: the rigid energy (kinetic,
-    gravitational, elastic) never rises along the model's motion.  A summary run leans on it: at a
-    step end before a sub-step's far end it skips the stop and blow-up tests when that far end's
-    energy clears the stop threshold by ``loop.QUIET_MARGIN``.  The rises seen at step ends are
-    rounding, ~1e8 times below that margin."""
-    from dicetrace.core.loop import QUIET_MARGIN
+    """Damping and friction only dissipate and the clamp only removes a pull, so the rigid energy
+    (kinetic, gravitational, elastic) never rises along the model's motion: at a step's end it
+    may rise by rounding only (measured: up to 6e-8 on a total of ~1.2e5), and it falls through
+    the stop threshold at the last step."""
     from dicetrace.studies.accuracy import sample_ics
 
     kp = make_config("physical").kernel_params()
-    margin = QUIET_MARGIN * (abs(kp.e_stop) + kp.e_rest)
     for ic in sample_ics(n=6, seed=4):
         r = simulate(ic, preset="physical", l_convention="program", record=Record(states=False, energy=True))
         assert r.status == "settled"
         total = r.trace.energy["total"]
-        assert np.diff(total).max() < 1e-12 * total[0] + 1e-6 * margin
-        # it fell to the stop threshold (the stop-test energy is the total less the rest energy)
+        assert np.diff(total).max() < 1e-11 * total[0]
+        # the stop-test energy is the total less the rest energy
         assert total[-1] - kp.e_rest <= kp.e_stop < total[-2] - kp.e_rest
 
 
 def test_a_throw_is_the_same_whether_its_step_ends_are_traced_or_not():
     """contact-tsit5 interpolates the state at a step's end; a summary run (``st.lazy``) computes
-    only the node heights there (and skips the stop tests that cannot fire, ``STATE.quiet``), a
-    traced run also the forces and node velocities and every test.  They steer nothing: status,
-    steps, outcome, the contact-set sequence and every sub-step count agree."""
+    only the node heights there, a traced run also the forces and node velocities.  They steer
+    nothing: status, steps, outcome, the contact-set sequence and every sub-step count agree."""
     from dicetrace.studies.accuracy import sample_ics
 
     for ic in sample_ics(n=6, seed=4):

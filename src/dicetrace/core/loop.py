@@ -61,15 +61,6 @@ ENERGY_COLS = 6
 # decides when the exact energy is evaluated, never the result.
 E_BOUND_MARGIN = 1e-7
 
-#: The stop test's margin, relative to the stop threshold plus the rest energy
-#: (``STATE.e_safe``): a lazy loop skips the stop and blow-up tests at a step end
-#: interpolated inside a sub-step whose far end's rigid energy clears the threshold
-#: by this much (~10 node-mass·cm²/s² on ``physical``, 10⁵ times what the
-#: interpolation can get wrong) and is below the blow-up threshold.  The rigid
-#: energy never increases along the model's motion (damping and friction only
-#: dissipate), so the skipped tests could not have fired.
-QUIET_MARGIN = 1e-3
-
 #: ICs per work item of ``run_batch`` (a few ms of work: scheduling is free).
 BATCH_BLOCK = 16
 
@@ -171,10 +162,6 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
     tracing = TRACE and (tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0)
     # nothing reads the forces or node velocities at a step's end: an interpolating scheme may skip them
     st.lazy = not tracing and not point_mass
-    if st.lazy:
-        # the energy band in which a step end needs neither the stop nor the blow-up test
-        st.e_safe[0] = kp.e_stop + QUIET_MARGIN * (abs(kp.e_stop) + e_rest)
-        st.e_safe[1] = e_blow
     if tracing:
         _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
 
@@ -189,9 +176,6 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
         ended, status, nsets, last_mask = after_step(finite, n, mask, last_mask, sets, set_steps, nsets)
         if ended:
             break
-        if st.quiet and st.ahead > 0.0:
-            # interpolated inside a sub-step whose far end is in the band: its energy is higher
-            continue
         e_dyn = math.nan
         if contact:
             e_dyn = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest

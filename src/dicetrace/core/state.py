@@ -48,14 +48,6 @@ scheme keeps from one step to the next:
     velocities at a step's end (a summary loop with the ``rigid`` stop-test
     energy): a scheme whose step ends on an interpolated state
     (``contact-tsit5``) then computes only the node heights there.
-``e_safe``, ``quiet``
-    the stop and blow-up tests' band, set by a lazy run loop: a step end
-    whose rigid energy exceeds ``e_safe[0]`` (above the stop threshold by a
-    margin) and stays below ``e_safe[1]`` (the blow-up threshold) needs
-    neither test.  ``quiet``: this step's end lies inside a sub-step whose
-    far end is in that band; the energy, which never increases along the
-    model's motion, is higher there, so the scheme interpolated only the
-    node heights (not U, L) and the loop skips both tests.
 
 A record costs no reference counting when it crosses a call (numba passes
 a pointer; its fields are views without a reference count), unlike the
@@ -133,8 +125,6 @@ STATE = np.dtype(
         ("tol_h", _F8),
         ("tol_decay", _F8),
         ("lazy", np.bool_),
-        ("e_safe", _F8, 2),
-        ("quiet", np.bool_),
     ],
     align=True,
 )
@@ -182,9 +172,6 @@ def init_state(st, ic, off0, kp):
     st.tol_h = -1.0
     st.tol_decay = 1.0
     st.lazy = False
-    st.e_safe[0] = math.inf
-    st.e_safe[1] = -math.inf
-    st.quiet = False
     for j in range(SUBSTEP_CAUSES_N):
         st.substeps[j] = 0
 

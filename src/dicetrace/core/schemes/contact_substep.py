@@ -32,7 +32,7 @@ import math
 
 from dicetrace.core._jit import jit, specialise
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
-from dicetrace.core.model import energy_dynamic, node_heights
+from dicetrace.core.model import node_heights
 from dicetrace.core.free_flight import (
     free_advance,
     free_flight,
@@ -446,12 +446,6 @@ def drive(st, kp, h, contact):
         # the last sub-step
         st.ahead = t + hs - h
         front_keep(st, c5, g0, g1, g2, q0, q1, q2, friction_rate(z, uk, P, kp))
-        # the rigid energy at the front (z holds its heights): in the loop's band, the
-        # step ends before it need only their node heights (``state.STATE``: quiet)
-        st.quiet = False
-        if st.lazy:
-            ef = energy_dynamic(Uw[0], Uw[1], Uw[2], W[0], W[1], W[2], z, kp) - kp.e_rest
-            st.quiet = st.e_safe[0] < ef < st.e_safe[1]
         DENSE_STATE(st, kp, rest / hs)
         return dense_end(st, kp)
     if t < h:

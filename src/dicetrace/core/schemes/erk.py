@@ -358,15 +358,6 @@ tsit5_error = jit(
 
 
 @jit(inline="always")
-def turn_heights(q0, q1, q2, q3, off0, off):
-    """The offsets' z components, R(q)·off0 (R's third row only; q a unit quaternion)."""
-    r = quat_matrix(q0, q1, q2, q3)
-    r20, r21, r22 = r[6], r[7], r[8]
-    for k in range(8):
-        off[k, 2] = r20 * off0[k, 0] + r21 * off0[k, 1] + r22 * off0[k, 2]
-
-
-@jit(inline="always")
 def dense_keep(st, h):
     """Keep what :func:`dense_state` needs of the sub-step just computed (length h) besides its stages.
 
@@ -388,8 +379,7 @@ def dense_state(st, kp, theta):
     the sub-step's starting ones: the die stays rigid to rounding.  With
     ``st.lazy`` (a run loop that reads only the node heights at a step's
     end) only the offsets' z components are turned; the next step goes on
-    from the front, never from these offsets.  With ``st.quiet`` too (the
-    loop skips its stop tests here) only X_z is written, not X_x, X_y, U, L, ω.
+    from the front, never from these offsets.
     """
     w = st.dn_w
     for i in range(TSIT5_STAGES + 1):
@@ -398,17 +388,18 @@ def dense_state(st, kp, theta):
     y = st.rk_acc
     combine(w, TSIT5_STAGES + 1, st.rk_k, st.rk_y0, st.dn_h, y)
     qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
-    if st.lazy and st.quiet:
-        st.X[2] = y[2]  # the loop reads only the node heights here (``STATE.quiet``)
-    else:
-        for j in range(3):
-            st.X[j] = y[j]
-            st.U[j] = y[3 + j]
-            st.L[j] = y[6 + j]
-            st.W[j] = y[6 + j] / kp.inertia
+    for j in range(3):
+        st.X[j] = y[j]
+        st.U[j] = y[3 + j]
+        st.L[j] = y[6 + j]
+        st.W[j] = y[6 + j] / kp.inertia
     if st.lazy:
         # only the heights are read at this step end: the offsets' third row (the rest of R unused)
-        turn_heights(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
+        r = quat_matrix(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn)
+        r20, r21, r22 = r[6], r[7], r[8]
+        off = st.dn_off
+        for k in range(8):
+            st.off[k, 2] = r20 * off[k, 0] + r21 * off[k, 1] + r22 * off[k, 2]
     else:
         quat_rotate(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
     st.rot_h = -1.0
