@@ -39,6 +39,7 @@ from dicetrace.core.schemes import contact_substep, contact_tsit5
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.studies.accuracy import T_MAX_S, sample_ics
+from dicetrace.studies.text import tol_text
 
 #: Bucket edges of λ_f·h and of ω·h.
 LAM_EDGES = (0.25, 0.5, 1.0, 2.0)
@@ -127,10 +128,8 @@ def main() -> None:
     counted = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()
     counts /= m
     causes /= m
-    tol = cfg.numerics.tol
-    growth = cfg.numerics.tol_growth
-    setting = f"tol {tol:g}" + (f" growing {growth:g}/s" if growth else "")
-    print(f"contact-tsit5 on {args.preset}, {setting}, {m} zoom-out ICs; per throw: "
+    setting = tol_text({"tol": cfg.numerics.tol, "tol_growth": cfg.numerics.tol_growth})
+    print(f"contact-tsit5 on {args.preset}, tol {setting}, {m} zoom-out ICs; per throw: "
           + ", ".join(f"{c} {v:.0f}" for c, v in zip(SUBSTEP_CAUSES, causes)))
     if counted != plain:
         print("  the counted driver CHANGED the trajectory: the figures below are not the scheme's")

@@ -23,25 +23,11 @@ from dicetrace.studies.accuracy import (
     cheapest_at_target,
     zero_floor_settings,
 )
-from dicetrace.studies.text import fmt
+from dicetrace.studies.text import fmt, grows, tol_text
 
 
 def _fmt(v, spec=".3g"):
     return fmt(v, spec, missing="—")
-
-
-def tol_text(r: dict) -> str:
-    """A run's tolerance as text: ``1e-07``, or ``2e-08 growing 10/s`` when it loosens over the throw; '' for none."""
-    tol = r.get("tol", float("nan"))
-    if tol is None or not np.isfinite(tol):
-        return ""
-    return f"{tol:g}" + (f" growing {r['tol_growth']:g}/s" if _grows(r) else "")
-
-
-def _grows(r: dict) -> bool:
-    """Whether a run's tolerance loosens over the throw."""
-    g = r.get("tol_growth", float("nan"))
-    return g is not None and np.isfinite(g) and g > 0
 
 
 def setting(r: dict) -> str:
@@ -244,8 +230,8 @@ def plot_study(res: StudyResult, path) -> None:
                           key=lambda r: r["cpu_ms_per_ic"])
             if not mine:
                 continue
-            graded = [r for r in mine if _grows(r)]
-            rr = [r for r in mine if not _grows(r)]
+            graded = [r for r in mine if grows(r)]
+            rr = [r for r in mine if not grows(r)]
             c = [r["cpu_ms_per_ic"] for r in rr]
             ax.plot(c, [r["outcome_agreement"] for r in rr], "o-", color=INTEGRATORS[integ].color, label=integ)
             if graded:
@@ -253,7 +239,7 @@ def plot_study(res: StudyResult, path) -> None:
                         ms=9, color=INTEGRATORS[integ].color, label=f"{integ}, tol growing over the throw")
             for r in mine:
                 lab = f"{r['tol']:.0e}" if np.isfinite(r.get("tol", float("nan"))) else f"{r['dt_s']:g}"
-                if _grows(r):
+                if grows(r):
                     lab += f"↑{r['tol_growth']:g}/s"
                 ax.annotate(lab, (r["cpu_ms_per_ic"], r["outcome_agreement"]), fontsize=6,
                             xytext=(2, 2), textcoords="offset points", color=INTEGRATORS[integ].color)

@@ -42,7 +42,7 @@ import numpy as np
 from pathlib import Path
 
 from dicetrace.studies.context import Computed, Context, Options, Output
-from dicetrace.studies.text import fmt, md_table, pm
+from dicetrace.studies.text import fmt, md_table, pm, tol_text
 
 NAME = "converged"
 WINDOWS = ("home", "zoom-out", "more-out", "red-sea")
@@ -350,8 +350,7 @@ def _numerics(r: dict) -> str:
     from dicetrace.integrators import INTEGRATORS
 
     if INTEGRATORS[r["integrator"]].adaptive:
-        growth = r.get("tol_growth") or 0.0  # rows written before the field: uniform
-        return f"{r['integrator']}, tol {r['tol']:.0e}" + (f" growing {growth:g}/s" if growth > 0 else "")
+        return f"{r['integrator']}, tol {tol_text(r)}"  # rows written before tol_growth: uniform
     return f"{r['integrator']}, dt {1000 * r['dt_s']:g} ms"
 
 

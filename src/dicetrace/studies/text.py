@@ -32,3 +32,17 @@ def pm(v, e, spec=".3f") -> str:
     if e is None or not math.isfinite(e):
         return format(v, spec)
     return f"{format(v, spec)} ± {format(e, spec)}"
+
+
+def grows(r: dict) -> bool:
+    """Whether a run's tolerance loosens over the throw (a ``tol_growth`` above 0; rows without one: no)."""
+    g = r.get("tol_growth")
+    return g is not None and math.isfinite(g) and g > 0
+
+
+def tol_text(r: dict) -> str:
+    """A run's tolerance as text: ``1e-07``, or ``2e-08 growing 10/s`` when it loosens over the throw; '' for none."""
+    tol = r.get("tol")
+    if tol is None or not math.isfinite(tol):
+        return ""
+    return f"{tol:g}" + (f" growing {r['tol_growth']:g}/s" if grows(r) else "")
