@@ -24,6 +24,7 @@ own name.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import types
@@ -65,18 +66,14 @@ def _core_digest() -> str:
     return h.hexdigest()
 
 
-_DIGEST: list[str] = []
-
-
+@functools.cache
 def kernel_digest() -> str:
     """The digest that stamps the cached kernels (all of ``core/**/*.py`` and the baked constants), once per process.
 
     What a cache of simulation *results* keys on too: when it changes, the
     kernels may compute something else.
     """
-    if not _DIGEST:
-        _DIGEST.append(_core_digest())
-    return _DIGEST[0]
+    return _core_digest()
 
 
 def _install_core_locator() -> None:
