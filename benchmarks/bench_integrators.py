@@ -146,6 +146,7 @@ def main() -> None:
         ics = convert_l(ics_prog, "program", get_preset(preset).l_convention)
         ref_cfg = make_config(preset, integrator=ref_name, dt_s=ref_dt, t_max_s=T_MAX_S, tol=args.reference_tol, **extra)
         ref = run_batch(ics, ref_cfg)
+        default = make_config(preset, **extra).numerics
         for integ, dt, tol, growth in lines:
             cfg = make_config(preset, integrator=integ, dt_s=dt, t_max_s=T_MAX_S, tol=tol,
                               tol_growth=growth or None, **extra)
@@ -156,7 +157,6 @@ def main() -> None:
             settled = r.settled
             agree = agreement(r, ref)
             label = f"{integ} dt={dt:g}" + ("" if tol is None else f" tol={tol:g}") + (f" +{growth:g}/s" if growth else "")
-            default = make_config(preset, **extra).numerics
             if (integ, dt, tol, growth) == (default.integrator, default.dt_s, default.tol, default.tol_growth):
                 label += " (default)"
             ratio = f"{ms / seed_ms:7.3g}x" if seed_ms else "       "
