@@ -189,8 +189,7 @@ def main() -> None:
         template, over = table[name]
         tag = name.replace(" ", "_").replace("-", "_")
         step = _jit(specialise(template, f"step_split_{tag}", **{**constants, **over}))
-        kernels[name] = _jit(specialise(loop._roll, f"roll_split_{tag}", STEP=step, TRACE=False,
-                                            FAST_APPLIES=loop._never, FAST=loop._no_kernel))
+        kernels[name] = _jit(loop.summary_loop(step, f"roll_split_{tag}"))
     hashes = {}
     for name in names:  # compile (numba compiles on the first call) and check the trajectory
         _all(kernels[name], kin.ics, kin.off0, kin.params, S, *out)

@@ -111,8 +111,7 @@ def main() -> None:
     kernels = {}
     for name, template in (("plain", contact_substep.drive), ("counted", instrumented_drive())):
         step = _jit(specialise(template, f"step_limits_{name}", **contact_tsit5.DRIVE_CONSTANTS))
-        kernels[name] = _jit(specialise(loop._roll, f"roll_limits_{name}", STEP=step, TRACE=False,
-                                        FAST_APPLIES=loop._never, FAST=loop._no_kernel))
+        kernels[name] = _jit(loop.summary_loop(step, f"roll_limits_{name}"))
     S = new_states(1)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
     _all(kernels["plain"], kin.ics, kin.off0, kin.params, S, *out)

@@ -120,3 +120,31 @@ def locate_entry(X, U, W, off, kp, hs, m1):
         if b - a <= 1e-13 * hs or fc == 0.0:
             break
     return b if fc < 0.0 else c
+
+
+@jit(inline="always")
+def flight_steps(X, U, W, off, kp, h, mmax):
+    """The most whole steps of length h, at most ``mmax``, over which no node can reach the ground.
+
+    The largest m with :func:`free_flight_safe` over m·h (the test is
+    monotone in its span: the lowest the CM gets only falls, the reach of
+    the rotating nodes only grows), found by doubling then bisection; 0 when
+    not even one step is safe.
+    """
+    lo = 0
+    hi = 1
+    while hi <= mmax and free_flight_safe(X, U, W, off, kp, hi * h):
+        lo = hi
+        hi *= 2
+    if hi > mmax:
+        if lo < mmax and free_flight_safe(X, U, W, off, kp, mmax * h):
+            return mmax
+        hi = mmax
+    # lo safe (or 0), hi not safe (or not tried beyond mmax)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if free_flight_safe(X, U, W, off, kp, mid * h):
+            lo = mid
+        else:
+            hi = mid
+    return lo

@@ -2,7 +2,11 @@
 
 ``_roll`` is the one loop: it steps the state until the stop test fires
 (docs/model.md §5.3, §7) or the run fails (§10), records the contact-set
-sequence (§8) and, in its tracing variant, the per-step channels.  It is
+sequence (§8) and, in its tracing variant, the per-step channels.  For a
+scheme whose free flight is exact (``EXACT_FLIGHT`` in its module: the
+contact schemes), a free flight of several whole steps is crossed in one
+piece (``_cross_flight``): the stop-test energy is conserved in it, so the
+stop test cannot fire, and no contact set changes.  It is
 never called itself: :func:`roll_kernel` specialises it at compile time
 (``_jit.specialise``) on the step function of one scheme (``core.schemes``,
 named by the integrator table) and on whether it may trace, so each
@@ -43,9 +47,10 @@ import numpy as np
 from numba import prange
 
 from dicetrace.core._jit import jit, jit_parallel, specialise
-from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_velocities
+from dicetrace.core.free_flight import flight_steps, free_advance
+from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_heights, node_velocities
 from dicetrace.core.schemes import scheme_module
-from dicetrace.core.state import STATE, after_step, init_state, new_states, state_finite
+from dicetrace.core.state import STATE, after_step, age_tolerance, init_state, new_states, state_finite
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import ENERGY_POINT_MASS
 from dicetrace.status import Status
@@ -57,8 +62,9 @@ ENERGY_COLS = 6
 # Relative safety margin of the free-flight energy bound (see _roll).  The
 # bound is exact for a perfect cube; 1e-7 also covers offsets that drift from
 # one over 10⁶ steps and tilted starts built from a rotation matrix accurate
-# to 1e-9 (Config.initial_offsets accepts that much).  The margin only
-# decides when the exact energy is evaluated, never the result.
+# to 1e-9 (Config.initial_offsets accepts that much).  The margin decides
+# when the exact energy is evaluated, never the result, and when a free
+# flight may be crossed in one piece (the stop test cannot fire in it).
 E_BOUND_MARGIN = 1e-7
 
 #: ICs per work item of ``run_batch`` (a few ms of work: scheduling is free).
@@ -92,6 +98,52 @@ def _write_trace(n, st, kp, tr_state, tr_force, tr_energy):
             tr_energy[n, 0] = parts[4] - kp.e_rest
         for j in range(5):
             tr_energy[n, 1 + j] = parts[j]
+
+
+@jit(inline="always")
+def _clears(e, kp):
+    """The stop-test energy e (``rigid``: ``energy_dynamic`` − e_rest) clears the stop threshold by far more than rounding.
+
+    The margin is ``E_BOUND_MARGIN`` relative to the energy's terms (all
+    positive in free flight), as the point-mass bound's; False for NaN.
+    """
+    return e - kp.e_stop > E_BOUND_MARGIN * (abs(e) + kp.e_rest + abs(kp.e_stop)) + 1e-9
+
+
+@jit
+def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
+    """Steps n+1 … n+m of a free flight in one exact piece (``free_flight.free_advance`` over m·h).
+
+    Returns what a step returns (no node below the ground, contact mask 0).
+    A trace gets rows n+1 … n+m−1 as the exact flight's states at those
+    step ends, each from the flight's start (row n+m is the loop's, as for
+    any step): tracing writes, never steers, so a traced throw and its
+    summary stay the same bit for bit.  The tolerance weight ages by m steps.
+    """
+    age_tolerance(st, kp, h, m)
+    if tracing:
+        # the flight's start, kept in the sub-step work area (free between steps without a front)
+        for j in range(3):
+            st.sub_X[j] = st.X[j]
+            st.sub_U[j] = st.U[j]
+        for k in range(8):
+            for j in range(3):
+                st.sub_off[k, j] = st.off[k, j]
+        for i in range(1, m + 1):
+            if i > 1:
+                for j in range(3):
+                    st.X[j] = st.sub_X[j]
+                    st.U[j] = st.sub_U[j]
+                for k in range(8):
+                    for j in range(3):
+                        st.off[k, j] = st.sub_off[k, j]
+            free_advance(st.X, st.U, st.W, st.off, kp, i * h)
+            if i < m:
+                node_heights(st.X[2], st.off, st.z)
+                _write_trace(n + i, st, kp, tr_state, tr_force, tr_energy)
+    else:
+        free_advance(st.X, st.U, st.W, st.off, kp, m * h)
+    return node_heights(st.X[2], st.off, st.z)
 
 
 @jit
@@ -169,9 +221,22 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
     maxn = int(kp.max_steps)
     status = Status.TIME_CAP
     half2 = kp.half_side_cm * kp.half_side_cm
+    # whether the stop-test energy of a free state clears the stop threshold by far
+    # more than rounding (``_clears``; at the start only where that energy is e0)
+    clear = not point_mass and _clears(e0, kp)
     while n < maxn:
-        n += 1
-        contact, mask = STEP(st, kp, h, contact)
+        m = 0
+        if FLIGHT and clear and last_mask == 0 and st.ahead == 0.0:
+            # A free flight conserves the stop-test energy: while it lasts the
+            # stop test cannot fire and no contact set changes.  Cross it in
+            # one exact piece.
+            m = flight_steps(X, U, W, off, kp, h, maxn - n)
+        if m > 1:
+            contact, mask = _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy)
+            n += m
+        else:
+            n += 1
+            contact, mask = STEP(st, kp, h, contact)
         finite = state_finite(X[2], U[0], U[1], U[2], L[0], L[1], L[2], off[0, 0], off[7, 2])
         ended, status, nsets, last_mask = after_step(finite, n, mask, last_mask, sets, set_steps, nsets)
         if ended:
@@ -187,9 +252,12 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
         # Stop test.  In free flight (no contact) the point-mass energy is
         # bounded below cheaply: Σ|u_k|² = 8|U|² + 16·h²|ω|² + rounding, so the
         # exact 24-term sum is needed only when that bound is near threshold.
+        # ``clear``: the stop-test energy of a free state clears the threshold
+        # by far more than rounding (computed alike whether or not tracing).
+        clear = False
         if point_mass:
             need = True
-            if not contact and not tracing:
+            if not contact:
                 ke = 8.0 * (U[0] * U[0] + U[1] * U[1] + U[2] * U[2]) + 16.0 * half2 * (
                     W[0] * W[0] + W[1] * W[1] + W[2] * W[2]
                 )
@@ -198,7 +266,8 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
                     sz += z[k]
                 e_approx = (0.5 * ke + (-kp.g) * sz) - e_rest
                 margin = E_BOUND_MARGIN * (0.5 * ke + abs(kp.g) * abs(sz) + e_rest) + 1e-9
-                need = not (e_approx - margin > kp.e_stop)  # a NaN bound (overflow) needs the exact energy
+                clear = e_approx - margin > kp.e_stop  # False for a NaN bound (overflow)
+                need = tracing or not clear
             if need:
                 if not contact:
                     node_velocities(U[0], U[1], U[2], W[0], W[1], W[2], off, st.uk)
@@ -207,6 +276,7 @@ def _roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
                 e = kp.e_stop + 1.0
         else:
             e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
+            clear = not contact and _clears(e, kp)
         if tracing:
             _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
         if not math.isfinite(e):
@@ -271,6 +341,18 @@ def _fast_summary(mod, trace: bool):
     return mod.fast_summary()
 
 
+def summary_loop(step, name: str, *, exact_flight: bool = True):
+    """The summary run loop around a step function of one's own, as a template to compile (``_jit.jit``).
+
+    What a benchmark or a test that varies a scheme runs its variant in:
+    ``_roll`` specialised on ``step`` (the contract of ``core.schemes``),
+    with no specialised kernel; ``exact_flight`` as a scheme module's
+    ``EXACT_FLIGHT`` (False: every free flight is stepped step by step).
+    """
+    return specialise(_roll, name, STEP=step, FLIGHT=bool(exact_flight), TRACE=False, FAST_APPLIES=_never,
+                      FAST=_no_kernel)
+
+
 def roll_kernel(integ: int, trace: bool):
     """The run loop of integrator ``integ`` (kernel id), tracing or summary only (built on first use).
 
@@ -284,7 +366,8 @@ def roll_kernel(integ: int, trace: bool):
         applies, fast = _fast_summary(mod, trace)
         name = f"roll_{scheme}_{'trace' if trace else 'summary'}"
         _KERNELS[key] = jit(
-            specialise(_roll, name, STEP=mod.step, TRACE=bool(trace), FAST_APPLIES=applies, FAST=fast)
+            specialise(_roll, name, STEP=mod.step, FLIGHT=getattr(mod, "EXACT_FLIGHT", False), TRACE=bool(trace),
+                       FAST_APPLIES=applies, FAST=fast)
         )
     return _KERNELS[key]
 

@@ -64,6 +64,7 @@ import numpy as np
 
 from dicetrace.core._jit import jit
 from dicetrace.core.contacts import record_set
+from dicetrace.params import TOL_LOOSEST
 from dicetrace.status import Status
 
 _F8 = np.float64
@@ -138,6 +139,26 @@ def new_states(n: int = 1) -> np.ndarray:
     S["tol_h"] = -1.0
     S["tol_decay"] = 1.0
     return S
+
+
+@jit(inline="always")
+def age_tolerance(st, kp, h, steps):
+    """Age the tolerance weight by ``steps`` steps of length h; returns the weight of the first.
+
+    With ``kp.tol_growth`` > 0 an error-controlled step that starts at time t
+    weighs its error estimates by exp(−tol_growth·t), never below kp.tol /
+    ``TOL_LOOSEST`` (the loosest tolerance); 1 with tol_growth = 0.  The
+    weight is a product of one ``tol_decay`` per step (see ``STATE``).
+    """
+    grade = 1.0
+    if kp.tol_growth > 0.0:
+        grade = max(st.tol_weight, min(1.0, kp.tol / TOL_LOOSEST))
+        if h != st.tol_h:
+            st.tol_h = h
+            st.tol_decay = math.exp(-kp.tol_growth * h)
+        for _ in range(steps):
+            st.tol_weight *= st.tol_decay
+    return grade
 
 
 @jit(inline="always")

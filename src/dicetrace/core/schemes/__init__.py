@@ -13,6 +13,11 @@ its scheme module here (``IntegratorSpec.scheme``); the module defines
     rigid.  Returns whether any node is strictly below the ground and the
     bitmask of nodes at or below it;
 
+``EXACT_FLIGHT`` (optional, False when absent)
+    True when the step integrates free flight exactly (the parabola and the
+    exact rotation, ``core.free_flight``): the run loop then crosses a free
+    flight of several whole steps in one piece (``core.loop``);
+
 and, optionally, ``fast_summary() -> (applies, kernel)``: a specialised
 summary kernel (``kernel(ic, off0, kp, sets, set_steps)``, bit-identical
 to the run loop's summary) and the predicate ``applies(kp, off0)`` that

@@ -12,7 +12,7 @@ near 1e-10) an order-8 pair takes steps several times longer than RK4; its
 from __future__ import annotations
 
 from dicetrace.core._jit import jit, specialise
-from dicetrace.core.schemes.contact_substep import drive
+from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, drive  # noqa: F401 (the driver's free flight)
 from dicetrace.core.schemes.erk import dop853_error, dop853_substep
 
 #: Largest λ_f·h of the friction law (DOP853's interval on the negative real

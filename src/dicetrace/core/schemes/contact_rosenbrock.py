@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from dicetrace.core._jit import jit, specialise
-from dicetrace.core.schemes.contact_substep import drive
+from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, drive  # noqa: F401 (the driver's free flight)
 from dicetrace.core.schemes.erk import (
     NY,
     ZERO,

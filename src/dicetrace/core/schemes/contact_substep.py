@@ -41,8 +41,8 @@ from dicetrace.core.free_flight import (
     locate_entry,
 )
 from dicetrace.core.schemes.rk4 import accept_substep, begin_substeps, cf4, cf4_error, end_substeps
-from dicetrace.core.state import SUBSTEP_CAUSES
-from dicetrace.params import FRICTION_SPECTRAL, TOL_LOOSEST
+from dicetrace.core.state import SUBSTEP_CAUSES, age_tolerance
+from dicetrace.params import FRICTION_SPECTRAL
 
 #: Largest RK4 sub-step for the friction law, in units of 1/λ_f (λ_f the
 #: friction law's stiffness per unit effective mass; RK4 is stable to 2.78).
@@ -100,6 +100,10 @@ def _no_dense_state(st, kp, theta):
 DENSE = False
 DENSE_KEEP = _no_dense_keep
 DENSE_STATE = _no_dense_state
+#: Free flight is exact (the parabola and the exact rotation): the run loop
+#: may cross a flight of several steps in one piece (``core.schemes``).  Every
+#: scheme built on :func:`drive` re-exports it.
+EXACT_FLIGHT = True
 #: Most sub-steps in one macro step (a safety valve: beyond it the state is
 #: set to NaN, which the loop reports as ``non_finite``).
 MAX_SUBSTEPS = 100000
@@ -252,13 +256,7 @@ def drive(st, kp, h, contact):
     """
     W = st.W
     # the weight of this step's error estimates (the tolerance loosened by tol_growth)
-    grade = 1.0
-    if kp.tol_growth > 0.0:
-        grade = max(st.tol_weight, min(1.0, kp.tol / TOL_LOOSEST))
-        if h != st.tol_h:
-            st.tol_h = h
-            st.tol_decay = math.exp(-kp.tol_growth * h)
-        st.tol_weight *= st.tol_decay
+    grade = age_tolerance(st, kp, h, 1)
     if DENSE and st.ahead > 0.0:
         if st.ahead > h:
             # the step ends inside the sub-step the front came from: interpolate

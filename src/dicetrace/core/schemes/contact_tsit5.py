@@ -16,7 +16,7 @@ step's end, the state at the end is Tsit5's continuous extension there
 from __future__ import annotations
 
 from dicetrace.core._jit import jit, specialise
-from dicetrace.core.schemes.contact_substep import drive
+from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, drive  # noqa: F401 (the driver's free flight)
 from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsit5_substep
 
 #: Largest λ_f·h of the friction law (Tsit5's interval on the negative real

@@ -1,0 +1,159 @@
+"""The run loop (``core.loop``): crossing a free flight in one piece.
+
+For a scheme whose free flight is exact the loop crosses a flight of
+several whole steps in one exact piece.  These tests pin what that may and
+may not change: the span it crosses is the longest one the free-flight
+bound allows; a recording's rows inside it are the exact flight; the
+tolerance weight ages as if stepped; and, against the same loop stepping
+every flight step by step, the throws end alike (status, steps, outcome,
+contact sets) with states that differ by rounding only.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dicetrace.core import loop
+from dicetrace.core._jit import _core_digest, jit
+from dicetrace.core.free_flight import flight_steps, free_flight_safe
+from dicetrace.core.schemes import step_of
+from dicetrace.core.state import age_tolerance, new_states
+from dicetrace.integrators import INTEGRATORS
+from dicetrace.params import convert_l, make_config
+from dicetrace.studies.accuracy import T_MAX_S, sample_ics
+
+_CORE = _core_digest()[:16]
+TSIT5 = INTEGRATORS["contact-tsit5"]
+
+
+@jit
+def _age(S, kp, h, steps, one_by_one):
+    st = S[0]
+    if one_by_one:
+        for _ in range(steps):
+            age_tolerance(st, kp, h, 1)
+    else:
+        age_tolerance(st, kp, h, steps)
+    return st.tol_weight
+
+
+@jit
+def _steps(X, U, W, off, kp, h, mmax):
+    return flight_steps(X, U, W, off, kp, h, mmax)
+
+
+@jit
+def _safe(X, U, W, off, kp, h):
+    return free_flight_safe(X, U, W, off, kp, h)
+
+
+_STEPPED: dict = {}
+
+
+def stepped_loop(spec):
+    """The summary loop of ``spec``'s scheme with every free flight stepped step by step (cached on disk)."""
+    if spec.scheme not in _STEPPED:
+        fn = loop.summary_loop(step_of(spec), f"roll_stepped_{spec.scheme}_{_CORE}", exact_flight=False)
+        _STEPPED[spec.scheme] = jit(fn)
+    return _STEPPED[spec.scheme]
+
+
+def _roll(kernel, ic, kin, states=None):
+    cap = 1 << 14
+    sets = np.zeros(cap, np.uint8)
+    set_steps = np.zeros(cap, np.int32)
+    S = new_states(1) if states is None else states
+    status, steps, outcome, nsets = kernel(ic, kin.off0, kin.params, S, sets, set_steps, *loop._NO_ROWS)
+    return (int(status), int(steps), int(outcome)), sets[:nsets].copy(), set_steps[:nsets].copy(), S
+
+
+def test_flight_steps_is_the_longest_span_the_bound_allows():
+    """m steps are safe and m + 1 are not (or m is the cap), from states rising, falling, spinning and near the ground."""
+    kp = make_config("physical").kernel_params()
+    rng = np.random.default_rng(7)
+    h = 1e-3
+    counted = 0
+    for _ in range(300):
+        X = np.array([0.0, 0.0, rng.uniform(0.5, 30.0)])
+        U = rng.normal(0.0, 60.0, 3)
+        W = rng.normal(0.0, 30.0, 3)
+        off = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float) * kp.half_side_cm
+        mmax = int(rng.integers(1, 400))
+        m = _steps(X, U, W, off, kp, h, mmax)
+        assert 0 <= m <= mmax
+        if m > 0:
+            assert _safe(X, U, W, off, kp, m * h)
+            counted += 1
+        if m < mmax:
+            assert not _safe(X, U, W, off, kp, (m + 1) * h)
+    assert counted > 100  # the sample reaches both cases
+
+
+@pytest.mark.parametrize("rate", [0.0, 10.0])
+def test_the_tolerance_weight_ages_by_a_crossed_flight_as_by_its_steps(rate):
+    kp = make_config("physical", tol=2e-8, tol_growth=rate).kernel_params()
+    a, b = new_states(1), new_states(1)
+    for steps in (1, 7, 150):
+        assert _age(a, kp, 1e-3, steps, True) == _age(b, kp, 1e-3, steps, False)  # bit for bit
+    assert a[0]["tol_weight"] == pytest.approx(math.exp(-rate * 0.158), rel=1e-12)
+
+
+def test_crossing_flights_changes_no_outcome_and_the_trajectory_only_by_rounding():
+    """Against the same loop stepping every flight: same status, steps, outcome and contact sets; states
+    within rounding at the end of a throw cut short at 0.25 s (before chaos amplifies the rounding)."""
+    cfg = make_config("physical", t_max_s=T_MAX_S)
+    ics = convert_l(sample_ics("zoom-out", 24), "program", "physical")
+    kin = cfg.kernel_inputs(ics)
+    crossing = loop.roll_kernel(TSIT5.kernel_id, False)
+    stepping = stepped_loop(TSIT5)
+    for ic in kin.ics:
+        a = _roll(crossing, ic, kin)
+        b = _roll(stepping, ic, kin)
+        assert a[0] == b[0]
+        np.testing.assert_array_equal(a[1], b[1])
+        np.testing.assert_array_equal(a[2], b[2])
+    short = make_config("physical", t_max_s=0.25).kernel_inputs(ics[:8])
+    moved = 0
+    for ic in short.ics:
+        sa = _roll(crossing, ic, short)[3][0]
+        sb = _roll(stepping, ic, short)[3][0]
+        for f in ("X", "U", "L", "off"):
+            np.testing.assert_allclose(sa[f], sb[f], rtol=0, atol=1e-8 * max(1.0, np.abs(sb[f]).max()))
+        moved += not np.array_equal(sa["off"], sb["off"])
+    assert moved > 0  # the flights were crossed: the rounding differs
+
+
+def test_a_recording_inside_a_crossed_flight_is_the_exact_flight_and_steers_nothing():
+    """The rows of the first flight are the parabola and the exact rotation from the start; the traced
+    throw ends exactly as its summary."""
+    cfg = make_config("physical", t_max_s=T_MAX_S)
+    ic = convert_l(sample_ics("zoom-out", 3), "program", "physical")[2]
+    kin = cfg.kernel_inputs(ic[None, :])
+    kp = kin.params
+    n = int(kp.max_steps)
+    tr_state = np.zeros((n + 1, loop.STATE_COLS))
+    tr_force = np.zeros((n + 1, loop.FORCE_COLS))
+    tr_energy = np.zeros((n + 1, loop.ENERGY_COLS))
+    cap = 1 << 14
+    sets, set_steps = np.zeros(cap, np.uint8), np.zeros(cap, np.int32)
+    traced = loop.run_roll(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, sets, set_steps, tr_state, tr_force, tr_energy)
+    summary = loop.run_summary(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, np.zeros(cap, np.uint8),
+                               np.zeros(cap, np.int32))
+    assert tuple(traced) == tuple(summary)
+    first = int(set_steps[1])  # the step of the first contact
+    assert first > 50
+    t = np.arange(first) * kp.dt_s
+    U0 = kin.ics[0, :3]
+    z = kp.z0_cm + U0[2] * t + 0.5 * kp.g * t * t
+    np.testing.assert_allclose(tr_state[:first, 2], z, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(tr_state[:first, 0], U0[0] * t, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(tr_state[:first, 5], U0[2] + kp.g * t, rtol=0, atol=1e-10)
+    assert np.all(tr_force[:first] == 0.0)
+    # rigid and turning at the constant ω: every offset keeps its length, the energy stays put
+    off = tr_state[:first, 9:].reshape(-1, 8, 3)
+    np.testing.assert_allclose(np.linalg.norm(off, axis=2), math.sqrt(3) * kp.half_side_cm, rtol=1e-13)
+    e = tr_energy[1:first, 5]
+    assert np.ptp(e) <= 1e-12 * np.abs(e).max()
