@@ -11,7 +11,7 @@ near 1e-10) an order-8 pair takes steps several times longer than RK4; its
 
 from __future__ import annotations
 
-from dicetrace.core._jit import jit, specialise
+from dicetrace.core._jit import jit_fused, specialise
 from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, drive  # noqa: F401 (the driver's free flight)
 from dicetrace.core.schemes.erk import dop853_error, dop853_substep
 
@@ -21,7 +21,7 @@ FRICTION_THETA = 3.0
 #: An impact's first sub-step, as ω·h with ω = √k.
 H0 = 0.3
 
-step = jit(
+step = jit_fused(
     specialise(
         drive, "step_dop853", "contact-dop853: ``contact_substep.drive`` on DOP853 sub-steps (``erk``).",
         SUBSTEP=dop853_substep, ERROR=dop853_error, ERR_EXP=1.0 / 8.0, THETA=FRICTION_THETA, H0=H0,

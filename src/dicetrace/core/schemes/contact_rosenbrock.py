@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from dicetrace.core._jit import jit, specialise
+from dicetrace.core._jit import jit_fused, specialise
 from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, drive  # noqa: F401 (the driver's free flight)
 from dicetrace.core.schemes.erk import (
     NY,
@@ -73,7 +73,7 @@ FRICTION_THETA = math.inf
 H0 = 0.1
 
 
-@jit
+@jit_fused
 def lu_factor(a, piv):
     """LU factors of the 13×13 matrix ``a`` in place (Doolittle, partial pivoting); row swaps in ``piv``."""
     n = NY
@@ -104,7 +104,7 @@ def lu_factor(a, piv):
                 a[r, c] = 0.0
 
 
-@jit
+@jit_fused
 def lu_solve(a, piv, b):
     """Solve (LU)·x = b in place with the factors of :func:`lu_factor`."""
     n = NY
@@ -126,7 +126,7 @@ def lu_solve(a, piv, b):
         b[r] = s / a[r, r]
 
 
-@jit
+@jit_fused
 def jacobian(st, kp, y0, f0, f1, f2, t0, t1, t2, J):
     """J = ∂f/∂y at the sub-step start y0 (q = 1), f0..t2 the contact force sum and torque there.
 
@@ -185,7 +185,7 @@ def jacobian(st, kp, y0, f0, f1, f2, t0, t1, t2, J):
         J[8, c] = (q2 - t2) / d
 
 
-@jit
+@jit_fused
 def ros_substep(st, kp, h, f0, f1, f2, t0, t1, t2):
     """One ROS34PW2 step from the sub-step start ``st.sub_*`` to ``st.new_*``.
 
@@ -232,13 +232,13 @@ def ros_substep(st, kp, h, f0, f1, f2, t0, t1, t2):
     substep_end(st, y)
 
 
-@jit
+@jit_fused
 def ros_error(st, kp, h, g0, g1, g2, q0, q1, q2):
     """Local error of the last :func:`ros_substep` over ``kp.tol`` (the embedded order-2 solution's distance)."""
     return state_error_norm(st.rk_acc, error_speed(st.new_U, st.new_L, kp), kp) / kp.tol
 
 
-step = jit(
+step = jit_fused(
     specialise(
         drive, "step_rosenbrock",
         "contact-rosenbrock: ``contact_substep.drive`` on ROS34PW2 sub-steps (linearly implicit).",

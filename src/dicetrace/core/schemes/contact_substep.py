@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 
-from dicetrace.core._jit import jit, specialise
+from dicetrace.core._jit import jit, jit_fused, specialise
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
 from dicetrace.core.model import node_heights
 from dicetrace.core.free_flight import (
@@ -461,7 +461,7 @@ def drive(st, kp, h, contact):
 
 
 #: contact-substep / contact-adaptive: the driver on commutator-free RK4 sub-steps.
-step = jit(
+step = jit_fused(
     specialise(
         drive, "step_rk4", "contact-substep and contact-adaptive: :func:`drive` on RK4 sub-steps (``rk4.cf4``).",
         SUBSTEP=cf4, ERROR=cf4_error, ERR_EXP=0.25, THETA=FRICTION_THETA, H0=ADAPT_H0,

@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from dicetrace.core._jit import jit, specialise
+from dicetrace.core._jit import jit, jit_fused, specialise
 from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
 from dicetrace.core.model import offset_cross_omega
 from dicetrace.core.schemes.rk4 import error_norm, error_speed
@@ -341,18 +341,18 @@ def erk_error1_template(st, kp, h, g0, g1, g2, q0, q1, q2):
 
 
 #: DOP853's sub-step and its error estimate (order 8; the estimate's exponent 1/8).
-dop853_substep = jit(
+dop853_substep = jit_fused(
     specialise(erk_template, "dop853_substep", NS=DOP853_STAGES, A=DOP853_A, B=DOP853_B)
 )
-dop853_error = jit(
+dop853_error = jit_fused(
     specialise(erk_error_template, "dop853_error", NS=DOP853_STAGES, E5=DOP853_E5, E3=DOP853_E3)
 )
 
 #: Tsit5's sub-step and its error estimate (order 5, estimate of order 4: the exponent 1/5).
-tsit5_substep = jit(
+tsit5_substep = jit_fused(
     specialise(erk_template, "tsit5_substep", NS=TSIT5_STAGES, A=TSIT5_A, B=TSIT5_B)
 )
-tsit5_error = jit(
+tsit5_error = jit_fused(
     specialise(erk_error1_template, "tsit5_error", NS=TSIT5_STAGES, E=TSIT5_E)
 )
 
