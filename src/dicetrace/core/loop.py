@@ -50,7 +50,7 @@ from dicetrace.core._jit import jit, jit_parallel, specialise
 from dicetrace.core.free_flight import flight_steps, free_advance
 from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_heights, node_velocities
 from dicetrace.core.schemes import scheme_module
-from dicetrace.core.state import STATE, after_step, age_tolerance, init_state, new_states, state_finite
+from dicetrace.core.state import STATE, after_step, age_tolerance, copy_motion, init_state, new_states, state_finite
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import ENERGY_POINT_MASS
 from dicetrace.status import Status
@@ -123,20 +123,10 @@ def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
     age_tolerance(st, kp, h, m)
     if tracing:
         # the flight's start, kept in the sub-step work area (free between steps without a front)
-        for j in range(3):
-            st.sub_X[j] = st.X[j]
-            st.sub_U[j] = st.U[j]
-        for k in range(8):
-            for j in range(3):
-                st.sub_off[k, j] = st.off[k, j]
+        copy_motion(st.X, st.U, st.L, st.off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
         for i in range(1, m + 1):
             if i > 1:
-                for j in range(3):
-                    st.X[j] = st.sub_X[j]
-                    st.U[j] = st.sub_U[j]
-                for k in range(8):
-                    for j in range(3):
-                        st.off[k, j] = st.sub_off[k, j]
+                copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.X, st.U, st.L, st.off)
             free_advance(st.X, st.U, st.W, st.off, kp, i * h)
             if i < m:
                 node_heights(st.X[2], st.off, st.z)

@@ -142,6 +142,18 @@ def new_states(n: int = 1) -> np.ndarray:
 
 
 @jit(inline="always")
+def copy_motion(X, U, L, off, X_to, U_to, L_to, off_to):
+    """Copy a motion (X, U, L and the offsets) from one part of the state record to another."""
+    for j in range(3):
+        X_to[j] = X[j]
+        U_to[j] = U[j]
+        L_to[j] = L[j]
+    for k in range(8):
+        for j in range(3):
+            off_to[k, j] = off[k, j]
+
+
+@jit(inline="always")
 def age_tolerance(st, kp, h, steps):
     """Age the tolerance weight by ``steps`` steps of length h; returns the weight of the first.
 

@@ -28,7 +28,7 @@ from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, eval_forces, step_wrench, wrench_at
 from dicetrace.core.free_flight import CIRCUM, free_flight, free_flight_safe
 from dicetrace.core.rotation import apply9, mul9, rot9
-from dicetrace.core.state import set_angular_momentum
+from dicetrace.core.state import copy_motion, set_angular_momentum
 
 
 @jit(inline="always")
@@ -184,26 +184,15 @@ def cf4_error(st, kp, h, g0, g1, g2, q0, q1, q2):
 
 
 @jit(inline="always")
-def _copy_motion(X, U, L, off, X_to, U_to, L_to, off_to):
-    for j in range(3):
-        X_to[j] = X[j]
-        U_to[j] = U[j]
-        L_to[j] = L[j]
-    for k in range(8):
-        for j in range(3):
-            off_to[k, j] = off[k, j]
-
-
-@jit(inline="always")
 def begin_substeps(st):
     """Copy the state into the sub-step start (``st.sub_*``)."""
-    _copy_motion(st.X, st.U, st.L, st.off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
+    copy_motion(st.X, st.U, st.L, st.off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
 
 
 @jit(inline="always")
 def accept_substep(st, kp):
     """The sub-step's result (``st.new_*``) becomes the sub-step start; ω follows L."""
-    _copy_motion(st.new_X, st.new_U, st.new_L, st.new_off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
+    copy_motion(st.new_X, st.new_U, st.new_L, st.new_off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
     for j in range(3):
         st.W[j] = st.sub_L[j] / kp.inertia
 
@@ -211,7 +200,7 @@ def accept_substep(st, kp):
 @jit(inline="always")
 def end_substeps(st, kp):
     """Copy the sub-step start back into the state (ω follows L; the cached rotation is dropped)."""
-    _copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.X, st.U, st.L, st.off)
+    copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.X, st.U, st.L, st.off)
     set_angular_momentum(st, st.L[0], st.L[1], st.L[2], kp)
 
 
