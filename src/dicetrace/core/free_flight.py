@@ -136,11 +136,8 @@ def flight_steps(X, U, W, off, kp, h, mmax):
     while hi <= mmax and free_flight_safe(X, U, W, off, kp, hi * h):
         lo = hi
         hi *= 2
-    if hi > mmax:
-        if lo < mmax and free_flight_safe(X, U, W, off, kp, mmax * h):
-            return mmax
-        hi = mmax
-    # lo safe (or 0), hi not safe (or not tried beyond mmax)
+    # lo safe (or 0); hi not safe, or beyond mmax (never taken)
+    hi = min(hi, mmax + 1)
     while hi - lo > 1:
         mid = (lo + hi) // 2
         if free_flight_safe(X, U, W, off, kp, mid * h):
