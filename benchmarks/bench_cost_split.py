@@ -51,7 +51,7 @@ import numba
 import numpy as np
 
 from dicetrace.core import loop
-from dicetrace.core._jit import jit, specialise
+from dicetrace.core._jit import jit, jit_fused, specialise
 from dicetrace.core.schemes import contact_substep, contact_tsit5, erk
 from dicetrace.core.state import new_states
 from dicetrace.params import convert_l, make_config
@@ -67,6 +67,11 @@ SINK = "st.dn_w[6] += "
 def _jit(fn):
     """dicetrace's jit, uncached: the variants are this run's only."""
     return jit(fn, cache=False)
+
+
+def _jit_scheme(fn):
+    """A variant of a contact scheme's kernel, compiled as the scheme's own are (``jit_fused``), uncached."""
+    return jit_fused(fn, cache=False)
 
 
 def _edited(fn, name: str, old: str, new: str, *more: str):
@@ -101,21 +106,21 @@ def variants() -> dict:
     tsub = erk.tsit5_substep
     terr = erk.tsit5_error
 
-    @_jit
+    @_jit_scheme
     def substep_twice(st, kp, h, f0, f1, f2, t0, t1, t2):
         tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
         st.dn_w[6] += st.new_X[2]
         tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
 
-    @_jit
+    @_jit_scheme
     def error_twice(st, kp, h, g0, g1, g2, q0, q1, q2):
         st.dn_w[6] += terr(st, kp, h, g0, g1, g2, q0, q1, q2)
         return terr(st, kp, h, g0, g1, g2, q0, q1, q2)
 
     stage = "        g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)\n"
     stages_tmpl = _edited(erk.erk_template, "erk_stages_twice", stage, _twice(stage, "g0 + q1"))
-    stages_twice = _jit(specialise(stages_tmpl, "tsit5_stages_twice", NS=erk.TSIT5_STAGES, A=erk.TSIT5_A,
-                                       B=erk.TSIT5_B))
+    stages_twice = _jit_scheme(specialise(stages_tmpl, "tsit5_stages_twice", NS=erk.TSIT5_STAGES, A=erk.TSIT5_A,
+                                          B=erk.TSIT5_B))
 
     drive = contact_substep.drive
     src = textwrap.dedent(inspect.getsource(drive))
@@ -188,7 +193,7 @@ def main() -> None:
     for name in names:
         template, over = table[name]
         tag = name.replace(" ", "_").replace("-", "_")
-        step = _jit(specialise(template, f"step_split_{tag}", **{**constants, **over}))
+        step = _jit_scheme(specialise(template, f"step_split_{tag}", **{**constants, **over}))
         kernels[name] = _jit(loop.summary_loop(step, f"roll_split_{tag}"))
     hashes = {}
     for name in names:  # compile (numba compiles on the first call) and check the trajectory

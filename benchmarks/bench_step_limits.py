@@ -32,7 +32,7 @@ import hashlib
 import numba
 import numpy as np
 
-from bench_cost_split import _all, _edited, _jit
+from bench_cost_split import _all, _edited, _jit, _jit_scheme
 from dicetrace.core import loop
 from dicetrace.core._jit import specialise
 from dicetrace.core.schemes import contact_substep, contact_tsit5
@@ -110,7 +110,7 @@ def main() -> None:
     m = len(ics)
     kernels = {}
     for name, template in (("plain", contact_substep.drive), ("counted", instrumented_drive())):
-        step = _jit(specialise(template, f"step_limits_{name}", **contact_tsit5.DRIVE_CONSTANTS))
+        step = _jit_scheme(specialise(template, f"step_limits_{name}", **contact_tsit5.DRIVE_CONSTANTS))
         kernels[name] = _jit(loop.summary_loop(step, f"roll_limits_{name}"))
     S = new_states(1)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
