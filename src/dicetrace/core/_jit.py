@@ -30,6 +30,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import sys
 import types
 from pathlib import Path
 
@@ -112,12 +113,37 @@ if CACHE:
 _OPTIONS = dict(cache=CACHE, fastmath=False, error_model="numpy", nogil=True)
 
 
+def _without_disk_cache(why: str) -> None:
+    """Compile without numba's on-disk cache from now on, and say so once on standard error."""
+    global CACHE
+    if CACHE:
+        CACHE = False
+        _OPTIONS["cache"] = False
+        sys.stderr.write(
+            f"dicetrace: no writable folder for numba's kernel cache ({why}); compiling without the disk cache"
+            " (set NUMBA_CACHE_DIR to a writable folder to keep compiled kernels)\n"
+        )
+
+
+def _njit(fn, opts: dict):
+    """``numba.njit(**opts)(fn)``; where no folder can hold the cache, without it (numba refuses with 'no locator available')."""
+    if opts.get("cache") and not CACHE:  # the cache was turned off after ``opts`` was made
+        opts = {**opts, "cache": False}
+    try:
+        return numba.njit(**opts)(fn)
+    except RuntimeError as exc:
+        if not opts.get("cache") or "no locator available" not in str(exc):
+            raise
+    _without_disk_cache("every folder numba tries is read-only")
+    return numba.njit(**{**opts, "cache": False})(fn)
+
+
 def jit(fn=None, **extra):
     """``numba.njit`` with dicetrace's options (cache, no fast-math)."""
     opts = {**_OPTIONS, **extra}
     if fn is None:
-        return lambda f: numba.njit(**opts)(f)
-    return numba.njit(**opts)(fn)
+        return lambda f: _njit(f, opts)
+    return _njit(fn, opts)
 
 
 #: The fast-math flags of :func:`jit_fused`: ``contract`` (x·y + z may be one fused multiply-add,
@@ -135,7 +161,7 @@ def jit_fused(fn=None, **extra):
 
 def jit_parallel(fn):
     """``jit`` with ``parallel=True`` for ``prange`` batch kernels."""
-    return numba.njit(**_OPTIONS, parallel=True)(fn)
+    return _njit(fn, {**_OPTIONS, "parallel": True})
 
 
 def specialise(template, name: str, doc: str | None = None, **constants):
