@@ -22,7 +22,9 @@ import io
 import json
 import math
 import os
+import sys
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -103,7 +105,7 @@ class Context:
 
     def sample(self, window, res, *, slice_spec="seed", sequences=False, **overrides):
         """:func:`dicetrace.analysis.simulator.sample_window`, cached in the cache folder."""
-        from dicetrace.analysis.simulator import WindowSample, sample_window
+        from dicetrace.analysis.simulator import sample_window
         from dicetrace.core._jit import kernel_digest
 
         win = window_ranges(window)
@@ -112,21 +114,102 @@ class Context:
                           _resolved(overrides), kernel_digest()], sort_keys=True)
         path = self.cache_dir / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
         if path.exists() and not self.options.no_cache:
-            z = np.load(path, allow_pickle=True)
-            return WindowSample(
-                labels=z["labels"], t_settle_s=z["t_settle_s"], axes=[z[f"axis{i}"] for i in range(len(win))],
-                window=win, sequences=z["sequences"] if sequences else None, status_code=z["status_code"],
-                wall_s=float(z["wall_s"]),
-            )
+            cached = read_cached_sample(path, key, win, res_t, sequences)
+            if not isinstance(cached, str):
+                return cached
+            print(f"dicetrace: warning: cache file {str(path)!r} ignored ({cached}): simulating its grid again",
+                  file=sys.stderr, flush=True)
         s = sample_window(win, res_t, slice_spec=slice_spec, sequences=sequences, **overrides)
         self.n_throws += s.labels.size
-        np.savez(path, labels=s.labels, t_settle_s=s.t_settle_s,
-                 sequences=s.sequences if sequences else np.zeros(0), status_code=s.status_code,
-                 wall_s=s.wall_s, **{f"axis{i}": a for i, a in enumerate(s.axes)})
+        write_cached_sample(path, key, s)
         self.log(f"simulated {window if isinstance(window, str) else win} at {res_t} "
                  f"({s.labels.size} throws, {s.wall_s:.1f} s, {s.labels.size / max(s.wall_s, 1e-9):.0f}/s)")
         return s
 
+
+
+#: Version of the grid cache's file layout (a file of another layout is ignored and simulated again).
+CACHE_FORMAT = 2
+#: The arrays of a cached grid besides its axes (``axis0``...): numbers only, never Python objects.
+_CACHE_ARRAYS = ("labels", "t_settle_s", "status_code", "wall_s", "seq_bytes", "seq_offsets")
+
+
+def write_cached_sample(path: Path, key: str, s) -> None:
+    """Write a simulated grid to ``path`` (``.npz``) as plain arrays only: numbers, the key as a byte string,
+    the contact sequences as UTF-8 bytes and offsets; readable with ``allow_pickle=False``.  Atomic: a
+    temporary file renamed into place, so that a reader never sees half a file."""
+    if s.sequences is not None:
+        encoded = [str(q).encode("utf-8") for q in np.asarray(s.sequences, dtype=object).ravel()]
+        seq_bytes = np.frombuffer(b"".join(encoded), dtype=np.uint8)
+        seq_offsets = np.concatenate([[0], np.cumsum([len(b) for b in encoded], dtype=np.int64)]).astype(np.int64)
+    else:
+        seq_bytes, seq_offsets = np.zeros(0, np.uint8), np.zeros(0, np.int64)
+    arrays = {
+        "format": np.int64(CACHE_FORMAT),
+        "key": np.frombuffer(key.encode("utf-8"), dtype=np.uint8),
+        "labels": np.asarray(s.labels), "t_settle_s": np.asarray(s.t_settle_s, dtype=np.float64),
+        "status_code": np.asarray(s.status_code), "wall_s": np.float64(s.wall_s),
+        "seq_bytes": seq_bytes, "seq_offsets": seq_offsets,
+        **{f"axis{i}": np.asarray(a, dtype=np.float64) for i, a in enumerate(s.axes)},
+    }
+    if any(np.asarray(a).dtype.hasobject for a in arrays.values()):  # pragma: no cover - a defect, never written
+        raise TypeError("a cached grid holds only numeric arrays")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            np.savez(f, **arrays)
+        os.replace(tmp, path)
+    except OSError as e:  # a cache that cannot be written costs a later run time, never this run
+        tmp.unlink(missing_ok=True)
+        print(f"dicetrace: warning: cannot write cache file {str(path)!r} ({e.strerror or e}): the grid is not "
+              "cached", file=sys.stderr, flush=True)
+
+
+def read_cached_sample(path: Path, key: str, window, res_t: tuple, sequences: bool):
+    """The grid cached in ``path`` if it is one of ``key``, else the reason it is not (a string).
+
+    Read with ``allow_pickle=False``: a file holding Python objects (a pickle, an object array) is refused
+    by numpy before anything in it is run.  A file that does not load, is of another layout or key, or whose
+    arrays do not have the grid's shape is not used."""
+    from dicetrace.analysis.simulator import WindowSample
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            names = set(z.files)
+            need = {"format", "key", *_CACHE_ARRAYS, *(f"axis{i}" for i in range(len(res_t)))}
+            if not need <= names:
+                return "not a grid of this dicetrace's cache: " + ", ".join(sorted(need - names)) + " missing"
+            if int(z["format"]) != CACHE_FORMAT:
+                return f"cache layout {int(z['format'])}, not {CACHE_FORMAT}"
+            if z["key"].dtype != np.uint8 or z["key"].tobytes() != key.encode("utf-8"):
+                return "a grid of another configuration"
+            arrays = {k: z[k] for k in need - {"format", "key"}}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, TypeError, AttributeError) as e:
+        # AttributeError: a file that np.load reads as a plain array (.npy, not a zip of arrays) has no .files
+        why = (e.strerror if isinstance(e, OSError) else None) or (str(e).splitlines() or [type(e).__name__])[0]
+        return f"unreadable: {why[:160]}"
+    labels = arrays["labels"]
+    shapes_ok = (labels.shape == tuple(res_t) and arrays["t_settle_s"].shape == labels.shape
+                 and arrays["status_code"].shape == labels.shape
+                 and all(arrays[f"axis{i}"].shape == (r,) for i, r in enumerate(res_t)))
+    seq = None
+    if shapes_ok and sequences:
+        offsets, raw = arrays["seq_offsets"], arrays["seq_bytes"]
+        shapes_ok = (offsets.shape == (labels.size + 1,) and raw.dtype == np.uint8 and offsets[0] == 0
+                     and offsets[-1] == raw.size and bool(np.all(np.diff(offsets) >= 0)))
+        if shapes_ok:
+            data = raw.tobytes()
+            try:
+                seq = np.empty(labels.size, dtype=object)
+                seq[:] = [data[a:b].decode("utf-8") for a, b in zip(offsets[:-1].tolist(), offsets[1:].tolist())]
+            except UnicodeDecodeError:
+                return "contact sequences that are not UTF-8"
+            seq = seq.reshape(labels.shape)
+    if not shapes_ok:
+        return "arrays not of the grid's shape"
+    return WindowSample(labels=labels, t_settle_s=arrays["t_settle_s"], axes=[arrays[f"axis{i}"] for i in range(len(res_t))],
+                        window=window, sequences=seq, status_code=arrays["status_code"],
+                        wall_s=float(arrays["wall_s"]))
 
 def _resolved(overrides: dict) -> dict:
     """The whole configuration a sample with these options runs (so that a cached grid is never one of an
