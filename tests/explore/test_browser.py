@@ -155,3 +155,75 @@ def test_back_and_reset_walk_the_history_of_views(browser, explorer, tmp_path):
     wait_ready(page)
     assert tuple(map(float, _window_of(page).split(","))) == (a0, a1, b0, b1)
     np.testing.assert_array_equal(page_outcomes(page), first)
+
+
+def _ticks(page, axis):
+    """The tick labels of an axis ("x" or "y"): [(text, centre in page px along the axis)], its step and base."""
+    return page.evaluate("""(axis) => {
+        const box = document.getElementById(axis + 'axis');
+        return {step: Number(box.dataset.step), base: box.dataset.base,
+                ticks: Array.from(box.querySelectorAll('.tick')).map((el) => {
+                    const r = el.getBoundingClientRect();
+                    return [el.textContent, axis === 'x' ? r.left + r.width / 2 : r.top + r.height / 2];
+                })};
+    }""", axis)
+
+
+def _check_ticks(page, box):
+    """Ticks at round values (1, 2 or 5 × 10^e), labelled with no more decimals than their step needs, placed where
+    their value is on the map; on a deep zoom, whole multiples of 10^e from a base given under the map."""
+    import math
+
+    x0, x1, y0, y1 = map(float, _window_of(page).split(","))
+    for axis, lo, hi in (("x", x0, x1), ("y", y0, y1)):
+        t = _ticks(page, axis)
+        labels = [text for text, _ in t["ticks"]]
+        assert 3 <= len(labels) <= 12, (axis, labels)
+        step = t["step"]
+        e = math.floor(math.log10(step) + 1e-9)
+        assert round(step / 10**e, 9) in (1, 2, 5), (axis, step)
+        for text in labels:
+            assert len(text) <= 9, f"{axis} tick label {text!r} is too long"
+        if t["base"]:
+            values = [float(t["base"]) + int(text) * 10**e for text in labels]
+            assert [int(text) for text in labels] == [k * round(step / 10**e) for k in range(len(labels))], labels
+            assert t["base"] in page.inner_text("#axisnote")
+        else:
+            needed = max(0, -e)
+            for text in labels:
+                decimals = len(text.split(".")[1]) if "." in text else 0
+                assert decimals <= needed, f"{axis} tick label {text!r} has {decimals} decimals; its step {step} needs {needed}"
+            values = [float(text) for text in labels]
+            for v in values:
+                assert abs(v / step - round(v / step)) < 1e-6, (axis, v, step)
+            assert all(abs(b - a - step) <= 1e-9 * max(1.0, abs(b)) for a, b in zip(values, values[1:])), values
+        width = hi - lo
+        for v, (_, centre) in zip(values, t["ticks"]):
+            assert lo - 1e-12 * width <= v <= hi + 1e-12 * width
+            f = (v - lo) / width
+            want = box["x"] + 1 + f * 512 if axis == "x" else box["y"] + 1 + (1 - f) * 512
+            assert abs(centre - want) < 1.5, f"{axis} tick {v} drawn at {centre:.1f} px, its place is {want:.1f}"
+
+
+def test_zooming_keeps_the_map_in_place_with_round_ticks(browser, explorer):
+    """Issue 35 item 8: after zooms the map does not move (a click lands where it was aimed) and the ticks stay short."""
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    page.goto(explorer.url)
+    wait_ready(page)
+    box = page.locator("#mapbox").bounding_box()
+    _check_ticks(page, box)
+    for fx, fy in ((0.37, 0.61), (0.23, 0.71), (0.81, 0.13), (0.55, 0.47), (0.31, 0.29)):  # wheel zooms off centre
+        before = page.url
+        page.mouse.move(box["x"] + box["width"] * fx, box["y"] + box["height"] * fy)
+        page.mouse.wheel(0, -100)
+        page.wait_for_function(f"location.href !== {before!r} && document.body.dataset.state !== 'computing'",
+                               timeout=120_000)
+        wait_ready(page)
+        assert page.locator("#mapbox").bounding_box() == box, f"the map moved after a zoom to {_window_of(page)}"
+        _check_ticks(page, box)
+    # a deep zoom (1e-9 wide): the labels would need 10 decimals, so they count from a base given under the map
+    page.goto(explorer.url.split("?")[0] + "?window=1.4123456789,1.4123456799,4.1000194552,4.1000194562")
+    wait_ready(page)
+    assert page.locator("#mapbox").bounding_box() == box
+    _check_ticks(page, box)
+    assert _ticks(page, "x")["base"] and _ticks(page, "y")["base"]

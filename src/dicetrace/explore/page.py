@@ -57,10 +57,14 @@ _TEMPLATE = r"""<!doctype html>
  #map{width:100%;height:100%;image-rendering:pixelated;display:block}
  #sel{position:absolute;border:1px dashed #000;background:rgba(255,255,255,.25);display:none;pointer-events:none}
  .ax{font-family:monospace;font-size:11px}
- #xlab{display:flex;justify-content:space-between;width:514px}
- #ylab{display:flex;flex-direction:column;justify-content:space-between;height:514px;text-align:right}
+ #plot{display:grid;grid-template-columns:72px 514px;grid-template-rows:514px 22px;margin-top:8px}
+ #yaxis,#xaxis{position:relative;overflow:visible}
+ .tick{position:absolute;white-space:nowrap;line-height:12px}
+ #yaxis .tick{right:0;padding-right:5px;transform:translateY(-50%);background:linear-gradient(#666,#666) right center/4px 1px no-repeat}
+ #xaxis .tick{top:0;padding-top:5px;transform:translateX(-50%);background:linear-gradient(#666,#666) center top/1px 4px no-repeat}
+ #axisnote{width:586px;padding-left:0;color:#444;overflow-wrap:anywhere}
  #error{color:#b00;font-weight:bold;white-space:pre-wrap}
- #status{min-width:14em} .busy::before{content:"⏳ "}
+ #status{display:inline-block;width:22em;white-space:nowrap;overflow:hidden;text-overflow:ellipsis;vertical-align:middle} .busy::before{content:"⏳ "}
  .key{margin-right:8px;white-space:nowrap}.sw{display:inline-block;width:11px;height:11px;border:1px solid #555;margin-right:3px;vertical-align:middle}
  #info{font-family:monospace;font-size:11px;white-space:pre;min-height:9em;border:1px solid #ccc;padding:4px;width:512px;overflow:auto}
  #viewerbox{width:640px;height:560px;border:1px solid #888}
@@ -85,9 +89,10 @@ _TEMPLATE = r"""<!doctype html>
 <div>%LEGEND% <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to add a second</span></div>
 <div id="main">
  <div>
-  <div style="display:flex"><div id="ylab" class="ax"><span id="y1"></span><span>y</span><span id="y0"></span></div>
-   <div><div id="mapbox"><canvas id="map" aria-label="outcome map"></canvas><div id="sel"></div></div>
-   <div id="xlab" class="ax"><span id="x0"></span><span>x</span><span id="x1"></span></div></div></div>
+  <div id="plot"><div id="yaxis" class="ax" aria-label="y axis"></div>
+   <div id="mapbox"><canvas id="map" aria-label="outcome map"></canvas><div id="sel"></div></div>
+   <div></div><div id="xaxis" class="ax" aria-label="x axis"></div></div>
+  <div id="axisnote" class="ax"></div>
   <div id="info"></div>
  </div>
  <div id="viewerbox"></div>
@@ -188,11 +193,46 @@ function fillControls() {
   for (const k of ["slice", "preset", "integrator"]) $(k).value = view[k] || "";
   for (const k of ["gamma", "dt", "z"]) $(k).value = view[k] || "";
   $("res").value = view.res;
-  $("x0").textContent = fmt(window4[0]); $("x1").textContent = fmt(window4[1]);
-  $("y0").textContent = fmt(window4[2]); $("y1").textContent = fmt(window4[3]);
+  drawAxes();
   $("savebox").style.display = CFG.canSave ? "" : "none";
 }
 function fmt(v) { return Number(v).toPrecision(12).replace(/\.?0+$/, ""); }
+
+// Axis ticks at round values (1, 2 or 5 times a power of ten, about `n` of them in [lo, hi]), labelled with
+// the decimals that step needs.  Where such a label would pass MAX_TICK_CHARS (a deep zoom), the ticks are
+// labelled as whole multiples of the power of ten from a base tick, and the base goes in the note below
+// the map.  The axes' boxes have a fixed size: the map stays in place whatever the labels.
+const MAX_TICK_CHARS = 9;
+function ticks(lo, hi, n) {
+  const raw = (hi - lo) / n, e = Math.floor(Math.log10(raw)), mag = Math.pow(10, e), norm = raw / mag;
+  const [m, ex] = norm < 1.5 ? [1, e] : norm < 3.5 ? [2, e] : norm < 7.5 ? [5, e] : [1, e + 1];
+  const step = m * Math.pow(10, ex), decimals = Math.max(0, -ex);
+  const k0 = Math.ceil(lo / step - 1e-9), k1 = Math.floor(hi / step + 1e-9);
+  const values = []; for (let k = k0; k <= k1; k++) values.push(k * step);
+  let labels = values.map((v) => (v === 0 ? 0 : v).toFixed(decimals)), base = null;
+  if (labels.some((t) => t.length > MAX_TICK_CHARS)) {   // whole multiples of 10^ex from the first tick
+    base = labels[0];
+    labels = values.map((v, k) => String(k * m));
+  }
+  return {values, labels, step, base, unit: ex};
+}
+function drawAxes() {
+  const [x0, x1, y0, y1] = window4, notes = [];
+  for (const [id, lo, hi, n, name] of [["xaxis", x0, x1, 5, "x"], ["yaxis", y0, y1, 6, "y"]]) {
+    const t = ticks(lo, hi, n), box = $(id);
+    box.textContent = "";
+    t.values.forEach((v, k) => {
+      const f = (v - lo) / (hi - lo), el = document.createElement("span");
+      el.className = "tick"; el.textContent = t.labels[k];
+      if (id === "xaxis") el.style.left = (1 + f * 512) + "px"; else el.style.top = (1 + (1 - f) * 512) + "px";
+      box.append(el);
+    });
+    box.dataset.step = String(t.step); box.dataset.base = t.base === null ? "" : t.base;
+    notes.push(t.base === null ? `${name} ${fmt(lo)} … ${fmt(hi)}`
+                               : `${name} ${fmt(lo)} … ${fmt(hi)}: ticks at ${name} = ${t.base} + label × 1e${t.unit}`);
+  }
+  $("axisnote").textContent = notes.join(";  ");
+}
 
 function toSlice(ev) {
   const b = $("mapbox").getBoundingClientRect();
