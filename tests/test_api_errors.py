@@ -98,7 +98,7 @@ CALLS = [
     call(lambda: scan(Points("seed", [(1e308, 1e308)])), ValueError, "non-finite ICs", "overflowing points"),
     call(lambda: read_scan(42), TypeError, "folder", "read_scan(42)"),
     call(lambda: simulate(IC, record=Record(states="no")), TypeError, "Record(states=...)", "Record(states='no')"),
-    call(lambda: simulate_batch([["a"] * 6]), ValueError, "initial conditions must be numbers", "ics of strings"),
+    call(lambda: simulate_batch([["a"] * 6]), ValueError, "initial conditions ics must be real numbers", "ics of strings"),
 ]
 
 

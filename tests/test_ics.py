@@ -169,3 +169,52 @@ def test_points_and_dict_round_trip():
     for space in (p, Grid("seed3-ortho", ((0, 1), (0, 1), (0, 1)), 4), Sample("seed", "home", 10, "sobol", 2)):
         assert space_from_dict(space.to_dict()) == space
 
+
+
+# -- seed_slice's ICs carry their slice coordinates ----------------------------------------------
+
+
+def test_seed_slice_ics_carry_their_coordinates():
+    from dicetrace.ics import SliceICs
+
+    x, y, z = np.array([1.0, 1.5, 2.0]), np.array([3.5, 4.0, 4.5]), np.array([0.1, 0.2, 0.3])
+    a = seed_slice(x, y)
+    assert isinstance(a, SliceICs) and isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (3, 6)
+    np.testing.assert_array_equal(a.coords, np.column_stack([x, y, np.full(3, np.nan)]))
+    np.testing.assert_array_equal(seed_slice(x, y, z).coords, np.column_stack([x, y, z]))
+    one = seed_slice(1.65, 3.9)
+    assert one.shape == (6,) and one.coords.tolist()[:2] == [1.65, 3.9] and np.isnan(one.coords[2])
+    np.testing.assert_array_equal(seed_slice(1.0, y).coords[:, :2], np.column_stack([np.ones(3), y]))  # broadcast
+    # the values are seed_slice's, bit for bit, whatever the container
+    np.testing.assert_array_equal(_bits(a), _bits(np.asarray(a)))
+
+
+def test_selecting_rows_keeps_coordinates_and_anything_else_drops_them():
+    import pickle
+
+    from dicetrace.ics import SliceICs
+
+    x, y = np.linspace(1.0, 2.0, 5), np.linspace(3.5, 4.5, 5)
+    a = seed_slice(x, y)
+    for key, rows in [(slice(1, 4), [1, 2, 3]), ([4, 0], [4, 0]), (np.array([True, False, True, False, False]), [0, 2]),
+                      ((slice(None, 2), slice(None)), [0, 1]), ((np.array([3]), Ellipsis), [3])]:
+        got = a[key]
+        assert isinstance(got, SliceICs) and got.coords[:, 0].tolist() == x[rows].tolist(), key
+    assert a[2].coords[:2].tolist() == [x[2], y[2]] and a[-1].coords[0] == x[-1]
+    assert a.copy().coords[:, 1].tolist() == y.tolist() and a.copy().coords is not a.coords
+    back = pickle.loads(pickle.dumps(a))
+    np.testing.assert_array_equal(back.coords, a.coords)
+    # columns, reshapes and masks over components are not rows at those coordinates
+    assert a[:, 3:].coords is None and a.reshape(-1).coords is None and a.T.coords is None
+    assert getattr(a[a > 5], "coords", None) is None
+    # arithmetic and other ufuncs give plain arrays; reductions give plain numbers
+    for derived in (a * np.array([1, 1, 1, -1, -1, -1]), a + 0.0, np.abs(a), np.concatenate([a, a])):
+        assert type(derived) is np.ndarray
+    assert type(a.sum()) is np.float64 and type(a.max(axis=0)) is np.ndarray
+    assert type(np.asarray(a)) is np.ndarray
+
+
+@pytest.mark.parametrize("bad", [1 + 2j, np.array([1.0 + 0j]), True, "1.5", None, [1.0, "a"]], ids=repr)
+def test_seed_slice_refuses_coordinates_that_are_not_real_numbers(bad):
+    with pytest.raises(ValueError, match="seed_slice x must be real numbers"):
+        seed_slice(bad, 3.9)

@@ -34,6 +34,7 @@ one chunk of ICs.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,12 +49,43 @@ SEED_U_DIRS = np.array([[2.7083, 3.4373, 4.4365], [2.4650, 1.4853, 0.6534], [1.3
 SEED_L_ORIGIN = np.array([0.0, 100.0, 0.0])
 
 
+#: What numpy dtype kinds hold, for messages about ICs that are not real numbers.
+_DTYPE_KINDS = {"b": "booleans", "c": "complex numbers", "U": "text", "S": "bytes", "M": "dates", "m": "time spans", "V": "records"}
+
+
+def _as_real(x, what: str, shape: str) -> np.ndarray:
+    """``x`` as a float64 array when it holds real numbers (integers or floats), else ValueError naming ``what``.
+
+    Complex numbers, booleans, text, dates and other objects are refused, not cast:
+    numpy's cast would drop an imaginary part with only a warning, read ``"1.5"``
+    as 1.5 and ``True`` as 1.  An object array passes when every element is a
+    real number (``numbers.Real``: int, float, Fraction, numpy scalars; not bool).
+    """
+    try:
+        a = np.asarray(x)
+    except (TypeError, ValueError) as e:  # e.g. rows of different lengths
+        raise ValueError(f"{what} must be real numbers, {shape} ({' '.join(str(e).split())})") from None
+    kind = a.dtype.kind
+    if kind == "O":
+        for v in a.flat:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
+                raise ValueError(f"{what} must be real numbers, {shape}: got {type(v).__name__} {_short(v)}")
+    elif kind not in "iuf":
+        raise ValueError(f"{what} must be real numbers, {shape}: got {_DTYPE_KINDS.get(kind, 'values')} (dtype {a.dtype})")
+    try:
+        return a.astype(np.float64, copy=False)
+    except (OverflowError, TypeError, ValueError):  # an integer beyond float64 in an object array
+        raise ValueError(f"{what} must be finite real numbers: a value is beyond float64's range") from None
+
+
+def _short(v) -> str:
+    r = repr(v)
+    return r if len(r) <= 40 else r[:37] + "..."
+
+
 def validate_ic(ic) -> np.ndarray:
     """Return ``ic`` as a float64 (6,) array or raise ValueError naming the problem."""
-    try:
-        a = np.asarray(ic, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"initial condition must be 6 numbers (vx,vy,vz,Lx,Ly,Lz), got {ic!r}") from None
+    a = _as_real(ic, "initial condition ic", "6 of them (vx,vy,vz,Lx,Ly,Lz)")
     if a.shape != (6,):
         raise ValueError(f"initial condition must have 6 components (vx,vy,vz,Lx,Ly,Lz), got {a.size}")
     if not np.all(np.isfinite(a)):
@@ -63,11 +95,11 @@ def validate_ic(ic) -> np.ndarray:
 
 
 def validate_ics(ics) -> np.ndarray:
-    """(m, 6) float64 array of finite ICs, or ValueError."""
-    try:
-        a = np.asarray(ics, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"initial conditions must be numbers, an (m, 6) array ({' '.join(str(e).split())})") from None
+    """(m, 6) float64 C-contiguous array of finite ICs, or ValueError.
+
+    A float64 C-contiguous (m, 6) input is returned as it is (no copy).
+    """
+    a = _as_real(ics, "initial conditions ics", "an (m, 6) array")
     if a.ndim == 1:
         a = a.reshape(1, -1)
     if a.ndim != 2 or a.shape[1] != 6:
@@ -78,25 +110,114 @@ def validate_ics(ics) -> np.ndarray:
     return np.ascontiguousarray(a)
 
 
-def seed_slice(x, y, z=None) -> np.ndarray:
+class SliceICs(np.ndarray):
+    """ICs that remember where on a slice they are: what :func:`seed_slice` returns.
+
+    A plain float64 array of ICs, (m, 6) or one IC (6,), with one more
+    attribute: ``coords``, their slice coordinates, (m, 3) or (3,) float64
+    (x, y, z; z is NaN on a 2-D slice).  :func:`~dicetrace.simulate.simulate_batch`
+    passes them on to its result, so ``simulate_batch(seed_slice(xs, ys)).to_pandas()``
+    has the ``x, y, z`` columns filled.
+
+    Selecting rows (``ics[:10]``, ``ics[mask]``, ``ics[[3, 1]]``, ``ics[5]``)
+    and ``ics.copy()`` keep the matching coordinates.  Anything else gives
+    ICs that no longer sit at those coordinates, or need not: arithmetic and
+    other ufuncs return a plain ndarray, and other views (``reshape``,
+    ``ics[:, 3:]``, ...) have ``coords`` None (their rows have no
+    coordinates, as for any plain array).
+    """
+
+    coords: np.ndarray | None
+
+    def __new__(cls, ics, coords):
+        obj = np.asarray(ics, dtype=np.float64).view(cls)
+        c = np.asarray(coords, dtype=np.float64)
+        if c.shape != obj.shape[:-1] + (3,):
+            raise ValueError(f"coords of shape {c.shape} do not match ICs of shape {obj.shape}")
+        obj.coords = c
+        return obj
+
+    def __array_finalize__(self, obj) -> None:
+        self.coords = None  # a view or a new array: its rows need not be the coordinates' (see __getitem__)
+
+    def __array_wrap__(self, arr, context=None, return_scalar=False):
+        # ufunc results (ics * sign, ics + 1, np.sin(ics), ...) are plain arrays: no longer at those coordinates
+        arr = arr.view(np.ndarray)
+        return arr[()] if return_scalar else arr
+
+    def __getitem__(self, key):
+        out = super().__getitem__(key)
+        if not isinstance(out, SliceICs) or self.coords is None:
+            return out
+        rows = self._rows(key)
+        if rows is not None and out.shape[-1:] == (6,):
+            try:
+                c = self.coords[rows]
+            except (IndexError, TypeError, ValueError):  # e.g. a mask over all 6 components: not whole rows
+                return out
+            if c.shape == out.shape[:-1] + (3,):
+                out.coords = c
+        return out
+
+    def _rows(self, key):
+        """The row part of ``key`` when it selects whole rows (all 6 components), else None."""
+        if self.ndim == 1:  # one IC: only the whole of it
+            whole = key is Ellipsis or (isinstance(key, slice) and key == slice(None))
+            return Ellipsis if whole or (isinstance(key, tuple) and key in ((), (Ellipsis,))) else None
+        if not isinstance(key, tuple):
+            return key
+        if len(key) == 1:
+            return key[0]
+        if len(key) == 2 and (key[1] is Ellipsis or (isinstance(key[1], slice) and key[1] == slice(None))):
+            return key[0]
+        return None
+
+    def copy(self, order="C"):
+        out = super().copy(order)
+        out.coords = None if self.coords is None else self.coords.copy()
+        return out
+
+    def __reduce__(self):
+        fn, args, state = super().__reduce__()
+        return fn, args, (state, self.coords)
+
+    def __setstate__(self, state):
+        nd_state, coords = state
+        super().__setstate__(nd_state)
+        self.coords = coords
+
+
+def seed_slice(x, y, z=None) -> SliceICs:
     """ICs on the writeup's seed slice, bit-exact with the program.
 
     ``L = [x y] * A + [0 100 0]`` and ``U = [x y] * B`` (2-D); the 3-D slice
     adds ``z·C``.  Returns an (m, 6) array (U, L) for array inputs or (6,)
-    for scalars.
+    for scalars: a :class:`SliceICs`, a float64 ndarray that also carries the
+    slice coordinates (``.coords``, (m, 3) or (3,), z NaN on the 2-D slice), so
+    ``simulate_batch(seed_slice(xs, ys))`` knows them (its table's ``x, y, z``).
     """
     scalar = np.ndim(x) == 0 and np.ndim(y) == 0 and (z is None or np.ndim(z) == 0)
-    x = np.atleast_1d(np.asarray(x, dtype=np.float64))[:, None]
-    y = np.atleast_1d(np.asarray(y, dtype=np.float64))[:, None]
+    xc = _as_real(x, "seed_slice x", "a number or an array")
+    yc = _as_real(y, "seed_slice y", "a number or an array")
+    x = np.atleast_1d(xc)[:, None]
+    y = np.atleast_1d(yc)[:, None]
     L = x * SEED_L_DIRS[0] + y * SEED_L_DIRS[1]
     U = x * SEED_U_DIRS[0] + y * SEED_U_DIRS[1]
     if z is not None:
-        z = np.atleast_1d(np.asarray(z, dtype=np.float64))[:, None]
+        z = np.atleast_1d(_as_real(z, "seed_slice z", "a number or an array"))[:, None]
         L = L + z * SEED_L_DIRS[2]
         U = U + z * SEED_U_DIRS[2]
     L = L + SEED_L_ORIGIN
     out = np.concatenate([U, L], axis=1)
-    return out[0] if scalar else out
+    m = len(out)
+    coords = np.full((m, 3), np.nan)
+    coords[:, 0] = np.broadcast_to(x[:, 0], (m,))
+    coords[:, 1] = np.broadcast_to(y[:, 0], (m,))
+    if z is not None:
+        coords[:, 2] = np.broadcast_to(z[:, 0], (m,))
+    if scalar:
+        return SliceICs(out[0], coords[0])
+    return SliceICs(out, coords)
 
 
 # -- slices ---------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ import numba
 from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
-from dicetrace.ics import validate_ic, validate_ics
+from dicetrace.ics import SliceICs, validate_ic, validate_ics
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
 from dicetrace.status import Status
 
@@ -380,7 +380,10 @@ class BatchResult:
 
     ``ics`` are in the preset's L convention.  The contact-set sequence of IC
     i is ``sets[set_offsets[i]:set_offsets[i+1]]`` (first seen at the steps
-    ``set_steps[...]`` of the same range).
+    ``set_steps[...]`` of the same range).  ``coords`` (m, 3): the ICs' slice
+    coordinates x, y, z (NaN where none) when the ICs came with them (a
+    :class:`~dicetrace.ics.SliceICs`, e.g. from :func:`~dicetrace.ics.seed_slice`),
+    else None; the tables fill their ``x, y, z`` columns from them.
     """
 
     ics: np.ndarray  # (m, 6) float64
@@ -392,6 +395,7 @@ class BatchResult:
     sets: np.ndarray  # uint8
     set_steps: np.ndarray  # int32
     config: Config
+    coords: np.ndarray | None = None  # (m, 3) float64 slice coordinates, NaN where none
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -408,7 +412,12 @@ class BatchResult:
         return [sets_to_text(self.contact_sets(i)) for i in range(len(self))]
 
     def to_arrow(self, *, ic_ids=None, coords=None, metadata: dict | None = None):
-        """The ``rolls`` table of these throws (the Parquet sink's schema), as a pyarrow Table."""
+        """The ``rolls`` table of these throws (the Parquet sink's schema), as a pyarrow Table.
+
+        ``coords``: slice coordinates for the ``x, y, z`` columns (see
+        :func:`~dicetrace.tables.rolls_table`); default: the batch's own
+        (``self.coords``, from ICs that carried them), else null.
+        """
         from dicetrace.tables import rolls_table
 
         return rolls_table(self, ic_ids=ic_ids, coords=coords, metadata=metadata)
@@ -491,7 +500,10 @@ def simulate_batch(
     Parameters
     ----------
     ics
-        (m, 6) ICs, L in ``l_convention`` (default: the preset's).
+        (m, 6) ICs, L in ``l_convention`` (default: the preset's).  ICs that
+        carry slice coordinates (a :class:`~dicetrace.ics.SliceICs`, as
+        :func:`~dicetrace.ics.seed_slice` returns) pass them on to the
+        result (``BatchResult.coords``, the table's ``x, y, z``).
     config, **options
         As in :func:`simulate`.
     threads
@@ -506,7 +518,10 @@ def simulate_batch(
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
         raise ValueError(f"threads must be an integer >= 1 or None, got {threads!r}")
     conv = cfg.preset.l_convention if l_convention is None else l_convention
+    coords = ics.coords if isinstance(ics, SliceICs) else None
     ics = validate_ics(ics)
+    if coords is not None:
+        coords = np.array(coords, dtype=np.float64).reshape(len(ics), 3)
     kin = cfg.kernel_inputs(ics, l_convention=conv)
     m = len(ics)
     status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads)
@@ -544,4 +559,5 @@ def simulate_batch(
         sets=flat_sets,
         set_steps=flat_steps,
         config=cfg,
+        coords=coords,
     )

@@ -231,6 +231,7 @@ class _Summaries:
             self.set_offsets = np.asarray(source.set_offsets, dtype=np.int64)
             self.sets = np.asarray(source.sets, dtype=np.uint8)
             self.set_steps = np.asarray(source.set_steps, dtype=np.int64)
+            self.coords = source.coords
             return
         rolls = [source] if isinstance(source, Roll) else list(source)
         if not rolls:
@@ -251,6 +252,7 @@ class _Summaries:
         self.set_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         self.sets = np.concatenate([np.asarray(r.contact_sets, dtype=np.uint8) for r in rolls])
         self.set_steps = np.concatenate([np.asarray(r.contact_steps, dtype=np.int64) for r in rolls])
+        self.coords = None
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -326,7 +328,8 @@ def rolls_table(source, *, coords=None, ic_ids=None, index=None, metadata: Mappi
     coords
         Slice coordinates of the ICs: an (m, 2) or (m, 3) array (x, y[, z])
         or a mapping ``{"x": ..., "y": ..., "z": ...}``; missing ones and NaN
-        are null.
+        are null.  Default: a BatchResult's own ``coords`` (ICs that came
+        with them, e.g. from :func:`~dicetrace.ics.seed_slice`), else null.
     ic_ids
         Integer id of each IC (default 0..m-1).
     index
@@ -339,6 +342,8 @@ def rolls_table(source, *, coords=None, ic_ids=None, index=None, metadata: Mappi
     s = _Summaries(source)
     m = len(s)
     cfg = s.config
+    if coords is None:
+        coords = s.coords
     c = _coords(coords, m)
     sets_arr = pa.ListArray.from_arrays(
         pa.array(s.set_offsets.astype(np.int32), type=pa.int32()), pa.array(s.sets, type=pa.uint8())
