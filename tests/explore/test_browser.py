@@ -227,3 +227,47 @@ def test_zooming_keeps_the_map_in_place_with_round_ticks(browser, explorer):
     assert page.locator("#mapbox").bounding_box() == box
     _check_ticks(page, box)
     assert _ticks(page, "x")["base"] and _ticks(page, "y")["base"]
+
+
+def test_info_panel_shows_long_lines_whole(browser, explorer):
+    """Issue 35 item 10: the IC line and a long contact sequence wrap inside the info panel instead of being clipped."""
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    page.goto(explorer.url)
+    wait_ready(page)
+    # the throw with the longest contact sequence among a 4×4 sample of the map's grid points
+    n = RES
+    best = page.evaluate("""async ([n, q]) => {
+        let best = null;
+        for (const i of [1, 5, 9, 13].filter((k) => k < n - 1)) for (const j of [1, 5, 9, 13].filter((k) => k < n - 1)) {
+            const info = await (await fetch('/api/hover?' + q + '&i=' + i + '&j=' + j)).json();
+            if (!best || info.contact_sequence.length > best.contact_sequence.length) best = info;
+        }
+        return best;
+    }""", [n, urlparse(page.url).query])
+    assert len(best["contact_sequence"]) > 40, best["contact_sequence"]
+    box = page.locator("#mapbox").bounding_box()
+    at = (box["x"] + box["width"] * best["i"] / (n - 1), box["y"] + box["height"] * (1 - best["j"] / (n - 1)))
+    page.mouse.move(*at)
+    page.wait_for_function("document.getElementById('info').textContent.startsWith('hover')", timeout=30_000)
+    page.mouse.click(*at)
+    page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
+    picked = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
+    assert (picked["i"], picked["j"]) == (best["i"], best["j"])
+    # a second throw: the divergence line too
+    page.keyboard.down("Shift")
+    page.mouse.click(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.3)
+    page.keyboard.up("Shift")
+    page.wait_for_function("JSON.parse(document.getElementById('info').dataset.throws || '[]').length === 2",
+                           timeout=60_000)
+    text = page.inner_text("#info")
+    assert best["contact_sequence"] in text.replace("\n", "") and "Lz=" in text and "divergence" in text
+    sizes = page.evaluate("""() => { const el = document.getElementById('info');
+        return {scroll: el.scrollWidth, client: el.clientWidth, right: el.getBoundingClientRect().right,
+                viewer: document.getElementById('viewerbox').getBoundingClientRect().left}; }""")
+    assert sizes["scroll"] <= sizes["client"], f"the info panel clips its lines ({sizes['scroll']} px of text in {sizes['client']} px)"
+    assert sizes["right"] <= sizes["viewer"]  # and stays beside the viewer
+    # every line of the text lies inside the panel
+    inside = page.evaluate("""() => { const el = document.getElementById('info'), r = el.getBoundingClientRect();
+        const range = document.createRange(); range.selectNodeContents(el);
+        return Array.from(range.getClientRects()).every((q) => q.right <= r.right + 0.5 && q.left >= r.left - 0.5); }""")
+    assert inside

@@ -66,7 +66,7 @@ _TEMPLATE = r"""<!doctype html>
  #error{color:#b00;font-weight:bold;white-space:pre-wrap}
  #status{display:inline-block;width:22em;white-space:nowrap;overflow:hidden;text-overflow:ellipsis;vertical-align:middle} .busy::before{content:"⏳ "}
  .key{margin-right:8px;white-space:nowrap}.sw{display:inline-block;width:11px;height:11px;border:1px solid #555;margin-right:3px;vertical-align:middle}
- #info{font-family:monospace;font-size:11px;white-space:pre;min-height:9em;border:1px solid #ccc;padding:4px;width:512px;overflow:auto}
+ #info{font-family:monospace;font-size:11px;white-space:pre-wrap;overflow-wrap:anywhere;min-height:9em;max-height:24em;border:1px solid #ccc;padding:4px;width:576px;box-sizing:border-box;overflow-x:hidden;overflow-y:auto}
  #viewerbox{width:640px;height:560px;border:1px solid #888}
 </style></head><body>
 <div id="top">
