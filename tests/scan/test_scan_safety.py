@@ -123,6 +123,32 @@ def test_a_refusal_leaves_no_lock_file_in_a_folder_it_did_not_make(tmp_path):
     assert not (tmp_path / "new").exists()
 
 
+def test_a_scan_refused_busy_removes_nothing_of_the_holder_and_one_that_fails_first_leaves_nothing(tmp_path,
+                                                                                                     monkeypatch):
+    import os
+
+    from dicetrace.scan import folder as folder_mod
+
+    out = tmp_path / "new" / "s"
+    out.mkdir(parents=True)  # the holder made it, and holds its lock before writing anything
+    lock = _hold_lock(out)
+    inode = os.stat(out / LOCK).st_ino
+    try:
+        with pytest.raises(ScanBusyError):
+            scan(Grid("seed", "home", 3), out, chunk=4)
+        assert sorted(p.name for p in out.iterdir()) == [LOCK] and os.stat(out / LOCK).st_ino == inode
+    finally:
+        lock.release()
+
+    def full(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(folder_mod, "_write_manifest", full)  # fails while holding the lock, before any manifest
+    with pytest.raises(OSError):
+        scan(Grid("seed", "home", 3), tmp_path / "made" / "s", chunk=4)
+    assert not (tmp_path / "made").exists()
+
+
 def _cli_scan(out: Path, res: str):
     return subprocess.Popen(
         [sys.executable, "-m", "dicetrace.cli", "scan", "--window", "0,1,0,1", "--res", res, "--chunk", "40",
@@ -150,6 +176,61 @@ def test_two_concurrent_scans_end_cleanly_with_the_single_run_dataset(tmp_path):
     want = scan(Grid("seed", ((0.0, 1.0), (0.0, 1.0)), 20), chunk=400, dt_s=5e-4)
     assert _data(df).equals(_data(want))
     assert not list(out.glob(".*.tmp"))
+
+
+# -- two scans of different definitions racing for a new folder ------------------------------------------------------
+
+#: Imports what a scan needs, says "ready", waits for "go" on stdin, then runs ``dicetrace ARGS``: both racers then
+#: reach the folder within a millisecond or so of each other.
+_RACER = (
+    "import sys\n"
+    "import dicetrace.scan.runner, dicetrace.scan.estimate, dicetrace.commands.scan, dicetrace.simulate\n"
+    "from dicetrace.cli import main\n"
+    "print('ready', flush=True)\n"
+    "sys.stdin.readline()\n"
+    "sys.argv = ['dicetrace', *sys.argv[1:]]\n"
+    "main()\n"
+)
+
+
+def _racer(out: Path, res: str):
+    return subprocess.Popen(
+        [sys.executable, "-c", _RACER, "scan", "--window", "home", "--res", res, "--chunk", "4", "--threads", "1",
+         "--out", str(out), "-q"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+
+
+@pytest.mark.slow
+def test_two_scans_of_different_definitions_racing_for_a_new_folder_one_wins_the_other_refuses(tmp_path):
+    """20 races: exactly one scan completes a valid folder (its lock still in place), the other exits 2 in one line
+    (busy, or a different scan) and removes nothing of the winner's."""
+    for race in range(20):
+        out = tmp_path / f"race{race}" / "s"
+        procs = {"3": _racer(out, "3"), "4": _racer(out, "4")}
+        try:
+            for p in procs.values():
+                assert p.stdout.readline().strip() == "ready"
+            for p in procs.values():
+                p.stdin.write("go\n")
+                p.stdin.flush()
+            results = {res: (p.communicate(timeout=120), p.returncode) for res, p in procs.items()}
+        finally:
+            for p in procs.values():
+                if p.poll() is None:
+                    p.kill()
+                    p.wait()
+        codes = sorted(rc for _, rc in results.values())
+        assert codes == [0, 2], (race, results)
+        winner = next(res for res, (_, rc) in results.items() if rc == 0)
+        (_, err), _ = next(v for v in results.values() if v[1] == 2)
+        lines = err.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("dicetrace: error: "), (race, err)
+        assert "another dicetrace scan is writing" in err or "holds a different scan" in err, (race, err)
+        assert sorted(p.name for p in out.iterdir()) == [LOCK, MANIFEST, "rolls"], (race, results)  # the lock stays
+        n = int(winner) ** 2
+        assert read_manifest(out)["definition"]["space"]["res"] == [int(winner)] * 2
+        assert (read_scan(out)["ic_id"] == np.arange(n)).all(), race
 
 
 # -- checksums -------------------------------------------------------------------------------------------------------

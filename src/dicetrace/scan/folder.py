@@ -18,10 +18,13 @@ again verifies the finished chunks against their checksums (recomputing, with
 a :class:`ScanWarning`, any that are damaged), skips the good ones and ends
 with exactly one row per IC.  A different definition
 against an existing folder is refused (:class:`ScanMismatchError`), never
-mixed in.  One writer at a time: a scan holds the folder's lock
-(``.dicetrace-scan.lock``, via ``filelock``) while it writes; a second one
-waits at most ``wait`` seconds, then refuses (:class:`ScanBusyError`),
-touching nothing.
+mixed in.  One writer at a time: taking the folder's lock
+(``.dicetrace-scan.lock``, via ``filelock``) is the first thing a scan does
+to the folder (it makes the folder to hold it), and it holds the lock while
+it writes; a second one waits at most ``wait`` seconds, then refuses
+(:class:`ScanBusyError`), touching nothing.  Nothing removes a lock it does
+not hold: a scan that fails before writing its manifest removes its own lock
+(holding it) and the folders it made.
 
 Every reader reads the folder as it is: ``polars.scan_parquet("scan/")``,
 ``pandas.read_parquet("scan")``, DuckDB's ``read_parquet('scan/**/*.parquet')``
@@ -515,29 +518,81 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
     return path
 
 
+def _make_folders(folder: Path) -> list[Path]:
+    """``mkdir -p folder``; the folders this call made, outermost first (one that another process made at the
+    same moment is not counted: it is not ours to remove)."""
+    missing = []
+    p = Path(folder)
+    while not os.path.lexists(p) and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    made = []
+    for d in reversed(missing):
+        try:
+            d.mkdir()
+        except FileExistsError:
+            if not d.is_dir():
+                raise
+        else:
+            made.append(d)
+    return made
+
+
 class _FolderLock:
-    """The folder's writer lock (``filelock``); refuses in one line after ``wait`` seconds."""
+    """The folder's writer lock (``filelock``): the first thing a scan does to the folder.
+
+    The folder is made (the lock file lives in it) and locked at once;
+    after ``wait`` seconds without the lock it refuses in one line,
+    removing nothing: the folder and the lock are the holder's.  Nothing
+    removes a lock it does not hold.  A scan that ends on an error while
+    holding the lock, before it wrote the manifest, removes the lock file
+    (still holding it: a waiter that had opened it sees it unlinked and
+    takes a fresh one) and the folders it made, where empty.
+    """
+
+    #: A folder removed under a waiting scan (by one that failed before writing anything) is made again at most
+    #: this many times.
+    RETRIES = 8
 
     def __init__(self, folder: Path, wait: float):
-        from filelock import FileLock
-
-        self.folder, self.wait = folder, wait
-        self.lock = FileLock(str(folder / LOCK), timeout=wait)
+        self.folder, self.wait = Path(folder), wait
+        self.created: list[Path] = []
+        self.lock = None
 
     def __enter__(self):
-        from filelock import Timeout
+        from filelock import FileLock, Timeout
 
+        deadline = time.monotonic() + self.wait
+        for attempt in range(self.RETRIES + 1):
+            try:
+                self.created += _make_folders(self.folder)
+            except OSError as e:
+                reason = os.strerror(e.errno) if e.errno else " ".join(str(e).split())
+                raise OutputError(f"cannot create the scan folder {str(self.folder)!r}: {reason}") from None
+            lock = FileLock(str(self.folder / LOCK), thread_local=False)
+            try:
+                lock.acquire(timeout=max(0.0, deadline - time.monotonic()))
+            except Timeout:
+                raise ScanBusyError(
+                    f"another dicetrace scan is writing into {str(self.folder)!r} (it holds {LOCK}); "
+                    f"waited {self.wait:g} s: let it finish (then re-run: finished chunks are skipped), "
+                    "or wait for it (--wait SECONDS)"
+                ) from None
+            except FileNotFoundError:  # the folder went between making and locking it: make it again
+                if attempt == self.RETRIES:
+                    raise OutputError(f"the scan folder {str(self.folder)!r} keeps disappearing") from None
+                continue
+            self.lock = lock
+            return self
+
+    def __exit__(self, exc_type, *exc):
         try:
-            self.lock.acquire()
-        except Timeout:
-            raise ScanBusyError(
-                f"another dicetrace scan is writing into {str(self.folder)!r} (it holds {LOCK}); "
-                f"waited {self.wait:g} s: let it finish (then re-run: finished chunks are skipped), "
-                "or wait for it (--wait SECONDS)"
-            ) from None
-        return self
-
-    def __exit__(self, *exc):
-        self.lock.release()
-
-
+            if exc_type is not None and not has_manifest(self.folder):  # nothing written: leave nothing behind
+                remove_quietly(self.folder / LOCK)  # ours: we hold it
+                for d in reversed(self.created):
+                    try:
+                        d.rmdir()
+                    except OSError:
+                        break
+        finally:
+            self.lock.release()

@@ -23,15 +23,9 @@ import pyarrow as pa
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.params import Config, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition
-from dicetrace.sinks._common import (
-    make_folders,
-    output_folder,
-    remove_folders,
-    remove_quietly,
-)
+from dicetrace.sinks._common import output_folder
 from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask
 from dicetrace.scan.folder import (
-    LOCK,
     _check_empty,
     _check_int,
     _check_manifest,
@@ -41,7 +35,6 @@ from dicetrace.scan.folder import (
     _with_metadata,
     compute_chunk,
     flush_chunk_log,
-    has_manifest,
     prepare_folder,
     write_chunk,
 )
@@ -271,24 +264,15 @@ def scan(
     if dask:
         client, closers = _open_dask(dask, n_workers)
     try:
-        created = make_folders(folder)
-        had_lock = (folder / LOCK).exists()
-        try:
-            with _FolderLock(folder, float(wait)):
-                return _run_into(folder, defn, created, t0, threads=threads, progress=progress, client=client,
-                                 max_chunks=max_chunks)
-        except BaseException:
-            if not has_manifest(folder):  # refused before anything was written: leave nothing behind
-                if not had_lock:
-                    remove_quietly(folder / LOCK)
-                remove_folders(created)
-            raise
+        with _FolderLock(folder, float(wait)):  # made and locked at once: nothing touches it before
+            return _run_into(folder, defn, t0, threads=threads, progress=progress, client=client,
+                             max_chunks=max_chunks)
     finally:
         for x in closers:
             x.close()
 
 
-def _run_into(folder: Path, defn: ScanDefinition, created, t0: float, *, threads, progress, client, max_chunks):
+def _run_into(folder: Path, defn: ScanDefinition, t0: float, *, threads, progress, client, max_chunks):
     done = prepare_folder(folder, defn)
     todo: Iterable[int] = (c for c in range(defn.n_chunks) if c not in done)
     if max_chunks is not None:
