@@ -286,12 +286,8 @@ def test_connect_streams_the_same_content_and_blueprint_as_the_file(tmp_path, di
 
 
 def test_connect_to_nothing_is_one_line_exit_2(tmp_path, dicetrace_cli):
-    import time
-
     port = free_port()  # closed again: nothing listens there
-    t0 = time.monotonic()
     res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--connect", "--url", str(port), cwd=tmp_path)
-    assert time.monotonic() - t0 < 10
     assert res.returncode == 2 and "Traceback" not in res.stderr
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and "--connect" in lines[0] and str(port) in lines[0], res.stderr
@@ -300,10 +296,7 @@ def test_connect_to_nothing_is_one_line_exit_2(tmp_path, dicetrace_cli):
 
 @pytest.mark.slow
 def test_serve_says_its_url_and_stops_after_serve_for(tmp_path):
-    import time
-
     grpc, web = free_port(), free_port()
-    t0 = time.monotonic()
     res = subprocess.run(
         [sys.executable, "-m", "dicetrace.cli", "record", "--ic", "14.08,11.46,9.87,13.8,122.8,15.5", "--serve",
          "--port", str(grpc), "--web-port", str(web), "--serve-for", "1"],
@@ -314,7 +307,92 @@ def test_serve_says_its_url_and_stops_after_serve_for(tmp_path):
     assert lines[0].startswith(f"serving the web viewer at http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F")
     assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in lines[-1] or f":{grpc}/proxy" in lines[-1]
     assert list(tmp_path.iterdir()) == []  # no file unless --out/--save is given
-    assert time.monotonic() - t0 < 240
+
+
+def listening_sockets(pid: int) -> set[tuple[str, int]]:
+    """(address, port) of every TCP socket process ``pid`` listens on, read from /proc/net/tcp and tcp6."""
+    import ipaddress
+    import os
+
+    inodes = set()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            link = os.readlink(f"/proc/{pid}/fd/{fd}")
+        except OSError:  # closed meanwhile
+            continue
+        if link.startswith("socket:["):
+            inodes.add(link[8:-1])
+    found = set()
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        if not os.path.exists(table):
+            continue
+        with open(table) as f:
+            next(f)
+            for row in f:
+                cols = row.split()
+                local, state, inode = cols[1], cols[3], cols[9]
+                if state != "0A" or inode not in inodes:  # 0A: LISTEN
+                    continue
+                addr_hex, port_hex = local.split(":")
+                raw = bytes.fromhex(addr_hex)
+                raw = b"".join(raw[k:k + 4][::-1] for k in range(0, len(raw), 4))  # each 32-bit word in host order
+                found.add((str(ipaddress.ip_address(raw)), int(port_hex, 16)))
+    return found
+
+
+def serve_and_look(tmp_path, *extra: str):
+    """Start ``record --serve`` (the extra options given), and once it serves: its printed line, its listening
+    sockets and its ports; stopped with Ctrl-C, as a user would."""
+    import signal
+
+    grpc, web = free_port(), free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dicetrace.cli", "record", "--ic", "14.08,11.46,9.87,13.8,122.8,15.5", "--serve",
+         "--port", str(grpc), "--web-port", str(web), "--serve-for", "120", *extra],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    try:
+        first = proc.stdout.readline()  # printed once both servers listen and the recording is served
+        sockets = listening_sockets(proc.pid)
+        page = None
+        host = {"--bind": None, **dict(zip(extra[::2], extra[1::2]))}["--bind"] or "127.0.0.1"
+        import urllib.request
+
+        with urllib.request.urlopen(f"http://{host}:{web}/", timeout=10) as r:
+            page = r.read()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+    assert proc.returncode == 0, err
+    return first, sockets, grpc, web, page
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="reads the listening sockets from /proc/net/tcp")
+def test_serve_listens_on_127_0_0_1_only(tmp_path):
+    first, sockets, grpc, web, page = serve_and_look(tmp_path)
+    assert sockets == {("127.0.0.1", grpc), ("127.0.0.1", web)}, first
+    assert first.startswith(f"serving the web viewer at http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A"
+                            f"{grpc}%2Fproxy (gRPC rerun+http://127.0.0.1:{grpc}/proxy)"), first
+    assert b"widget.js" in page  # Rerun's web viewer, served on that address
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="reads the listening sockets from /proc/net/tcp")
+def test_serve_listens_on_the_address_bind_gives(tmp_path):
+    """Another loopback address (Linux routes all of 127/8 to this machine): both servers there, and the URLs say so."""
+    import socket
+
+    first, sockets, grpc, web, page = serve_and_look(tmp_path, "--bind", "127.0.0.2")
+    assert sockets == {("127.0.0.2", grpc), ("127.0.0.2", web)}, first
+    assert first.startswith(f"serving the web viewer at http://127.0.0.2:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.2%3A"
+                            f"{grpc}%2Fproxy (gRPC rerun+http://127.0.0.2:{grpc}/proxy)"), first
+    assert b"widget.js" in page
+    with socket.socket() as s:  # and nothing on 127.0.0.1
+        assert s.connect_ex(("127.0.0.1", web)) != 0
 
 
 def test_channels_option_adds_forces_and_depths_and_the_default_stays_lean(tmp_path, dicetrace_cli):

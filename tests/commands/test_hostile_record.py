@@ -112,6 +112,11 @@ BAD = [
     case([*AT, "--serve", "--serve-for", "-1"], "--serve-for", "'-1'"),
     case([*AT, "--serve", "--serve-for", "soon"], "--serve-for", "'soon'"),
     case([*AT, "--serve", "--port", "0"], "--port", "range"),
+    case([*AT, "--bind", "127.0.0.1"], "--bind", "--serve"),
+    case([*AT, "--connect", "--bind", "127.0.0.1"], "--bind", "--serve", "--url"),
+    case([*AT, "--serve", "--bind", "example.com"], "--bind", "'example.com'", "IP address"),
+    case([*AT, "--serve", "--bind", "300.1.1.1"], "--bind", "'300.1.1.1'"),
+    case([*AT, "--serve", "--port", "9999", "--web-port", "9999"], "--port", "--web-port", "9999"),
     case([*AT, "--nudge", "big"], "--nudge", "'big'"),
     case([*AT, "--nudge", "nan"], "--nudge", "'nan'"),
     case([*AT, "--nudge", "1"], "--nudge", "(-1, 1)"),
@@ -345,3 +350,99 @@ def test_serve_on_a_taken_port_is_one_line_exit_2(snapshot, work, dicetrace_cli,
         res = dicetrace_cli("record", *AT, "--serve", "--port", str(port), "--serve-for", "0", cwd=work)
         assert_one_line_error(res, "--serve", str(port), "in use")
         assert snapshot(work) == before
+
+
+# -- unreachable or broken streaming targets: one line, exit 2, in bounded time (real peers on 127.0.0.1) -------
+
+#: The bound on a refusal (the issue's "within 10 s"): the run is killed, and the test fails, past it.
+REFUSAL_WAIT_S = 10
+
+
+@pytest.fixture
+def peer():
+    """``peer(kind) -> port``: a TCP peer on 127.0.0.1 that refuses ("refused": nothing listens), accepts and never
+    answers ("silent"), or answers garbage ("garbage"); closed in teardown."""
+    import socket
+
+    servers, stop = [], threading.Event()
+
+    def start(kind: str) -> int:
+        s = socket.socket()
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        if kind == "refused":
+            s.close()
+            return port
+        s.listen(8)
+        s.settimeout(0.2)
+        servers.append(s)
+
+        def serve():
+            held = []
+            while not stop.is_set():
+                try:
+                    c, _ = s.accept()
+                except OSError:
+                    continue
+                held.append(c)  # silent: kept open, never written to
+                if kind == "garbage":
+                    try:
+                        c.sendall(b"HTTP/1.1 200 OK\r\nnot gRPC \x00\xff\xfe\r\n\r\n" * 8)
+                    except OSError:
+                        pass
+            for c in held:
+                c.close()
+
+        threading.Thread(target=serve, daemon=True).start()
+        return port
+
+    yield start
+    stop.set()
+    for s in servers:
+        s.close()
+
+
+def run_bounded(args, cwd, env=None):
+    """``dicetrace ARGS`` in a real process (the SDK's own log lines would go to its fd 2), killed past the bound."""
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "dicetrace.cli", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=REFUSAL_WAIT_S)
+
+
+@pytest.mark.parametrize("kind", ["refused", "silent", "garbage"])
+def test_connect_to_a_peer_that_is_no_grpc_server_is_one_line_exit_2(tmp_path, peer, kind):
+    port = peer(kind)
+    res = run_bounded(["record", *AT, "--connect", "--url", f"rerun+http://127.0.0.1:{port}/proxy"], tmp_path)
+    assert res.returncode == 2 and res.stdout == "", (res.returncode, res.stdout, res.stderr)
+    (line,) = res.stderr.strip().splitlines()  # one line: ours, no SDK log lines
+    assert line.startswith("dicetrace: error: --connect ") and f":{port}/proxy" in line
+    assert {"refused": "refused", "silent": "did not answer", "garbage": "not as an HTTP/2"}[kind] in line
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("display", [None, ":93"])
+def test_spawn_without_a_display_is_one_line_exit_2(tmp_path, peer, display):
+    """No display at all, or a DISPLAY where no X server answers: refused before any work, in one line."""
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    if display is not None:
+        if os.path.exists(f"/tmp/.X11-unix/X{display[1:]}"):
+            pytest.skip(f"an X server may answer at {display}")
+        env["DISPLAY"] = display
+    res = run_bounded(["record", *AT, "--spawn", "--port", str(peer("refused"))], tmp_path, env=env)
+    assert res.returncode == 2 and res.stdout == "", (res.returncode, res.stdout, res.stderr)
+    (line,) = res.stderr.strip().splitlines()
+    assert line.startswith("dicetrace: error: --spawn needs a display")
+    assert ("DISPLAY and WAYLAND_DISPLAY are unset" if display is None else f"DISPLAY={display}") in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_spawn_onto_a_port_held_by_something_else_is_one_line_exit_2(tmp_path, peer):
+    """A port that answers but not as a viewer is not "reused": refused in bounded time."""
+    port = peer("silent")
+    env = {**os.environ, "DISPLAY": ":0"}
+    res = run_bounded(["record", *AT, "--spawn", "--port", str(port)], tmp_path, env=env)
+    assert res.returncode == 2 and res.stdout == "", (res.returncode, res.stdout, res.stderr)
+    (line,) = res.stderr.strip().splitlines()
+    assert line.startswith(f"dicetrace: error: --spawn: port {port} is taken by something that is not a Rerun viewer")

@@ -15,6 +15,7 @@ Sinks as in rerun's example scripts (``rr.script_add_args``): ``--out`` /
 viewer), ``--connect [--url URL]`` (a running viewer or gRPC server),
 ``--serve`` (gRPC + web viewer, until Ctrl-C or ``--serve-for`` s).  They
 carry the same content and default blueprint: :mod:`dicetrace.sinks.rerun_stream`.
+``--serve`` and ``--spawn`` listen on 127.0.0.1 unless ``--bind ADDR`` says otherwise.
 
 Several ``--ic``, or ``--nudge EPS`` (a second throw from the first IC times
 1 + EPS), compare throws in one recording: :mod:`dicetrace.sinks.rerun_compare`.
@@ -181,7 +182,7 @@ def check_port(port: int | None, option: str) -> None:
         fail(f"{option} {port} is out of range 1..65535")
 
 
-def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, web_port):
+def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, web_port, bind=None):
     """The streaming sink asked for ("spawn", "connect", "serve" or None), its options checked; one-line failures."""
     chosen = [name for name, on in (("spawn", spawn), ("connect", connect), ("serve", serve)) if on]
     if len(chosen) > 1:
@@ -195,12 +196,21 @@ def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, w
         fail("--web-port needs --serve")
     if port is not None and mode not in ("spawn", "serve"):
         fail("--port needs --spawn or --serve (with --connect give --url)")
-    if mode == "spawn" and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
-        fail("--spawn needs a display to open the viewer on (DISPLAY and WAYLAND_DISPLAY are unset): use --serve "
-             "(web viewer) or --out FILE.rrd")
+    if bind is not None and mode not in ("spawn", "serve"):
+        fail("--bind needs --spawn or --serve (with --connect give --url)")
     check_port(port, "--port")
     check_port(web_port, "--web-port")
     return mode
+
+
+def check_bind(bind: str | None) -> str:
+    """The address --serve / --spawn listen on (default 127.0.0.1); one-line failure."""
+    from dicetrace.sinks.rerun_stream import parse_bind
+
+    try:
+        return parse_bind(bind)
+    except ValueError as e:
+        fail(f"--bind: {e}")
 
 
 def register(app: typer.Typer) -> None:
@@ -247,6 +257,10 @@ def register(app: typer.Typer) -> None:
             None, "--port", help="With --spawn or --serve: the gRPC port (default: 9876)."
         ),
         web_port: Optional[int] = typer.Option(None, "--web-port", help="With --serve: the web viewer's port (default: 9090)."),
+        bind: Optional[str] = typer.Option(
+            None, "--bind", "--host", help="With --serve or --spawn: the address to listen on (default 127.0.0.1: this "
+            "machine only; 0.0.0.0: every interface)."
+        ),
         channels: Optional[str] = typer.Option(
             None, "--channels", help="Optional channels, comma-separated (default: none, a lean recording): forces "
             "(per-node normal and friction contact forces as arrows), penetration (depth per node below the ground), "
@@ -264,10 +278,12 @@ def register(app: typer.Typer) -> None:
         failure (the files are still written for inspection), 2 on bad input or an unreachable
         viewer or server.
         """
-        from dicetrace.sinks.rerun_stream import DEFAULT_PORT, DEFAULT_WEB_PORT, StreamError
+        from dicetrace.sinks.rerun_stream import DEFAULT_PORT, DEFAULT_WEB_PORT, StreamError, quiet_sdk_logs
 
+        quiet_sdk_logs()  # before rerun is imported: failures are one line of ours, not the SDK's log lines
         ics = list(ic or [])
-        mode = check_sinks(spawn, connect, serve, url, serve_for, port, web_port)
+        mode = check_sinks(spawn, connect, serve, url, serve_for, port, web_port, bind)
+        host = check_bind(bind)
         serve_s = parse_seconds(serve_for, "--serve-for")
         eps = parse_nudge(nudge)
         comparing = len(ics) > 1 or eps is not None
@@ -320,7 +336,11 @@ def register(app: typer.Typer) -> None:
             elif mode == "serve":
                 from dicetrace.sinks.rerun_stream import check_serve
 
-                check_serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT)
+                check_serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT, host)
+            elif mode == "spawn":
+                from dicetrace.sinks.rerun_stream import check_spawn
+
+                check_spawn(port or DEFAULT_PORT, host)
         except StreamError as e:
             fail(str(e))
         except ValueError as e:
@@ -379,9 +399,9 @@ def register(app: typer.Typer) -> None:
                 if mode == "connect":
                     st.connect(target)
                 elif mode == "spawn":
-                    st.spawn(port or DEFAULT_PORT)
+                    st.spawn(port or DEFAULT_PORT, host)
                 else:
-                    web = st.serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT)
+                    web = st.serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT, host)
                 st.send(log)
                 sent = f"sent to {st.grpc_url}"
                 if mode == "serve":
