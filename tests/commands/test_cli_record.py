@@ -90,6 +90,29 @@ def test_default_name_of_a_direct_ic_and_non_default_numerics():
     )
 
 
+@pytest.mark.slow
+def test_default_names_say_what_is_in_the_recording_and_never_clobber_another(tmp_path, dicetrace_cli):
+    """Channels, a time cap, a nudge: each its own default name; the plain recording is left as it was."""
+    at = ("--slice", "seed", "--at", "1.65,3.9")
+    assert dicetrace_cli("record", *at, cwd=tmp_path).returncode == 0
+    plain = tmp_path / "recordings" / "seed_x1.65_y3.9.rrd"
+    before = plain.read_bytes()
+    expected = {
+        ("--channels", "all"): "seed_x1.65_y3.9_forces-penetration-velocities.rrd",
+        ("--channels", "penetration,forces"): "seed_x1.65_y3.9_forces-penetration.rrd",
+        ("--t-max", "0.3"): "seed_x1.65_y3.9_tmax0.3.rrd",
+        ("--nudge", "1e-6"): "seed_x1.65_y3.9_nudge1e-06.rrd",
+    }
+    for extra, name in expected.items():
+        res = dicetrace_cli("record", *at, *extra, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        assert f"wrote recordings/{name}" in res.stdout, (extra, res.stdout)
+    assert sorted(p.name for p in plain.parent.iterdir()) == sorted([plain.name, *expected.values()])
+    assert plain.read_bytes() == before  # not overwritten by any of them
+    assert "/world/die/forces/normal" in read_rrd(plain.parent / expected[("--channels", "all")])
+    assert "/world/die/forces/normal" not in read_rrd(plain)
+
+
 def test_numerical_failure_exits_1_and_keeps_the_recording(tmp_path, dicetrace_cli):
     out = tmp_path / "fail.rrd"
     res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--out", str(out), cwd=tmp_path)

@@ -4,9 +4,10 @@ The IC comes from ``--ic VX,VY,VZ,LX,LY,LZ``, ``--slice seed --at X,Y[,Z]``,
 or ``--scan DIR --at X,Y`` (the scanned point nearest to X,Y, with the
 scan's configuration: it reproduces that row exactly).
 The recording goes to ``--out PATH.rrd``, by default
-``recordings/<name>.rrd`` where the name encodes the IC
-(``seed_x1.65_y3.9.rrd``, ``ic_1_2_3_4_5_6.rrd``, plus the preset,
-integrator and time step when they are not the defaults).  ``--parquet DIR``
+``recordings/<name>.rrd`` where the name says what is in it: the IC
+(``seed_x1.65_y3.9.rrd``, ``ic_1_2_3_4_5_6.rrd``), plus the preset,
+integrator, time step, time cap and tolerances when they are not the
+defaults, the optional channels and the comparison (:func:`default_name`).  ``--parquet DIR``
 also writes ``rolls.parquet``, ``contacts.parquet`` and
 ``trajectory.parquet`` there.  Prints one summary line.
 
@@ -58,9 +59,16 @@ from dicetrace.commands.simulate import (
 DEFAULT_FOLDER = Path("recordings")
 
 
-def default_name(ic, coords, desc: dict, cfg) -> str:
-    """File stem encoding the IC (and any non-default preset, integrator, time step)."""
+def default_name(ic, coords, desc: dict, cfg, channels=frozenset()) -> str:
+    """File stem saying what is in the recording: the IC, then whatever is not the default.
+
+    The preset, integrator, time step, time cap, tolerance (and its growth), sub-steps when they
+    are not the defaults, and the optional channels (``_forces-penetration``): two recordings with
+    different content never get the same default name, so a default-named file is only ever
+    replaced by a recording of the same throw with the same content.
+    """
     from dicetrace.params import Numerics
+    from dicetrace.sinks.rerun_channels import CHANNELS
 
     if desc.get("kind") == "scan":
         parts = [Path(desc["scan"]).resolve().name or "scan"] + [f"{a}{fmt_num(v)}" for a, v in zip("xyz", coords)]
@@ -68,13 +76,23 @@ def default_name(ic, coords, desc: dict, cfg) -> str:
         parts = [desc["slice"]] + [f"{a}{fmt_num(v)}" for a, v in zip("xyz", coords)]
     else:
         parts = ["ic"] + [fmt_num(v) for v in ic]
-    default = Numerics()
+    default, num = Numerics(), cfg.numerics
     if cfg.preset.name != "seed":
         parts.append(cfg.preset.name)
-    if cfg.numerics.integrator != default.integrator:
-        parts.append(cfg.numerics.integrator)
-    if cfg.numerics.dt_s != default.dt_s:
-        parts.append(f"dt{fmt_num(cfg.numerics.dt_s)}")
+    if num.integrator != default.integrator:
+        parts.append(num.integrator)
+    if num.dt_s != default.dt_s:
+        parts.append(f"dt{fmt_num(num.dt_s)}")
+    if num.t_max_s != default.t_max_s:
+        parts.append(f"tmax{fmt_num(num.t_max_s)}")
+    if num.tol != default.tol:
+        parts.append(f"tol{fmt_num(num.tol)}")
+    if num.tol_growth != default.tol_growth:
+        parts.append(f"tolgrowth{fmt_num(num.tol_growth)}")
+    if num.substeps != default.substeps:
+        parts.append(f"substeps{num.substeps}")
+    if channels:
+        parts.append("-".join(c for c in CHANNELS if c in channels))
     return "_".join(parts)
 
 
@@ -236,7 +254,7 @@ def register(app: typer.Typer) -> None:
         tol_growth: Optional[str] = typer.Option(None, "--tol-growth", help=TOL_GROWTH_HELP),
         out: Optional[Path] = typer.Option(
             None, "--out", "--save", help="Output .rrd file (default, when no other sink is given: "
-            "recordings/<name>.rrd, the name encoding the IC); a character device or FIFO is written directly, "
+            "recordings/<name>.rrd, the name encoding the IC and every non-default option); a character device or FIFO is written directly, "
             "'-' is standard output."
         ),
         spawn: bool = typer.Option(False, "--spawn", help="Open a Rerun viewer now and stream the recording to it."),
@@ -318,7 +336,7 @@ def register(app: typer.Typer) -> None:
         if scan is None:
             cfg = build_config(preset or "seed", integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
                                tol_growth=tol_growth)
-        name = default_name(the_ic, coords, desc, cfg)
+        name = default_name(the_ic, coords, desc, cfg, chans)
         if comparing:
             name = f"{name}_nudge{fmt_num(eps)}" if eps is not None and len(all_ics) == 2 else f"compare{len(all_ics)}_{name}"
         if out is None and mode is None:
