@@ -166,3 +166,37 @@ def test_cli_refuses_bad_options_in_one_line(tmp_path):
 
     r = CliRunner().invoke(app, ["explore", "--no-browser", "--window", "1,1,3,4"])
     assert r.exit_code != 0 and "x1 > x0" in str(r.exception or "") + (r.output or "")
+
+
+@pytest.mark.parametrize("kwargs, param", [
+    ({"port": 70000}, "port"),
+    ({"port": -1}, "port"),
+    ({"port": "8080"}, "port"),
+    ({"port": 1.5}, "port"),
+    ({"host": ""}, "host"),
+    ({"host": "no-such-host.invalid"}, "host"),
+    ({"threads": 0}, "threads"),
+])
+def test_explorer_refuses_a_bad_port_or_address_up_front(kwargs, param):
+    from dicetrace.explore import Explorer
+
+    before = threading.active_count()
+    with pytest.raises(ValueError) as exc:
+        Explorer(window=WINDOW, res=RES, **kwargs)
+    assert not isinstance(exc.value, OverflowError) and str(exc.value).startswith(param + " ")
+    assert threading.active_count() == before  # no server thread was started
+
+
+@pytest.mark.parametrize("args, option", [
+    (["--port", "70000"], "--port"),
+    (["--port", "-5"], "--port"),
+    (["--bind", "no-such-host.invalid"], "--host"),
+    (["--host", ""], "--host"),
+    (["--threads", "0"], "--threads"),
+])
+def test_cli_refuses_a_bad_port_or_address_in_one_line(tmp_path, dicetrace_cli, args, option):
+    res = dicetrace_cli("explore", "--no-browser", "--window", WINDOW, "--res", str(RES), *args, cwd=tmp_path)
+    assert res.returncode == 2, res
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"dicetrace: error: {option} "), res.stderr
+    assert "Traceback" not in res.stderr and res.stdout == ""

@@ -36,7 +36,8 @@ def register(app: typer.Typer) -> None:
         integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
         gamma: Optional[float] = typer.Option(None, "--gamma", help="Damping γ, s/cm (default: the preset's)."),
         dt: Optional[float] = typer.Option(None, "--dt", help="Time step, s (default 0.001)."),
-        host: str = typer.Option("127.0.0.1", "--host", help="Address to listen on (default 127.0.0.1: this machine only)."),
+        host: str = typer.Option("127.0.0.1", "--host", "--bind",
+                                 help="Address to listen on (default 127.0.0.1: this machine only)."),
         port: int = typer.Option(0, "--port", help="Port (default: a free one)."),
         no_browser: bool = typer.Option(False, "--no-browser", help="Do not open a browser; print the URL only."),
         out: Optional[Path] = typer.Option(
@@ -46,17 +47,19 @@ def register(app: typer.Typer) -> None:
         threads: Optional[int] = typer.Option(None, "--threads", help="numba threads per map (default: all)."),
     ) -> None:
         """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer."""
-        from dicetrace.explore.server import make_view, serve_forever
+        from dicetrace.explore.server import check_host, check_port, check_threads, make_view, serve_forever
         from dicetrace.explore.view import ViewError
 
         try:
             view = make_view(slice_name, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
         except ViewError as e:
             fail(f"--{e.param}: {e.message}")
-        if not 0 <= port <= 65535:
-            fail(f"--port must be in 0..65535, got {port}")
-        if threads is not None and threads < 1:
-            fail(f"--threads must be >= 1, got {threads}")
+        for check, value, name in ((check_port, port, "--port"), (check_host, host, "--host"),
+                                   (check_threads, threads, "--threads")):
+            try:
+                check(value, name)
+            except ValueError as e:
+                fail(str(e))
         if out is not None:
             out = output_dir(out, "--out")
             out.mkdir(parents=True, exist_ok=True)

@@ -11,10 +11,13 @@ an anywidget whose picked throws and view come back to Python.  ``stop()``
 from __future__ import annotations
 
 import html
+import ipaddress
 import socket
 import threading
 import time
 from pathlib import Path
+
+import numpy as np
 
 from dicetrace.explore.view import View, view_from_query
 
@@ -22,6 +25,40 @@ from dicetrace.explore.view import View, view_from_query
 DEFAULT_HOST = "127.0.0.1"
 #: Longest wait for the server to come up, s.
 START_TIMEOUT_S = 30.0
+
+
+def check_port(port, name: str = "port") -> int:
+    """``port`` as an int in 0..65535 (0: a free one), or ValueError naming ``name``."""
+    if isinstance(port, bool) or not isinstance(port, (int, np.integer)):
+        raise ValueError(f"{name} must be a whole number in 0..65535 (0: a free one), got {port!r}")
+    if not 0 <= port <= 65535:
+        raise ValueError(f"{name} must be in 0..65535 (0: a free one), got {port!r}")
+    return int(port)
+
+
+def check_host(host, name: str = "host") -> str:
+    """``host`` as an address this machine can listen on (an IP address, or a name that resolves), or ValueError naming ``name``."""
+    if not isinstance(host, str) or not host.strip() or host != host.strip():
+        raise ValueError(f"{name} must be an address to listen on, such as 127.0.0.1, got {host!r}")
+    try:
+        ipaddress.ip_address(host)
+        return host
+    except ValueError:
+        pass
+    try:
+        socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as e:
+        raise ValueError(f"{name} {host!r} does not resolve to an address: {getattr(e, 'strerror', None) or e}") from None
+    return host
+
+
+def check_threads(threads, name: str = "threads"):
+    """``threads`` as None or an int >= 1, or ValueError naming ``name``."""
+    if threads is None:
+        return None
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1:
+        raise ValueError(f"{name} must be a whole number >= 1, got {threads!r}")
+    return int(threads)
 
 
 def bind_socket(host: str = DEFAULT_HOST, port: int = 0) -> socket.socket:
@@ -69,9 +106,13 @@ class Explorer:
     def __init__(self, slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
                  gamma=None, dt=None, z=None, out=None, host: str = DEFAULT_HOST, port: int = 0,
                  threads: int | None = None, start: bool = True, height: int = 900):
+        host, port = check_host(host), check_port(port)  # before anything starts (ValueError naming the parameter)
+        threads = check_threads(threads)
+        if isinstance(height, bool) or not isinstance(height, (int, np.integer)) or height < 1:
+            raise ValueError(f"height must be a whole number of pixels >= 1, got {height!r}")
         self.view = make_view(slice, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
         self.out = None if out is None else Path(out)
-        self.host, self.port, self.threads, self.height = host, int(port), threads, int(height)
+        self.host, self.port, self.threads, self.height = host, port, threads, int(height)
         self._server = None
         self._thread: threading.Thread | None = None
         self._sock: socket.socket | None = None
@@ -152,6 +193,7 @@ def serve_forever(view: View, *, host: str = DEFAULT_HOST, port: int = 0, out=No
     """Serve the explorer in the foreground until interrupted; ``on_ready(url)`` is called once it listens."""
     from dicetrace.explore.app import create_app
 
+    host, port, threads = check_host(host), check_port(port), check_threads(threads)
     sock = bind_socket(host, port)
     port = sock.getsockname()[1]
     server = make_server(create_app(view, out=out, threads=threads), sock)
