@@ -341,6 +341,73 @@ def test_a_torn_chunk_log_line_is_ignored(tmp_path, home5, to_legacy_layout):
     assert _data(read_scan(out)).equals(_data(home5))
 
 
+
+# -- the folder holds what its manifest lists ------------------------------------------------------------------------
+
+
+def _tree(folder: Path) -> dict:
+    return {str(p.relative_to(folder)): (p.read_bytes() if p.is_file() else "dir") for p in sorted(folder.rglob("*"))}
+
+
+def test_a_copy_of_a_chunk_under_another_name_is_not_read_and_refused_by_name(tmp_path, dicetrace_cli, home5,
+                                                                            assert_one_line_error):
+    import shutil
+
+    out = tmp_path / "s"
+    args = ["scan", "--window", "home", "--res", "5", "--chunk", "5", "--out", str(out), "-q"]
+    scan(HOME5, out, chunk=5, max_chunks=2)
+    rolls = out / "rolls"
+    shutil.copy(rolls / "part-000000.parquet", rolls / "part-000003.parquet")  # a chunk index the scan has not done
+    df = read_scan(out)
+    assert (df["ic_id"] == np.arange(10)).all()  # only the manifest's files are read: no duplicate ic_id
+    assert outcome_counts(out) and sum(status_counts(out).values()) == 10
+    before = _tree(out)
+    assert_one_line_error(dicetrace_cli(*args, cwd=tmp_path), "--out", "part-000003.parquet", "not listed",
+                          "ic_ids are not chunk 3")
+    assert _tree(out) == before  # refused by name: nothing moved, deleted or written
+    (rolls / "part-000003.parquet").rename(rolls / "part-000099.parquet")  # beyond the scan's chunks
+    assert_one_line_error(dicetrace_cli(*args, cwd=tmp_path), "--out", "part-000099.parquet", "beyond")
+    (rolls / "part-000099.parquet").rename(tmp_path / "moved-out.parquet")
+    (rolls / "notes.txt").write_text("mine")
+    with pytest.raises(FileExistsError, match=r"notes\.txt.*none of the scan's chunk files"):
+        scan(HOME5, out, chunk=5)
+    (rolls / "notes.txt").unlink()
+    res = dicetrace_cli(*args, cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert _data(read_scan(out)).equals(_data(home5))
+
+
+def test_a_folder_where_a_chunk_file_should_be_is_named_by_readers_and_refused_by_a_resume(tmp_path, dicetrace_cli,
+                                                                                        assert_one_line_error):
+    out = tmp_path / "s"
+    args = ["scan", "--window", "home", "--res", "5", "--chunk", "5", "--out", str(out), "-q"]
+    scan(HOME5, out, chunk=5)
+    part = out / "rolls" / "part-000001.parquet"
+    part.unlink()
+    part.mkdir()
+    (part / "x.parquet").write_bytes(b"mine")
+    with pytest.raises(CorruptChunkError, match=r"part-000001\.parquet.*damaged"):
+        read_scan(out)
+    before = _tree(out)
+    assert_one_line_error(dicetrace_cli(*args, cwd=tmp_path), "--out", "part-000001.parquet", "is a folder")
+    assert _tree(out) == before
+
+
+def test_a_resume_adopts_its_own_chunk_that_the_log_missed_and_readers_wait_for_it(tmp_path, home5):
+    """A kill between a chunk's rename and the log's next rewrite: the part is the scan's own, not listed yet."""
+    from dicetrace.scan.folder import _write_manifest
+
+    out = tmp_path / "s"
+    scan(HOME5, out, chunk=5, max_chunks=3)
+    log = read_chunk_log(out)
+    del log[2]
+    _write_manifest(out, read_manifest(out), log)
+    assert len(read_scan(out)) == 10  # not listed: not read
+    r = scan(HOME5, out, chunk=5)
+    assert (r.chunks_skipped, r.chunks_computed) == (3, 2)  # adopted (its content checked), not recomputed
+    assert sorted(read_chunk_log(out)) == [0, 1, 2, 3, 4]
+    assert _data(read_scan(out)).equals(_data(home5))
+
 # -- sizes ---------------------------------------------------------------------------------------------------------
 
 

@@ -298,7 +298,7 @@ def register(app: typer.Typer) -> None:
         from dicetrace.scan.dask import SchedulerError
         from dicetrace.scan.folder import ScanBusyError
         from dicetrace.scan.dask import check_scheduler_address
-        from dicetrace.scan.folder import _check_empty, _check_manifest, _check_space_finite
+        from dicetrace.scan.folder import _check_space_finite, check_folder
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
@@ -344,8 +344,7 @@ def register(app: typer.Typer) -> None:
             where = {"grid": "--window", "sample": "--box"}.get(space.kind, "--points")
             fail(f"{where}: {e}")
         try:
-            if out_dir.is_dir() and not _check_manifest(out_dir, defn):
-                _check_empty(out_dir)
+            check_folder(out_dir, defn)
         except (ScanMismatchError, FileExistsError) as e:
             fail(f"--out: {e}")
         _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None)
@@ -354,7 +353,9 @@ def register(app: typer.Typer) -> None:
                 defn, out_dir, threads=threads, progress=not quiet and sys.stderr.isatty(),
                 dask=scheduler or (True if dask else None), n_workers=workers, max_chunks=max_chunks, wait=wait,
             )
-        except (ScanMismatchError, FileExistsError, ScanBusyError) as e:
+        except (ScanMismatchError, FileExistsError) as e:  # the folder changed since the check above
+            fail(f"--out: {e}")
+        except ScanBusyError as e:
             fail(str(e))
         except SchedulerError as e:
             fail(f"--scheduler {scheduler}: {e}" if scheduler else f"--dask: {e}")

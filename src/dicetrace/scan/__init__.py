@@ -28,6 +28,7 @@ from dicetrace.scan.estimate import ScanEstimate, estimate_scan
 from dicetrace.scan.folder import (
     MANIFEST,
     CorruptChunkError,
+    ForeignFileError,
     ScanBusyError,
     ScanMismatchError,
     ScanWarning,
@@ -43,6 +44,7 @@ from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
 
 __all__ = [
     "CorruptChunkError",
+    "ForeignFileError",
     "ScanBusyError",
     "ScanEstimate",
     "ScanWarning",

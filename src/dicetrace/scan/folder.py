@@ -16,7 +16,9 @@ most once a second while a scan runs, and as it ends).  So a
 Ctrl-C or a kill loses at most the chunks in flight; running the same scan
 again verifies the finished chunks against their checksums (recomputing, with
 a :class:`ScanWarning`, any that are damaged), skips the good ones and ends
-with exactly one row per IC.  A different definition
+with exactly one row per IC.  The folder holds what the manifest lists:
+anything else in ``rolls/`` is refused by name (:class:`ForeignFileError`),
+and dicetrace's readers read only the listed chunks.  A different definition
 against an existing folder is refused (:class:`ScanMismatchError`), never
 mixed in.  One writer at a time: taking the folder's lock
 (``.dicetrace-scan.lock``, via ``filelock``) is the first thing a scan does
@@ -81,6 +83,10 @@ _PART = re.compile(r"^part-(\d{6,})\.parquet$")
 
 class ScanMismatchError(ValueError):
     """The folder holds a scan with a different definition."""
+
+
+class ForeignFileError(FileExistsError):
+    """The scan folder holds something that is none of the scan's own files (the message names it)."""
 
 
 class ScanBusyError(RuntimeError):
@@ -416,26 +422,150 @@ def _check_empty(folder: Path) -> None:
         )
 
 
+def has_chunk_log(folder) -> bool:
+    """True if the folder's manifest lists its chunks (this version's, or an older one's ``_scan.chunks.jsonl``).
+
+    Only a folder of a dicetrace older still has no chunk log: its parts
+    are read by name.
+    """
+    return (Path(folder) / MANIFEST).is_file() or (Path(folder) / LEGACY_CHUNK_LOG).is_file()
+
+
+def _foreign(path: Path, folder: Path, why: str) -> ForeignFileError:
+    return ForeignFileError(f"{str(path)!r} {why}: a scan folder holds only the files its manifest lists; "
+                            f"move it out of {str(folder)!r}, then re-run")
+
+
+def check_rolls(folder, defn: ScanDefinition) -> None:
+    """Refuse (:class:`ForeignFileError`, naming it) anything in ``rolls/`` that cannot be one of the scan's chunk files.
+
+    That is another name than ``part-NNNNNN.parquet``, a chunk index beyond
+    the scan, or something other than a regular file (a folder, a link).
+    It only lists the folder: whether a chunk file is the scan's own is
+    checked by :func:`prepare_folder`, holding the lock.
+    """
+    folder = Path(folder)
+    rolls = folder / ROLLS_DIR
+    if os.path.lexists(rolls) and not rolls.is_dir():
+        raise FileExistsError(f"{str(rolls)!r} is not a folder: the scan's rolls table goes there; move it away")
+    try:
+        with os.scandir(rolls) as it:
+            entries = sorted(it, key=lambda e: e.name)
+    except FileNotFoundError:
+        return
+    for e in entries:
+        p = rolls / e.name
+        m = _PART.match(e.name)
+        if not m or e.name != part_name(int(m.group(1))):
+            raise _foreign(p, folder, "is none of the scan's chunk files (rolls/ holds part-NNNNNN.parquet only)")
+        c = int(m.group(1))
+        if c >= defn.n_chunks:
+            raise _foreign(p, folder, f"is chunk {c:,}, beyond the scan's {defn.n_chunks:,} chunk(s)")
+        if not e.is_file(follow_symlinks=False):
+            kind = ("a folder" if e.is_dir(follow_symlinks=False) else "a link" if e.is_symlink()
+                    else "not a regular file")
+            raise _foreign(p, folder, f"is {kind}, not a chunk file")
+
+
+def check_folder(folder, defn: ScanDefinition) -> None:
+    """Refuse an existing folder the scan ``defn`` cannot go into, touching nothing (only reading).
+
+    :class:`ScanMismatchError`: it holds another scan; FileExistsError: it
+    holds files but no scan; :class:`ForeignFileError`: ``rolls/`` holds
+    something that is none of the scan's chunk files (see :func:`check_rolls`).
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return
+    if not _check_manifest(folder, defn):
+        _check_empty(folder)
+    check_rolls(folder, defn)
+
+
+def _verify_unlogged(path: Path, defn: ScanDefinition, c: int) -> str | None:
+    """Why the chunk file ``path``, not in the chunk log, is not chunk ``c`` of the scan ``defn`` (None: it is).
+
+    It must decode whole, hold chunk ``c``'s ic_ids in order, and (where
+    its metadata says) be chunk ``c`` of this very scan: a copy of another
+    chunk, or of another scan's, is not adopted.
+    """
+    start, stop = defn.chunk_range(c)
+    try:
+        table = pq.read_table(path)
+    except Exception as e:  # noqa: BLE001 - any decoding error means "not a finished chunk"
+        return f"it does not decode ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
+    if table.num_rows != stop - start:
+        return f"it holds {table.num_rows} rows, the chunk has {stop - start}"
+    if "ic_id" not in table.column_names or not np.array_equal(
+            table.column("ic_id").to_numpy(zero_copy_only=False), np.arange(start, stop)):
+        return f"its ic_ids are not chunk {c}'s ({start}..{stop - 1})"
+    try:
+        meta = json.loads((table.schema.metadata or {})[METADATA_KEY])
+    except KeyError:
+        return None  # an older dicetrace's chunk: the ic_ids decide
+    except ValueError:
+        return "its dicetrace metadata is unreadable"
+    if meta.get("chunk_index", c) != c:
+        return f"it is chunk {meta.get('chunk_index')} (its metadata says), not chunk {c}"
+    if "scan" in meta and json.dumps(meta["scan"], sort_keys=True) != defn.canonical():
+        return "it belongs to a scan of another definition (its metadata says)"
+    return None
+
+
 def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     """Create or check the scan folder; return the chunks already finished (and verified).
 
     Call it holding the folder's lock (:func:`scan` does).  Raises
-    :class:`ScanMismatchError` when the folder holds another scan, and
-    FileExistsError when it holds files that are not a dicetrace scan.
-    Leftover temporary files of interrupted writes are removed, and a
-    folder of an older dicetrace gets this version's layout (its JSON
-    manifest and chunk log become the Parquet manifest).  Every
-    finished chunk is checked against its logged checksum; a damaged one
-    (or one with the wrong number of rows) is deleted, to be recomputed,
-    with a :class:`ScanWarning` naming it.
+    :class:`ScanMismatchError` when the folder holds another scan,
+    FileExistsError when it holds files that are not a dicetrace scan, and
+    :class:`ForeignFileError` (before changing anything) when ``rolls/``
+    holds something that is none of the scan's chunk files: another name,
+    a folder, or a chunk file that the manifest does not list and that is
+    not the scan's own chunk (a copy of another chunk, another scan's).
+    What it can, it repairs: leftover temporary files of interrupted writes
+    are removed; a chunk file the manifest does not list yet (a kill
+    between its rename and the log's next rewrite) is adopted once its
+    content is checked; a listed chunk that no longer matches its logged
+    checksum (or has the wrong number of rows) is deleted, to be
+    recomputed, with a :class:`ScanWarning` naming it; a folder of an
+    older dicetrace gets this version's layout (its JSON manifest and
+    chunk log become the Parquet manifest).
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     with _MANIFEST_WRITE:  # entries an earlier scan failed to write: their parts are verified below by decoding
         _PENDING.pop(folder.absolute(), None)
         _LAST_LOG.pop(folder.absolute(), None)
-    if not _check_manifest(folder, defn):
-        _check_empty(folder)
+    check_folder(folder, defn)  # refusals first: nothing is changed before them
+    listed = has_chunk_log(folder)  # before a JSON manifest is converted: without a chunk log parts go by name
+    log = read_chunk_log(folder)
+    done, adopted, damaged, foreign = set(), [], [], []
+    for c, p in chunk_files(folder).items():
+        if c >= defn.n_chunks:
+            continue
+        start, stop = defn.chunk_range(c)
+        if c in log:
+            why = verify_chunk(p, log[c], stop - start)
+            if why is None:
+                done.add(c)
+            else:
+                damaged.append((p, why))
+            continue
+        why = _verify_unlogged(p, defn, c)
+        if why is None:  # the scan's own chunk, not logged yet (or a folder written before checksums were logged)
+            digest, size = file_sha256(p)
+            adopted.append({"chunk": c, "file": f"{ROLLS_DIR}/{part_name(c)}", "rows": stop - start, "bytes": size,
+                            "sha256": digest})
+            done.add(c)
+        elif listed:
+            foreign.append((p, why))
+        else:
+            damaged.append((p, why))
+    if foreign:
+        (p, why), more = foreign[0], len(foreign) - 1
+        raise _foreign(p, folder, f"is not listed in {MANIFEST} and is not the scan's own chunk ({why})"
+                       + (f"; and {more} more such file(s)" if more else ""))
+    if not has_manifest(folder):
         manifest = {
             "format": defn.to_dict()["format"],
             "dicetrace_version": _version(),
@@ -448,33 +578,18 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     elif not (folder / MANIFEST).is_file():  # an older dicetrace's JSON manifest and chunk log: convert them
         manifest = read_manifest(folder)
         manifest.pop("chunk_log", None)
-        _write_manifest(folder, manifest, read_chunk_log(folder))
+        _write_manifest(folder, manifest, log)
     for old in (LEGACY_MANIFEST, LEGACY_CHUNK_LOG):
         (folder / old).unlink(missing_ok=True)
-    rolls = folder / ROLLS_DIR
-    if rolls.exists() and not rolls.is_dir():
-        raise FileExistsError(f"{str(rolls)!r} is not a folder: the scan's rolls table goes there; move it away")
-    rolls.mkdir(exist_ok=True)
+    (folder / ROLLS_DIR).mkdir(exist_ok=True)
     _move_legacy_parts(folder)
     for p in [*folder.glob(".part-*.tmp"), *folder.glob(f".{MANIFEST}.*.tmp")]:
         p.unlink(missing_ok=True)
-    log = read_chunk_log(folder)
-    done = set()
-    adopted = []
-    for c, p in chunk_files(folder).items():
-        if c >= defn.n_chunks:
-            continue
-        start, stop = defn.chunk_range(c)
-        why = verify_chunk(p, log.get(c), stop - start)
-        if why is None:
-            if c not in log:  # adopt a chunk of a folder written before checksums were logged
-                digest, size = file_sha256(p)
-                adopted.append({"chunk": c, "file": _log_name(folder, p), "rows": stop - start, "bytes": size,
-                                "sha256": digest})
-            done.add(c)
-        else:
-            warnings.warn(f"scan chunk {str(p)!r} is damaged ({why}): recomputing it", ScanWarning, stacklevel=3)
-            p.unlink(missing_ok=True)
+    for p, why in damaged:
+        if not os.path.lexists(p):  # an older dicetrace's part, moved into rolls/ just above
+            p = folder / ROLLS_DIR / p.name
+        warnings.warn(f"scan chunk {str(p)!r} is damaged ({why}): recomputing it", ScanWarning, stacklevel=3)
+        p.unlink(missing_ok=True)
     _log_chunks(folder, adopted, force=True)
     return done
 

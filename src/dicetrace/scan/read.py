@@ -23,6 +23,7 @@ from dicetrace.scan.folder import (
     METADATA_KEY,
     CorruptChunkError,
     chunk_files,
+    has_chunk_log,
     read_chunk_log,
     read_manifest,
     verify_chunk,
@@ -54,19 +55,23 @@ def _folder_of(folder) -> Path:
 
 
 def verified_chunk_files(folder, manifest: dict | None = None) -> list[str]:
-    """The chunk files of a scan folder, each checked against the checksum logged when it was written.
+    """The chunk files the manifest of a scan folder lists, each checked against the checksum logged when it was
+    written.
 
     Raises :class:`CorruptChunkError` naming the first file that does not
-    match (or, for a folder written before checksums were logged, that does
-    not decode).  Only this scan's chunk indices are returned.
+    match.  Any other file in the folder (one the manifest does not list,
+    a chunk not logged yet) is not read.  Only a folder of a dicetrace
+    older still, without a chunk log, is read by name: its parts of this
+    scan's chunk indices (the decoding names a damaged one).
     """
     folder = _folder_of(folder)
     manifest = read_manifest(folder) if manifest is None else manifest
     defn = ScanDefinition.from_dict(manifest["definition"])
     log = read_chunk_log(folder)
+    listed = has_chunk_log(folder)
     files = []
     for c, p in chunk_files(folder).items():
-        if c >= defn.n_chunks:
+        if c >= defn.n_chunks or (listed and c not in log):
             continue
         entry = log.get(c)
         start, stop = defn.chunk_range(c)

@@ -26,10 +26,9 @@ from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition
 from dicetrace.sinks._common import output_folder
 from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask
 from dicetrace.scan.folder import (
-    _check_empty,
     _check_int,
-    _check_manifest,
     _check_space_finite,
+    check_folder,
     _FolderLock,
     _version,
     _with_metadata,
@@ -237,7 +236,9 @@ def scan(
     TypeError, ValueError
         A bad argument (named), before anything is computed or written.
     ScanMismatchError, FileExistsError
-        ``out`` holds another scan, or files that are not a scan.
+        ``out`` holds another scan, or files that are not a scan, or
+        (:class:`~dicetrace.scan.folder.ForeignFileError`, named) something in
+        ``rolls/`` that is none of the scan's chunk files.
     ScanBusyError
         Another scan is writing into ``out``.
     SchedulerError
@@ -258,8 +259,7 @@ def scan(
         return _with_metadata(table, {"dicetrace_version": _version(), "scan": defn.to_dict(),
                                       "config": defn.config.as_dict(), "l_convention": defn.config.preset.l_convention})
     folder = output_folder(out, what="scan folder")
-    if folder.is_dir() and not _check_manifest(folder, defn):  # refuse at once, without waiting for a lock
-        _check_empty(folder)
+    check_folder(folder, defn)  # refuse at once, without waiting for a lock (read only)
     client, closers = (None, [])
     if dask:
         client, closers = _open_dask(dask, n_workers)
