@@ -271,3 +271,32 @@ def test_info_panel_shows_long_lines_whole(browser, explorer):
         const range = document.createRange(); range.selectNodeContents(el);
         return Array.from(range.getClientRects()).every((q) => q.right <= r.right + 0.5 && q.left >= r.left - 0.5); }""")
     assert inside
+
+
+@pytest.mark.parametrize("stored", [None, "(app_options:(show_metrics:false,check_for_updates_on_startup:true))"],
+                         ids=["fresh", "viewer-settings-stored"])
+def test_the_page_and_its_viewer_request_nothing_beyond_the_local_server(browser, explorer, stored):
+    """Issue 35 item 11: every request of the page, Rerun's web viewer included, goes to 127.0.0.1 (Rerun's viewer
+    asks api.github.com for its latest release unless told not to), and the page's connect-src policy blocked none;
+    also where a viewer on this origin stored its settings (update check on) before."""
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    urls = []
+    page.on("request", lambda r: urls.append(r.url))
+    page.goto(explorer.url)
+    wait_ready(page)
+    if stored:
+        page.evaluate("(s) => localStorage.setItem('app', s)", stored)
+    box = page.locator("#mapbox").bounding_box()
+    page.mouse.click(box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
+    page.wait_for_selector("#viewerbox canvas", timeout=120_000)
+    for _ in range(1200):  # the viewer is up when it fetches the throw
+        if any("/api/throw.rrd" in u for u in urls):
+            break
+        page.wait_for_timeout(100)
+    assert any("/api/throw.rrd" in u for u in urls), "the viewer did not open the throw"
+    page.wait_for_timeout(5000)  # the viewer's start-up requests (its update check came before the throw)
+    far = [u for u in urls if urlparse(u).scheme not in ("data", "blob") and urlparse(u).hostname != "127.0.0.1"]
+    assert not far, f"requests beyond 127.0.0.1: {far}"
+    assert not page.evaluate("document.body.dataset.blocked || ''"), "the page's policy had to block a request"
+    state = page.evaluate("localStorage.getItem('app')")
+    assert state.count("check_for_updates_on_startup:false") == 1 and "check_for_updates_on_startup:true" not in state

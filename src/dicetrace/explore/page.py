@@ -48,6 +48,7 @@ def page_html(default: View, *, can_save: bool) -> str:
 
 _TEMPLATE = r"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>dicetrace explore</title>
+<meta http-equiv="Content-Security-Policy" content="connect-src 'self'">
 <style>
  body{font-family:system-ui,sans-serif;margin:8px;font-size:13px;color:#222}
  #top{display:flex;gap:8px;flex-wrap:wrap;align-items:center;margin-bottom:6px}
@@ -100,6 +101,11 @@ _TEMPLATE = r"""<!doctype html>
 <script type="module">
 const CFG = %CONFIG%;
 const $ = (id) => document.getElementById(id);
+// The page connects to its own server only (the policy above); what the policy blocked is kept for the tests.
+document.addEventListener("securitypolicyviolation", (ev) => {
+  document.body.dataset.blocked = (document.body.dataset.blocked ? document.body.dataset.blocked + " " : "") + ev.blockedURI;
+  console.warn("dicetrace: blocked a request to", ev.blockedURI);
+});
 const client = Math.random().toString(36).slice(2);
 let view = null;          // the current view's query (an object of strings)
 let window4 = null;       // [x0, x1, y0, y1] numbers
@@ -286,7 +292,20 @@ function ensureViewer() {  // one viewer, however many picks come while it loads
   viewer = viewer || makeViewer().catch((e) => { viewer = null; throw e; });
   return viewer;
 }
+// Rerun's web viewer asks api.github.com for its latest release when it starts, unless its own setting
+// "check for updates on startup" is off.  It keeps its settings in this origin's localStorage ("app", in
+// RON), read when it starts: turn that one off there first, so the viewer makes no request beyond this server.
+function viewerOffline() {
+  const key = "app", off = "check_for_updates_on_startup:false";
+  try {
+    const state = localStorage.getItem(key) || "";
+    localStorage.setItem(key, /check_for_updates_on_startup:/.test(state) ? state.replace(/check_for_updates_on_startup:true/g, off)
+                              : state.includes("(app_options:(") ? state.replace("(app_options:(", `(app_options:(${off},`)
+                              : `(app_options:(${off}))`);
+  } catch (e) { console.warn("dicetrace: cannot turn off the Rerun viewer's update check:", e); }
+}
 async function makeViewer() {
+  viewerOffline();
   const mod = await import("/rerun/widget.js");
   const handlers = {};
   const box = $("viewerbox");
