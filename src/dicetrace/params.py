@@ -189,7 +189,7 @@ class Preset:
         a uniform 1e-7.  ``physical``: 2e-8 loosening at 10 /s (up to
         :data:`TOL_LOOSEST`): the same outcome agreement with the converged
         reference as a uniform 1e-7 within the sample's noise (0.96 against
-        0.97), with 0.7x the sub-step attempts (docs/model.md §9).
+        0.97), with 0.7x the sub-step attempts (analysis/accuracy/TUNING.md §9).
     """
 
     name: str = "seed"

@@ -921,7 +921,7 @@ def test_rosenbrock_resting_die_is_stable_beyond_the_explicit_friction_bound():
     (Not much further: the step linearises the friction law at its start, and where |u|
     crosses v_reg inside a step much longer than 1/λ_f the linearisation fails; at 0.5 cm/s
     fixed steps of 15 ms blow up, a known limit of linearly implicit methods.  Under error
-    control the sub-steps shrink there instead; docs/model.md §9.)"""
+    control the sub-steps shrink there instead; analysis/accuracy/TUNING.md §3.)"""
     from dicetrace.core.schemes.contact_substep import INV_MASS_NODE
 
     kp = fixed_substeps("contact-rosenbrock", friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=0.5)
