@@ -17,7 +17,7 @@ def client(tmp_path):
     from dicetrace.explore.view import parse_window
 
     app = create_app(View(window=parse_window(WINDOW), res=(RES, RES)), out=tmp_path / "saved")
-    with TestClient(app) as c:
+    with TestClient(app, base_url="http://127.0.0.1") as c:  # a Host the explorer answers (not "testserver")
         yield c
 
 

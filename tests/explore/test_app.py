@@ -152,7 +152,7 @@ def test_save_is_off_without_a_folder():
 
     from dicetrace.explore import create_app
 
-    with TestClient(create_app()) as c:
+    with TestClient(create_app(), base_url="http://127.0.0.1") as c:
         r = c.post("/api/save", params={"res": 4, "name": "x"})
         assert r.status_code == 403 and "--out" in r.json()["error"]
 
@@ -177,3 +177,68 @@ def test_seed3_map_is_the_scan_of_that_z_level(client, tmp_path):
                                                             "res": 8}).content)
     scan(Grid("seed3", get_window("home") + ((0.09, 0.09),), (8, 8, 1)), tmp_path / "s3b")
     np.testing.assert_array_equal(other, label_grid(tmp_path / "s3b")[:, :, 0])
+
+
+@pytest.mark.parametrize("headers, why", [
+    ({"Origin": "http://evil.example"}, "Origin"),
+    ({"Origin": "http://evil.example", "Sec-Fetch-Site": "cross-site"}, "Sec-Fetch-Site"),
+    ({"Sec-Fetch-Site": "cross-site"}, "Sec-Fetch-Site"),  # a browser that sent no Origin
+    ({"Sec-Fetch-Site": "same-site", "Origin": "http://localhost"}, "Sec-Fetch-Site"),
+    ({"Origin": "null"}, "Origin"),  # a sandboxed frame, a file:// page
+    ({"Origin": "http://127.0.0.1:9999"}, "Origin"),  # another port is another origin
+    ({"Origin": "http://localhost"}, "Origin"),  # another name is another origin
+    ({"Origin": "https://127.0.0.1"}, "Origin"),
+])
+def test_a_foreign_page_cannot_save(client, tmp_path, headers, why):
+    r = client.post("/api/save", params={"window": WINDOW, "res": 4, "name": "planted"}, headers=headers)
+    assert r.status_code == 403, r.text
+    assert r.json()["error"].startswith(f"cross-origin request refused: {why}")
+    assert not (tmp_path / "saved" / "planted").exists()
+    assert not (tmp_path / "saved").exists() or not any((tmp_path / "saved").iterdir())
+
+
+@pytest.mark.parametrize("headers", [
+    {"Origin": "http://127.0.0.1", "Sec-Fetch-Site": "same-origin"},  # the page's own fetch
+    {"Origin": "http://127.0.0.1"},  # a browser without Fetch Metadata
+    {},  # not a browser (curl, urllib)
+])
+def test_the_pages_own_save_and_a_script_still_save(client, tmp_path, headers):
+    r = client.post("/api/save", params={"window": WINDOW, "res": 4, "name": "mine"}, headers=headers)
+    assert r.status_code == 200, r.text
+    assert (tmp_path / "saved" / "mine" / "_scan.parquet").is_file()
+
+
+@pytest.mark.parametrize("host", ["evil.example", "evil.example:8000", "127.0.0.1.evil.example", "10.0.0.1", "[::2]"])
+def test_a_foreign_host_name_is_refused(client, host):
+    """DNS rebinding: a page of evil.example whose name now points at 127.0.0.1 sends Host: evil.example."""
+    for path in ("/", "/api/map.png?res=4", "/api/health", "/api/throw.rrd?i=0&j=0&res=4"):
+        r = client.get(path, headers={"Host": host})
+        assert r.status_code == 400, (path, r.status_code)
+    r = client.post("/api/save", params={"res": 4, "name": "x"}, headers={"Host": host})
+    assert r.status_code == 400
+
+
+def test_the_servers_own_names_are_answered(client):
+    for host in ("127.0.0.1", "127.0.0.1:8765", "localhost:8765", "LOCALHOST", "[::1]:8765"):
+        assert client.get("/api/health", headers={"Host": host}).status_code == 200, host
+
+
+def test_no_cors_headers_for_a_foreign_origin(client):
+    for path in ("/api/throw.rrd", "/api/hover", "/api/map.png", "/api/map.json", "/api/view", "/"):
+        r = client.get(path, params={"window": WINDOW, "res": 4, "i": 1, "j": 2},
+                       headers={"Origin": "http://evil.example"})
+        assert r.status_code == 200, (path, r.text[:200])
+        assert not [k for k in r.headers if k.lower().startswith("access-control-")], (path, dict(r.headers))
+    r = client.options("/api/save", headers={"Origin": "http://evil.example", "Access-Control-Request-Method": "POST"})
+    assert not [k for k in r.headers if k.lower().startswith("access-control-")]
+
+
+def test_allowed_hosts_are_the_local_names_and_the_listening_address():
+    from dicetrace.explore.app import LOCAL_HOSTS, allowed_hosts
+
+    assert allowed_hosts() == list(LOCAL_HOSTS)
+    assert allowed_hosts(["192.168.1.7"]) == [*LOCAL_HOSTS, "192.168.1.7"]
+    assert allowed_hosts(["::1"]) == list(LOCAL_HOSTS)
+    assert allowed_hosts(["fe80::0001"]) == [*LOCAL_HOSTS, "[fe80::1]"]
+    assert allowed_hosts(["My-Box"]) == [*LOCAL_HOSTS, "my-box"]
+    assert allowed_hosts(["0.0.0.0"]) == ["*"]  # every interface, by the user's choice

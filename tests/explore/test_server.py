@@ -200,3 +200,105 @@ def test_cli_refuses_a_bad_port_or_address_in_one_line(tmp_path, dicetrace_cli, 
     lines = res.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"dicetrace: error: {option} "), res.stderr
     assert "Traceback" not in res.stderr and res.stdout == ""
+
+
+def _request(port: int, method: str, path: str, headers: dict, timeout: float = 120.0):
+    """One raw HTTP request to 127.0.0.1:port with exactly these headers (Host included): status, headers, body."""
+    import http.client
+
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=timeout)
+    try:
+        conn.putrequest(method, path, skip_host=True, skip_accept_encoding=True)
+        for k, v in headers.items():
+            conn.putheader(k, v)
+        conn.endheaders()
+        r = conn.getresponse()
+        return r.status, {k.lower(): v for k, v in r.getheaders()}, r.read()
+    finally:
+        conn.close()
+
+
+def test_real_server_refuses_foreign_origins_and_host_names(tmp_path):
+    from dicetrace.explore import Explorer
+
+    out = tmp_path / "saved"
+    with Explorer(window=WINDOW, res=RES, out=out) as ex:
+        own = f"127.0.0.1:{ex.port}"
+        save = f"/api/save?window={WINDOW}&res=4&name="
+        # a page of another site posts to the explorer: refused, nothing written
+        status, _, body = _request(ex.port, "POST", save + "evil", {"Host": own, "Origin": "http://evil.example",
+                                                                    "Content-Length": "0"})
+        assert status == 403 and b"cross-origin" in body
+        status, _, _ = _request(ex.port, "POST", save + "evil2", {"Host": own, "Sec-Fetch-Site": "cross-site",
+                                                                  "Content-Length": "0"})
+        assert status == 403
+        assert not out.exists() or not any(out.iterdir())
+        # DNS rebinding: the right address under a foreign name
+        for host in ("evil.example", f"evil.example:{ex.port}"):
+            status, _, _ = _request(ex.port, "GET", "/", {"Host": host})
+            assert status == 400
+            status, _, _ = _request(ex.port, "POST", save + "rebound", {"Host": host, "Origin": f"http://{host}",
+                                                                        "Content-Length": "0"})
+            assert status == 400
+        assert not out.exists() or not any(out.iterdir())
+        # no CORS header for a foreign page
+        status, headers, _ = _request(ex.port, "GET", f"/api/throw.rrd?window={WINDOW}&res={RES}&i=2&j=3",
+                                      {"Host": own, "Origin": "http://evil.example"})
+        assert status == 200 and not [k for k in headers if k.startswith("access-control-")], headers
+        # the page's own flow: its origin, by either name it is reached by
+        for host in (own, f"localhost:{ex.port}"):
+            status, _, body = _request(ex.port, "POST", save + "mine-" + host.split(":")[0],
+                                       {"Host": host, "Origin": f"http://{host}", "Sec-Fetch-Site": "same-origin",
+                                        "Content-Length": "0"})
+            assert status == 200, body
+        assert sorted(p.name for p in out.iterdir()) == ["mine-127.0.0.1", "mine-localhost"]
+
+
+@pytest.mark.slow
+def test_in_a_browser_the_pages_save_works_and_a_foreign_pages_does_not(browser, tmp_path):
+    """Headless chromium: the explorer's own "save view as scan" writes; a page of another origin that
+    posts to the explorer (as any site could, with fetch in no-cors mode) writes nothing."""
+    from explore_helpers import wait_ready
+
+    from dicetrace.explore import Explorer
+    from dicetrace.explore.server import bind_socket
+
+    out = tmp_path / "saved"
+    with Explorer(window=WINDOW, res=RES, out=out) as ex:
+        page = browser.new_page()
+        page.goto(ex.url)
+        wait_ready(page)
+        page.fill("#scanname", "from-page")
+        page.click("#save")
+        page.wait_for_function("document.getElementById('status').textContent.startsWith('saved')", timeout=120_000)
+        assert (out / "from-page" / "_scan.parquet").is_file()
+
+        # another origin: a second local server's page (a different port is a different origin)
+        other_sock = bind_socket("127.0.0.1", 0)
+        other_port = other_sock.getsockname()[1]
+        other_sock.close()
+        from starlette.applications import Starlette
+        from starlette.responses import HTMLResponse
+        from starlette.routing import Route
+        import uvicorn
+
+        evil = Starlette(routes=[Route("/", lambda r: HTMLResponse("<html><body>elsewhere</body></html>"))])
+        server = uvicorn.Server(uvicorn.Config(evil, host="127.0.0.1", port=other_port, log_level="warning"))
+        th = threading.Thread(target=server.run, daemon=True)
+        th.start()
+        try:
+            for _ in range(600):
+                if server.started:
+                    break
+                time.sleep(0.02)
+            foreign = browser.new_page()
+            foreign.goto(f"http://127.0.0.1:{other_port}/")
+            sent = foreign.evaluate("""async (url) => {
+                await fetch(url, {method: "POST", mode: "no-cors"});
+                return true;
+            }""", f"http://127.0.0.1:{ex.port}/api/save?window={WINDOW}&res=4&name=from-elsewhere")
+            assert sent
+        finally:
+            server.should_exit = True
+            th.join(timeout=30)
+        assert sorted(p.name for p in out.iterdir()) == ["from-page"]

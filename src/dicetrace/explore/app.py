@@ -14,8 +14,15 @@ Endpoints::
     GET  /api/map.strips        the refined map as it is computed: NDJSON, a line per strip of image rows, then "done"
     GET  /api/hover?x=&y=       the nearest grid point's throw: coordinates, IC, outcome, steps, settle time, contacts
     GET  /api/throw.rrd?x=&y=   that throw as a Rerun recording (as ``dicetrace record`` writes it)
+    GET  /api/compare.rrd?t=&t= picked throws in one compare recording (:mod:`dicetrace.explore.compare`)
     POST /api/save?name=        the view as a scan dataset (as ``dicetrace scan`` writes it) in the start-up folder
     GET  /rerun/widget.js, /rerun/re_viewer_bg.wasm   Rerun's web viewer (shipped by rerun-notebook)
+
+Only the server's own names are served (starlette's ``TrustedHostMiddleware``:
+127.0.0.1, localhost, [::1] and the address it listens on; another ``Host:``, as
+a DNS-rebinding page sends, gets a 400), a request that changes something
+(``POST``) from another origin is refused with a 403 (:class:`SameOriginWrites`),
+and no response carries CORS headers, so no other site's page can read one.
 """
 
 from __future__ import annotations
@@ -28,6 +35,8 @@ from pathlib import Path
 
 import numpy as np
 from starlette.applications import Starlette
+from starlette.middleware import Middleware
+from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
@@ -41,6 +50,75 @@ PASSES = {"preview": 16, "coarse": 4, "fine": 1}
 THROW_TIMEOUT_S = 120.0
 #: How often a streamed map looks for new strips, s.
 STRIP_POLL_S = 0.03
+
+
+#: The names a browser on this machine reaches a loopback server by (the Host header's name, IPv6 in brackets).
+LOCAL_HOSTS = ("127.0.0.1", "localhost", "[::1]")
+#: Methods that only read (a browser's cross-origin check applies to the others).
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+
+
+def allowed_hosts(hosts=()) -> list[str]:
+    """The Host names the app answers: :data:`LOCAL_HOSTS` and ``hosts`` (the listening address);
+    ``["*"]`` (any) when that address is a wildcard (0.0.0.0, ::), which serves every interface by choice."""
+    import ipaddress
+
+    names = list(LOCAL_HOSTS)
+    for h in hosts:
+        h = str(h).strip().lower()
+        try:
+            ip = ipaddress.ip_address(h.strip("[]"))
+        except ValueError:
+            names.append(h)
+            continue
+        if ip.is_unspecified:
+            return ["*"]
+        names.append(f"[{ip.compressed}]" if ip.version == 6 else ip.compressed)
+    return list(dict.fromkeys(names))
+
+
+class SameOriginWrites:
+    """ASGI middleware: a request that may change state (not GET/HEAD/OPTIONS) from another origin gets a 403.
+
+    The check browsers make possible (the design of Go's ``http.CrossOriginProtection``
+    and of Jupyter's ``check_origin``): a browser marks every request with
+    ``Sec-Fetch-Site`` (only ``same-origin``, or ``none`` for one the user typed, pass)
+    and, on a POST, with ``Origin``, which must be this server's own origin, the
+    scheme and the ``Host`` it was reached by (a Host that
+    :class:`~starlette.middleware.trustedhost.TrustedHostMiddleware` has already
+    checked).  ``Origin: null`` (a sandboxed frame, a file) is refused.  A request
+    with neither header is not a browser's (curl, urllib, a test): no other site can
+    make one, so it passes.
+    """
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] == "http" and scope["method"] not in SAFE_METHODS:
+            why = self.refusal(scope)
+            if why is not None:
+                await JSONResponse({"error": f"cross-origin request refused: {why}", "param": None},
+                                   status_code=403)(scope, receive, send)
+                return
+        await self.app(scope, receive, send)
+
+    @staticmethod
+    def refusal(scope) -> str | None:
+        """Why this request is not the explorer's own page's (None: it is, or it is not a browser's)."""
+        from starlette.datastructures import Headers
+
+        h = Headers(scope=scope)
+        site = h.get("sec-fetch-site")
+        if site is not None and site.lower() not in ("same-origin", "none"):
+            return f"Sec-Fetch-Site is {site[:40]!r}, not same-origin"
+        origin = h.get("origin")
+        if origin is None:
+            return None
+        own = f"{scope.get('scheme', 'http')}://{h.get('host', '')}".lower()
+        if origin.lower() != own:
+            return f"Origin {origin[:100]!r} is not this server's ({own})"
+        return None
 
 
 def outcome_rgb_table() -> np.ndarray:
@@ -116,8 +194,13 @@ def _point(request: Request, view: View) -> tuple[int, int]:
 
 
 def create_app(default: View | None = None, *, out: Path | None = None, threads: int | None = None,
-               worker: Worker | None = None) -> Starlette:
-    """The explorer app; ``default`` is the view of a bare URL, ``out`` the only folder it may write scans into."""
+               worker: Worker | None = None, hosts=()) -> Starlette:
+    """The explorer app; ``default`` is the view of a bare URL, ``out`` the only folder it may write scans into.
+
+    ``hosts``: the address(es) the server listens on, answered besides :data:`LOCAL_HOSTS`
+    (:func:`allowed_hosts`); every other ``Host:`` gets a 400.
+    """
+    from dicetrace.explore.compare import compare_endpoint
     from dicetrace.explore.page import page_html
 
     default = default or View()
@@ -221,8 +304,8 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         download = bool(request.query_params.get("download"))
         name, data, summary = await asyncio.wait_for(  # for the viewer, record's blueprint made active
             asyncio.wrap_future(worker.submit_throw(throw_rrd, v, i, j, not download)), THROW_TIMEOUT_S)
-        headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"],
-                   "Access-Control-Allow-Origin": request.headers.get("origin", "") or "null"}
+        # no CORS header: the page's viewer fetches this from the page's own origin
+        headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"]}
         if download:
             headers["Content-Disposition"] = f'attachment; filename="{name}.rrd"'
         return Response(data, media_type="application/octet-stream", headers=headers)
@@ -267,6 +350,7 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         Route("/api/map.strips", map_strips_ep),
         Route("/api/hover", hover),
         Route("/api/throw.rrd", throw),
+        Route("/api/compare.rrd", compare_endpoint),
         Route("/api/save", save, methods=["POST"]),
         Route("/api/health", health),
         Route("/rerun/widget.js", asset("widget.js", "text/javascript")),
@@ -280,7 +364,9 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         finally:
             worker.shutdown()
 
-    app = Starlette(routes=routes, exception_handlers={Exception: on_error}, lifespan=lifespan)
+    middleware = [Middleware(TrustedHostMiddleware, allowed_hosts=allowed_hosts(hosts), www_redirect=False),
+                  Middleware(SameOriginWrites)]
+    app = Starlette(routes=routes, middleware=middleware, exception_handlers={Exception: on_error}, lifespan=lifespan)
     app.state.worker = worker
     app.state.default = default
     app.state.out = out

@@ -135,7 +135,7 @@ class Explorer:
 
         self._sock = bind_socket(self.host, self.port)
         self.port = self._sock.getsockname()[1]
-        self.app = create_app(self.view, out=self.out, threads=self.threads)
+        self.app = create_app(self.view, out=self.out, threads=self.threads, hosts=[self.host])
         self._server = make_server(self.app, self._sock)
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [self._sock]},
                                         name="dicetrace-explore-server", daemon=True)
@@ -196,7 +196,7 @@ def serve_forever(view: View, *, host: str = DEFAULT_HOST, port: int = 0, out=No
     host, port, threads = check_host(host), check_port(port), check_threads(threads)
     sock = bind_socket(host, port)
     port = sock.getsockname()[1]
-    server = make_server(create_app(view, out=out, threads=threads), sock)
+    server = make_server(create_app(view, out=out, threads=threads, hosts=[host]), sock)
     url = f"http://{host}:{port}/?{view.query_string()}"
     if on_ready is not None:
         def watch():
