@@ -20,7 +20,7 @@ from dicetrace.params import Numerics, Preset, make_config, resolve_config
 from dicetrace.scan import ScanDefinition, read_scan, scan
 from dicetrace.scan.estimate import estimate_scan
 from dicetrace.scan.runner import iter_scan
-from dicetrace.simulate import Record, simulate, simulate_batch
+from dicetrace.simulate import CAP_GROWTH, Record, simulate, simulate_batch
 from dicetrace.sinks._common import OutputError
 
 IC = [14.08, 11.46, 9.87, 13.8, 122.8, 15.5]
@@ -159,3 +159,133 @@ def test_numpy_reals_are_stored_as_python_numbers():
     assert type(p.k) is int and type(p.mu) is float and p.mu == 1.25
     n = Numerics(dt_s=np.float32(0.5), tol=np.float64(1e-7))
     assert type(n.dt_s) is float and type(n.tol) is float
+
+
+# -- the Python API's edges (issue 36 item 9): integer arguments, ICs that are not real numbers ----------
+
+#: Two throws whose contact sequences outgrow a one-set buffer: 70 sets (three re-runs, 1 → 8 → 64 → 512) and 23.
+ICS2 = np.asarray(seed_slice([5.79176516776336, 1.65], [3.0872428026467946, 3.9]))
+INT_TYPES = [np.int8, np.int16, np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64, int]
+
+
+def _bounded(fn, seconds: float):
+    """``fn()``, failing the test when it has not returned within ``seconds`` (it keeps running in a daemon thread)."""
+    import threading
+
+    out: dict = {}
+
+    def target():
+        try:
+            out["value"] = fn()
+        except BaseException as e:  # noqa: BLE001 - handed to the test
+            out["error"] = e
+
+    t = threading.Thread(target=target, daemon=True)
+    t.start()
+    t.join(seconds)
+    assert not t.is_alive(), f"did not return within {seconds} s"
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
+def _same_batch(a, b) -> None:
+    for name in ("outcome", "status_code", "steps", "set_offsets", "sets", "set_steps"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+@pytest.mark.parametrize("itype", INT_TYPES, ids=lambda t: t.__name__)
+def test_integer_arguments_of_every_width_are_python_ints(itype):
+    """``cap=np.int8(1)`` never returned: the buffer grew 1, 8, 64, then wrapped to 0 in int8 arithmetic."""
+    ref = simulate_batch(ICS2, cap=1, threads=1)
+    assert ref.set_offsets[1] > CAP_GROWTH**2  # the first throw needs a 512-set buffer: past int8's range
+    got = _bounded(lambda: simulate_batch(ICS2, cap=itype(1), threads=itype(1)), 120)
+    _same_batch(got, ref)
+
+BAD_COUNTS = [0, -1, np.int8(-1), np.int64(0), np.uint8(0), True, np.bool_(True), 1.0, np.float64(2.0), float("nan"),
+              "8", 1 + 0j, np.array(4), [4]]
+
+
+@pytest.mark.parametrize("bad", BAD_COUNTS, ids=repr)
+@pytest.mark.parametrize("name", ["cap", "threads"])
+def test_bad_integer_arguments_are_refused_naming_them(name, bad):
+    with pytest.raises(ValueError, match=rf"^{name} must be an integer >= 1") as info:
+        simulate_batch(ICS2, **{name: bad})
+    assert "np." not in str(info.value)
+
+
+@pytest.mark.parametrize("huge", [2**31, np.uint64(2**64 - 1), np.int64(2**62), 10**30], ids=repr)
+def test_a_huge_cap_is_refused_before_anything_runs(huge):
+    with pytest.raises(ValueError, match=r"^cap must be at most 2,147,483,647, got [\d,]+$"):
+        simulate_batch(ICS2, cap=huge)
+
+
+def test_more_threads_than_numba_has_run_as_many_as_it_has():
+    import numba
+
+    for threads in (numba.config.NUMBA_NUM_THREADS + 1, np.uint64(2**64 - 1), 10**30):
+        _same_batch(simulate_batch(ICS2, threads=threads, t_max_s=0.3), simulate_batch(ICS2, threads=1, t_max_s=0.3))
+
+
+IC6 = np.asarray(seed_slice(1.65, 3.9))
+NOT_REAL = [
+    pytest.param(IC6 + 1j, "complex numbers", id="complex array"),
+    pytest.param(IC6.astype(np.complex64), "complex numbers", id="complex64, zero imaginary part"),
+    pytest.param([complex(v) for v in IC6], "complex numbers", id="list of complex"),
+    pytest.param(IC6.astype(object) + 1j, "got complex", id="object array of complex"),
+    pytest.param(np.array([*IC6[:5], None], dtype=object), "got NoneType", id="object array with None"),
+    pytest.param([*IC6[:5], "1.5"], "text", id="a string among numbers"),
+    pytest.param(IC6.astype(str), "text", id="str array"),
+    pytest.param(IC6.astype(bytes), "bytes", id="bytes array"),
+    pytest.param(IC6 > 0, "booleans", id="bool array"),
+    pytest.param(np.arange(6).astype("datetime64[s]"), "dates", id="datetime64"),
+    pytest.param([*IC6[:5], 10**400], "beyond float64's range", id="an integer beyond float64"),
+    pytest.param([*IC6[:5], float("nan")], "not finite", id="NaN"),
+    pytest.param([*IC6[:5], -np.inf], "not finite", id="-inf"),
+]
+
+
+@pytest.mark.parametrize("ic, words", NOT_REAL)
+def test_ics_that_are_not_real_numbers_are_refused_by_simulate_and_simulate_batch_alike(ic, words):
+    """A complex array was truncated to its real part by simulate_batch (numpy's warning only)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no ComplexWarning on the way either
+        with pytest.raises(ValueError, match="initial condition") as one:
+            simulate(ic)
+        with pytest.raises(ValueError, match="initial condition") as many:
+            simulate_batch([ic] if isinstance(ic, list) else np.reshape(ic, (1, 6)))
+        if words != "booleans":  # (a list mixing a row of bools with one of floats is numbers to numpy: [1.0, 0.0])
+            with pytest.raises(ValueError, match="initial condition"):
+                simulate_batch([ic, IC6])
+    for info in (one, many):
+        assert words in str(info.value) and "\n" not in str(info.value)
+    assert "ic " in str(one.value) or "ic:" in str(one.value) or "not finite" in str(one.value)
+
+
+def test_real_numbers_of_any_numeric_dtype_are_accepted():
+    from fractions import Fraction
+
+    ref = simulate_batch(ICS2, t_max_s=0.3)
+    as_int = np.round(ICS2 * 4) / 4  # values that every dtype below holds exactly
+    ref_int = simulate_batch(as_int, t_max_s=0.3)
+    for ok in (as_int.astype(np.float32), as_int.astype(object), [[Fraction(v) for v in row] for row in as_int]):
+        _same_batch(simulate_batch(ok, t_max_s=0.3), ref_int)
+    _same_batch(simulate_batch(ICS2.astype(object), t_max_s=0.3), ref)
+    assert simulate(np.array([0, 0, -400, 300, -50, 20]), t_max_s=0.3).steps > 0  # integers
+
+
+@pytest.mark.parametrize("bad", [np.eye(3) * (1 + 0j), np.eye(3).astype(bool), np.eye(3).astype(str), [[1, 0], [0, 1, 0]]],
+                         ids=["complex", "bool", "str", "ragged"])
+def test_an_orientation_that_is_not_real_numbers_is_refused(bad):
+    with pytest.raises(ValueError, match="^orientation must be a 3×3 rotation matrix"):
+        simulate(IC6, orientation=bad)
+
+
+@pytest.mark.parametrize("field", ["t_max_s", "dt_s", "k", "gamma", "tol"])
+def test_an_integer_beyond_float64_is_a_value_error_naming_the_option(field):
+    """``t_max_s=10**400`` raised OverflowError from math.isfinite."""
+    with pytest.raises(ValueError) as info:
+        make_config(**{field: 10**400})
+    assert {"t_max_s": "t_max", "dt_s": "dt", "tol": "tol"}.get(field, field) in str(info.value)

@@ -24,8 +24,18 @@ from dicetrace.stepsize import auto_dt
 
 
 def _is_number(v) -> bool:
-    """A real number that is not a bool (``dt_s=True`` is no step); numpy reals count."""
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
+    """A real number that is not a bool (``dt_s=True`` is no step); numpy reals count.
+
+    An integer beyond float64's range (``t_max_s=10**400``) is no number either:
+    the checks that follow (``math.isfinite``) would raise OverflowError on it.
+    """
+    if not isinstance(v, (int, float, np.integer, np.floating)) or isinstance(v, (bool, np.bool_)):
+        return False
+    try:
+        float(v)
+    except OverflowError:
+        return False
+    return True
 
 
 def _plain(v):

@@ -26,6 +26,8 @@ ENERGY_NAMES = ("stop_test", "kinetic_translational", "kinetic_rotational", "gra
 #: Contact sets per IC in the first pass (longer throws are re-run with ``CAP_GROWTH`` times more).
 DEFAULT_CAP = 128
 CAP_GROWTH = 8
+#: Largest first-pass buffer a caller may ask for, contact sets per IC.
+MAX_CAP = 2**31 - 1
 
 
 class SimulationError(RuntimeError):
@@ -313,13 +315,35 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
     )
 
 
+def _integer(v, name: str, lo: int, hi: int | None = None, *, none_ok: bool = False) -> int | None:
+    """``v`` as a Python int in [lo, hi] (None passes when ``none_ok``), else ValueError naming ``name``.
+
+    Python and numpy integers of every width are accepted and converted, so
+    that arithmetic on them (a buffer growing ``CAP_GROWTH``-fold) cannot wrap
+    around; bools, floats (NaN, 2.0), strings and arrays are refused.
+    """
+    if v is None and none_ok:
+        return None
+    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or int(v) < lo:
+        shown = v.item() if isinstance(v, np.generic) else v
+        raise ValueError(f"{name} must be an integer >= {lo}{' or None' if none_ok else ''}, got {shown!r}")
+    n = int(v)
+    if hi is not None and n > hi:
+        raise ValueError(f"{name} must be at most {hi:,}, got {n:,}")
+    return n
+
+
 def _check_orientation(orientation) -> None:
     if orientation is None:
         return
     try:
-        rot = np.asarray(orientation, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"orientation must be a 3×3 rotation matrix of numbers, got {type(orientation).__name__}") from None
+        a = np.asarray(orientation)
+    except (TypeError, ValueError):  # ragged rows
+        a = np.asarray(None)
+    if a.dtype.kind not in "iuf":  # complex, bool, text, objects: refused, not cast
+        what = type(orientation).__name__ if a.dtype.kind in "OUS" else f"dtype {a.dtype}"
+        raise ValueError(f"orientation must be a 3×3 rotation matrix of real numbers, got {what}")
+    rot = a.astype(np.float64)
     if rot.shape != (3, 3):
         raise ValueError(f"orientation must be a 3×3 rotation matrix, got shape {rot.shape}")
 
@@ -507,16 +531,20 @@ def simulate_batch(
     config, **options
         As in :func:`simulate`.
     threads
-        numba threads for this call (None: numba's current setting).
+        numba threads for this call (None: numba's current setting; more
+        than numba was started with, ``NUMBA_NUM_THREADS``, run as that many).
     cap
-        Initial per-IC contact-set buffer; throws that need more are re-run
-        (all together, in parallel) with ``CAP_GROWTH`` times more until they fit.
+        Initial per-IC contact-set buffer, an integer in [1, ``MAX_CAP``];
+        throws that need more are re-run (all together, in parallel) with
+        ``CAP_GROWTH`` times more until they fit.
+
+    Integer arguments may be Python or numpy integers; bools, floats and
+    anything else are refused with a ValueError naming the argument, as are
+    ICs that are not real numbers (complex, bool, text, other objects).
     """
     cfg = resolve_config(config, **options)
-    if isinstance(cap, bool) or not isinstance(cap, (int, np.integer)) or cap < 1:
-        raise ValueError(f"cap must be an integer >= 1, got {cap!r}")
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or threads < 1):
-        raise ValueError(f"threads must be an integer >= 1 or None, got {threads!r}")
+    cap = _integer(cap, "cap", 1, MAX_CAP)
+    threads = _integer(threads, "threads", 1, none_ok=True)
     conv = cfg.preset.l_convention if l_convention is None else l_convention
     coords = ics.coords if isinstance(ics, SliceICs) else None
     ics = validate_ics(ics)
