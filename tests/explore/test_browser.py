@@ -300,3 +300,48 @@ def test_the_page_and_its_viewer_request_nothing_beyond_the_local_server(browser
     assert not page.evaluate("document.body.dataset.blocked || ''"), "the page's policy had to block a request"
     state = page.evaluate("localStorage.getItem('app')")
     assert state.count("check_for_updates_on_startup:false") == 1 and "check_for_updates_on_startup:true" not in state
+
+
+def test_shift_click_gives_the_viewer_both_throws_in_one_recording(browser, explorer, tmp_path):
+    """Issue 35 item 9: after a shift-click the viewer is given one compare recording holding both throws (each
+    die, and their divergence), as `dicetrace record --ic A --ic B` makes it, in place of the first throw's."""
+    from dicetrace.sinks.rerun import read_rrd
+
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    urls = []
+    page.on("request", lambda r: urls.append(r.url))
+    page.goto(explorer.url)
+    wait_ready(page)
+    box = page.locator("#mapbox").bounding_box()
+    with page.expect_response(lambda r: "/api/throw.rrd" in r.url, timeout=120_000):
+        page.mouse.click(box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
+    page.keyboard.down("Shift")
+    with page.expect_event("requestfinished", lambda r: "/api/compare.rrd" in r.url, timeout=120_000) as got:
+        page.mouse.click(box["x"] + box["width"] * 0.7, box["y"] + box["height"] * 0.3)
+    page.keyboard.up("Shift")
+    resp = got.value.response()
+    assert resp.ok
+    two = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)")
+    assert len(two) == 2 and two[0]["ic"] != two[1]["ic"]
+    assert page.evaluate("document.getElementById('info').dataset.viewer") == resp.url
+    assert page.get_attribute("#download", "href") == resp.url + "&download=1"
+    path = tmp_path / "viewer.rrd"
+    path.write_bytes(resp.body())
+    temporal, static = read_rrd(path), read_rrd(path, static=True)
+    for k in (0, 1):
+        assert any(e.startswith(f"/throws/{k}/") for e in temporal), sorted(temporal)
+    assert "/divergence/log10/1" in temporal and "/divergence/distance/1" in temporal
+    summary = str(static["/summary"].to_pydict())
+    for info in two:
+        assert f"x = {info['coords']['x']!r}, y = {info['coords']['y']!r}" in summary
+        assert info["contact_sequence"] in summary
+    # only the viewer asked for it (once); the single throw's recording was not asked for again
+    assert sum("/api/compare.rrd" in u for u in urls) == 1 and sum("/api/throw.rrd" in u for u in urls) == 1
+    page.wait_for_timeout(6000)  # the viewer draws the comparison
+    from PIL import Image
+    import io
+
+    img = np.asarray(Image.open(io.BytesIO(page.locator("#viewerbox").screenshot())).convert("RGB")).astype(float)
+    assert img.std() > 10, "the embedded Rerun viewer is blank"
+    # the compare blueprint's 3-D view (background 250,250,250) is the viewer's layout
+    assert (img[:, : img.shape[1] // 2] == 250).all(axis=-1).mean() > 0.25

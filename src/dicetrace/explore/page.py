@@ -36,7 +36,10 @@ def page_html(default: View, *, can_save: bool) -> str:
         f'<span class="key"><span class="sw" style="background:rgb{OUTCOME_RGB[o]}"></span>{html.escape(OUTCOME_NAMES[o])}</span>'
         for o in (1, 2, 3, 4, 5, 6, 0, -1)
     )
-    cfg = {"default": default.to_query(), "canSave": can_save, "palette": outcome_rgb_table().tolist()}
+    from dicetrace.explore.compare import MAX_THROWS
+
+    cfg = {"default": default.to_query(), "canSave": can_save, "palette": outcome_rgb_table().tolist(),
+           "maxCompare": MAX_THROWS}
     return (
         _TEMPLATE.replace("%LEGEND%", legend)
         .replace("%SLICES%", _options(SLICES, default.slice))
@@ -87,7 +90,7 @@ _TEMPLATE = r"""<!doctype html>
  <span id="status"></span>
 </div>
 <div id="error" role="alert"></div>
-<div>%LEGEND% <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to add a second</span></div>
+<div>%LEGEND% <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to compare more throws with it</span></div>
 <div id="main">
  <div>
   <div id="plot"><div id="yaxis" class="ax" aria-label="y axis"></div>
@@ -320,30 +323,52 @@ async function makeViewer() {
   return {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
           close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
 }
+// A click shows that throw in the viewer (record's recording); a shift-click adds it to the picked ones, and the
+// viewer is given one compare recording of them all (record --ic A --ic B's: every die, their divergence from
+// throw 1), in place of what it showed.  Throws are compared under one configuration: a shift-click after the
+// preset, integrator, γ or dt changed starts again from that throw.
+const MAX_COMPARE = CFG.maxCompare;
+const CONFIG_KEYS = ["preset", "integrator", "gamma", "dt"];
+let opened = [];          // the URLs open in the viewer
+function sameConfig(a, b) { return CONFIG_KEYS.every((k) => (a[k] || "") === (b[k] || "")); }
+function absolute(path) { return new URL(path, location.href).href; }
 async function pick(x, y, add) {
+  if (add && throws.length >= MAX_COMPARE) { showError(`at most ${MAX_COMPARE} throws in one comparison: click (without shift) to start again`); return; }
   const r = await fetch("/api/hover?" + qs(view, {x, y}));
   const info = await r.json();
   if (!r.ok) { showError(info.error); return; }
-  const url = new URL("/api/throw.rrd?" + qs(view, {i: info.i, j: info.j}), location.href).href;
-  $("download").href = url + "&download=1";
-  const gone = add ? [] : throws;
+  showError("");
+  const q = qs(view, {i: info.i, j: info.j});
+  if (add && throws.length && !sameConfig(throws[0].view, view)) {
+    add = false;
+    setStatus("another configuration: a new comparison", false);
+  }
   if (!add) throws = [];
-  throws.push({x, y, info, url});
+  throws.push({x, y, info, view: {...view}, q, url: absolute("/api/throw.rrd?" + q)});
+  const url = throws.length > 1 ? absolute("/api/compare.rrd?" + throws.map((t) => "t=" + encodeURIComponent(t.q)).join("&"))
+                                : throws[0].url;
+  $("download").href = url + "&download=1";
+  $("download").textContent = throws.length > 1 ? `download these ${throws.length} throws (.rrd)` : "download this throw (.rrd)";
   $("info").dataset.throws = JSON.stringify(throws.map((t) => t.info));
+  $("info").dataset.viewer = url;
   tellParent("throws", {throws: throws.map((t) => t.info)});
   $("info").textContent = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n") + compare();
   const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
-  if (v) { gone.forEach((t) => v.close(t.url)); v.open(url); }
+  if (v) { const gone = opened; opened = [url]; gone.forEach((u) => v.close(u)); v.open(url); }
 }
-function compare() {
+function compare() {  // each later throw against throw 1, as the compare recording plots it
   if (throws.length < 2) return "";
-  const [a, b] = throws.slice(-2).map((t) => t.info);
-  const sa = a.contact_sequence.split("-"), sb = b.contact_sequence.split("-");
-  let k = 0; while (k < Math.min(sa.length, sb.length) && sa[k] === sb[k]) k++;
-  const d = Math.hypot(...Object.keys(a.ic).map((n) => a.ic[n] - b.ic[n]));
-  return `\n\ndivergence: |ΔIC| = ${d.toExponential(3)}; contact sequences agree for ${k} sets, then ` +
-         (k < Math.max(sa.length, sb.length) ? `${sa[k] || "(end)"} vs ${sb[k] || "(end)"}` : "never differ") +
-         `; outcomes ${a.outcome} vs ${b.outcome}`;
+  const a = throws[0].info;
+  return throws.slice(1).map((t, n) => {
+    const b = t.info;
+    const sa = a.contact_sequence.split("-"), sb = b.contact_sequence.split("-");
+    let k = 0; while (k < Math.min(sa.length, sb.length) && sa[k] === sb[k]) k++;
+    const d = Math.hypot(...Object.keys(a.ic).map((c) => a.ic[c] - b.ic[c]));
+    return `\n\ndivergence${throws.length > 2 ? ` of throw ${n + 2} from throw 1` : ""}: |ΔIC| = ${d.toExponential(3)}; ` +
+           `contact sequences agree for ${k} sets, then ` +
+           (k < Math.max(sa.length, sb.length) ? `${sa[k] || "(end)"} vs ${sb[k] || "(end)"}` : "never differ") +
+           `; outcomes ${a.outcome} vs ${b.outcome}`;
+  }).join("") + "\n\nthe viewer shows them in one recording: every die, and each one's divergence from throw 1";
 }
 
 $("apply").onclick = () => {
