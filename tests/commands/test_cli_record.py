@@ -70,7 +70,7 @@ def test_record_seed_slice_writes_rrd_and_parquet(tmp_path, dicetrace_cli):
 def test_default_output_name_encodes_the_ic(tmp_path, dicetrace_cli):
     res = dicetrace_cli("record", "--slice", "seed", "--at", "1.5,4,0.25", "--t-max", "0.2", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
-    rrd = tmp_path / "recordings" / "seed_x1.5_y4_z0.25.rrd"
+    rrd = tmp_path / "recordings" / "seed_x1.5_y4_z0.25_tmax0.2.rrd"  # the time cap is not the default
     assert rrd.exists()
     assert "status time_cap" in res.stdout and "outcome -1" in res.stdout
     nodes = read_rrd(rrd)["/world/die/nodes"]
@@ -102,6 +102,7 @@ def test_default_names_say_what_is_in_the_recording_and_never_clobber_another(tm
         ("--channels", "penetration,forces"): "seed_x1.65_y3.9_forces-penetration.rrd",
         ("--t-max", "0.3"): "seed_x1.65_y3.9_tmax0.3.rrd",
         ("--nudge", "1e-6"): "seed_x1.65_y3.9_nudge1e-06.rrd",
+        ("--nudge", "1e-6", "--layout", "side"): "seed_x1.65_y3.9_nudge1e-06_side.rrd",
     }
     for extra, name in expected.items():
         res = dicetrace_cli("record", *at, *extra, cwd=tmp_path)
@@ -111,6 +112,14 @@ def test_default_names_say_what_is_in_the_recording_and_never_clobber_another(tm
     assert plain.read_bytes() == before  # not overwritten by any of them
     assert "/world/die/forces/normal" in read_rrd(plain.parent / expected[("--channels", "all")])
     assert "/world/die/forces/normal" not in read_rrd(plain)
+    # comparisons of different throws from the same first IC: different names
+    ic = "14.08,11.46,9.87,13.8,122.8,15.5"
+    names = set()
+    for second in ("14.08,11.46,9.87,13.8,122.8,15.6", "14.08,11.46,9.87,13.8,122.8,15.7"):
+        res = dicetrace_cli("record", "--ic", ic, "--ic", second, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        names.add(res.stdout.split("wrote ")[1].strip())
+    assert len(names) == 2 and all(n.startswith("recordings/compare2_ic_14.08_") for n in names), names
 
 
 def test_numerical_failure_exits_1_and_keeps_the_recording(tmp_path, dicetrace_cli):

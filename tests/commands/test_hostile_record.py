@@ -127,6 +127,8 @@ BAD = [
     case([*AT, "--channels", "forces,torque"], "--channels", "'torque'"),
     case([*AT, "--channels", ","], "--channels"),
     case([*AT, "--nudge", "1e-6", "--channels", "forces"], "--channels", "comparing"),
+    case([*AT, "--layout", "side"], "--layout", "--nudge"),
+    case([*AT, "--nudge", "1e-6", "--layout", "diagonal"], "--layout", "'diagonal'", "overlay, side"),
     # an existing recording is not touched by a refusal
     case(["--ic", "1,2,nan,4,5,6", "--out", "existing.rrd"], "--ic", "non-finite"),
     case([*AT, "--dt", "0", "--out", "existing.rrd"], "--dt", "'0'"),

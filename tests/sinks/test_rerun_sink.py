@@ -466,6 +466,89 @@ def test_compare_recording_holds_each_throw_in_its_colour_and_the_divergence(rol
     assert dist.max() > 1e4 * eps
 
 
+def _rgb(table: pa.Table, column: str) -> np.ndarray:
+    packed = np.array(table.column(column).to_pylist()[0], dtype=np.uint64)
+    return np.stack([(packed >> 24) & 0xFF, (packed >> 16) & 0xFF, (packed >> 8) & 0xFF], axis=1)
+
+
+def _outer_reach(static: dict, base: str) -> tuple[float, float, float]:
+    """A compare die's extents in its body frame, from the recording: (body half side, the plates' half width in
+    their face, the farthest any plate or pip reaches out along a face normal)."""
+    body = values(static[f"{base}/body"], "Boxes3D:half_sizes", 3)[0, 0].astype(np.float64)
+    plates = static[f"{base}/faces"]
+    pc = values(plates, "Boxes3D:centers", 3)[0].astype(np.float64)
+    ph = values(plates, "Boxes3D:half_sizes", 3)[0].astype(np.float64)
+    pips = static[f"{base}/faces/pips"]
+    qc = values(pips, "Ellipsoids3D:centers", 3)[0].astype(np.float64)
+    qh = values(pips, "Ellipsoids3D:half_sizes", 3)[0].astype(np.float64)
+    reach = max((np.abs(pc) + ph).max(), (np.abs(qc) + qh).max())
+    return float(body[0]), float(np.sort(ph, axis=1)[:, -1].max()), float(reach)
+
+
+def test_compare_dice_keep_faces_and_pips_labels_on_hover_and_nest_without_z_fighting(roll, nudged):
+    """Each compared die is a whole die (writeup colours, pips, moving with it), its throw shown by its rim, nodes
+    and path; labels only on hover; and a later die fits strictly inside the earlier one, so where two coincide
+    (a 1e-6 nudge, for most of the throw) the first is seen whole instead of two surfaces flickering."""
+    from dicetrace.sinks.rerun_compare import throw_color
+
+    eps, other, path = nudged
+    temporal, static = read_rrd(path), read_rrd(path, static=True)
+    extents = []
+    for k, r in enumerate((roll, other)):
+        base = f"/throws/{k}"
+        plates = static[f"{base}/faces"]
+        np.testing.assert_array_equal(_rgb(plates, "Boxes3D:colors"), FACE_COLORS)
+        assert plates.column("Boxes3D:labels").to_pylist()[0] == ["1", "2", "3", "4", "5", "6"]
+        pips = static[f"{base}/faces/pips"]
+        faces = [int(t.split()[-1]) for t in texts(pips, "Ellipsoids3D:labels")]
+        np.testing.assert_array_equal(np.bincount(faces, minlength=7)[1:], [1, 2, 3, 4, 5, 6])
+        # the plates (and their pips, a child) move with the throw's own die
+        move = temporal[f"{base}/faces"]
+        np.testing.assert_array_equal(values(move, "Transform3D:translation", 3)[: r.steps + 1, 0],
+                                      r.trace.cm_pos[: r.steps + 1].astype(np.float32))
+        np.testing.assert_array_equal(values(move, "Transform3D:quaternion", 4)[:, 0],
+                                      values(temporal[f"{base}/body"], "Boxes3D:quaternions", 4)[:, 0])
+        # labels on hover only, as in a single recording (a label is drawn over everything)
+        for entity, arch in ((f"{base}/faces", "Boxes3D"), (f"{base}/faces/pips", "Ellipsoids3D"),
+                             (f"{base}/nodes", "Points3D"), (f"{base}/body", "Boxes3D")):
+            assert static[entity].column(f"{arch}:show_labels").to_pylist()[0] == [False], entity
+        assert static[f"{base}/nodes"].column("Points3D:labels").to_pylist()[0] == [str(j) for j in range(1, 9)]
+        assert tuple(_rgb(static[f"{base}/body"], "Boxes3D:colors")[0]) == throw_color(k)
+        extents.append(_outer_reach(static, base))
+    (b0, w0, r0), (b1, w1, r1) = extents
+    margin = 0.005 * roll.config.preset.half_side_cm
+    assert b1 < b0 - margin and w1 < w0 - margin and r1 < r0 - margin  # nested, never coplanar
+    # coinciding paths: the later one thinner and lifted by a fixed amount, never the same surface
+    paths = [static[f"/throws/{k}/cm_path"].column("LineStrips3D:radii").to_pylist()[0][0] for k in (0, 1)]
+    assert paths[1] < 0.8 * paths[0]
+    ends = [np.asarray(temporal[f"/throws/{k}/cm_path"].column("LineStrips3D:strips").to_pylist()[-1][0])
+            for k in (0, 1)]
+    np.testing.assert_allclose(ends[1][0] - ends[0][0], [0, 0, ends[1][0][2] - ends[0][0][2]])
+    assert ends[1][0][2] - ends[0][0][2] > margin
+
+
+def test_side_layout_puts_the_dice_apart_and_keeps_the_divergence(roll, nudged, tmp_path):
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd
+
+    eps, other, overlay = nudged
+    path = tmp_path / "side.rrd"
+    path.write_bytes(encode_compare_rrd([roll, other], ["a", "b"], layout="side"))
+    side, over = read_rrd(path), read_rrd(overlay)
+    half = roll.config.preset.half_side_cm
+    a = values(side["/throws/0/nodes"], "Points3D:positions", 3).astype(np.float64)
+    b = values(side["/throws/1/nodes"], "Points3D:positions", 3).astype(np.float64)
+    # every node of one die stays farther from every node of the other than a die's size, at every step
+    gaps = np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
+    assert gaps.min() > 2 * half
+    # the shift is a constant across the first throw's travel; the divergence is that of the real states
+    shift = values(side["/throws/1/body"], "Boxes3D:centers", 3)[:, 0] - values(over["/throws/1/body"], "Boxes3D:centers", 3)[:, 0]
+    np.testing.assert_allclose(shift, np.broadcast_to(shift[0], shift.shape), atol=1e-4)
+    travel = roll.trace.cm_pos[-1, :2] - roll.trace.cm_pos[0, :2]
+    assert abs(shift[0][:2] @ travel) < 1e-3 * np.linalg.norm(travel) * np.linalg.norm(shift[0][:2]) and shift[0][2] == 0
+    for key in ("distance", "log10"):
+        np.testing.assert_array_equal(_scalars(side, f"/divergence/{key}/1")[1], _scalars(over, f"/divergence/{key}/1")[1])
+
+
 def test_identical_throws_have_exactly_zero_divergence(roll, tmp_path):
     from dicetrace.sinks.rerun_compare import encode_compare_rrd
 

@@ -96,6 +96,19 @@ def default_name(ic, coords, desc: dict, cfg, channels=frozenset()) -> str:
     return "_".join(parts)
 
 
+def compare_name(name: str, all_ics, eps, layout: str) -> str:
+    """The default file stem of a comparison: ``<first throw's name>_nudge<EPS>`` for one nudged throw, else
+    ``compare<N>_<first throw's name>_<digest of every IC>``; ``_side`` for the side-by-side layout."""
+    import hashlib
+
+    if eps is not None and len(all_ics) == 2:
+        out = f"{name}_nudge{fmt_num(eps)}"
+    else:
+        digest = hashlib.sha1(np.ascontiguousarray(np.stack(all_ics), dtype="<f8").tobytes()).hexdigest()[:8]
+        out = f"compare{len(all_ics)}_{name}_{digest}"
+    return out if layout == "overlay" else f"{out}_{layout}"
+
+
 def ic_label(ic, coords, desc: dict) -> str:
     if desc.get("kind") == "scan":
         where = ", ".join(f"{a} = {fmt_num(v)}" for a, v in zip("xyz", coords))
@@ -279,6 +292,10 @@ def register(app: typer.Typer) -> None:
             None, "--bind", "--host", help="With --serve or --spawn: the address to listen on (default 127.0.0.1: this "
             "machine only; 0.0.0.0: every interface)."
         ),
+        layout: Optional[str] = typer.Option(
+            None, "--layout", help="When comparing throws: overlay (default: each die where it is, the later ones "
+            "drawn slightly smaller so coinciding dice do not flicker) or side (each throw beside the previous one)."
+        ),
         channels: Optional[str] = typer.Option(
             None, "--channels", help="Optional channels, comma-separated (default: none, a lean recording): forces "
             "(per-node normal and friction contact forces as arrows), penetration (depth per node below the ground), "
@@ -315,6 +332,12 @@ def register(app: typer.Typer) -> None:
             fail("--channels records one throw: drop it when comparing throws (several --ic or --nudge)")
         if comparing and parquet is not None:
             fail("--parquet records one throw: drop it when comparing throws (several --ic or --nudge)")
+        from dicetrace.sinks.rerun_compare import LAYOUTS
+
+        if layout is not None and layout not in LAYOUTS:
+            fail(f"--layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+        if layout is not None and not comparing:
+            fail("--layout places compared throws: give several --ic or --nudge")
         if scan is not None:
             if ics or slice_name is not None:
                 fail("give either --scan DIR --at X,Y or --ic / --slice, not both")
@@ -338,7 +361,7 @@ def register(app: typer.Typer) -> None:
                                tol_growth=tol_growth)
         name = default_name(the_ic, coords, desc, cfg, chans)
         if comparing:
-            name = f"{name}_nudge{fmt_num(eps)}" if eps is not None and len(all_ics) == 2 else f"compare{len(all_ics)}_{name}"
+            name = compare_name(name, all_ics, eps, layout or "overlay")
         if out is None and mode is None:
             out = DEFAULT_FOLDER / f"{name}.rrd"
         dest = None if out is None else check_output_file(out, "--out", suffix=".rrd")
@@ -375,7 +398,8 @@ def register(app: typer.Typer) -> None:
         if comparing:
             from dicetrace.sinks.rerun_compare import compare_blueprint, compare_logger
 
-            log, blueprint = compare_logger(rolls, labels, name=name), compare_blueprint(rolls)
+            lay = layout or "overlay"
+            log, blueprint = compare_logger(rolls, labels, name=name, layout=lay), compare_blueprint(rolls, lay)
         else:
             from dicetrace.sinks.rerun import default_blueprint, roll_logger
 

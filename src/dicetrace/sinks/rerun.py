@@ -342,23 +342,7 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     )
     rec.send_columns("world/die/body", indexes=index, columns=rr.Boxes3D.columns(centers=cm, quaternions=quat))
 
-    # the face plates and their pips: static in the body frame, carried by the die's pose (one transform per step)
-    plate_t = 0.02 * half
-    plate_half = np.where(FACE_NORMALS != 0, plate_t, 0.62 * half)
-    rec.log(
-        "world/die/faces",
-        rr.Boxes3D.from_fields(
-            centers=FACE_NORMALS * (half + plate_t),
-            half_sizes=plate_half,
-            colors=FACE_COLORS,
-            fill_mode="solid",
-            labels=[str(v) for v in range(1, 7)],
-            show_labels=False,  # on hover only: a label is drawn over everything, a hidden face's too
-        ),
-        static=True,
-    )
-    rec.send_columns("world/die/faces", indexes=index, columns=rr.Transform3D.columns(translation=cm, quaternion=quat))
-    log_pips(rec, "world/die/faces/pips", FACE_NORMALS, half, lift=half + 2 * plate_t)
+    log_faces(rec, "world/die/faces", half, index, cm, quat)
 
     # -- nodes: red while in contact -------------------------------------------------------------
     rec.log(
@@ -445,7 +429,34 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
         log_channels(rec, roll, channels, rows, index, scales or arrow_scales(roll, channels))
 
 
-def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_path", color=CM_COLOR) -> None:
+def log_faces(rec, entity: str, half: float, index, cm, quat) -> None:
+    """The die's six face plates (writeup colours, numbered on hover) and their pips at ``entity``.
+
+    Static in the body frame, carried by the die's pose: one transform per step (centre ``cm``,
+    quaternion ``quat``, xyzw) on the ``index`` timelines.  The pips are the child ``entity/pips``.
+    """
+    import rerun as rr
+
+    plate_t = 0.02 * half
+    plate_half = np.where(FACE_NORMALS != 0, plate_t, 0.62 * half)
+    rec.log(
+        entity,
+        rr.Boxes3D.from_fields(
+            centers=FACE_NORMALS * (half + plate_t),
+            half_sizes=plate_half,
+            colors=FACE_COLORS,
+            fill_mode="solid",
+            labels=[str(v) for v in range(1, 7)],
+            show_labels=False,  # on hover only: a label is drawn over everything, a hidden face's too
+        ),
+        static=True,
+    )
+    rec.send_columns(entity, indexes=index, columns=rr.Transform3D.columns(translation=cm, quaternion=quat))
+    log_pips(rec, f"{entity}/pips", FACE_NORMALS, half, lift=half + 2 * plate_t)
+
+
+def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_path", color=CM_COLOR,
+               radius: float = 0.03) -> None:
     """The growing centre-of-mass line strip, updated every ``trail_every`` steps.
 
     Update u (at row r_u) holds the path sampled every ``trail_every`` rows up
@@ -470,7 +481,7 @@ def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_
         if (nfull - 1) * every != r:
             pts = np.concatenate([pts, cm[r : r + 1]])
         strips.append(pts)
-    rec.log(entity, rr.LineStrips3D.from_fields(radii=[0.03], colors=[color]), static=True)
+    rec.log(entity, rr.LineStrips3D.from_fields(radii=[radius], colors=[color]), static=True)
     rec.send_columns(
         entity,
         indexes=[rr.TimeColumn("step", sequence=steps[rows]), rr.TimeColumn("sim_time", duration=t_s[rows])],

@@ -3,8 +3,11 @@
 Entities (world frame: z up, cm):
 
 ``world/ground``               the ground plane (as in a single-throw recording)
-``throws/<k>/body``            throw k's die, a solid box in its own colour (:data:`THROW_COLORS`)
-``throws/<k>/nodes``           its eight corner nodes, labelled 1..8
+``throws/<k>/body``            throw k's die, a solid box in its own colour (:data:`THROW_COLORS`): the rim
+                               around its face plates, so each die keeps its faces and shows its throw
+``throws/<k>/faces``           its six face plates in the writeup's colours, numbered on hover, and
+``throws/<k>/faces/pips``      their pips, as in a single recording (one transform per step)
+``throws/<k>/nodes``           its eight corner nodes in its colour, labelled 1..8 on hover
 ``throws/<k>/cm_path``         its centre-of-mass path so far
 ``divergence/log10/<k>``       log10 of the phase-space distance of throw k from throw 0 (k ≥ 1);
                                steps where the distance is exactly 0 are left out (no logarithm)
@@ -20,6 +23,12 @@ positions and orientations agree, so for a throw whose IC is throw 0's
 scaled by (1 + ε) (``--nudge ε``) it is exactly ε up to rounding.
 Rerun 0.41 plots have no logarithmic axis, hence the log10 series.  A throw
 that settles before another keeps its last state.
+
+Layouts (:data:`LAYOUTS`): ``overlay`` (the default) draws each die where it is;
+throw k's die is drawn :data:`SHRINK` smaller per k, so that where dice coincide
+(a small nudge, before it grows) the first one is seen whole, with no flicker of
+coincident surfaces (z-fighting).  ``side`` puts each throw beside the previous
+one, across the first throw's travel, so that every die is always seen.
 """
 
 from __future__ import annotations
@@ -102,11 +111,57 @@ def compare_summary(rolls, labels) -> str:
     return "\n".join(lines)
 
 
-def log_compare(rec, rolls, labels) -> None:
-    """Log the throws and their divergence into an open recording stream."""
+#: Layouts of the dice: at their own positions (overlay), or each throw beside the previous one (side).
+LAYOUTS = ("overlay", "side")
+#: Throw k's die is drawn this much smaller per k (relative, up to :data:`MAX_SHRUNK` throws): where two dice
+#: coincide (a small nudge, before it grows) the first one is seen whole instead of flickering surfaces.
+SHRINK = 0.03
+MAX_SHRUNK = 10
+#: The centre-of-mass path's radius (throw 0, in half sides), and the factor per throw after it; the lift of throw
+#: k's path per k, in half sides (overlay): where paths coincide each shows as a band around the next one.
+PATH_RADIUS = 0.03
+PATH_THIN = 0.6
+PATH_LIFT = 0.02
+
+
+def drawn_half(half: float, k: int) -> float:
+    """The half side throw ``k``'s die is drawn with (see :data:`SHRINK`)."""
+    return half * (1.0 - SHRINK * min(k, MAX_SHRUNK))
+
+
+def layout_offsets(states, half: float, layout: str = "overlay") -> np.ndarray:
+    """(throws, 3) display offsets of each throw's die: zero for ``overlay``; for ``side`` a row across the
+    first throw's horizontal travel, spaced so that no two paths (dice included) ever touch."""
+    n = len(states)
+    if layout == "overlay":
+        return np.zeros((n, 3))
+    if layout != "side":
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+    cm0 = states[0]["cm"]
+    travel = cm0[-1, :2] - cm0[0, :2]
+    norm = float(np.hypot(*travel))
+    d = travel / norm if norm > half else np.array([0.0, 1.0])
+    across = np.array([d[1], -d[0], 0.0])  # to the right of the travel: left to right in the default camera
+    reach = [((s["cm"][:, None, :] + s["off"]) @ across) for s in states]  # every node's position across
+    gap = 3.0 * half
+    offsets, edge = [0.0], float(reach[0].max())
+    for r in reach[1:]:
+        shift = edge + gap - float(r.min())
+        offsets.append(shift)
+        edge = shift + float(r.max())
+    return np.outer(offsets, across)
+
+
+def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
+    """Log the throws and their divergence into an open recording stream.
+
+    Each die as in a single recording (face colours, pips, numbers and node labels on hover),
+    its body (the rim around the face plates), nodes and path in the throw's colour; ``layout``:
+    :data:`LAYOUTS`.  The divergence is always that of the real states, whatever the layout.
+    """
     import rerun as rr
 
-    from dicetrace.sinks.rerun import GROUND_COLOR, _log_trail
+    from dicetrace.sinks.rerun import GROUND_COLOR, _log_trail, log_faces
 
     half = float(rolls[0].config.preset.half_side_cm)
     steps, t_s, divs = compare_series(rolls)
@@ -117,7 +172,8 @@ def log_compare(rec, rolls, labels) -> None:
 
     rec.log("/", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     states = [_padded(r, n) for r in rolls]
-    allxy = np.concatenate([(s["cm"][:, None, :] + s["off"])[..., :2].reshape(-1, 2) for s in states])
+    shifts = layout_offsets(states, half, layout)
+    allxy = np.concatenate([(s["cm"][:, None, :] + s["off"] + o)[..., :2].reshape(-1, 2) for s, o in zip(states, shifts)])
     lo = np.minimum(allxy.min(axis=0), -3 * half)
     hi = np.maximum(allxy.max(axis=0), 3 * half)
     centre, extent, thick = 0.5 * (lo + hi), 0.5 * (hi - lo) + 3.0 * half, 0.05 * half
@@ -129,15 +185,23 @@ def log_compare(rec, rolls, labels) -> None:
         color = throw_color(k)
         base = f"throws/{k}"
         index = idx(steps, t_s)
-        rec.log(f"{base}/body", rr.Boxes3D.from_fields(half_sizes=[[half, half, half]], colors=[color], fill_mode="solid",
+        h = drawn_half(half, k)
+        cm = s["cm"] + shifts[k]
+        rec.log(f"{base}/body", rr.Boxes3D.from_fields(half_sizes=[[h, h, h]], colors=[color], fill_mode="solid",
                                                        labels=[f"throw {k}"], show_labels=False), static=True)
-        rec.send_columns(f"{base}/body", indexes=index, columns=rr.Boxes3D.columns(centers=s["cm"], quaternions=s["quat"]))
-        rec.log(f"{base}/nodes", rr.Points3D.from_fields(radii=[0.07 * half], colors=[color],
-                                                        labels=[str(j) for j in range(1, 9)]), static=True)
-        nodes = s["cm"][:, None, :] + s["off"]
+        rec.send_columns(f"{base}/body", indexes=index, columns=rr.Boxes3D.columns(centers=cm, quaternions=s["quat"]))
+        log_faces(rec, f"{base}/faces", h, index, cm, s["quat"])
+        rec.log(f"{base}/nodes", rr.Points3D.from_fields(radii=[0.07 * h], colors=[color],
+                                                        labels=[str(j) for j in range(1, 9)], show_labels=False),
+                static=True)
+        nodes = cm[:, None, :] + s["off"] * (h / half)
         rec.send_columns(f"{base}/nodes", indexes=index,
                          columns=rr.Points3D.columns(positions=nodes.reshape(-1, 3)).partition(np.full(n, 8)))
-        _log_trail(rec, rr, s["cm"], steps, t_s, None, entity=f"{base}/cm_path", color=color)
+        # coinciding paths would flicker: a later throw's path is thinner and lifted a little, drawn as a core
+        # line of its colour inside the earlier ones (overlay; beside each other they never coincide)
+        lift = np.array([0.0, 0.0, PATH_LIFT * half * min(k, MAX_SHRUNK)]) if layout == "overlay" else 0.0
+        _log_trail(rec, rr, cm + lift, steps, t_s, None, entity=f"{base}/cm_path", color=color,
+                   radius=PATH_RADIUS * half * PATH_THIN ** min(k, MAX_SHRUNK))
 
     for k, d in enumerate(divs, start=1):
         color = throw_color(k)
@@ -154,10 +218,10 @@ def log_compare(rec, rolls, labels) -> None:
             rec.send_columns(f"divergence/{key}/{k}", indexes=idx(steps, t_s), columns=rr.Scalars.columns(scalars=d[key]))
 
 
-def compare_blueprint(rolls=None):
+def compare_blueprint(rolls=None, layout: str = "overlay"):
     """3-D view of all throws, the log10 divergence plot and the summary.
 
-    With ``rolls``, the 3-D camera frames the paths of all of them.
+    With ``rolls``, the 3-D camera frames the paths of all of them (as ``layout`` places them).
     """
     import rerun.blueprint as rrb
 
@@ -165,7 +229,11 @@ def compare_blueprint(rolls=None):
 
     eye = None
     if rolls:
-        eye = _eye_for(np.concatenate([r.trace.cm_pos for r in rolls]), float(rolls[0].config.preset.half_side_cm))
+        half = float(rolls[0].config.preset.half_side_cm)
+        n = common_length(rolls)
+        states = [_padded(r, n) for r in rolls]
+        shifts = layout_offsets(states, half, layout)
+        eye = _eye_for(np.concatenate([s["cm"] + o for s, o in zip(states, shifts)]), half)
     view3d = rrb.Spatial3DView(origin="/", contents=["/world/**", "/throws/**"], name="throws", eye_controls=eye,
                                background=(250, 250, 250), line_grid=rrb.LineGrid3D(visible=False))
     div = rrb.TimeSeriesView(origin="/divergence/log10", name="log10 divergence from throw 0",
@@ -176,24 +244,30 @@ def compare_blueprint(rolls=None):
     return layout_blueprint(rrb, view3d, right)
 
 
-def compare_logger(rolls, labels, *, name: str = "dicetrace compare"):
+def compare_logger(rolls, labels, *, name: str = "dicetrace compare", layout: str = "overlay"):
     """``log(rec)`` of the compare recording (the file and the streaming sinks share it)."""
     import rerun as rr
 
     from dicetrace.sinks.rerun import metadata_values
 
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
+
     def log(rec) -> None:
         rec.send_recording_name(name)
         meta = metadata_values(rolls[0], labels[0])
         meta["n_throws"] = len(rolls)
+        meta["layout"] = layout
         rec.send_property("dicetrace", rr.AnyValues(**meta))
-        log_compare(rec, rolls, labels)
+        log_compare(rec, rolls, labels, layout=layout)
 
     return log
 
 
-def encode_compare_rrd(rolls, labels, *, name: str = "dicetrace compare", application_id: str = "dicetrace") -> bytes:
-    """The bytes of the compare recording of ``rolls`` (throw 0 the reference)."""
+def encode_compare_rrd(rolls, labels, *, name: str = "dicetrace compare", application_id: str = "dicetrace",
+                       layout: str = "overlay") -> bytes:
+    """The bytes of the compare recording of ``rolls`` (throw 0 the reference; ``layout``: :data:`LAYOUTS`)."""
     from dicetrace.sinks.rerun import encode_rrd
 
-    return encode_rrd(compare_logger(rolls, labels, name=name), compare_blueprint(rolls), application_id=application_id)
+    return encode_rrd(compare_logger(rolls, labels, name=name, layout=layout), compare_blueprint(rolls, layout),
+                      application_id=application_id)
