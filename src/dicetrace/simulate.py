@@ -506,6 +506,94 @@ def _run_serial(kin, cap: int):
     return status, steps, outcome, nsets, sets, set_steps
 
 
+#: Bytes a batch's result holds per IC whatever its throws: status and outcome (1 each);
+#: steps, t_settle_s, set_offsets and the set counts (8 each); at least one contact set (1, and 4 for its step).
+RESULT_BYTES_PER_IC = 1 + 1 + 8 + 8 + 8 + 8 + 5
+#: Bytes per IC of a chunk in flight besides its contact-set buffers (``cap`` sets of 1 + 4 bytes, and
+#: a 1-byte mask): the kernel's copy of the ICs (48), its outputs (1 + 8 + 1 + 8), their compacted copy.
+CHUNK_BYTES_PER_IC = 48 + 18 + 18
+#: Working memory of one chunk of :func:`simulate_batch` when no ``chunk`` is given.
+CHUNK_BYTES = 64 * 2**20
+
+
+def _chunk_bytes_per_ic(cap: int) -> int:
+    return CHUNK_BYTES_PER_IC + 6 * cap
+
+
+def batch_chunk(cap: int = DEFAULT_CAP) -> int:
+    """ICs per chunk of :func:`simulate_batch` by default: about ``CHUNK_BYTES`` of buffers, whole kernel blocks."""
+    n = CHUNK_BYTES // _chunk_bytes_per_ic(cap)
+    return max(BATCH_BLOCK, n // BATCH_BLOCK * BATCH_BLOCK)
+
+
+def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, what: str = "simulate_batch") -> None:
+    """Refuse (ValueError naming ``what``, the size and the limit) a batch that cannot fit in the available memory.
+
+    Counts what the result must hold whatever the throws (``RESULT_BYTES_PER_IC``,
+    48 more per IC when the ICs are returned converted, ``ics_copy``) and one
+    chunk in flight; the contact sets beyond the first of each throw (about
+    5 bytes each, 20–70 a throw) come on top, so this is a lower bound.
+    """
+    result = m * (RESULT_BYTES_PER_IC + (48 if ics_copy else 0))
+    flight = min(m, chunk) * _chunk_bytes_per_ic(cap)
+    avail = available_memory()
+    if avail is not None and result + flight > avail:
+        gib = 2**30
+        raise ValueError(
+            f"{what}: {m:,} ICs need at least {(result + flight) / gib:.3g} GiB ({result / gib:.3g} GiB for their results, "
+            f"more with their contact sets, and {flight / gib:.3g} GiB for a chunk of {min(m, chunk):,} ICs with cap {cap:,}), "
+            f"more than the {avail / gib:.3g} GiB of memory available: pass fewer ICs per call"
+            + (" or a smaller chunk or cap" if flight > result else "")
+            + " (a scan writes its rows to disk chunk by chunk)"
+        )
+
+
+def _run_chunk(kin, cap: int, threads):
+    """Summaries of the ICs of ``kin``: (status, steps, outcome, nsets, sets, set_steps), sets compacted.
+
+    Throws that fill their ``cap`` sets are re-run, all together, with
+    ``CAP_GROWTH`` times more until they fit.
+    """
+    m = len(kin.ics)
+    status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads)
+    extra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    todo = np.nonzero(status == Status.BUFFER_FULL)[0]
+    big = cap
+    while todo.size:
+        big *= CAP_GROWTH
+        st, sp, oc, ns, ss, sst = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads)
+        done = st != Status.BUFFER_FULL
+        for r in np.nonzero(done)[0]:
+            i = todo[r]
+            status[i], steps[i], outcome[i], nsets[i] = st[r], sp[r], oc[r], ns[r]
+            extra[int(i)] = (ss[r * big : r * big + ns[r]].copy(), sst[r * big : r * big + ns[r]].copy())
+        todo = todo[~done]
+    sets2, steps2 = sets.reshape(m, cap), set_steps.reshape(m, cap)
+    if not extra:
+        full = np.arange(cap)[None, :] < nsets[:, None]
+        return status, steps, outcome, nsets, sets2[full], steps2[full]
+    ends = np.cumsum(nsets)
+    flat_sets = np.empty(int(ends[-1]), dtype=np.uint8)
+    flat_steps = np.empty(int(ends[-1]), dtype=np.int32)
+    for i in range(m):
+        a, b = ends[i] - nsets[i], ends[i]
+        flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets2[i, : nsets[i]], steps2[i, : nsets[i]])
+    return status, steps, outcome, nsets, flat_sets, flat_steps
+
+
+def _join(parts: list, dtype, total: int) -> np.ndarray:
+    """The parts end to end, each part freed once copied (peak: the whole plus one part)."""
+    if len(parts) == 1:
+        return parts.pop()
+    out = np.empty(total, dtype=dtype)
+    pos = 0
+    while parts:
+        p = parts.pop(0)
+        out[pos : pos + len(p)] = p
+        pos += len(p)
+    return out
+
+
 def simulate_batch(
     ics,
     *,
@@ -513,6 +601,7 @@ def simulate_batch(
     l_convention: str | None = None,
     threads: int | None = None,
     cap: int = DEFAULT_CAP,
+    chunk: int | None = None,
     **options,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads).
@@ -537,6 +626,15 @@ def simulate_batch(
         Initial per-IC contact-set buffer, an integer in [1, ``MAX_CAP``];
         throws that need more are re-run (all together, in parallel) with
         ``CAP_GROWTH`` times more until they fit.
+    chunk
+        ICs run per call of the kernel (None: :func:`batch_chunk`, about
+        64 MiB of buffers).  The ICs run chunk by chunk and only each chunk's
+        contact sets are kept, compacted, so the memory a batch takes is its
+        result (about 40 bytes per IC and 5 per contact set, 48 more per IC
+        when the ICs are returned in another L convention) plus one chunk; the
+        result is the same, bit for bit, whatever the chunk.  A batch whose
+        result and chunk cannot fit in the memory available is refused before
+        anything runs (a ValueError naming the sizes; see :func:`check_batch_memory`).
 
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are
@@ -545,38 +643,33 @@ def simulate_batch(
     cfg = resolve_config(config, **options)
     cap = _integer(cap, "cap", 1, MAX_CAP)
     threads = _integer(threads, "threads", 1, none_ok=True)
+    chunk = _integer(chunk, "chunk", 1, none_ok=True)
     conv = cfg.preset.l_convention if l_convention is None else l_convention
     coords = ics.coords if isinstance(ics, SliceICs) else None
     ics = validate_ics(ics)
-    if coords is not None:
-        coords = np.array(coords, dtype=np.float64).reshape(len(ics), 3)
-    kin = cfg.kernel_inputs(ics, l_convention=conv)
     m = len(ics)
-    status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads)
-    full = np.arange(cap)[None, :] < nsets[:, None]
-    extra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-    todo = np.nonzero(status == Status.BUFFER_FULL)[0]
-    big = cap
-    while todo.size:
-        big *= CAP_GROWTH
-        st, sp, oc, ns, ss, sst = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads)
-        done = st != Status.BUFFER_FULL
-        for r in np.nonzero(done)[0]:
-            i = todo[r]
-            status[i], steps[i], outcome[i], nsets[i] = st[r], sp[r], oc[r], ns[r]
-            extra[int(i)] = (ss[r * big : r * big + ns[r]].copy(), sst[r * big : r * big + ns[r]].copy())
-        todo = todo[~done]
+    if coords is not None:
+        coords = np.array(coords, dtype=np.float64).reshape(m, 3)
+    cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
+    chunk = batch_chunk(cap) if chunk is None else chunk
+    check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention)
+    status, outcome = np.zeros(m, dtype=np.int8), np.zeros(m, dtype=np.int8)
+    steps, nsets = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
+    set_parts: list[np.ndarray] = []
+    step_parts: list[np.ndarray] = []
+    for a in range(0, m, chunk):  # chunk by chunk: the buffers of one chunk in memory, its sets compacted
+        b = min(m, a + chunk)
+        kin = cfg.kernel_inputs(ics[a:b], l_convention=conv)
+        status[a:b], steps[a:b], outcome[a:b], nsets[a:b], sets, set_steps = _run_chunk(kin, cap, threads)
+        set_parts.append(sets)
+        step_parts.append(set_steps)
+        del kin, sets, set_steps
     offsets = np.zeros(m + 1, dtype=np.int64)
     np.cumsum(nsets, out=offsets[1:])
-    sets2, steps2 = sets.reshape(m, cap), set_steps.reshape(m, cap)
-    if not extra:
-        flat_sets, flat_steps = sets2[full], steps2[full]
-    else:
-        flat_sets = np.empty(int(offsets[-1]), dtype=np.uint8)
-        flat_steps = np.empty(int(offsets[-1]), dtype=np.int32)
-        for i in range(m):
-            a, b = offsets[i], offsets[i + 1]
-            flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets2[i, : nsets[i]], steps2[i, : nsets[i]])
+    del nsets
+    total = int(offsets[-1])
+    flat_sets = _join(set_parts, np.uint8, total) if set_parts else np.zeros(0, dtype=np.uint8)
+    flat_steps = _join(step_parts, np.int32, total) if step_parts else np.zeros(0, dtype=np.int32)
     return BatchResult(
         ics=cfg.to_preset_convention(ics, conv),
         outcome=outcome,
