@@ -348,24 +348,72 @@ def test_blueprint_shows_every_logged_entity_and_no_empty_view(rrd, temporal, st
     assert set(views) <= reached
 
 
-def test_camera_frames_the_path(roll, rrd):
-    """With a roll the 3-D camera looks at the middle of the centre-of-mass path from far enough to see all of it."""
+#: The 3-D view's vertical field of view in Rerun's viewer 0.41 (its default eye), degrees.
+VIEWER_FOV_Y_DEG = 55.0
+
+
+def in_camera(eye: dict, points: np.ndarray) -> np.ndarray:
+    """``points`` in the blueprint camera's frame: (right, up, depth) per point, the eye's look direction as depth."""
+    position = np.array(eye["EyeControls3D:position"][0])
+    fwd = np.array(eye["EyeControls3D:look_target"][0]) - position
+    fwd /= np.linalg.norm(fwd)
+    right = np.cross(fwd, eye["EyeControls3D:eye_up"][0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    rel = points - position
+    return np.stack([rel @ right, rel @ up, rel @ fwd], axis=-1)
+
+
+def test_camera_frames_the_resting_die_and_its_path_large(roll, rrd):
+    """The blueprint's camera (read from the .rrd) sees the resting die and the whole path from its first bounce,
+    every node of it, and from as close as that allows: the resting die spans at least a sixth of the view
+    (it was about a tenth, framing the whole drop from across the travel)."""
     rows = blueprint_rows(rrd)
     (eye,) = [v for k, v in rows.items() if k.endswith("/EyeControls3D")]
-    target = np.array(eye["EyeControls3D:look_target"][0])
-    position = np.array(eye["EyeControls3D:position"][0])
     assert eye["EyeControls3D:eye_up"][0] == [0.0, 0.0, 1.0]
-    cm = roll.trace.cm_pos
-    lo, hi = cm.min(axis=0), cm.max(axis=0)
-    np.testing.assert_allclose(target[:2], 0.5 * (lo[:2] + hi[:2]), rtol=1e-6)
-    span = np.linalg.norm(hi - lo)
-    dist = np.linalg.norm(position - target)
-    assert span < dist < 10 * span  # the whole path fits the view, and the die is not a speck
-    assert position[2] > target[2]  # from above
-    # the travel runs across the view: the line of sight is (nearly) perpendicular to it
-    travel = cm[-1, :2] - cm[0, :2]
-    sight = (target - position)[:2]
-    assert abs(np.dot(travel, sight)) < 1e-3 * np.linalg.norm(travel) * np.linalg.norm(sight)
+    half = roll.config.preset.half_side_cm
+    tr = roll.trace
+    nodes = tr.cm_pos[:, None, :] + tr.node_offsets
+    first = int(np.flatnonzero(tr.cm_pos[:, 2] <= np.sqrt(3) * half)[0])  # the die may touch the ground from here
+    assert 100 < first < roll.steps  # the drop is before it
+    seen = in_camera(eye, nodes[first:].reshape(-1, 3))
+    tan = np.tan(np.radians(VIEWER_FOV_Y_DEG) / 2)
+    assert (seen[:, 2] > 0).all()
+    assert (np.abs(seen[:, :2]) <= tan * seen[:, 2:3]).all(), "a node of the path from the first bounce is out of view"
+    rest = in_camera(eye, nodes[-1])
+    ys, depth = rest[:, :2], rest[:, 2]
+    size = (ys.max(axis=0) - ys.min(axis=0)).max() / (2 * tan * depth.mean())  # of the view's height
+    assert size > 1 / 6, f"the resting die spans {size:.3f} of the view"
+    # the camera looks down, and orbits around the point of its axis at the resting die's depth
+    centre = in_camera(eye, tr.cm_pos[-1][None, :])[0]
+    target = in_camera(eye, np.array(eye["EyeControls3D:look_target"]))[0]
+    assert target[2] == pytest.approx(centre[2], rel=1e-4)
+    assert np.array(eye["EyeControls3D:position"][0])[2] > tr.cm_pos[-1, 2] + 2 * half
+
+
+def test_ground_grid_is_one_line_per_die_side_across_the_ground_and_through_the_resting_place(roll, static):
+    half = roll.config.preset.half_side_cm
+    ground = static["/world/ground"]
+    centre = np.array(ground.column("Boxes3D:centers").to_pylist()[0][0])
+    extent = np.array(ground.column("Boxes3D:half_sizes").to_pylist()[0][0])
+    strips = np.array(static["/world/ground/grid"].column("LineStrips3D:strips").to_pylist()[0], dtype=np.float64)
+    assert strips.shape[1:] == (2, 3)
+    z = strips[..., 2]
+    assert (z > 0).all() and (z < 0.05 * half).all()  # on the ground's top face (z = 0), just above it
+    rest = roll.trace.cm_pos[-1, :2]
+    nodes = roll.trace.cm_pos[:, None, :2] + roll.trace.node_offsets[..., :2]
+    for axis in (0, 1):  # lines of constant x, then of constant y
+        lines = strips[strips[:, 0, axis] == strips[:, 1, axis]]
+        at = np.sort(lines[:, 0, axis])
+        np.testing.assert_allclose(np.diff(at), 2 * half, rtol=1e-6)  # one die side apart (float32 in the file)
+        assert np.min(np.abs(at - rest[axis])) < 1e-5  # one through the resting place
+        # across the whole ground, which holds every node of the throw
+        assert at[0] - 2 * half < centre[axis] - extent[axis] and at[-1] + 2 * half > centre[axis] + extent[axis]
+        assert centre[axis] - extent[axis] < nodes[..., axis].min() and nodes[..., axis].max() < centre[axis] + extent[axis]
+        other = 1 - axis
+        np.testing.assert_allclose(np.sort(lines[:, :, other], axis=1),
+                                   np.tile([centre[other] - extent[other], centre[other] + extent[other]], (len(lines), 1)),
+                                   rtol=1e-6, atol=1e-5)
 
 
 @pytest.mark.skipif(not RERUN_CLI.exists() and shutil.which("rerun") is None, reason="rerun CLI not installed")

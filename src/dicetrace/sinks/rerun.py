@@ -71,6 +71,9 @@ NODE_FREE_COLOR = (150, 150, 150)
 EVENT_ENTER_COLOR = (255, 40, 40)
 EVENT_LEAVE_COLOR = (40, 110, 255)
 GROUND_COLOR = (120, 150, 120)
+#: The ground's grid lines (one per die side) and their height above the ground, in half sides.
+GRID_COLOR = (95, 120, 95)
+GRID_LIFT = 0.01
 CM_COLOR = (255, 140, 0)
 
 ENERGY_SERIES = (
@@ -317,21 +320,7 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
 
     # -- static: frame, ground, summary ------------------------------------------------------
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    lo = np.minimum(nodes[..., :2].min(axis=(0, 1)), -3 * half)
-    hi = np.maximum(nodes[..., :2].max(axis=(0, 1)), 3 * half)
-    centre = 0.5 * (lo + hi)
-    extent = 0.5 * (hi - lo) + 3.0 * half
-    thick = 0.05 * half
-    rec.log(
-        "world/ground",
-        rr.Boxes3D(
-            centers=[[centre[0], centre[1], -thick]],
-            half_sizes=[[extent[0], extent[1], thick]],
-            colors=[GROUND_COLOR],
-            fill_mode="solid",
-        ),
-        static=True,
-    )
+    log_ground(rec, nodes[..., :2].reshape(-1, 2), half, cm[-1, :2])
     rec.log("summary", rr.TextDocument(summary_markdown(roll, ic_label), media_type=rr.MediaType.MARKDOWN), static=True)
 
     # -- the die: body box and face plates ---------------------------------------------------------
@@ -429,6 +418,43 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
         log_channels(rec, roll, channels, rows, index, scales or arrow_scales(roll, channels))
 
 
+def log_ground(rec, xy: np.ndarray, half: float, anchor: np.ndarray) -> None:
+    """The ground sized to what happens on it: a thin box whose top face is z = 0 under every point of ``xy``
+    (and the origin) with 3 half sides to spare, and on it ``world/ground/grid``, a line every die side,
+    one of them through ``anchor`` (the resting place) each way: the die's scale, across the whole ground."""
+    import rerun as rr
+
+    lo = np.minimum(xy.min(axis=0), -3 * half)
+    hi = np.maximum(xy.max(axis=0), 3 * half)
+    centre = 0.5 * (lo + hi)
+    extent = 0.5 * (hi - lo) + 3.0 * half
+    thick = 0.05 * half
+    rec.log(
+        "world/ground",
+        rr.Boxes3D(
+            centers=[[centre[0], centre[1], -thick]],
+            half_sizes=[[extent[0], extent[1], thick]],
+            colors=[GROUND_COLOR],
+            fill_mode="solid",
+        ),
+        static=True,
+    )
+    side, z = 2.0 * half, GRID_LIFT * half
+    g0, g1 = centre - extent, centre + extent
+    strips = []
+    for axis in (0, 1):
+        other = 1 - axis
+        first = anchor[axis] + side * np.ceil((g0[axis] - anchor[axis]) / side)
+        for v in np.arange(first, g1[axis] + 1e-9 * side, side):
+            a, b = np.zeros(3), np.zeros(3)
+            a[axis] = b[axis] = v
+            a[other], b[other] = g0[other], g1[other]
+            a[2] = b[2] = z
+            strips.append([a, b])
+    rec.log("world/ground/grid", rr.LineStrips3D(strips, radii=rr.Radius.ui_points(1.0), colors=[GRID_COLOR]),
+            static=True)
+
+
 def log_faces(rec, entity: str, half: float, index, cm, quat) -> None:
     """The die's six face plates (writeup colours, numbered on hover) and their pips at ``entity``.
 
@@ -489,28 +515,74 @@ def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_
     )
 
 
-def _eye_for(cm: np.ndarray, half: float):
-    """A camera that sees the whole centre-of-mass path from the side of its horizontal travel.
+#: The 3-D view's vertical field of view in Rerun's viewer (0.41: 55°), and the share of it the framing fills.
+VIEW_FOV_Y_DEG = 55.0
+FRAME_FILL = 0.9
+#: The default camera: its azimuth from the throw's travel, seen from beyond the resting place (deg), and elevation.
+EYE_AZIMUTH_DEG = 35.0
+EYE_ELEVATION_DEG = 30.0
+#: Most path points the framing looks at (the path is subsampled above it).
+FRAME_POINTS = 400
 
-    It looks across the travel direction (so the path spreads left to right),
-    25° from above, from a distance proportional to the path's extent.
+
+def framed_points(cm: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray]:
+    """What the default camera frames: (centre-of-mass points, the resting place), from one path.
+
+    The path from the first row where the die may touch the ground (centre of mass within √3·half
+    of it: the bounces, where the outcome is decided) to its end, and the resting place; the drop
+    before the first bounce rises out of the frame.  A path that never comes down is framed whole.
+    """
+    cm = cm[np.isfinite(cm).all(axis=1)]
+    near = np.flatnonzero(cm[:, 2] <= np.sqrt(3.0) * half + 1e-9)
+    pts = cm[near[0]:] if len(near) else cm
+    if len(pts) > FRAME_POINTS:
+        pts = pts[np.linspace(0, len(pts) - 1, FRAME_POINTS).round().astype(int)]
+    return pts, cm[-1]
+
+
+def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: float):
+    """The camera closest to ``rest`` that sees every point of ``points`` with the whole die around it.
+
+    It looks from beyond the resting place back along the ``travel`` (horizontal, start to rest),
+    :data:`EYE_AZIMUTH_DEG` to its side and :data:`EYE_ELEVATION_DEG` from above; its distance is
+    the solution of a linear programme: every point's sphere of the die's circumradius lies within
+    :data:`FRAME_FILL` of the view's field of view (:data:`VIEW_FOV_Y_DEG`, both ways), as close to
+    the resting die as that allows.  It orbits around the point in front of it at the resting
+    die's depth.
     """
     import rerun.blueprint as rrb
+    from scipy.optimize import linprog
 
+    norm = float(np.hypot(*travel))
+    d = np.asarray(travel, dtype=float) / norm if norm > half else np.array([0.0, 1.0])
+    az, el = np.radians(EYE_AZIMUTH_DEG), np.radians(EYE_ELEVATION_DEG)
+    back = np.cos(az) * d + np.sin(az) * np.array([d[1], -d[0]])  # from the resting place towards the camera
+    fwd = -np.array([back[0] * np.cos(el), back[1] * np.cos(el), np.sin(el)])
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    k = np.tan(np.radians(VIEW_FOV_Y_DEG) / 2) * FRAME_FILL
+    rho = np.sqrt(3.0) * half * np.sqrt(1 + k * k)  # a die's circumsphere kept inside each side of the frustum
+    # for each point p and side a: a·(p - E) - k·fwd·(p - E) <= -rho  (p's sphere inside that side)
+    sides = np.stack([right, -right, up, -up])
+    pts = np.vstack([points, rest[None, :]])
+    a_ub = np.repeat(k * fwd[None, :] - sides, len(pts), axis=0)
+    b_ub = np.concatenate([-(pts @ (a - k * fwd)) - rho for a in sides])
+    res = linprog(-fwd, A_ub=a_ub, b_ub=b_ub, bounds=[(None, None)] * 3, method="highs")
+    if res.status != 0:  # pragma: no cover - a bounded, feasible programme
+        raise RuntimeError(f"framing the die: {res.message}")
+    eye = res.x
+    target = eye + fwd * float(fwd @ (rest - eye))
+    return rrb.EyeControls3D(position=eye, look_target=target, eye_up=[0.0, 0.0, 1.0])
+
+
+def _eye_for(cm: np.ndarray, half: float):
+    """The default camera of a throw whose centre of mass follows ``cm`` (:func:`framing_eye`); None without a path."""
     cm = cm[np.isfinite(cm).all(axis=1)]
     if len(cm) == 0:
         return None
-    lo, hi = cm.min(axis=0), cm.max(axis=0)
-    target = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.4 * max(hi[2], 2 * half)])
-    travel = cm[-1, :2] - cm[0, :2]
-    norm = float(np.hypot(*travel))
-    d = travel / norm if norm > half else np.array([0.0, 1.0])
-    side = np.array([d[1], -d[0]])  # travel runs left to right as seen from here
-    span = float(max(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 8 * half))
-    elev = np.radians(25.0)
-    dist = 1.3 * span + 4 * half
-    position = target + dist * np.array([side[0] * np.cos(elev), side[1] * np.cos(elev), np.sin(elev)])
-    return rrb.EyeControls3D(position=position, look_target=target, eye_up=[0.0, 0.0, 1.0])
+    points, rest = framed_points(cm, half)
+    return framing_eye(points, rest, cm[-1, :2] - cm[0, :2], half)
 
 
 def default_blueprint(roll=None, channels=()):
@@ -529,7 +601,7 @@ def default_blueprint(roll=None, channels=()):
         name="die",
         eye_controls=eye,
         background=(250, 250, 250),
-        line_grid=rrb.LineGrid3D(visible=False),
+        line_grid=rrb.LineGrid3D(visible=False),  # the ground has its own grid (log_ground)
     )
     energy = rrb.TimeSeriesView(
         origin="/energy",

@@ -161,7 +161,7 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
     """
     import rerun as rr
 
-    from dicetrace.sinks.rerun import GROUND_COLOR, _log_trail, log_faces
+    from dicetrace.sinks.rerun import _log_trail, log_faces, log_ground
 
     half = float(rolls[0].config.preset.half_side_cm)
     steps, t_s, divs = compare_series(rolls)
@@ -174,11 +174,7 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
     states = [_padded(r, n) for r in rolls]
     shifts = layout_offsets(states, half, layout)
     allxy = np.concatenate([(s["cm"][:, None, :] + s["off"] + o)[..., :2].reshape(-1, 2) for s, o in zip(states, shifts)])
-    lo = np.minimum(allxy.min(axis=0), -3 * half)
-    hi = np.maximum(allxy.max(axis=0), 3 * half)
-    centre, extent, thick = 0.5 * (lo + hi), 0.5 * (hi - lo) + 3.0 * half, 0.05 * half
-    rec.log("world/ground", rr.Boxes3D(centers=[[centre[0], centre[1], -thick]], half_sizes=[[extent[0], extent[1], thick]],
-                                       colors=[GROUND_COLOR], fill_mode="solid"), static=True)
+    log_ground(rec, allxy, half, states[0]["cm"][-1, :2] + shifts[0][:2])
     rec.log("summary", rr.TextDocument(compare_summary(rolls, labels), media_type=rr.MediaType.MARKDOWN), static=True)
 
     for k, s in enumerate(states):
