@@ -8,7 +8,10 @@ Examples::
     dicetrace explore --no-browser --port 8765          # print the URL only
 
 The view (window, resolution, preset, integrator, γ, dt, z) is in the page's
-URL, so a view can be shared and reopened.  Runs until interrupted (Ctrl-C).
+URL, so a view can be shared and reopened.  Runs until interrupted (Ctrl-C
+stops it at once, even while a map computes).  Maps are shared fairly between
+browser tabs, a tab's newer view cancels its older one, and a map that would
+take more than --map-budget seconds of computing is refused with a message.
 Exit code 2 on bad input (a bad option, a port in use), nothing served.
 """
 
@@ -45,9 +48,12 @@ def register(app: typer.Typer) -> None:
             "without it saving is off)."
         ),
         threads: Optional[int] = typer.Option(None, "--threads", help="numba threads per map (default: all)."),
+        map_budget: Optional[float] = typer.Option(
+            None, "--map-budget", help="Seconds of computing one map may take (default 60); a map that would take "
+            "longer is refused with a message (fewer pixels or a longer dt)."),
     ) -> None:
         """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer."""
-        from dicetrace.explore.server import check_host, check_port, check_threads, make_view, serve_forever
+        from dicetrace.explore.server import check_budget, check_host, check_port, check_threads, make_view, serve_forever
         from dicetrace.explore.view import ViewError
 
         try:
@@ -55,7 +61,7 @@ def register(app: typer.Typer) -> None:
         except ViewError as e:
             fail(f"--{e.param}: {e.message}")
         for check, value, name in ((check_port, port, "--port"), (check_host, host, "--host"),
-                                   (check_threads, threads, "--threads")):
+                                   (check_threads, threads, "--threads"), (check_budget, map_budget, "--map-budget")):
             try:
                 check(value, name)
             except ValueError as e:
@@ -72,8 +78,16 @@ def register(app: typer.Typer) -> None:
                 webbrowser.open(url)
 
         try:
-            serve_forever(view, host=host, port=port, out=out, threads=threads, on_ready=ready)
+            serve_forever(view, host=host, port=port, out=out, threads=threads, map_budget_s=map_budget, on_ready=ready)
         except OSError as e:
             fail(f"--host {host} --port {port}: cannot listen there: {e.strerror or e}")
         except KeyboardInterrupt:
-            pass
+            # Ctrl-C: the server has stopped (every map cancelled, nothing half-written: a save in progress is a
+            # resumable scan folder).  A kernel call can still be running on a worker thread and the interpreter's
+            # own teardown of numba's compiled code takes a second or more, so end the process now.
+            import os
+            import sys
+
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)

@@ -41,7 +41,8 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
-from dicetrace.explore.compute import Cancelled, Worker, scan_folder_for, strip_rows, throw_info, throw_rrd
+from dicetrace.explore.compute import (Busy, Cancelled, OverBudget, Worker, scan_folder_for, strip_rows, throw_info,
+                                      throw_rrd)
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
 
 #: The passes of a view and their resolution divisors: the page asks for each in turn.
@@ -193,18 +194,31 @@ def _point(request: Request, view: View) -> tuple[int, int]:
     return view.pixel(x, y)
 
 
+#: HTTP statuses of a map that is not made: superseded by the same tab's newer view, over the budget, busy.
+MAP_REFUSALS = {Cancelled: 409, OverBudget: 422, Busy: 503}
+
+
+def _map_refusal(e: Exception) -> tuple[int, dict] | None:
+    for cls, status in MAP_REFUSALS.items():
+        if isinstance(e, cls):
+            msg = (str(e) or "superseded by a newer view") if cls is Cancelled else str(e)
+            return status, {"error": msg, "param": getattr(e, "param", None)}
+    return None
+
+
 def create_app(default: View | None = None, *, out: Path | None = None, threads: int | None = None,
-               worker: Worker | None = None, hosts=()) -> Starlette:
+               worker: Worker | None = None, hosts=(), map_budget_s: float | None = None) -> Starlette:
     """The explorer app; ``default`` is the view of a bare URL, ``out`` the only folder it may write scans into.
 
     ``hosts``: the address(es) the server listens on, answered besides :data:`LOCAL_HOSTS`
-    (:func:`allowed_hosts`); every other ``Host:`` gets a 400.
+    (:func:`allowed_hosts`); every other ``Host:`` gets a 400.  ``map_budget_s``: the
+    computing time one map may take (:class:`~dicetrace.explore.compute.Worker`'s ``budget_s``).
     """
     from dicetrace.explore.compare import compare_endpoint
     from dicetrace.explore.page import page_html
 
     default = default or View()
-    worker = worker or Worker(threads=threads)
+    worker = worker or Worker(threads=threads, budget_s=map_budget_s)
     out = None if out is None else Path(out).resolve()
 
     async def page(request: Request) -> Response:
@@ -230,13 +244,14 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         return await asyncio.wrap_future(fut)
 
     async def _map_or_error(request: Request):
-        """(map, None), or (None, the error response: a bad view, or superseded by a newer one)."""
+        """(map, None), or (None, the error response: a bad view, superseded by a newer one, over budget, busy)."""
         try:
             return await _map(request), None
         except ViewError as e:
             return None, _error(e)
-        except Cancelled:
-            return None, JSONResponse({"error": "superseded by a newer view", "param": None}, status_code=409)
+        except (Cancelled, OverBudget, Busy) as e:
+            status, body = _map_refusal(e)
+            return None, JSONResponse(body, status_code=status)
 
     async def map_png_ep(request: Request) -> Response:
         m, err = await _map_or_error(request)
@@ -260,7 +275,11 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
             v = _view(request, default)
         except ViewError as e:
             return _error(e)
-        fut = asyncio.wrap_future(worker.submit_map(v, request.query_params.get("client", "")[:64]))
+        try:
+            fut = asyncio.wrap_future(worker.submit_map(v, request.query_params.get("client", "")[:64]))
+        except (Cancelled, Busy) as e:
+            status, body = _map_refusal(e)
+            return JSONResponse(body, status_code=status)
         rows = strip_rows(v)
 
         async def lines():
@@ -269,8 +288,11 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
                 finished = fut.done()
                 try:
                     m = fut.result() if finished else worker.progress(v)
-                except Cancelled:
-                    yield (json.dumps({"error": "superseded by a newer view", "status": 409}) + "\n").encode()
+                except (Cancelled, OverBudget, Busy) as e:
+                    status, body = _map_refusal(e)
+                    if status == 409:
+                        body = {"error": body["error"]}
+                    yield (json.dumps({**body, "status": status}) + "\n").encode()
                     return
                 except Exception as e:
                     yield (json.dumps({"error": f"internal error: {type(e).__name__}: {e}", "status": 500}) + "\n").encode()
@@ -327,7 +349,8 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         return JSONResponse(summary)
 
     async def health(request: Request) -> Response:
-        return JSONResponse({"ok": True, "computed": worker.computed_count, "cancelled": worker.cancelled_count})
+        return JSONResponse({"ok": True, "computed": worker.computed_count, "cancelled": worker.cancelled_count,
+                             "over_budget": worker.refused_count, "cache_bytes": worker.cache_nbytes})
 
     def asset(name: str, media: str):
         async def ep(request: Request) -> Response:

@@ -3,21 +3,24 @@
 Maps go through :func:`dicetrace.simulate.simulate_batch` (the batch kernel
 that ``dicetrace scan`` uses, on the same grid points), in strips of whole
 image rows of about ``BLOCK`` ICs, top first, on one worker thread (numba's
-parallel regions use the cores inside it; one map at a time so they never
-compete); a map being computed can be read as far as it is
-(:meth:`Worker.progress`).  A refined map takes the results of the grid points
-it shares with the view's coarser passes (:func:`compute_map`'s ``known``).
-Every map request carries a client id: a newer request from the same client
-cancels the older one, which stops at its next strip (or before it starts)
-with :class:`Cancelled`.  Finished maps are cached by view.
+parallel regions use the cores inside it); a map being computed can be read as
+far as it is (:meth:`Worker.progress`).  A refined map takes the results of the
+grid points it shares with the view's coarser passes (:class:`MapBuild`'s
+``known``).  The worker's thread serves every map in the making in turn, a
+kernel call of about ``CHUNK_S`` seconds each, so one client's slow map cannot
+hold up another's; each map has a budget of computing time
+(:class:`OverBudget`).  Every map request carries a client id: a newer request
+from the same client supersedes the older one, which fails at once with
+:class:`Cancelled`.  Finished maps are cached by view, up to ``CACHE_BYTES``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import re
 import threading
-from collections import OrderedDict
-from concurrent.futures import Future, ThreadPoolExecutor
+from collections import OrderedDict, deque
+from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -29,8 +32,23 @@ from dicetrace.explore.view import View, ViewError
 #: call ends at a parallel barrier: on the loaded 2-core machine a 256² map in 4096-IC calls took
 #: 1.8-1.9 s of CPU against 1.4-1.5 s in one call; in 8192-IC calls (8 strips of 32 rows) 1.6 s.
 BLOCK = 8192
-#: Maps kept in the cache.
-CACHE_SIZE = 48
+#: Bytes of finished maps the cache keeps, all clients together (a 1024² map is 10 MiB, a 256² one 0.6 MiB).
+CACHE_BYTES = 160 * 2**20
+#: Seconds of computing one map may take (its own kernel calls; :class:`OverBudget` past it).
+MAP_BUDGET_S = 60.0
+#: A map whose rate so far says it would take more than this many budgets is refused at once.
+BUDGET_SLACK = 4.0
+#: Seconds a kernel call of a map should take, about: how long another client's map, a newer view or
+#: a cancel waits at most (beyond one throw per numba thread, which no call can be shorter than).
+CHUNK_S = 0.2
+#: Maps in the making at once, all clients together (more is refused as busy).
+MAX_JOBS = 32
+#: Threads that compute maps.  One computes while the pieces are short; when every running piece has run
+#: longer than ``STUCK_S`` (a throw of a tiny dt can take minutes, and no kernel call can be cut), the next
+#: lane takes the next map, so clients with slow maps hold up at most this many minus one lanes.
+MAX_LANES = 3
+#: Seconds after which a running piece counts as stuck (another lane may start), s.
+STUCK_S = 1.0
 #: A saved scan's name.
 SCAN_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$")
 
@@ -71,11 +89,6 @@ class OutcomeMap:
 UNSET = -9
 
 
-class _Token:
-    def __init__(self) -> None:
-        self.cancelled = threading.Event()
-
-
 def strip_rows(view: View) -> int:
     """Image rows per block of a map (whole rows, about ``BLOCK`` grid points)."""
     return max(1, BLOCK // view.res[0])
@@ -90,52 +103,102 @@ def _nested_step(fine: np.ndarray, coarse: np.ndarray) -> int | None:
     return k if np.array_equal(fine[::k], coarse) else None
 
 
+class MapBuild:
+    """A map computed a piece at a time (:meth:`step`), in strips of whole image rows from the top.
+
+    ``known``: maps of the same view at other resolutions; where their grid
+    points are this grid's (same coordinates, so the same ICs) their results
+    are taken instead of being computed again.  A step throws at most ``limit``
+    ICs of the current strip; a strip's rows count as done (``map.rows_done``,
+    ``on_strip(map)``) once all its ICs are thrown.  The ICs of a step are made
+    as ``Grid.block`` makes them (the same coordinates, the same arithmetic), so
+    any split into steps gives the same map, bit for bit.
+    """
+
+    def __init__(self, view: View, known=(), threads: int | None = None, on_strip=None):
+        import time
+
+        self.t0 = time.perf_counter()
+        self.view, self.threads, self.on_strip = view, threads, on_strip
+        self.grid = view.grid()
+        self.cfg = view.config()
+        nx, ny = view.res
+        self.axes = self.grid.axes()
+        xs, ys = self.axes[:2]
+        m = OutcomeMap(view, xs, ys, np.full((nx, ny), UNSET, np.int8), np.zeros((nx, ny), np.int64),
+                       np.zeros((nx, ny), np.int8), 0.0)
+        have = np.zeros((nx, ny), bool)
+        for other in known:
+            kx, ky = _nested_step(xs, other.xs), _nested_step(ys, other.ys)
+            if kx is None or ky is None or replace(other.view, res=view.res) != view:
+                continue
+            sel = (slice(None, None, kx), slice(None, None, ky))
+            m.outcome[sel], m.steps[sel], m.status[sel] = other.outcome, other.steps, other.status
+            have[sel] = True
+        m.reused = int(have.sum())
+        self.map, self.have = m, have
+        self.todo = nx * ny - m.reused  # ICs to throw in all
+        self.thrown = 0
+        self.rows = strip_rows(view)
+        self.row0 = 0
+        self._strip: tuple[np.ndarray, np.ndarray] | None = None  # (i, j) of the current strip's ICs to throw
+        self._pos = 0
+
+    @property
+    def done(self) -> bool:
+        return self.row0 >= self.view.res[1]
+
+    def _ics(self, ii: np.ndarray, jj: np.ndarray) -> np.ndarray:
+        cols = [self.axes[0][ii], self.axes[1][jj]] + [self.axes[a][np.zeros_like(ii)] for a in range(2, self.grid.ndim)]
+        return self.grid.slice.ics(np.stack(cols, axis=1)).reshape(len(ii), 6)
+
+    def step(self, limit: int | None = None) -> int:
+        """Throw up to ``limit`` (None: all) of the current strip's ICs still to throw; the number thrown."""
+        import time
+
+        from dicetrace.simulate import simulate_batch
+
+        if self.done:
+            return 0
+        nx, ny = self.view.res
+        row1 = min(ny, self.row0 + self.rows)
+        if self._strip is None:
+            ii, jl = np.nonzero(~self.have[:, ny - row1 : ny - self.row0])
+            self._strip, self._pos = (ii, jl + (ny - row1)), 0
+        ii, jj = self._strip
+        n = len(ii) - self._pos if limit is None else min(len(ii) - self._pos, max(1, int(limit)))
+        if n > 0:
+            sel = slice(self._pos, self._pos + n)
+            res = simulate_batch(self._ics(ii[sel], jj[sel]), config=self.cfg, l_convention=self.grid.slice.l_convention,
+                                 threads=self.threads)
+            m = self.map
+            m.outcome[ii[sel], jj[sel]], m.steps[ii[sel], jj[sel]], m.status[ii[sel], jj[sel]] = (
+                res.outcome, res.steps, res.status_code)
+            self._pos += n
+            self.thrown += n
+        if self._pos >= len(ii):  # the strip is whole
+            self.row0, self._strip = row1, None
+            self.map.rows_done = row1
+            if self.done:
+                self.map.wall_s = time.perf_counter() - self.t0
+            if self.on_strip is not None:
+                self.on_strip(self.map)
+        return n
+
+
 def compute_map(view: View, cancelled: threading.Event | None = None, threads: int | None = None, *,
                 known=(), on_strip=None) -> OutcomeMap:
-    """The outcome map of ``view`` (raises :class:`Cancelled` once ``cancelled`` is set).
+    """The outcome map of ``view`` (raises :class:`Cancelled` once ``cancelled`` is set), a strip a kernel call.
 
     It is computed in strips of whole image rows from the top, ``on_strip(map)``
-    called after each.  ``known``: maps of the same view at other resolutions;
-    where their grid points are this grid's (same coordinates, so the same ICs)
-    their results are taken instead of being computed again.
+    called after each; ``known`` as :class:`MapBuild`'s.
     """
-    import time
-
-    from dicetrace.simulate import simulate_batch
-
-    t0 = time.perf_counter()
-    grid = view.grid()
-    cfg = view.config()
-    conv = grid.slice.l_convention
-    nx, ny = view.res
-    xs, ys = grid.axes()[:2]
-    m = OutcomeMap(view, xs, ys, np.full((nx, ny), UNSET, np.int8), np.zeros((nx, ny), np.int64),
-                   np.zeros((nx, ny), np.int8), 0.0)
-    have = np.zeros((nx, ny), bool)
-    for other in known:
-        kx, ky = _nested_step(xs, other.xs), _nested_step(ys, other.ys)
-        if kx is None or ky is None or replace(other.view, res=view.res) != view:
-            continue
-        sel = (slice(None, None, kx), slice(None, None, ky))
-        m.outcome[sel], m.steps[sel], m.status[sel] = other.outcome, other.steps, other.status
-        have[sel] = True
-    m.reused = int(have.sum())
-    ics = grid.block(0, grid.size).ics.reshape(nx, ny, 6)
-    rows = strip_rows(view)
-    for row0 in range(0, ny, rows):
+    b = MapBuild(view, known, threads, on_strip)
+    while not b.done:
         if cancelled is not None and cancelled.is_set():
             raise Cancelled()
-        row1 = min(ny, row0 + rows)
-        js = slice(ny - row1, ny - row0)
-        todo = ~have[:, js]
-        if todo.any():
-            res = simulate_batch(ics[:, js][todo], config=cfg, l_convention=conv, threads=threads)
-            m.outcome[:, js][todo], m.steps[:, js][todo], m.status[:, js][todo] = res.outcome, res.steps, res.status_code
-        m.rows_done = row1
-        if on_strip is not None:
-            on_strip(m)
-    m.wall_s = time.perf_counter() - t0
-    return m
+        b.step()
+    return b.map
 
 
 def point_ic(view: View, i: int, j: int) -> tuple[tuple[float, ...], np.ndarray]:
@@ -200,19 +263,125 @@ def throw_rrd(view: View, i: int, j: int, activate: bool = False) -> tuple[str, 
     return name, data, {"outcome": roll.outcome, "status": roll.status.label, "steps": roll.steps}
 
 
-class Worker:
-    """Runs maps (newest per client wins) and scans on one thread; throws on a small pool of their own."""
+class OverBudget(Exception):
+    """A map would take more computing than the worker's budget per map (``param``: the view parameter to change)."""
 
-    def __init__(self, threads: int | None = None):
+    param = "res"
+
+
+class Busy(Exception):
+    """The worker holds as many maps in the making as it may (:data:`MAX_JOBS`)."""
+
+    param = None
+
+
+class _DaemonPool:
+    """A few daemon threads running submitted calls (futures): unlike ThreadPoolExecutor's, nobody waits for
+    them when the interpreter exits, so a throw or a save in progress does not keep a stopped server alive."""
+
+    def __init__(self, n: int, name: str):
+        import queue
+
+        self._q: "queue.SimpleQueue" = queue.SimpleQueue()
+        self._stopped = False
+        for k in range(n):
+            threading.Thread(target=self._run, name=f"{name}-{k}", daemon=True).start()
+
+    def _run(self) -> None:
+        while True:
+            item = self._q.get()
+            if item is None:
+                return
+            fut, fn, args = item
+            if not fut.set_running_or_notify_cancel():
+                continue
+            try:
+                fut.set_result(fn(*args))
+            except BaseException as e:
+                fut.set_exception(e)
+
+    def submit(self, fn, *args) -> Future:
+        fut: Future = Future()
+        if self._stopped:
+            fut.set_exception(Cancelled())
+        else:
+            self._q.put((fut, fn, args))
+        return fut
+
+    def shutdown(self, n: int) -> None:
+        self._stopped = True
+        for _ in range(n):
+            self._q.put(None)
+
+
+class _Job:
+    """One map in the making: the clients waiting for it, its future, its budget's account."""
+
+    def __init__(self, view: View):
+        self.view, self.key = view, view.key()
+        self.clients: set = set()
+        self.future: Future = Future()
+        self.cancelled = False
+        self.build: MapBuild | None = None  # made on its first turn (on the worker's thread)
+        self.spent_s = 0.0  # computing time of its own pieces (but the first)
+        self.counted: int | None = None  # ICs thrown in those pieces (None: the first piece is still to come)
+        self.chunk = 0  # ICs of its next step (0: not sized yet)
+
+
+def map_nbytes(m: OutcomeMap) -> int:
+    """Bytes of a map's arrays."""
+    return int(sum(a.nbytes for a in (m.outcome, m.steps, m.status, m.xs, m.ys)))
+
+
+class Worker:
+    """Makes maps for many clients on one thread, a piece at a time, fairly; throws and saves on threads of their own.
+
+    Every map in the making is a job; the worker's thread gives each job in
+    turn one kernel call of about ``CHUNK_S`` seconds (sized from the job's
+    own rate so far, one IC per numba thread at first), so a small map of one
+    client is done after at most one piece of another's big one; a piece that
+    runs longer than ``STUCK_S`` (one throw of a tiny dt can take minutes) lets
+    another of ``MAX_LANES`` threads take the next job meanwhile.  A client's
+    newer view supersedes its older one (which fails with :class:`Cancelled`
+    at once and is dropped before its next piece) unless another client waits
+    for that same view; requests without a client id supersede nothing.  A job
+    whose own computing passes ``budget_s``, or whose rate so far says it
+    would take ``BUDGET_SLACK`` times that, fails with :class:`OverBudget`;
+    more than ``MAX_JOBS`` maps in the making at once is :class:`Busy`.
+    Finished maps are cached by view up to ``cache_bytes`` bytes in all (least
+    recently used out first); nothing else keeps a finished map.
+    """
+
+    def __init__(self, threads: int | None = None, *, budget_s: float | None = None, cache_bytes: int | None = None):
         self.threads = threads
-        self._maps = ThreadPoolExecutor(max_workers=1, thread_name_prefix="dicetrace-explore-map")
-        self._throws = ThreadPoolExecutor(max_workers=2, thread_name_prefix="dicetrace-explore-throw")
+        self.budget_s = MAP_BUDGET_S if budget_s is None else float(budget_s)
+        if not self.budget_s > 0:
+            raise ValueError(f"budget_s must be > 0 s, got {budget_s!r}")
+        self.cache_bytes_max = CACHE_BYTES if cache_bytes is None else int(cache_bytes)
         self._lock = threading.Lock()
-        self._latest: dict[str, tuple[tuple, _Token, Future]] = {}
+        self._wake = threading.Condition(self._lock)
+        self._queue: deque[_Job] = deque()  # jobs waiting for their next turn
+        self._jobs: dict[tuple, _Job] = {}  # view key -> its job (queued or running)
+        self._latest: dict = {}  # client -> the key of the job it waits for (only while that job is unfinished)
         self._cache: OrderedDict[tuple, OutcomeMap] = OrderedDict()
-        self._running: dict[tuple, OutcomeMap] = {}  # maps being computed, as far as they are
+        self._cache_nbytes = 0
+        self._stopped = False
+        self._throws = _DaemonPool(2, "dicetrace-explore-throw")
+        self._saves = _DaemonPool(1, "dicetrace-explore-save")
         self.cancelled_count = 0
         self.computed_count = 0
+        self.refused_count = 0
+        self._running: dict = {}  # a token per piece being computed -> when it started (time.monotonic)
+        for k in range(MAX_LANES):
+            threading.Thread(target=self._loop, name=f"dicetrace-explore-map-{k}", daemon=True).start()
+
+    # -- the cache ---------------------------------------------------------------------------------------------
+
+    @property
+    def cache_nbytes(self) -> int:
+        """Bytes of the maps in the cache."""
+        with self._lock:
+            return self._cache_nbytes
 
     def cached(self, view: View) -> OutcomeMap | None:
         with self._lock:
@@ -221,73 +390,213 @@ class Worker:
                 self._cache.move_to_end(view.key())
             return m
 
+    def _cache_put(self, key, m: OutcomeMap) -> None:  # under the lock
+        n = map_nbytes(m)
+        if n > self.cache_bytes_max:
+            return
+        old = self._cache.pop(key, None)
+        if old is not None:
+            self._cache_nbytes -= map_nbytes(old)
+        self._cache[key] = m
+        self._cache_nbytes += n
+        while self._cache_nbytes > self.cache_bytes_max:
+            _, out = self._cache.popitem(last=False)
+            self._cache_nbytes -= map_nbytes(out)
+
+    # -- maps --------------------------------------------------------------------------------------------------
+
     def submit_map(self, view: View, client: str = "") -> Future:
-        """A future of ``view``'s map; cancels this client's earlier map request if it is for another view."""
+        """A future of ``view``'s map; this client's earlier request for another view is superseded.
+
+        Raises :class:`Busy` when ``MAX_JOBS`` maps are in the making.
+        """
         key = view.key()
+        who = client if client else object()  # no client id: a client of its own
         with self._lock:
+            if self._stopped:
+                raise Cancelled()
+            prev = self._latest.pop(who, None) if client else None
+            if prev is not None and prev != key:
+                self._leave(who, prev)
             hit = self._cache.get(key)
-            prev = self._latest.get(client)
             if hit is not None:
+                self._cache.move_to_end(key)
                 f: Future = Future()
                 f.set_result(hit)
-                if prev is not None and prev[0] != key:
-                    self._cancel(prev)
-                    del self._latest[client]
                 return f
-            if prev is not None:
-                if prev[0] == key and not prev[2].done():
-                    return prev[2]
-                self._cancel(prev)
-            tok = _Token()
-            fut = self._maps.submit(self._run_map, view, tok)
-            self._latest[client] = (key, tok, fut)
-            return fut
+            job = self._jobs.get(key)
+            if job is None:
+                if len(self._jobs) >= MAX_JOBS:
+                    raise Busy(f"the explorer is computing {len(self._jobs)} maps already (at most {MAX_JOBS}): "
+                               "try again in a moment")
+                job = _Job(view)
+                self._jobs[key] = job
+                self._queue.append(job)
+                self._wake.notify_all()
+            job.clients.add(who)
+            if client:
+                self._latest[who] = key
+            return job.future
 
-    def _cancel(self, entry) -> None:
-        _, tok, fut = entry
-        if not fut.done():
-            tok.cancelled.set()
+    def _leave(self, who, key) -> None:  # under the lock: ``who`` no longer waits for ``key``'s map
+        job = self._jobs.get(key)
+        if job is None:
+            return
+        job.clients.discard(who)
+        if not job.clients:
+            self._drop(job, Cancelled())
+            self.cancelled_count += 1
+
+    def _drop(self, job: _Job, exc: BaseException | None, result: OutcomeMap | None = None) -> None:
+        """Under the lock: the job is over (its result, or ``exc``); nothing keeps it any longer."""
+        job.cancelled = True
+        if self._jobs.get(job.key) is job:
+            del self._jobs[job.key]
+        for who in job.clients:
+            if self._latest.get(who) == job.key:
+                del self._latest[who]
+        job.clients.clear()
+        with contextlib.suppress(Exception):  # InvalidStateError: already settled
+            if exc is None:
+                job.future.set_result(result)
+            else:
+                job.future.set_exception(exc)
 
     def progress(self, view: View) -> OutcomeMap | None:
         """``view``'s map as far as it is computed (complete once cached), or None before its first strip."""
         with self._lock:
-            return self._running.get(view.key()) or self._cache.get(view.key())
+            job = self._jobs.get(view.key())
+            if job is not None and job.build is not None and job.build.map.rows_done > 0:
+                return job.build.map
+            return self._cache.get(view.key())
 
+    def _may_start(self, now: float) -> bool:
+        """Under the lock: may another lane start a piece now? (Only while every piece running is stuck.)"""
+        if not self._running:
+            return True
+        if len(self._running) >= MAX_LANES or not _concurrent_kernels_ok():
+            return False
+        return all(now - t0 > STUCK_S for t0 in self._running.values())
 
-    def _run_map(self, view: View, tok: _Token) -> OutcomeMap:
-        def on_strip(m: OutcomeMap) -> None:
+    def _loop(self) -> None:
+        import time
+
+        while True:
             with self._lock:
-                self._running[view.key()] = m
-
-        try:
-            with self._lock:  # a coarser pass's points may be this grid's (compute_map takes those that are)
-                known = list(self._cache.values())
-            m = compute_map(view, tok.cancelled, threads=self.threads, known=known, on_strip=on_strip)
-        except BaseException as e:
+                while True:
+                    if self._stopped:
+                        return
+                    if self._queue and self._may_start(time.monotonic()):
+                        job = self._queue.popleft()
+                        if job.cancelled:
+                            continue
+                        break
+                    # something queued behind a running piece: look again when that piece may count as stuck
+                    self._wake.wait(timeout=0.1 if self._queue else None)
+                known = [] if job.build is not None else [  # a coarser pass's points may be this grid's
+                    m for m in self._cache.values() if replace(m.view, res=job.view.res) == job.view]
+                me = object()
+                self._running[me] = time.monotonic()
+            try:
+                finished = self._turn(job, known)
+            except BaseException as e:  # a bad configuration, over budget, ...
+                with self._lock:
+                    del self._running[me]
+                    if not job.cancelled:
+                        self.refused_count += isinstance(e, OverBudget)
+                        self._drop(job, e)
+                    self._wake.notify_all()
+                continue
             with self._lock:
-                self._running.pop(view.key(), None)
-                self.cancelled_count += isinstance(e, Cancelled)
-            raise
-        with self._lock:
-            self._running.pop(view.key(), None)
-            self.computed_count += 1
-            self._cache[view.key()] = m
-            while len(self._cache) > CACHE_SIZE:
-                self._cache.popitem(last=False)
-        return m
+                del self._running[me]
+                if not job.cancelled:
+                    if finished:
+                        self.computed_count += 1
+                        self._cache_put(job.key, job.build.map)
+                        self._drop(job, None, job.build.map)
+                    else:
+                        self._queue.append(job)
+                self._wake.notify_all()
+
+    def _turn(self, job: _Job, known) -> bool:
+        """One piece of ``job`` (on the worker's thread); True once its map is whole."""
+        import time
+
+        if job.build is None:
+            job.build = MapBuild(job.view, known, self.threads)
+            if job.build.done:
+                return True
+        b = job.build
+        if job.chunk == 0:  # one IC per thread first: its time sizes the next pieces
+            job.chunk = self.threads or _numba_threads()
+        t0 = time.perf_counter()
+        n = b.step(job.chunk)
+        dt = time.perf_counter() - t0
+        if n > 0 and dt > 0:
+            job.chunk = int(min(max(1, CHUNK_S * n / dt), 8 * n))
+        if b.done:
+            return True
+        if job.counted is None:  # the first piece may have compiled or loaded the kernel: not counted
+            job.counted = 0
+            return False
+        job.spent_s += dt
+        job.counted += n
+        left = b.todo - b.thrown
+        projected = job.spent_s + job.spent_s / max(job.counted, 1) * left
+        if job.spent_s > self.budget_s or projected > BUDGET_SLACK * self.budget_s:
+            nx, ny = job.view.res
+            raise OverBudget(
+                f"this {nx}×{ny} map would take about {projected:,.0f} s of computing ({job.counted:,} of its "
+                f"{b.todo:,} throws took {job.spent_s:.1f} s), more than the explorer's {self.budget_s:g} s per map: "
+                "ask for fewer pixels (res) or a longer time step (dt)")
+        return False
+
+    # -- throws, saves, the end --------------------------------------------------------------------------------
 
     def submit_throw(self, fn, *args) -> Future:
         return self._throws.submit(fn, *args)
 
     def submit_scan(self, view: View, folder: Path, name: str) -> Future:
-        return self._maps.submit(save_scan, view, folder, name, self.threads)
+        return self._saves.submit(save_scan, view, folder, name, self.threads)
+
+    def cancel_all(self) -> None:
+        """Every map in the making fails with :class:`Cancelled` now (its piece being computed is the last)."""
+        with self._lock:
+            for job in list(self._jobs.values()):
+                self._drop(job, Cancelled("the explorer is stopping"))
+            self._queue.clear()
 
     def shutdown(self) -> None:
+        """Cancel every map, stop the threads; waits for nothing (a piece being computed ends on its own thread)."""
         with self._lock:
-            for entry in self._latest.values():
-                self._cancel(entry)
-        self._maps.shutdown(wait=True, cancel_futures=True)
-        self._throws.shutdown(wait=True, cancel_futures=True)
+            self._stopped = True
+            self._wake.notify_all()
+        self.cancel_all()
+        self._throws.shutdown(2)
+        self._saves.shutdown(1)
+
+
+_CONCURRENT_OK: bool | None = None
+
+
+def _concurrent_kernels_ok() -> bool:
+    """Whether numba's threading layer takes parallel kernels from several threads at once (tbb, omp: yes;
+    workqueue: no, it aborts the process); False until the first parallel kernel has chosen the layer."""
+    global _CONCURRENT_OK
+    if _CONCURRENT_OK is None:
+        import numba
+
+        try:
+            _CONCURRENT_OK = numba.threading_layer() in ("tbb", "omp")
+        except ValueError:  # no parallel kernel has run yet
+            return False
+    return _CONCURRENT_OK
+
+
+def _numba_threads() -> int:
+    import numba
+
+    return int(numba.get_num_threads())
 
 
 def scan_folder_for(out: Path, name: str) -> Path:

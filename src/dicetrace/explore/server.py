@@ -61,6 +61,18 @@ def check_threads(threads, name: str = "threads"):
     return int(threads)
 
 
+def check_budget(budget, name: str = "map_budget_s"):
+    """``budget`` as None or a finite number of seconds > 0, or ValueError naming ``name``."""
+    import math
+
+    if budget is None:
+        return None
+    if isinstance(budget, bool) or not isinstance(budget, (int, float, np.integer, np.floating)) \
+            or not math.isfinite(budget) or budget <= 0:
+        raise ValueError(f"{name} must be a number of seconds > 0, got {budget!r}")
+    return float(budget)
+
+
 def bind_socket(host: str = DEFAULT_HOST, port: int = 0) -> socket.socket:
     """A listening TCP socket on (host, port); port 0 picks a free one."""
     fam = socket.AF_INET6 if ":" in host else socket.AF_INET
@@ -76,11 +88,25 @@ def bind_socket(host: str = DEFAULT_HOST, port: int = 0) -> socket.socket:
     return sock
 
 
+#: Longest the server waits, once told to stop, for requests in progress (a throw being simulated) before it cancels them, s.
+GRACEFUL_S = 1.0
+
+
 def make_server(app, sock: socket.socket):
+    """A uvicorn server of ``app`` that, told to stop (Ctrl-C, ``should_exit``), first cancels every map in the making,
+    so the requests waiting for them answer at once, and cancels what is still running after ``GRACEFUL_S``."""
     import uvicorn
 
-    config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False)
-    return uvicorn.Server(config)
+    class Server(uvicorn.Server):
+        async def shutdown(self, sockets=None):
+            worker = getattr(getattr(app, "state", None), "worker", None)
+            if worker is not None:
+                worker.cancel_all()
+            await super().shutdown(sockets)
+
+    config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
+                            timeout_graceful_shutdown=GRACEFUL_S)
+    return Server(config)
 
 
 def make_view(slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
@@ -100,19 +126,23 @@ class Explorer:
     Parameters as :func:`make_view` (the start view), plus ``out`` (the only
     folder "save this view as a scan" may write into; None: saving off),
     ``host``/``port`` (default 127.0.0.1, a free port), ``threads`` (numba
-    threads per map), ``start`` (start now) and ``height`` (of the IFrame, px).
+    threads per map), ``map_budget_s`` (the computing time one map may take,
+    default ``compute.MAP_BUDGET_S``), ``start`` (start now) and ``height`` (of
+    the IFrame, px).
     """
 
     def __init__(self, slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
                  gamma=None, dt=None, z=None, out=None, host: str = DEFAULT_HOST, port: int = 0,
-                 threads: int | None = None, start: bool = True, height: int = 900):
+                 threads: int | None = None, map_budget_s: float | None = None, start: bool = True,
+                 height: int = 900):
         host, port = check_host(host), check_port(port)  # before anything starts (ValueError naming the parameter)
-        threads = check_threads(threads)
+        threads, map_budget_s = check_threads(threads), check_budget(map_budget_s)
         if isinstance(height, bool) or not isinstance(height, (int, np.integer)) or height < 1:
             raise ValueError(f"height must be a whole number of pixels >= 1, got {height!r}")
         self.view = make_view(slice, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
         self.out = None if out is None else Path(out)
         self.host, self.port, self.threads, self.height = host, port, threads, int(height)
+        self.map_budget_s = map_budget_s
         self._server = None
         self._thread: threading.Thread | None = None
         self._sock: socket.socket | None = None
@@ -135,7 +165,8 @@ class Explorer:
 
         self._sock = bind_socket(self.host, self.port)
         self.port = self._sock.getsockname()[1]
-        self.app = create_app(self.view, out=self.out, threads=self.threads, hosts=[self.host])
+        self.app = create_app(self.view, out=self.out, threads=self.threads, hosts=[self.host],
+                              map_budget_s=self.map_budget_s)
         self._server = make_server(self.app, self._sock)
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [self._sock]},
                                         name="dicetrace-explore-server", daemon=True)
@@ -189,14 +220,15 @@ class Explorer:
 
 
 def serve_forever(view: View, *, host: str = DEFAULT_HOST, port: int = 0, out=None, threads=None,
-                  on_ready=None) -> None:
+                  map_budget_s=None, on_ready=None) -> None:
     """Serve the explorer in the foreground until interrupted; ``on_ready(url)`` is called once it listens."""
     from dicetrace.explore.app import create_app
 
     host, port, threads = check_host(host), check_port(port), check_threads(threads)
+    map_budget_s = check_budget(map_budget_s)
     sock = bind_socket(host, port)
     port = sock.getsockname()[1]
-    server = make_server(create_app(view, out=out, threads=threads, hosts=[host]), sock)
+    server = make_server(create_app(view, out=out, threads=threads, hosts=[host], map_budget_s=map_budget_s), sock)
     url = f"http://{host}:{port}/?{view.query_string()}"
     if on_ready is not None:
         def watch():
