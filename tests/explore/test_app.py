@@ -242,3 +242,13 @@ def test_allowed_hosts_are_the_local_names_and_the_listening_address():
     assert allowed_hosts(["fe80::0001"]) == [*LOCAL_HOSTS, "[fe80::1]"]
     assert allowed_hosts(["My-Box"]) == [*LOCAL_HOSTS, "my-box"]
     assert allowed_hosts(["0.0.0.0"]) == ["*"]  # every interface, by the user's choice
+
+
+def test_a_throw_past_its_time_limit_is_a_504_naming_dt(client, monkeypatch):
+    from dicetrace.explore import app
+
+    monkeypatch.setattr(app, "THROW_TIMEOUT_S", 0.3)
+    r = client.get("/api/hover", params={"window": WINDOW, "res": RES, "i": 3, "j": 4, "dt": "1e-7"})  # seconds a throw
+    assert r.status_code == 504, r.text
+    assert r.json()["param"] == "dt" and r.json()["error"].startswith("dt: this throw took more than 0.3 s")
+    assert client.get("/api/health").json()["ok"] is True

@@ -206,6 +206,23 @@ def _map_refusal(e: Exception) -> tuple[int, dict] | None:
     return None
 
 
+class ThrowTimeout(TimeoutError):
+    """A throw took longer than ``THROW_TIMEOUT_S`` (the view's dt names what to change)."""
+
+    param = "dt"
+
+
+async def _throw_within(fut):
+    """The result of a throw's future, or :class:`ThrowTimeout` after ``THROW_TIMEOUT_S`` (a throw still waiting
+    for a thread is then cancelled; one being simulated cannot be cut and ends on its own)."""
+    try:
+        return await asyncio.wait_for(asyncio.wrap_future(fut), THROW_TIMEOUT_S)
+    except TimeoutError:
+        fut.cancel()
+        raise ThrowTimeout(f"dt: this throw took more than {THROW_TIMEOUT_S:g} s to simulate: "
+                           "choose a longer time step (dt)") from None
+
+
 def create_app(default: View | None = None, *, out: Path | None = None, threads: int | None = None,
                worker: Worker | None = None, hosts=(), map_budget_s: float | None = None) -> Starlette:
     """The explorer app; ``default`` is the view of a bare URL, ``out`` the only folder it may write scans into.
@@ -314,7 +331,10 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
             i, j = _point(request, v)
         except ViewError as e:
             return _error(e)
-        info = await asyncio.wait_for(asyncio.wrap_future(worker.submit_throw(throw_info, v, i, j)), THROW_TIMEOUT_S)
+        try:
+            info = await _throw_within(worker.submit_throw(throw_info, v, i, j))
+        except TimeoutError as e:
+            return _error(e, 504)
         return JSONResponse(info)
 
     async def throw(request: Request) -> Response:
@@ -324,8 +344,10 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         except ViewError as e:
             return _error(e)
         download = bool(request.query_params.get("download"))
-        name, data, summary = await asyncio.wait_for(  # for the viewer, record's blueprint made active
-            asyncio.wrap_future(worker.submit_throw(throw_rrd, v, i, j, not download)), THROW_TIMEOUT_S)
+        try:  # for the viewer, record's blueprint made active
+            name, data, summary = await _throw_within(worker.submit_throw(throw_rrd, v, i, j, not download))
+        except TimeoutError as e:
+            return _error(e, 504)
         # no CORS header: the page's viewer fetches this from the page's own origin
         headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"]}
         if download:
