@@ -173,6 +173,8 @@ def test_cli_refuses_bad_options_in_one_line(tmp_path):
     ({"host": ""}, "host"),
     ({"host": "no-such-host.invalid"}, "host"),
     ({"threads": 0}, "threads"),
+    ({"map_budget_s": 0}, "map_budget_s"),
+    ({"map_budget_s": float("nan")}, "map_budget_s"),
 ])
 def test_explorer_refuses_a_bad_port_or_address_up_front(kwargs, param):
     from dicetrace.explore import Explorer
@@ -190,6 +192,8 @@ def test_explorer_refuses_a_bad_port_or_address_up_front(kwargs, param):
     (["--bind", "no-such-host.invalid"], "--host"),
     (["--host", ""], "--host"),
     (["--threads", "0"], "--threads"),
+    (["--map-budget", "-1"], "--map-budget"),
+    (["--map-budget", "inf"], "--map-budget"),
 ])
 def test_cli_refuses_a_bad_port_or_address_in_one_line(tmp_path, dicetrace_cli, args, option):
     res = dicetrace_cli("explore", "--no-browser", "--window", WINDOW, "--res", str(RES), *args, cwd=tmp_path)
