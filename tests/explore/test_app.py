@@ -252,3 +252,32 @@ def test_a_throw_past_its_time_limit_is_a_504_naming_dt(client, monkeypatch):
     assert r.status_code == 504, r.text
     assert r.json()["param"] == "dt" and r.json()["error"].startswith("dt: this throw took more than 0.3 s")
     assert client.get("/api/health").json()["ok"] is True
+
+
+def test_throws_waiting_are_bounded_a_full_queue_is_a_503(client, monkeypatch):
+    """Hovers at a tiny dt take seconds each: past MAX_THROWS_WAITING waiting, more are refused, not queued."""
+    import threading
+
+    from dicetrace.explore import compute
+
+    worker = client.app.state.worker
+    release, started = threading.Event(), threading.Semaphore(0)
+
+    def hold():
+        started.release()
+        release.wait(60)
+
+    for _ in range(2):  # both throw threads busy until released
+        worker.submit_throw(hold)
+    try:
+        assert started.acquire(timeout=30) and started.acquire(timeout=30)
+        waiting = [worker.submit_throw(lambda: None) for _ in range(compute.MAX_THROWS_WAITING)]
+        for path in ("/api/hover", "/api/throw.rrd"):
+            r = client.get(path, params={"window": WINDOW, "res": RES, "i": 1, "j": 1})
+            assert r.status_code == 503, r.text
+            assert "waiting to be simulated" in r.json()["error"]
+    finally:
+        release.set()
+    for f in waiting:
+        f.result(timeout=30)
+    assert client.get("/api/hover", params={"window": WINDOW, "res": RES, "i": 1, "j": 1}).status_code == 200

@@ -335,6 +335,8 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
             info = await _throw_within(worker.submit_throw(throw_info, v, i, j))
         except TimeoutError as e:
             return _error(e, 504)
+        except Busy as e:
+            return _error(e, 503)
         return JSONResponse(info)
 
     async def throw(request: Request) -> Response:
@@ -348,6 +350,8 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
             name, data, summary = await _throw_within(worker.submit_throw(throw_rrd, v, i, j, not download))
         except TimeoutError as e:
             return _error(e, 504)
+        except Busy as e:
+            return _error(e, 503)
         # no CORS header: the page's viewer fetches this from the page's own origin
         headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"]}
         if download:
@@ -411,7 +415,11 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
 
     middleware = [Middleware(TrustedHostMiddleware, allowed_hosts=allowed_hosts(hosts), www_redirect=False),
                   Middleware(SameOriginWrites)]
-    app = Starlette(routes=routes, middleware=middleware, exception_handlers={Exception: on_error}, lifespan=lifespan)
+    async def on_busy(request: Request, exc: Exception) -> Response:  # any endpoint that meets a full worker
+        return _error(exc, 503)
+
+    app = Starlette(routes=routes, middleware=middleware, exception_handlers={Busy: on_busy, Exception: on_error},
+                    lifespan=lifespan)
     app.state.worker = worker
     app.state.default = default
     app.state.out = out

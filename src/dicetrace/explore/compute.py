@@ -43,6 +43,8 @@ BUDGET_SLACK = 4.0
 CHUNK_S = 0.2
 #: Maps in the making at once, all clients together (more is refused as busy).
 MAX_JOBS = 32
+#: Hovers and viewer throws waiting for one of their two threads, all clients together (more: :class:`Busy`).
+MAX_THROWS_WAITING = 16
 #: Threads that compute maps.  One computes while the pieces are short; when every running piece has run
 #: longer than ``STUCK_S`` (a throw of a tiny dt can take minutes, and no kernel call can be cut), the next
 #: lane takes the next map, so clients with slow maps hold up at most this many minus one lanes.
@@ -270,7 +272,8 @@ class OverBudget(Exception):
 
 
 class Busy(Exception):
-    """The worker holds as many maps in the making as it may (:data:`MAX_JOBS`)."""
+    """The worker holds as many maps in the making (:data:`MAX_JOBS`), or throws waiting
+    (:data:`MAX_THROWS_WAITING`), as it may."""
 
     param = None
 
@@ -279,11 +282,14 @@ class _DaemonPool:
     """A few daemon threads running submitted calls (futures): unlike ThreadPoolExecutor's, nobody waits for
     them when the interpreter exits, so a throw or a save in progress does not keep a stopped server alive."""
 
-    def __init__(self, n: int, name: str):
+    def __init__(self, n: int, name: str, max_waiting: int | None = None):
         import queue
 
         self._q: "queue.SimpleQueue" = queue.SimpleQueue()
         self._stopped = False
+        self._max_waiting = max_waiting
+        self._waiting = 0
+        self._count_lock = threading.Lock()
         for k in range(n):
             threading.Thread(target=self._run, name=f"{name}-{k}", daemon=True).start()
 
@@ -293,6 +299,8 @@ class _DaemonPool:
             if item is None:
                 return
             fut, fn, args = item
+            with self._count_lock:
+                self._waiting -= 1
             if not fut.set_running_or_notify_cancel():
                 continue
             try:
@@ -303,9 +311,14 @@ class _DaemonPool:
     def submit(self, fn, *args) -> Future:
         fut: Future = Future()
         if self._stopped:
-            fut.set_exception(Cancelled())
-        else:
-            self._q.put((fut, fn, args))
+            fut.set_exception(Cancelled("the explorer is stopping"))
+            return fut
+        with self._count_lock:
+            if self._max_waiting is not None and self._waiting >= self._max_waiting:
+                raise Busy(f"{self._waiting} throws are waiting to be simulated already (at most "
+                           f"{self._max_waiting}): try again in a moment")
+            self._waiting += 1
+        self._q.put((fut, fn, args))
         return fut
 
     def shutdown(self, n: int) -> None:
@@ -366,7 +379,7 @@ class Worker:
         self._cache: OrderedDict[tuple, OutcomeMap] = OrderedDict()
         self._cache_nbytes = 0
         self._stopped = False
-        self._throws = _DaemonPool(2, "dicetrace-explore-throw")
+        self._throws = _DaemonPool(2, "dicetrace-explore-throw", max_waiting=MAX_THROWS_WAITING)
         self._saves = _DaemonPool(1, "dicetrace-explore-save")
         self.cancelled_count = 0
         self.computed_count = 0
