@@ -71,7 +71,7 @@ _TEMPLATE = r"""<!doctype html>
  #status{display:inline-block;width:22em;white-space:nowrap;overflow:hidden;text-overflow:ellipsis;vertical-align:middle} .busy::before{content:"⏳ "}
  .key{margin-right:8px;white-space:nowrap}.sw{display:inline-block;width:11px;height:11px;border:1px solid #555;margin-right:3px;vertical-align:middle}
  #info{font-family:monospace;font-size:11px;white-space:pre-wrap;overflow-wrap:anywhere;min-height:9em;max-height:24em;border:1px solid #ccc;padding:4px;width:576px;box-sizing:border-box;overflow-x:hidden;overflow-y:auto}
- #viewerbox{width:640px;height:560px;border:1px solid #888}
+ #viewerbox{flex:1 1 640px;min-width:480px;height:max(560px,calc(100vh - 100px));border:1px solid #888}
 </style></head><body>
 <div id="top">
  <label>slice <select id="slice">%SLICES%</select></label>
@@ -316,12 +316,23 @@ async function makeViewer() {
     get: (k) => ({_url: null, _panel_states: {top: "collapsed"}, _width: box.clientWidth, _height: box.clientHeight,
                   _fallback_token: null, _theme: "light"})[k],
     on: (ev, f) => { (handlers[ev] = handlers[ev] || []).push(f); },
-    send: (m) => { if (m === "ready") model.ready = true; },
+    send: (m) => { if (m === "ready") model.ready = true; else viewerEvent(m); },
   };
   mod.default.render({model, el: box});
+  // the viewer takes the room beside the map (the page's width and height less the rest): it follows the window
+  new ResizeObserver(() => (handlers["change:_width"] || []).forEach((f) => f(null, box.clientWidth))).observe(box);
   for (let k = 0; k < 600 && !model.ready; k++) await new Promise((r) => setTimeout(r, 100));
   return {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
           close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
+}
+// The viewer's events (JSON): the recording each names is the one on screen (kept for the tests).  A recording
+// the page closed before any of it had arrived is still loading and opens later ("nothing is loaded" then):
+// each time one opens, the page closes again what it has closed.
+let closed = new Set();   // URLs the page has closed in the viewer
+function viewerEvent(text) {
+  let ev; try { ev = JSON.parse(text); } catch (e) { return; }
+  if (ev.recording_id) document.body.dataset.viewerRecording = ev.recording_id;
+  if (ev.type === "recording_open" && closed.size) viewer.then((v) => closed.forEach((u) => v.close(u)));
 }
 // A click shows that throw in the viewer (record's recording); a shift-click adds it to the picked ones, and the
 // viewer is given one compare recording of them all (record --ic A --ic B's: every die, their divergence from
@@ -332,7 +343,9 @@ const CONFIG_KEYS = ["preset", "integrator", "gamma", "dt"];
 let opened = [];          // the URLs open in the viewer
 function sameConfig(a, b) { return CONFIG_KEYS.every((k) => (a[k] || "") === (b[k] || "")); }
 function absolute(path) { return new URL(path, location.href).href; }
+let picks = 0;            // the newest pick: an older one still waiting for the viewer opens nothing
 async function pick(x, y, add) {
+  const my = ++picks;
   if (add && throws.length >= MAX_COMPARE) { showError(`at most ${MAX_COMPARE} throws in one comparison: click (without shift) to start again`); return; }
   const r = await fetch("/api/hover?" + qs(view, {x, y}));
   const info = await r.json();
@@ -354,7 +367,11 @@ async function pick(x, y, add) {
   tellParent("throws", {throws: throws.map((t) => t.info)});
   $("info").textContent = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n") + compare();
   const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
-  if (v) { const gone = opened; opened = [url]; gone.forEach((u) => v.close(u)); v.open(url); }
+  if (!v || my !== picks) return;
+  const gone = opened.filter((u) => u !== url);
+  opened = [url]; closed.delete(url); gone.forEach((u) => closed.add(u));
+  gone.forEach((u) => v.close(u));
+  v.open(url);
 }
 function compare() {  // each later throw against throw 1, as the compare recording plots it
   if (throws.length < 2) return "";
