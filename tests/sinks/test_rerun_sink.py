@@ -588,11 +588,16 @@ def test_side_layout_puts_the_dice_apart_and_keeps_the_divergence(roll, nudged, 
     # every node of one die stays farther from every node of the other than a die's size, at every step
     gaps = np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
     assert gaps.min() > 2 * half
-    # the shift is a constant across the first throw's travel; the divergence is that of the real states
+    # the shift is a constant, horizontal, to the right as the recording's camera sees it (across its line of
+    # sight: the dice side by side on the screen); the divergence is that of the real states
     shift = values(side["/throws/1/body"], "Boxes3D:centers", 3)[:, 0] - values(over["/throws/1/body"], "Boxes3D:centers", 3)[:, 0]
     np.testing.assert_allclose(shift, np.broadcast_to(shift[0], shift.shape), atol=1e-4)
-    travel = roll.trace.cm_pos[-1, :2] - roll.trace.cm_pos[0, :2]
-    assert abs(shift[0][:2] @ travel) < 1e-3 * np.linalg.norm(travel) * np.linalg.norm(shift[0][:2]) and shift[0][2] == 0
+    (eye,) = [v for k, v in blueprint_rows(path).items() if k.endswith("/EyeControls3D")]
+    right, up, depth = (in_camera(eye, shift[0][None, :].astype(np.float64)) - in_camera(eye, np.zeros((1, 3))))[0]
+    assert shift[0][2] == 0 and right > 2 * half and abs(depth) < 1e-3 * right
+    # and the camera sees both dice at rest
+    seen = in_camera(eye, np.concatenate([a[-1], b[-1]]))
+    assert (np.abs(seen[:, :2]) <= np.tan(np.radians(VIEWER_FOV_Y_DEG) / 2) * seen[:, 2:3]).all()
     for key in ("distance", "log10"):
         np.testing.assert_array_equal(_scalars(side, f"/divergence/{key}/1")[1], _scalars(over, f"/divergence/{key}/1")[1])
 

@@ -540,19 +540,12 @@ def framed_points(cm: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray]:
     return pts, cm[-1]
 
 
-def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: float):
-    """The camera closest to ``rest`` that sees every point of ``points`` with the whole die around it.
+def view_axes(travel: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The default camera's (forward, right, up) unit vectors for a throw whose horizontal travel is ``travel``.
 
-    It looks from beyond the resting place back along the ``travel`` (horizontal, start to rest),
-    :data:`EYE_AZIMUTH_DEG` to its side and :data:`EYE_ELEVATION_DEG` from above; its distance is
-    the solution of a linear programme: every point's sphere of the die's circumradius lies within
-    :data:`FRAME_FILL` of the view's field of view (:data:`VIEW_FOV_Y_DEG`, both ways), as close to
-    the resting die as that allows.  It orbits around the point in front of it at the resting
-    die's depth.
+    It looks back along the travel from beyond the resting place, :data:`EYE_AZIMUTH_DEG` to the
+    travel's right and :data:`EYE_ELEVATION_DEG` from above (a travel shorter than half a side: along +y).
     """
-    import rerun.blueprint as rrb
-    from scipy.optimize import linprog
-
     norm = float(np.hypot(*travel))
     d = np.asarray(travel, dtype=float) / norm if norm > half else np.array([0.0, 1.0])
     az, el = np.radians(EYE_AZIMUTH_DEG), np.radians(EYE_ELEVATION_DEG)
@@ -560,7 +553,24 @@ def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: 
     fwd = -np.array([back[0] * np.cos(el), back[1] * np.cos(el), np.sin(el)])
     right = np.cross(fwd, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right)
-    up = np.cross(right, fwd)
+    return fwd, right, np.cross(right, fwd)
+
+
+def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: float):
+    """The camera closest to ``rest`` that sees every point of ``points`` with the whole die around it.
+
+    It looks from beyond the resting place back along the ``travel`` (horizontal, start to rest),
+    :data:`EYE_AZIMUTH_DEG` to its side and :data:`EYE_ELEVATION_DEG` from above; its distance is
+    the solution of a linear programme: every point's sphere of the die's circumradius lies within
+    :data:`FRAME_FILL` of the view's field of view (:data:`VIEW_FOV_Y_DEG`, both ways), as close to
+    the resting die as that allows; a second one centres the view at that distance (the tightest
+    side of the frame gets the most room).  It orbits around the point in front of it at the
+    resting die's depth.
+    """
+    import rerun.blueprint as rrb
+    from scipy.optimize import linprog
+
+    fwd, right, up = view_axes(travel, half)
     k = np.tan(np.radians(VIEW_FOV_Y_DEG) / 2) * FRAME_FILL
     rho = np.sqrt(3.0) * half * np.sqrt(1 + k * k)  # a die's circumsphere kept inside each side of the frustum
     # for each point p and side a: a·(p - E) - k·fwd·(p - E) <= -rho  (p's sphere inside that side)
@@ -571,7 +581,17 @@ def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: 
     res = linprog(-fwd, A_ub=a_ub, b_ub=b_ub, bounds=[(None, None)] * 3, method="highs")
     if res.status != 0:  # pragma: no cover - a bounded, feasible programme
         raise RuntimeError(f"framing the die: {res.message}")
-    eye = res.x
+    # then, as close as that, centred: the eye that gives the tightest side the most room, left/right and
+    # up/down each (margins mh, mv: a frame filled one way may still have room the other way)
+    closest = float(fwd @ (rest - res.x))
+    n = len(pts)
+    margins = np.zeros((4 * n, 2))
+    margins[: 2 * n, 0] = margins[2 * n :, 1] = 1.0  # rows: right, left sides, then up, down
+    a2 = np.vstack([np.hstack([a_ub, margins]), np.append(-fwd, [0.0, 0.0])[None, :]])
+    b2 = np.append(b_ub, closest * (1 + 1e-9) + 1e-9 * half - float(fwd @ rest))
+    res2 = linprog(np.array([0.0, 0.0, 0.0, -1.0, -1.0]), A_ub=a2, b_ub=b2,
+                   bounds=[(None, None)] * 3 + [(0, None)] * 2, method="highs")
+    eye = res2.x[:3] if res2.status == 0 else res.x
     target = eye + fwd * float(fwd @ (rest - eye))
     return rrb.EyeControls3D(position=eye, look_target=target, eye_up=[0.0, 0.0, 1.0])
 

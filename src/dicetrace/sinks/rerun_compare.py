@@ -28,7 +28,7 @@ Layouts (:data:`LAYOUTS`): ``overlay`` (the default) draws each die where it is;
 throw k's die is drawn :data:`SHRINK` smaller per k, so that where dice coincide
 (a small nudge, before it grows) the first one is seen whole, with no flicker of
 coincident surfaces (z-fighting).  ``side`` puts each throw beside the previous
-one, across the first throw's travel, so that every die is always seen.
+one, left to right as the default camera sees them, so that every die is always seen.
 """
 
 from __future__ import annotations
@@ -130,18 +130,18 @@ def drawn_half(half: float, k: int) -> float:
 
 
 def layout_offsets(states, half: float, layout: str = "overlay") -> np.ndarray:
-    """(throws, 3) display offsets of each throw's die: zero for ``overlay``; for ``side`` a row across the
-    first throw's horizontal travel, spaced so that no two paths (dice included) ever touch."""
+    """(throws, 3) display offsets of each throw's die: zero for ``overlay``; for ``side`` a row from left to
+    right as the default camera sees it (horizontal, across its line of sight), spaced so that no two paths
+    (dice included) ever touch."""
+    from dicetrace.sinks.rerun import view_axes
+
     n = len(states)
     if layout == "overlay":
         return np.zeros((n, 3))
     if layout != "side":
         raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
     cm0 = states[0]["cm"]
-    travel = cm0[-1, :2] - cm0[0, :2]
-    norm = float(np.hypot(*travel))
-    d = travel / norm if norm > half else np.array([0.0, 1.0])
-    across = np.array([d[1], -d[0], 0.0])  # to the right of the travel: left to right in the default camera
+    across = view_axes(cm0[-1, :2] - cm0[0, :2], half)[1]  # the camera's right: horizontal
     reach = [((s["cm"][:, None, :] + s["off"]) @ across) for s in states]  # every node's position across
     gap = 3.0 * half
     offsets, edge = [0.0], float(reach[0].max())
@@ -217,11 +217,12 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
 def compare_blueprint(rolls=None, layout: str = "overlay"):
     """3-D view of all throws, the log10 divergence plot and the summary.
 
-    With ``rolls``, the 3-D camera frames the paths of all of them (as ``layout`` places them).
+    With ``rolls``, the 3-D camera frames every die's resting place and path from its first bounce (as
+    ``layout`` places them; :func:`dicetrace.sinks.rerun.framing_eye`), orbiting at their mean resting place.
     """
     import rerun.blueprint as rrb
 
-    from dicetrace.sinks.rerun import _eye_for, layout_blueprint
+    from dicetrace.sinks.rerun import framed_points, framing_eye, layout_blueprint
 
     eye = None
     if rolls:
@@ -229,7 +230,10 @@ def compare_blueprint(rolls=None, layout: str = "overlay"):
         n = common_length(rolls)
         states = [_padded(r, n) for r in rolls]
         shifts = layout_offsets(states, half, layout)
-        eye = _eye_for(np.concatenate([s["cm"] + o for s, o in zip(states, shifts)]), half)
+        framed = [framed_points(s["cm"] + o, half) for s, o in zip(states, shifts)]  # each die's path and rest
+        cm0 = states[0]["cm"]
+        eye = framing_eye(np.concatenate([pts for pts, _ in framed] + [np.array([r for _, r in framed])]),
+                          np.mean([r for _, r in framed], axis=0), cm0[-1, :2] - cm0[0, :2], half)
     view3d = rrb.Spatial3DView(origin="/", contents=["/world/**", "/throws/**"], name="throws", eye_controls=eye,
                                background=(250, 250, 250), line_grid=rrb.LineGrid3D(visible=False))
     div = rrb.TimeSeriesView(origin="/divergence/log10", name="log10 divergence from throw 0",
