@@ -345,7 +345,6 @@ function sameConfig(a, b) { return CONFIG_KEYS.every((k) => (a[k] || "") === (b[
 function absolute(path) { return new URL(path, location.href).href; }
 let picks = 0;            // the newest pick: an older one still waiting for the viewer opens nothing
 async function pick(x, y, add) {
-  const my = ++picks;
   if (add && throws.length >= MAX_COMPARE) { showError(`at most ${MAX_COMPARE} throws in one comparison: click (without shift) to start again`); return; }
   const r = await fetch("/api/hover?" + qs(view, {x, y}));
   const info = await r.json();
@@ -356,6 +355,7 @@ async function pick(x, y, add) {
     add = false;
     setStatus("another configuration: a new comparison", false);
   }
+  const my = ++picks;
   if (!add) throws = [];
   throws.push({x, y, info, view: {...view}, q, url: absolute("/api/throw.rrd?" + q)});
   const url = throws.length > 1 ? absolute("/api/compare.rrd?" + throws.map((t) => "t=" + encodeURIComponent(t.q)).join("&"))
@@ -370,6 +370,7 @@ async function pick(x, y, add) {
   if (!v || my !== picks) return;
   const gone = opened.filter((u) => u !== url);
   opened = [url]; closed.delete(url); gone.forEach((u) => closed.add(u));
+  for (const u of closed) { if (closed.size <= 8) break; closed.delete(u); }  // the few latest are enough
   gone.forEach((u) => v.close(u));
   v.open(url);
 }
