@@ -63,3 +63,19 @@ def test_bad_comparisons_get_a_400_naming_the_throw(client, throws, says):
     assert r.status_code == 400
     j = r.json()
     assert j["param"] == "t" and says in j["error"], j
+
+
+def test_a_comparison_past_its_time_is_a_504_naming_t(client, monkeypatch):
+    import threading
+
+    from dicetrace.explore import compare
+
+    release = threading.Event()
+    monkeypatch.setattr(compare, "COMPARE_TIMEOUT_S", 0.2)
+    monkeypatch.setattr(compare, "compare_rrd", lambda throws, activate: release.wait(30))
+    try:
+        r = _compare(client, _throw(1, 1), _throw(2, 2))
+    finally:
+        release.set()
+    assert r.status_code == 504
+    assert r.json()["param"] == "t" and "more than 0.2 s" in r.json()["error"]

@@ -73,7 +73,8 @@ def compare_rrd(throws: list[tuple[View, int, int]], activate: bool = False) -> 
 
 
 async def compare_endpoint(request):
-    """``GET /api/compare.rrd``: the app's worker (``app.state.worker``) computes it; a 400 names a bad ``t``."""
+    """``GET /api/compare.rrd``: the app's worker (``app.state.worker``) computes it; a 400 names a bad ``t``,
+    a 504 a comparison past :data:`COMPARE_TIMEOUT_S`."""
     from starlette.responses import JSONResponse, Response
 
     try:
@@ -82,7 +83,12 @@ async def compare_endpoint(request):
         return JSONResponse({"error": str(e), "param": e.param}, status_code=400)
     download = bool(request.query_params.get("download"))
     fut = request.app.state.worker.submit_throw(compare_rrd, throws, not download)
-    name, data, summary = await asyncio.wait_for(asyncio.wrap_future(fut), COMPARE_TIMEOUT_S)
+    try:
+        name, data, summary = await asyncio.wait_for(asyncio.wrap_future(fut), COMPARE_TIMEOUT_S)
+    except TimeoutError:
+        fut.cancel()  # still waiting for a thread: never run (one being simulated ends on its own)
+        return JSONResponse({"error": f"t: the comparison took more than {COMPARE_TIMEOUT_S:g} s to simulate: "
+                                      "choose a longer time step (dt)", "param": "t"}, status_code=504)
     headers = {"X-Dicetrace-Outcomes": ",".join(map(str, summary["outcomes"])), "Cache-Control": "no-store"}
     if download:
         headers["Content-Disposition"] = f'attachment; filename="{name}.rrd"'
