@@ -79,6 +79,24 @@ TARGET_AGREEMENT = {"seed": 0.97, "physical": 0.93}
 BASELINE_INTEGRATOR = "contact-adaptive"
 #: Timed runs: best of this many (quick: 1); one run moved by up to ~1.5x on a loaded machine.
 TIMING_REPEAT = 3
+#: Memory per IC of the sample, bytes: a reference batch peaked ~1.2 KB per IC (contact-set buffers, summaries),
+#: with the ICs, their perturbed copies and the runs the study keeps; rounded up.
+BYTES_PER_IC = 2048
+#: Seeds the study takes (those of :class:`dicetrace.ics.Sample`).
+SEED_RANGE = (0, 2**64)
+
+
+def check_size(n: int) -> None:
+    """Refuse (ValueError naming --n) a sample of ``n`` ICs whose runs will not fit in the available memory."""
+    from dicetrace.simulate import available_memory
+    from dicetrace.sinks._common import human_bytes
+
+    need, avail = int(n) * BYTES_PER_IC, available_memory()
+    if avail is not None and need > avail:
+        raise ValueError(f"--n {n:,}: the study's runs of {n:,} ICs need about {human_bytes(need)} of memory, "
+                         f"{human_bytes(avail)} available: use a smaller --n")
+
+
 #: Failed statuses (never an outcome), as codes.
 FAILED = tuple(int(s) for s in Status if s.failed)
 

@@ -17,11 +17,13 @@ from dicetrace.studies.context import MAX_FIG_BYTES, Computed, Context, Output, 
 NAME = "animation"
 Z_RANGE = (0.0, 0.25)
 GIF = "i_redsea_z.gif"
+#: Frames along z (full run, --quick).
+NZ = (26, 6)
 
 
 def compute(ctx: Context) -> Computed:
     res = ctx.res(161, 41)
-    nz = ctx.pick(26, 6)
+    nz = ctx.pick(*NZ)
     window = tuple(window_ranges("red-sea")) + (Z_RANGE,)
     s = ctx.sample(window, (res, res, nz), slice_spec="seed3")
     g = s.labels

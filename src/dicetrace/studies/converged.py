@@ -67,6 +67,16 @@ def models(integrator: str | None = None, tol: float | None = None) -> dict[str,
     return out
 
 
+def check_overrides(integrator: str | None = None, tol: float | None = None) -> None:
+    """Refuse (ValueError) an integrator or tolerance that a converged model cannot run with, before any work."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # make_config's notes (a tolerance a fixed step ignores) belong to the run
+        for opts in models(integrator, tol).values():
+            model_config(opts)
+
+
 def model_config(opts: dict):
     from dicetrace.params import make_config
 

@@ -22,6 +22,34 @@ from dicetrace.studies.context import Context, Options, Output, write_json
 TIMINGS = "run_all"
 
 
+#: Memory per node of the largest grid of a run, bytes: study a (cells) at --res 601 peaked ~600 B per node of its
+#: main grid (four windows held with their cell tables); rounded up.
+BYTES_PER_GRID_NODE = 1024
+
+
+def largest_grid(names, options: Options) -> int:
+    """Nodes of the largest grid a run of studies ``names`` simulates with ``options.res`` (its main grid: res²,
+    res² × the frames of study i); 0 without ``--res`` (the studies' own sizes, which fit)."""
+    if options.res is None:
+        return 0
+    from dicetrace.studies.animation import NZ
+
+    nz = NZ[1 if options.quick else 0] if "animation" in names else 1
+    return int(options.res) ** 2 * nz
+
+
+def check_memory(names, options: Options) -> None:
+    """Refuse (ValueError naming --res) a run whose largest grid will not fit in the available memory."""
+    from dicetrace.simulate import available_memory
+    from dicetrace.sinks._common import human_bytes
+
+    nodes = largest_grid(names, options)
+    need, avail = nodes * BYTES_PER_GRID_NODE, available_memory()
+    if nodes and avail is not None and need > avail:
+        raise ValueError(f"--res {options.res}: the largest grid of this run ({nodes:,} nodes) needs about "
+                         f"{human_bytes(need)} of memory, {human_bytes(avail)} available: use a smaller --res")
+
+
 def run_study(name: str, options: Options, out: Path) -> dict:
     """Compute and render one writeup study into ``out``; returns what its JSON holds."""
     mod = study_module(name)

@@ -1,0 +1,168 @@
+"""``dicetrace analyze``, ``accuracy`` and ``stability`` against a hostile user: every option is checked first.
+
+Each bad value is one line on stderr naming its option (``--res``, ``--tol``, ...) and exit code 2, before
+the command touches the disk or computes: the output folder is not created and the working folder is
+byte-for-byte the same.  The studies themselves are replaced by sentinels that fail the test, so that a value
+that slips through is seen at once instead of starting a study.  Sizes that will not fit in memory
+(``analyze --res``, ``accuracy --n``) are refused from an estimate, before anything is allocated.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+OUT = "OUT"
+
+
+class _Started(Exception):
+    """A study was started: the options were not all checked first."""
+
+
+@pytest.fixture
+def no_work(monkeypatch):
+    """Replace every study entry point by a sentinel that records its call and raises :class:`_Started`."""
+    calls: list[str] = []
+
+    def sentinel(name):
+        def started(*args, **kwargs):
+            calls.append(name)
+            raise _Started(name)
+        return started
+
+    monkeypatch.setattr("dicetrace.studies.runner.run", sentinel("analyze"))
+    monkeypatch.setattr("dicetrace.studies.accuracy.study", sentinel("accuracy"))
+    monkeypatch.setattr("dicetrace.studies.stability.stability_map", sentinel("stability"))
+    return calls
+
+
+@pytest.fixture
+def work(tmp_path) -> Path:
+    (tmp_path / "afile").write_text("not a folder")
+    (tmp_path / "results-without-report").mkdir()
+    return tmp_path
+
+
+def case(args, *names):
+    return pytest.param(list(args), names, id=" ".join(args))
+
+
+BAD = [
+    # analyze (issue 36 item 7): the reproducers, then the class
+    case(["analyze", "cells", "--res", "100000"], "--res", "memory"),
+    case(["analyze", "cells", "--quick", "--res", "100000"], "--res", "memory"),
+    case(["analyze", "animation", "--quick", "--res", "20000"], "--res", "memory"),
+    case(["analyze", "all", "--res", str(10**12)], "--res", "memory"),
+    case(["analyze", "cells", "--res", "2"], "--res"),
+    case(["analyze", "cells", "--res", "0"], "--res"),
+    case(["analyze", "cells", "--res", "-5"], "--res"),
+    case(["analyze", "cells", "--res", "1e5"], "--res"),
+    case(["analyze", "converged", "--tol", "nan"], "--tol"),
+    case(["analyze", "converged", "--quick", "--tol", "nan"], "--tol"),
+    case(["analyze", "converged", "--tol", "inf"], "--tol"),
+    case(["analyze", "converged", "--tol", "-inf"], "--tol"),
+    case(["analyze", "converged", "--tol", "0"], "--tol"),
+    case(["analyze", "converged", "--tol", "-1e-6"], "--tol"),
+    case(["analyze", "converged", "--tol", "1"], "--tol"),
+    case(["analyze", "converged", "--tol", "1e-300"], "--tol"),
+    case(["analyze", "converged", "--tol", "small"], "--tol"),
+    case(["analyze", "converged", "--integrator", "nope"], "--integrator", "nope"),
+    case(["analyze", "converged", "--quick", "--integrator", "nope"], "--integrator"),
+    case(["analyze", "converged", "--integrator", ""], "--integrator"),
+    case(["analyze", "cells", "--integrator", "RK4"], "--integrator"),
+    case(["analyze", "cells", "--seed", "-1"], "--seed"),
+    case(["analyze", "cells", "--quick", "--seed", "-1"], "--seed"),
+    case(["analyze", "cells", "--seed", str(2**64)], "--seed"),
+    case(["analyze", "cells", "--seed", "1.5"], "--seed"),
+    case(["analyze", "nonsense"], "unknown study", "nonsense"),
+    case(["analyze", "m"], "unknown study"),
+    case(["analyze"], "name the studies"),
+    case(["analyze", "--report-only", "--quick"], "--quick", "--report-only"),
+    case(["analyze", "--report-only", "--res", "9"], "--res", "--report-only"),
+    case(["analyze", "--report-only", "--seed", "3"], "--seed", "--report-only"),
+    case(["analyze", "--report-only", "cells"], "--report-only"),
+    case(["analyze", "--report-only"], "--out", "results/"),
+    # accuracy (items 7 and 8): sizes, the window (one parser, zero width refused), seeds, names
+    case(["accuracy", "--n", "1000000000"], "--n", "memory"),
+    case(["accuracy", "--quick", "--n", str(10**15)], "--n", "memory"),
+    case(["accuracy", "--n", "1"], "--n"),
+    case(["accuracy", "--n", "0"], "--n"),
+    case(["accuracy", "--n", "-3"], "--n"),
+    case(["accuracy", "--window", "1,1,0,1"], "--window"),
+    case(["accuracy", "--quick", "--window", "0,1,2,2"], "--window"),
+    case(["accuracy", "--window", "1,0,0,1"], "--window"),
+    case(["accuracy", "--window", "0,1,0,nan"], "--window"),
+    case(["accuracy", "--window", "0,1,0"], "--window"),
+    case(["accuracy", "--window", "nope"], "--window", "nope"),
+    case(["accuracy", "--seed", "-1"], "--seed"),
+    case(["accuracy", "--seed", str(2**64)], "--seed"),
+    case(["accuracy", "--threads", "0"], "--threads"),
+    case(["accuracy", "--presets", "nope"], "--presets", "nope"),
+    case(["accuracy", "--presets", ","], "--presets"),
+    case(["accuracy", "--integrator", "nope"], "--integrator", "nope"),
+    # stability
+    case(["stability", "--k", "0"], "--k"),
+    case(["stability", "--k", "-1"], "--k"),
+    case(["stability", "--k", "nan"], "--k"),
+    case(["stability", "--k", "1e400"], "--k"),
+    case(["stability", "--k", "1,x"], "--k"),
+    case(["stability", "--k", ""], "--k"),
+    case(["stability", "--presets", "nope"], "--presets", "nope"),
+    case(["stability", "--integrator", "nope,rk4"], "--integrator", "nope"),
+]
+
+
+@pytest.mark.parametrize("args, names", BAD)
+def test_bad_option_is_one_line_exit_2_before_any_work(work, snapshot, no_work, dicetrace_cli, assert_one_line_error,
+                                                       args, names):
+    before = snapshot(work)
+    res = dicetrace_cli(*args, "--out", OUT, cwd=work)
+    assert_one_line_error(res, *names)
+    assert no_work == []
+    assert not (work / OUT).exists()
+    assert snapshot(work) == before
+
+
+@pytest.mark.parametrize("args, names", [
+    case(["analyze", "cells", "--seed", "-1"], "--seed"),
+    case(["analyze", "converged", "--tol", "nan"], "--tol"),
+    case(["accuracy", "--n", "1000000000"], "--n"),
+    case(["stability", "--k", "0"], "--k"),
+])
+def test_the_default_output_folder_is_not_made_either(work, snapshot, no_work, dicetrace_cli, assert_one_line_error,
+                                                      args, names):
+    before = snapshot(work)
+    assert_one_line_error(dicetrace_cli(*args, cwd=work), *names)
+    assert not (work / "dicetrace-results").exists() and snapshot(work) == before
+
+
+@pytest.mark.parametrize("args, option", [
+    (["analyze", "cells", "--quick", "--res", "401"], "--res"),
+    (["analyze", "animation", "--quick", "--res", "101"], "--res"),  # res² × 6 frames
+    (["accuracy", "--quick", "--n", "100000"], "--n"),
+])
+def test_a_size_that_does_not_fit_the_memory_available_is_refused(work, no_work, dicetrace_cli, assert_one_line_error,
+                                                                   monkeypatch, args, option):
+    """With 32 MiB available (MemAvailable, patched) a run whose estimate is larger is refused by name."""
+    monkeypatch.setattr("dicetrace.simulate.available_memory", lambda: 32 * 2**20)
+    line = assert_one_line_error(dicetrace_cli(*args, "--out", OUT, cwd=work), option, "32 MiB available")
+    assert line.startswith(f"dicetrace: error: {option} ")
+    assert no_work == [] and not (work / OUT).exists()
+
+
+@pytest.mark.parametrize("args, started", [
+    (["analyze", "cells", "--quick", "--res", "41", "--seed", "7"], "analyze"),
+    (["analyze", "converged", "--quick", "--integrator", "contact-tsit5", "--tol", "1e-6"], "analyze"),
+    (["analyze", "converged", "--quick", "--integrator", "rk4"], "analyze"),
+    (["analyze", "i", "--quick", "--res", "21"], "analyze"),
+    (["accuracy", "--quick", "--window", "red-sea", "--n", "20", "--seed", "3", "--presets", "seed",
+      "--integrator", "rk4,contact-substep"], "accuracy"),
+    (["accuracy", "--quick", "--window", "0,1,3,4"], "accuracy"),
+    (["stability", "--quick", "--k", "5e5,5e6", "--presets", "physical"], "stability"),
+])
+def test_good_options_pass_the_checks(work, no_work, dicetrace_cli, args, started):
+    """Valid options reach the study (the sentinel): the checks refuse only what is bad."""
+    res = dicetrace_cli(*args, "--out", OUT, cwd=work)
+    assert no_work == [started], res.stderr
+    assert (work / OUT).is_dir()  # made once every option had passed
