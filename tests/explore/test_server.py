@@ -463,3 +463,26 @@ def test_the_default_cache_bound_holds_for_the_largest_maps():
 
     per_map = MAX_RES * MAX_RES * (1 + 8 + 1) + 2 * MAX_RES * 8
     assert 4 * per_map <= compute.CACHE_BYTES <= 512 * 2**20  # a few of the largest maps, a bounded total
+
+
+@pytest.mark.slow
+def test_maps_and_saves_at_once_under_numbas_workqueue_layer(tmp_path):
+    """numba's workqueue layer aborts the process when two threads run parallel kernels at once: there
+    the worker runs them one at a time (a slow map, a save and a small map, all at once, all done)."""
+    code = f"""
+import numba, pathlib
+from dicetrace.explore import View, Worker
+from dicetrace.explore.compute import _concurrent_kernels_ok
+w = Worker(budget_s=1e9)
+w.submit_map(View(res=(8, 8))).result()
+assert numba.threading_layer() == "workqueue" and not _concurrent_kernels_ok()
+slow = w.submit_map(View(res=(24, 24), dt=2e-5), "a")
+save = w.submit_scan(View(res=(48, 48)), pathlib.Path({str(tmp_path)!r}), "s")
+small = w.submit_map(View(res=(16, 16), dt=2e-3), "b")
+print(small.result(timeout=300).outcome.shape, save.result(timeout=300)["n_ics"], slow.result(timeout=300).outcome.shape)
+w.shutdown()
+"""
+    env = {**os.environ, "NUMBA_THREADING_LAYER": "workqueue"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.split() == ["(16,", "16)", "2304", "(24,", "24)"]

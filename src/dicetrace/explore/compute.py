@@ -385,6 +385,7 @@ class Worker:
         self.computed_count = 0
         self.refused_count = 0
         self._running: dict = {}  # a token per piece being computed -> when it started (time.monotonic)
+        self._serial = threading.Lock()  # parallel kernels one at a time, where the threading layer needs it
         for k in range(MAX_LANES):
             threading.Thread(target=self._loop, name=f"dicetrace-explore-map-{k}", daemon=True).start()
 
@@ -543,7 +544,8 @@ class Worker:
         if job.chunk == 0:  # one IC per thread first: its time sizes the next pieces
             job.chunk = self.threads or _numba_threads()
         t0 = time.perf_counter()
-        n = b.step(job.chunk)
+        with self._kernel_gate():
+            n = b.step(job.chunk)
         dt = time.perf_counter() - t0
         if n > 0 and dt > 0:
             job.chunk = int(min(max(1, CHUNK_S * n / dt), 8 * n))
@@ -570,7 +572,16 @@ class Worker:
         return self._throws.submit(fn, *args)
 
     def submit_scan(self, view: View, folder: Path, name: str) -> Future:
-        return self._saves.submit(save_scan, view, folder, name, self.threads)
+        return self._saves.submit(self._save, view, folder, name)
+
+    def _save(self, view: View, folder: Path, name: str) -> dict:
+        with self._kernel_gate():
+            return save_scan(view, folder, name, self.threads)
+
+    def _kernel_gate(self):
+        """Held around every parallel kernel call (map pieces, saves) unless numba's threading layer takes
+        calls from several threads at once: then nothing (see :func:`_concurrent_kernels_ok`)."""
+        return contextlib.nullcontext() if _concurrent_kernels_ok() else self._serial
 
     def cancel_all(self) -> None:
         """Every map in the making fails with :class:`Cancelled` now (its piece being computed is the last)."""
