@@ -347,7 +347,7 @@ def map_nbytes(m: OutcomeMap) -> int:
 
 
 class Worker:
-    """Makes maps for many clients on one thread, a piece at a time, fairly; throws and saves on threads of their own.
+    """Makes maps for many clients a piece at a time, in turn; throws and saves on threads of their own.
 
     Every map in the making is a job; the worker's thread gives each job in
     turn one kernel call of about ``CHUNK_S`` seconds (sized from the job's
@@ -428,7 +428,7 @@ class Worker:
         who = client if client else object()  # no client id: a client of its own
         with self._lock:
             if self._stopped:
-                raise Cancelled()
+                raise Cancelled("the explorer is stopping")
             prev = self._latest.pop(who, None) if client else None
             if prev is not None and prev != key:
                 self._leave(who, prev)
@@ -523,6 +523,8 @@ class Worker:
                 continue
             with self._lock:
                 del self._running[me]
+                if finished and job.cancelled and not self._stopped:  # superseded as its last piece ran: keep it
+                    self._cache_put(job.key, job.build.map)
                 if not job.cancelled:
                     if finished:
                         self.computed_count += 1
@@ -541,14 +543,15 @@ class Worker:
             if job.build.done:
                 return True
         b = job.build
+        lanes = self.threads or _numba_threads()
         if job.chunk == 0:  # one IC per thread first: its time sizes the next pieces
-            job.chunk = self.threads or _numba_threads()
+            job.chunk = lanes
         t0 = time.perf_counter()
         with self._kernel_gate():
             n = b.step(job.chunk)
         dt = time.perf_counter() - t0
-        if n > 0 and dt > 0:
-            job.chunk = int(min(max(1, CHUNK_S * n / dt), 8 * n))
+        if n > 0 and dt > 0:  # about CHUNK_S a piece, never less than an IC per thread, growing 8× at most
+            job.chunk = int(min(max(lanes, CHUNK_S * n / dt), 8 * n))
         if b.done:
             return True
         if job.counted is None:  # the first piece may have compiled or loaded the kernel: not counted
