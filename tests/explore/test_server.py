@@ -219,6 +219,7 @@ def _request(port: int, method: str, path: str, headers: dict, timeout: float = 
         conn.close()
 
 
+@pytest.mark.slow
 def test_real_server_refuses_foreign_origins_and_host_names(tmp_path):
     from dicetrace.explore import Explorer
 
@@ -432,6 +433,7 @@ def _live_maps():
     return [o for o in gc.get_objects() if isinstance(o, OutcomeMap)]
 
 
+@pytest.mark.slow
 def test_maps_kept_are_bounded_by_bytes_whatever_the_number_of_client_ids():
     """Every page load is a new client id: 150 of them, each with a view of its own, keep no more
     bytes of maps than the cache's bound (no map kept per client beyond it)."""
