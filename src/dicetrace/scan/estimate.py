@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -28,6 +29,11 @@ MEMORY_PER_IC = 1024
 #: Calibration: ICs sampled across the space, and the steps each may take.
 CALIBRATION_ICS = 48
 CALIBRATION_STEPS = 20_000
+#: The timed probe is repeated until it has run CALIBRATION_MIN_S seconds and CALIBRATION_MIN_REPS times, or for
+#: CALIBRATION_MAX_S seconds (one run of a slow scheme may take that long).
+CALIBRATION_MIN_S = 0.5
+CALIBRATION_MIN_REPS = 10
+CALIBRATION_MAX_S = 2.0
 #: Slowest step of any integrator, s (a pessimistic bound used to skip calibrating tiny scans).
 SLOWEST_STEP_S = 2e-6
 
@@ -54,13 +60,16 @@ class ScanEstimate:
     seconds: float | None
     seconds_bound: float
     upper: bool = False
+    #: The machine's load (1-minute average) when it was calibrated, where it slows the scan down (else None).
+    load: float | None = None
 
     def describe(self) -> str:
         t = self.seconds if self.seconds is not None else self.seconds_bound
         when = f"{'at most ' if self.seconds is None or self.upper else 'about '}{human_seconds(t)}"
+        busy = "" if self.load is None else f" at the machine's present load ({self.load:.1f})"
         free = "" if self.free_bytes is None else f", {human_bytes(self.free_bytes)} free"
         return (f"{self.ics_todo:,} ICs in {self.chunks_todo:,} chunks to compute (of {self.n_ics:,}): "
-                f"{when} on {self.threads} thread(s), about {human_bytes(self.bytes)} on disk{free}")
+                f"{when} on {self.threads} thread(s){busy}, about {human_bytes(self.bytes)} on disk{free}")
 
 
 def human_seconds(s: float) -> str:
@@ -84,7 +93,10 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     ``CALIBRATION_ICS`` ICs spread over the space with the scan's
     configuration, each limited to ``CALIBRATION_STEPS`` steps (a throw not
     ended by then is counted at the full time cap: the estimate is then an
-    upper one).
+    upper one).  Only warm throughput is timed: the probe runs once untimed
+    first, which compiles (or loads) the kernels the scan needs -- on a
+    fresh install or with ``DICETRACE_CACHE=0`` that first run takes the
+    compile's time, which the scan then does not spend again.
     """
     import numba
 
@@ -117,16 +129,51 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     cal_steps = min(max_steps, CALIBRATION_STEPS)
     cal = replace(defn.config, numerics=replace(num, t_max_s=min(num.t_max_s, cal_steps * num.dt_s)))
     conv = defn.space.slice.l_convention
-    simulate_batch(ics[:1], config=replace(cal, numerics=replace(num, t_max_s=num.dt_s)), l_convention=conv,
-                   threads=1)  # load the compiled kernel before timing
-    t = time.perf_counter()
-    res = simulate_batch(ics, config=cal, l_convention=conv, threads=1)
-    wall = time.perf_counter() - t
+
+    def probe():
+        return simulate_batch(ics, config=cal, l_convention=conv, threads=1)
+
+    # Warm throughput only: the first run compiles (or loads from the cache) every kernel these throws reach --
+    # numba compiles some only when a throw first needs them -- and is not timed.  Then the probe is timed over
+    # at least CALIBRATION_MIN_S and CALIBRATION_MIN_REPS runs: one run of a millisecond says little on a busy
+    # machine, where a run now and then waits for the processor; their mean is the throughput the scan will see.
+    res = probe()
+    reps, t0, cpu0 = 0, time.perf_counter(), time.process_time()
+    while True:
+        probe()
+        reps += 1
+        elapsed = time.perf_counter() - t0
+        if elapsed >= CALIBRATION_MAX_S or (elapsed >= CALIBRATION_MIN_S and reps >= CALIBRATION_MIN_REPS):
+            break
+    cpu = (time.process_time() - cpu0) / reps  # processor time: a probe a busy machine put aside costs none
     steps = res.steps.astype(np.float64)
     capped = (steps >= cal.numerics.max_steps) & (cal.numerics.max_steps < max_steps)
     full = np.where(capped, float(max_steps), steps)
-    per_ic = wall / len(ids) * (full.sum() / max(steps.sum(), 1.0))
-    return replace(est, seconds=ics_todo * per_ic / nthreads, upper=bool(capped.any()))
+    per_ic = cpu / len(ids) * (full.sum() / max(steps.sum(), 1.0))
+    cores, load = effective_cores(nthreads)
+    return replace(est, seconds=ics_todo * per_ic / cores, upper=bool(capped.any()), load=load)
+
+
+def effective_cores(threads: int) -> tuple[float, float | None]:
+    """The processors ``threads`` threads of a scan will get: (cores, the load that limits them or None).
+
+    ``min(threads, cpus)`` on an idle machine; on a busy one (a 1-minute
+    load average of L runnable threads besides the scan's own) each runnable
+    thread gets ``cpus / (L + threads)`` of a processor.  Timing a probe
+    of a millisecond or so by the wall clock instead tells little: a thread
+    that has just woken gets more than its share for a while.
+    """
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    n = max(1, min(threads, cpus))
+    try:
+        load = max(0.0, os.getloadavg()[0])
+    except (AttributeError, OSError):
+        return float(n), None
+    share = min(1.0, cpus / (load + n))
+    return n * share, (load if share < 1.0 else None)
 
 
 def _existing_parent(p: Path) -> Path:
