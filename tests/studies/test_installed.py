@@ -27,6 +27,8 @@ from pathlib import Path
 
 import pytest
 
+from dicetrace.studies import WRITEUP_STUDIES
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -38,8 +40,7 @@ def _run(args, cwd, env, timeout=1800):
 
 def _check_analyze(out: Path) -> None:
     names = {p.stem for p in (out / "results").glob("*.json")}
-    assert names == {"cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge",
-                     "animation", "transient", "referee", "run_all"}
+    assert names == {*WRITEUP_STUDIES, "run_all"}
     topo = json.loads((out / "results" / "topology.json").read_text())
     assert all(t["matches_program"] is True for t in topo["throws"])
     report = (out / "REPORT.md").read_text()

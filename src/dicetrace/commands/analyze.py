@@ -11,7 +11,11 @@ Studies: cells (a), fractal (b), repetition (c), topology (d), damping (e),
 vertices (f), settle (g), wedge (h), animation (i), or ``all``.
 
 Output: ``--out`` (default ``./dicetrace-results/analysis``) gets
-``figures/``, ``results/<study>.json``, ``cache/`` and ``REPORT.md``.  A
+``figures/``, ``results/<study>.json``, ``cache/`` (simulated grids as plain
+arrays, never unpickled; a file that is not one of them is ignored and its
+grid simulated again) and ``REPORT.md``: the whole report once every study
+has results there, else only the sections of the studies that have (one study
+into a new folder: its own section, with its numbers and run time).  A
 folder of committed results (``analysis/``, marked by
 ``.committed-results``) only takes full runs: ``--quick``, ``--res`` or
 ``--seed`` into it is refused.
@@ -51,7 +55,9 @@ figures/a_*.png ...), or give all:
 
 The committed results in analysis/ are regenerated only by the full run
 `dicetrace analyze all --out analysis` (from the repository root); a --quick,
---res or --seed run into analysis/ is refused. --report-only re-assembles
+--res or --seed run into analysis/ is refused. REPORT.md is the whole report
+once every study has results in OUT/results, else the sections of those that
+have (one study alone: its own section). --report-only re-assembles
 OUT/REPORT.md from OUT/results/*.json.
 """
 

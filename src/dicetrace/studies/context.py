@@ -127,7 +127,6 @@ class Context:
         return s
 
 
-
 #: Version of the grid cache's file layout (a file of another layout is ignored and simulated again).
 CACHE_FORMAT = 2
 #: The arrays of a cached grid besides its axes (``axis0``...): numbers only, never Python objects.

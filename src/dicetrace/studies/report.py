@@ -15,6 +15,13 @@ Placeholders in the template (``dicetrace/studies/REPORT.template.md``):
 A placeholder whose value is missing renders as ``n/a`` (and is listed on
 stderr). When any study ran with ``--quick`` the report starts with a
 warning that its numbers come from CI-sized grids.
+
+The whole report needs the results of every writeup study.  While some are
+missing (``dicetrace analyze settle`` into a new folder), ``REPORT.md`` holds
+only the sections (``## g. ...``) of the studies whose results are there,
+under a header that says so and gives each one's own run time: a paragraph
+that quotes a study without results (a cross-reference, the full run's
+timings) is left out, never shown as ``n/a``.
 """
 
 from __future__ import annotations
@@ -80,8 +87,65 @@ def render(template: str, results: dict[str, dict]) -> tuple[str, list[str]]:
     return _PH.sub(sub, template), missing
 
 
+#: A level-2 heading of the template; a study's section is ``## <letter>. ...`` up to the next one.
+_H2 = re.compile(r"^## ", re.M)
+_STUDY_H2 = re.compile(r"## ([a-z])\. ")
+
+
+def sections(template: str) -> dict[str, str]:
+    """The template's section of each writeup study (study name -> its text, from its ``## x.`` heading to the
+    next level-2 heading, without the trailing ``---``)."""
+    from dicetrace.studies import LETTERS
+
+    starts = [m.start() for m in _H2.finditer(template)] + [len(template)]
+    out = {}
+    for a, b in zip(starts[:-1], starts[1:]):
+        m = _STUDY_H2.match(template, a)
+        if m and m.group(1) in LETTERS:
+            text = template[a:b].rstrip()
+            while text.endswith("---"):
+                text = text[:-3].rstrip()
+            out[LETTERS[m.group(1)]] = text + "\n"
+    return out
+
+
+def _studies_quoted(text: str) -> set[str]:
+    return {m.group(2).strip().partition(".")[0] for m in _PH.finditer(text)}
+
+
+def _keep_paragraphs(text: str, have: set[str]) -> str:
+    """``text`` without the paragraphs that quote a study not in ``have``."""
+    paragraphs = re.split(r"\n[ \t]*\n", text.strip("\n"))
+    return "\n\n".join(p for p in paragraphs if _studies_quoted(p) <= have) + "\n"
+
+
+def partial_template(template: str, studies: list[str], results: dict[str, dict]) -> str:
+    """A report template of the sections of ``studies`` only: a header naming them, with each one's run time
+    (its results' ``wall_s``), the template's conventions, then their sections; paragraphs that quote another
+    study are left out."""
+    from dicetrace.studies import LETTERS, WRITEUP_STUDIES
+
+    letter = {name: lt for lt, name in LETTERS.items()}
+    ran = ", ".join(f"{letter[s]} ({s}, {_fmt(results.get(s, {}).get('wall_s'), '.0f')} s)" for s in studies)
+    head = [
+        "# The chaos of the 2019 die, measured: " + ("section " if len(studies) == 1 else "sections ")
+        + ", ".join(letter[s] for s in studies),
+        "",
+        f"Only part of the report: the results of {len(studies)} of the {len(WRITEUP_STUDIES)} writeup studies are "
+        f"in `results/` ({ran}). Paragraphs that quote a study not run here are left out; "
+        "`dicetrace analyze all` runs every study and writes the whole report.",
+        "",
+    ]
+    conventions = [p for p in re.split(r"\n[ \t]*\n", template) if p.startswith("**Conventions.**")]
+    body = [_keep_paragraphs(sec, set(studies)) for name, sec in sections(template).items() if name in studies]
+    return "\n".join(head) + "\n" + "".join(c + "\n\n" for c in conventions) + "\n".join(body)
+
+
 def build(out: Path, template: str | None = None) -> Path:
-    """Write ``OUT/REPORT.md`` from ``OUT/results/*.json``; returns its path."""
+    """Write ``OUT/REPORT.md`` from ``OUT/results/*.json``: the whole report when every writeup study has results
+    there, else the sections of those that have (:func:`partial_template`); returns its path."""
+    from dicetrace.studies import WRITEUP_STUDIES
+
     out = Path(out)
     results = {}
     for p in sorted((out / "results").glob("*.json")):
@@ -89,11 +153,18 @@ def build(out: Path, template: str | None = None) -> Path:
             results[p.stem] = json.loads(p.read_text())
         except ValueError:
             print(f"report: cannot read {p}", file=sys.stderr)
-    text, missing = render(template if template is not None else template_text(), results)
-    if any(r.get("quick") for r in results.values()):
+    template = template if template is not None else template_text()
+    have = [s for s in WRITEUP_STUDIES if s in results]
+    if len(have) < len(WRITEUP_STUDIES):
+        template = partial_template(template, have, results)
+    text, missing = render(template, results)
+    if any(results[s].get("quick") for s in have) or (len(have) == len(WRITEUP_STUDIES)
+                                                     and any(r.get("quick") for r in results.values())):
         text = QUICK_WARNING + text
     path = out / "REPORT.md"
-    path.write_text(text)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
     if missing:
         print(f"report: {len(missing)} placeholder(s) without a value, e.g. {missing[:3]}", file=sys.stderr)
     return path

@@ -4,7 +4,8 @@
 compiles once); they share simulated grids through ``OUT/cache``.  Each
 writes ``OUT/results/<study>.json`` and its figures; the timings go to
 ``OUT/results/run_all.json``, and ``OUT/REPORT.md`` is rebuilt from every
-``OUT/results/*.json`` present.
+``OUT/results/*.json`` present: the whole report when every study has
+results, else the sections of those that have (:func:`dicetrace.studies.report.build`).
 """
 
 from __future__ import annotations
