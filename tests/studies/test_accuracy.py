@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -16,14 +15,13 @@ from dicetrace.studies import accuracy as acc
 
 
 @pytest.mark.slow
-def test_quick_study_cli_runs_under_a_minute(tmp_path):
-    """No --out: the results go to ./dicetrace-results/accuracy of the current folder."""
-    t0 = time.perf_counter()
+def test_quick_study_cli_runs(tmp_path):
+    """No --out: the results go to ./dicetrace-results/accuracy of the current folder (a bounded wait, no time
+    assert: speed belongs in benchmarks/)."""
     res = subprocess.run(
         [sys.executable, "-m", "dicetrace.cli", "accuracy", "--quick", "--quiet"],
         capture_output=True, text=True, timeout=600, cwd=tmp_path,
     )
-    elapsed = time.perf_counter() - t0
     assert res.returncode == 0, res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dicetrace-results"]
     assert "wrote dicetrace-results/accuracy/summary.md" in res.stdout
@@ -63,8 +61,6 @@ def test_quick_study_cli_runs_under_a_minute(tmp_path):
     assert "Best method for a time budget" in text and "chaos floor" in text.lower()
     assert "## Own numerical floor of each setting" in text and "settings whose floor is 0" in text
     assert "## Cheapest setting of each integrator at the target agreement" in text
-    # compile time aside (the kernels are cached by the rest of the suite), well under a minute
-    assert elapsed < 120
 
 
 @pytest.mark.slow
