@@ -166,3 +166,12 @@ def test_good_options_pass_the_checks(work, no_work, dicetrace_cli, args, starte
     res = dicetrace_cli(*args, "--out", OUT, cwd=work)
     assert no_work == [started], res.stderr
     assert (work / OUT).is_dir()  # made once every option had passed
+
+
+@pytest.mark.parametrize("command", [["analyze", "wedge", "--quick"], ["accuracy", "--quick"], ["stability", "--quick"]])
+@pytest.mark.parametrize("where", ["afile", "afile/deeper"])
+def test_an_output_folder_that_cannot_be_made_is_one_line(work, snapshot, no_work, dicetrace_cli, assert_one_line_error,
+                                                          command, where):
+    before = snapshot(work)
+    assert_one_line_error(dicetrace_cli(*command, "--out", where, cwd=work), "--out", "afile")
+    assert no_work == [] and snapshot(work) == before

@@ -95,6 +95,14 @@ def _plant_wrong_shape(path, marker):
         np.savez(f, **arrays)
 
 
+def _plant_old_layout(path, marker):
+    """A grid cached by an older dicetrace (no layout, no key): not trusted, simulated again."""
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in ("labels", "t_settle_s", "status_code", "wall_s", "axis0", "axis1")}
+    with open(path, "wb") as f:
+        np.savez(f, sequences=np.zeros(0), **arrays)
+
+
 def _plant_garbage(path, marker):
     path.write_bytes(b"PK\x03\x04 not really a zip")
 
@@ -104,7 +112,7 @@ def _plant_truncated(path, marker):
 
 
 @pytest.mark.parametrize("plant", [_plant_object_npz, _plant_pickle, _plant_foreign_key, _plant_wrong_shape,
-                                   _plant_garbage, _plant_truncated])
+                                   _plant_old_layout, _plant_garbage, _plant_truncated])
 def test_a_planted_cache_file_never_runs_and_is_recomputed(tmp_path, capsys, plant):
     marker = tmp_path / "pwned"
     ctx = _fresh(tmp_path)

@@ -45,7 +45,7 @@ def _out_dir(out: Optional[Path], command: str, reduced: dict) -> Path:
         return prepare_out(Path(out) if out is not None else default_out(command), full=not any(reduced.values()),
                            why=", ".join(k for k, on in reduced.items() if on))
     except ValueError as e:
-        fail(str(e))
+        fail(f"--out: {e}")
 
 
 def _command_line(name: str) -> str:

@@ -176,6 +176,8 @@ def read_cached_sample(path: Path, key: str, window, res_t: tuple, sequences: bo
         with np.load(path, allow_pickle=False) as z:
             names = set(z.files)
             need = {"format", "key", *_CACHE_ARRAYS, *(f"axis{i}" for i in range(len(res_t)))}
+            if "format" not in names:
+                return "not a grid of this cache's layout (an older dicetrace's, or another file)"
             if not need <= names:
                 return "not a grid of this dicetrace's cache: " + ", ".join(sorted(need - names)) + " missing"
             if int(z["format"]) != CACHE_FORMAT:
