@@ -71,7 +71,7 @@ _TEMPLATE = r"""<!doctype html>
  #status{display:inline-block;width:22em;white-space:nowrap;overflow:hidden;text-overflow:ellipsis;vertical-align:middle} .busy::before{content:"⏳ "}
  .key{margin-right:8px;white-space:nowrap}.sw{display:inline-block;width:11px;height:11px;border:1px solid #555;margin-right:3px;vertical-align:middle}
  #info{font-family:monospace;font-size:11px;white-space:pre-wrap;overflow-wrap:anywhere;min-height:9em;max-height:24em;border:1px solid #ccc;padding:4px;width:576px;box-sizing:border-box;overflow-x:hidden;overflow-y:auto}
- #viewerbox{flex:1 1 640px;min-width:480px;height:max(560px,calc(100vh - 100px));border:1px solid #888}
+ #viewerbox{flex:1 1 640px;min-width:480px;aspect-ratio:8/7;min-height:0;max-height:max(560px,calc(100vh - 100px));overflow:hidden;border:1px solid #888}
 </style></head><body>
 <div id="top">
  <label>slice <select id="slice">%SLICES%</select></label>
@@ -319,7 +319,7 @@ async function makeViewer() {
     send: (m) => { if (m === "ready") model.ready = true; else viewerEvent(m); },
   };
   mod.default.render({model, el: box});
-  // the viewer takes the room beside the map (the page's width and height less the rest): it follows the window
+  // the viewer takes the page's width beside the map (8:7, as tall as the page allows): it follows the window
   new ResizeObserver(() => (handlers["change:_width"] || []).forEach((f) => f(null, box.clientWidth))).observe(box);
   for (let k = 0; k < 600 && !model.ready; k++) await new Promise((r) => setTimeout(r, 100));
   return {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
