@@ -286,9 +286,13 @@ def web_viewer_url(host: str, web_port: int, grpc_url: str) -> str:
 
 
 #: The web viewer's page: rerun-notebook's build of Rerun's viewer, full window, opening the ``url`` of the query
-#: (a gRPC address; an unspecified host, 0.0.0.0 or [::], means the host this page came from).
+#: (a gRPC address; an unspecified host, 0.0.0.0 or [::], means the host this page came from).  It connects to
+#: this server and the gRPC port only (a Content-Security-Policy), and turns off the viewer's update check (its
+#: "check for updates on startup" setting, in this origin's localStorage) before the viewer starts: the viewer
+#: would ask api.github.com for its latest release.
 VIEWER_PAGE = """<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>dicetrace record: Rerun viewer</title>
+<meta http-equiv="Content-Security-Policy" content="connect-src 'self' http://*:__GRPC_PORT__">
 <link rel="stylesheet" href="widget.css">
 <style>html, body { margin: 0; height: 100%; overflow: hidden; } #viewer { width: 100vw; height: 100vh; }</style>
 </head><body><div id="viewer"></div>
@@ -304,6 +308,15 @@ const model = {
   on: (ev, f) => { (handlers[ev] = handlers[ev] || []).push(f); },
   send: (m) => { if (m === "ready") document.body.dataset.ready = "1"; },
 };
+document.addEventListener("securitypolicyviolation", (ev) => {  // what the policy blocked, for the tests
+  document.body.dataset.blocked = ((document.body.dataset.blocked || "") + " " + ev.blockedURI).trim();
+});
+try {  // the viewer's settings: "app" in RON; turn its update check off before it reads them
+  const key = "app", off = "check_for_updates_on_startup:false", state = localStorage.getItem(key) || "";
+  localStorage.setItem(key, /check_for_updates_on_startup:/.test(state) ? state.replace(/check_for_updates_on_startup:true/g, off)
+                            : state.includes("(app_options:(") ? state.replace("(app_options:(", `(app_options:(${off},`)
+                            : `(app_options:(${off}))`);
+} catch (e) { console.warn("dicetrace: cannot turn off the Rerun viewer's update check:", e); }
 const mod = await import("./widget.js");
 mod.default.render({model, el: box});
 window.addEventListener("resize", () => {
@@ -342,7 +355,8 @@ class WebViewerServer:
         if folder is None:
             raise StreamError("--serve: Rerun's web viewer was not found (install rerun-notebook, as dicetrace's "
                               "dependencies do)")
-        page = VIEWER_PAGE.replace("__GRPC_URL__", grpc_url).encode()
+        grpc_port = urllib.parse.urlsplit(grpc_url).port
+        page = VIEWER_PAGE.replace("__GRPC_URL__", grpc_url).replace("__GRPC_PORT__", str(grpc_port)).encode()
 
         class Handler(BaseHTTPRequestHandler):
             server_version = "dicetrace-record"
