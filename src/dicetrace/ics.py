@@ -392,10 +392,25 @@ def _ranges(r, ndim: int | None, what: str) -> tuple[tuple[float, float], ...]:
     return pairs
 
 
-def get_window(window, ndim: int = 2, z_range=None) -> tuple[tuple[float, float], ...]:
+def _check_widths(pairs, points) -> None:
+    """Every range must have hi > lo (the one rule for windows, boxes and z ranges everywhere); a grid axis of one
+    point (``points[a] == 1``) may have lo == hi: that point is lo.  Never hi < lo."""
+    for a, (lo, hi) in enumerate(pairs):
+        one = points is not None and a < len(points) and points[a] == 1
+        if hi > lo or (one and hi == lo):
+            continue
+        axis = "xyz"[a] if a < 3 else f"axis {a}"
+        what = "zero" if hi == lo else "negative"
+        raise ValueError(f"the {axis} range must have {axis}1 > {axis}0 ({what} width), got {lo!r}, {hi!r}")
+
+
+def get_window(window, ndim: int = 2, z_range=None, *, points=None) -> tuple[tuple[float, float], ...]:
     """Window ranges from a name in ``WINDOWS``, ``"x0,x1,y0,y1[,z0,z1]"`` or pairs.
 
     A named (2-D) window on a 3-D slice needs ``z_range`` = (z0, z1).
+    Every range must be finite with hi > lo (a zero-width or inverted window
+    is refused, by every command and in the API alike); only a grid axis of
+    one point (``points``: the grid's points per axis) may have lo == hi.
     """
     if isinstance(window, str):
         key = window.strip().lower().replace("_", "-").replace(" ", "-")
@@ -420,7 +435,9 @@ def get_window(window, ndim: int = 2, z_range=None) -> tuple[tuple[float, float]
         pairs = pairs + (tuple(float(v) for v in z_range),)
     if len(pairs) == 2 and ndim == 3:
         raise ValueError("a 3-D slice needs a z range too (x0,x1,y0,y1,z0,z1, or a named window plus z0,z1)")
-    return _ranges(pairs, ndim, "window")
+    pairs = _ranges(pairs, ndim, "window")
+    _check_widths(pairs, points)
+    return pairs
 
 
 def grid_axis(lo: float, hi: float, n: int) -> np.ndarray:
@@ -529,7 +546,6 @@ class Grid:
     def __post_init__(self) -> None:
         sl = _slice_of(self.slice)
         object.__setattr__(self, "slice", sl)
-        object.__setattr__(self, "window", get_window(self.window, sl.ndim))
         res = self.res
         if isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_)):
             res = (res,) * sl.ndim
@@ -547,6 +563,7 @@ class Grid:
         if any(r < 1 for r in res):
             raise ValueError(f"resolution must be >= 1 on every axis, got {res}")
         object.__setattr__(self, "res", res)
+        object.__setattr__(self, "window", get_window(self.window, sl.ndim, points=res))
 
     @property
     def ndim(self) -> int:

@@ -411,3 +411,32 @@ def test_cli_out_is_a_file(tmp_path, capsys, monkeypatch):
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert exc.value.code == 2 and line.startswith(f"dicetrace: error: --out {str(out)!r}")
     assert out.read_text() == "mine"
+
+
+def test_a_single_z_plane_is_a_grid_axis_of_one_point(tmp_path, dicetrace_cli):
+    """The one window rule: x1 > x0 on every axis, except a grid axis of one point (that point is z0)."""
+    res = dicetrace_cli("scan", "--slice", "seed3", "--window", "home", "--z", "0.02,0.02", "--res", "3,3,1",
+                        "--out", "s", "-q", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    df = read_scan(tmp_path / "s")
+    assert len(df) == 9 and (df["z"] == 0.02).all()
+
+
+def test_a_zero_width_window_or_box_is_refused_by_the_api_too():
+    from dicetrace.ics import Sample, get_window
+
+    with pytest.raises(ValueError, match=r"x1 > x0 \(zero width\)"):
+        Grid("seed", ((1.0, 1.0), (0.0, 1.0)), 10)
+    with pytest.raises(ValueError, match=r"y1 > y0 \(negative width\)"):
+        Grid("seed", ((0.0, 1.0), (1.0, 0.0)), (3, 1))  # one point on y: still not inverted
+    with pytest.raises(ValueError, match="zero width"):
+        Sample("seed", ((1.0, 1.0), (0.0, 1.0)), 10)
+    with pytest.raises(ValueError, match="zero width"):
+        get_window("1,1,0,1")
+    assert Grid("seed", ((1.0, 1.0), (0.0, 1.0)), (1, 10)).size == 10
+
+
+def test_a_whole_table_in_memory_that_would_not_fit_is_refused_before_any_work():
+    with pytest.raises(ValueError, match=r"out: the rolls table of 10,000,000,000 ICs .* give out="):
+        scan(Grid("seed", "home", 10**5))
+

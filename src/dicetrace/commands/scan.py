@@ -46,7 +46,7 @@ from dicetrace.commands.simulate import EXIT_NUMERICAL_FAILURE, INTEGRATOR_HELP,
 SLICE_HELP = "Slice of IC space: seed (the writeup's 2-D), seed3 (3-D), seed-ortho, seed3-ortho (Gram–Schmidt)."
 WINDOW_HELP = (
     "Window: a name (home, zoom-out, more-out, most-out, red-sea, red-sea-2, party, green-island) "
-    "or x0,x1,y0,y1[,z0,z1]."
+    "or x0,x1,y0,y1[,z0,z1] with x1 > x0, y1 > y0, z1 > z0 (an axis of one grid point may be a single value)."
 )
 RES_HELP = "Grid points per axis: N (every axis), NX,NY or NX,NY,NZ (the program's formula x0+(p-1)/(n-1)(x1-x0))."
 #: A run estimated to take longer than this (s) needs --yes.
@@ -111,16 +111,22 @@ def build_slice(slice_name: str, origin: Optional[str], dirs: Optional[List[str]
     return SLICES[slice_name]
 
 
-def _window(text: str, option: str, ndim: int, z: Optional[str]):
-    """Window ranges of ``--window``/``--box`` (with ``--z``), or a one-line failure naming the option."""
+def _window(text: str, option: str, ndim: int, z: Optional[str], points=None):
+    """Window ranges of ``--window``/``--box`` (with ``--z``), or a one-line failure naming the option.
+
+    The rule is :func:`dicetrace.ics.get_window`'s, every command's: finite
+    ranges of x1 > x0 (only a grid axis of one point, ``points``, may have x1 == x0).
+    """
     from dicetrace.ics import get_window
 
+    if z is not None and ndim != 3:
+        fail(f"--z: the slice is {ndim}-D: a z range applies only to a 3-D slice (seed3, seed3-ortho)")
     zr = parse_floats(z, 2, "--z") if z is not None else None
     try:
-        return get_window(text, ndim, zr)
+        return get_window(text, ndim, zr, points=points)
     except ValueError as e:
         msg = str(e)
-        opt = "--z" if "z range" in msg else option
+        opt = "--z" if "z range" in msg and (z is not None or "needs a z range" in msg) else option
         fail(f"{opt}: {msg}" + ("" if repr(text) in msg or opt == "--z" else f" (got {text!r})"))
 
 
@@ -131,6 +137,14 @@ def build_space(sl, window, z, res, sample, n, box, seed, points):
     given = [name for name, v in (("--window/--res", window or res), ("--sample", sample), ("--points", points)) if v]
     if len(given) > 1:
         fail(f"give one IC space: {' or '.join(given)}, not several")
+    if sample is None:  # an option that would be ignored is refused: it says the user meant something else
+        for name, v in (("--n", n), ("--box", box), ("--seed", seed)):
+            if v is not None:
+                fail(f"{name} goes with --sample (random or sobol), which is not given")
+    if points is not None and z is not None:
+        fail("--z goes with a named --window or --box on a 3-D slice, not with --points")
+    if seed is None:
+        seed = 0
     if points is not None:
         try:
             return Points(sl, _read_points(points, sl.ndim))
@@ -157,8 +171,8 @@ def build_space(sl, window, z, res, sample, n, box, seed, points):
         fail("give --window NAME or x0,x1,y0,y1[,z0,z1] (with --res), or --sample, or --points")
     if res is None:
         fail("--window needs --res N (points per axis), e.g. --res 400 or --res 200,200,50")
-    rng = _window(window, "--window", sl.ndim, z)
     shape = _parse_res(res, sl.ndim)
+    rng = _window(window, "--window", sl.ndim, z, points=shape)
     try:
         return Grid(sl, rng, shape)
     except ValueError as e:
@@ -231,21 +245,43 @@ def _status_summary(out: Path, quiet: bool) -> bool:
     return bool(failed)
 
 
-def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers) -> None:
-    """Estimate the run; refuse what the disk cannot hold or (without --yes) what takes too long; say it when large."""
-    from dicetrace.scan.estimate import estimate_scan
-    from dicetrace.scan.estimate import human_seconds
+def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers, *,
+                    maps=(), local_workers=None) -> None:
+    """Check the run's size before any work: memory (a chunk, the maps, local Dask workers) and disk first, then
+    the time (calibrated: refused beyond MAX_UNCONFIRMED_S without --yes); say it when large.
+
+    ``maps``: the map options given (``--png``, ``--rrd``: drawn from the whole scan in memory);
+    ``local_workers``: the processes of a local ``--dask`` cluster (None: no local cluster).
+    """
+    from dicetrace.scan.estimate import (
+        DASK_WORKER_MEMORY,
+        MAP_MEMORY_PER_IC,
+        MAP_MEMORY_BASE,
+        estimate_scan,
+        human_seconds,
+    )
     from dicetrace.simulate import available_memory
     from dicetrace.sinks._common import human_bytes
 
-    est = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
+    quick = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks, calibrate=False)
     avail = available_memory()
-    if avail is not None and est.chunk_memory * 2 > avail:
-        fail(f"--chunk {defn.chunk:,}: one chunk needs about {human_bytes(est.chunk_memory)} of memory, "
-             f"{human_bytes(avail)} available: use a smaller --chunk")
-    if est.free_bytes is not None and est.bytes > est.free_bytes:
-        fail(f"--out {str(out)!r}: this run writes about {human_bytes(est.bytes)} ({est.ics_todo:,} ICs), "
-             f"only {human_bytes(est.free_bytes)} free there: free space, or scan in parts with --max-chunks N")
+    if avail is not None:
+        if quick.chunk_memory * 2 > avail:
+            fail(f"--chunk {defn.chunk:,}: one chunk needs about {human_bytes(quick.chunk_memory)} of memory, "
+                 f"{human_bytes(avail)} available: use a smaller --chunk")
+        if local_workers is not None:
+            need = local_workers * (DASK_WORKER_MEMORY + quick.chunk_memory)
+            if need > avail:
+                fail(f"--workers {local_workers:,}: a local Dask cluster of {local_workers:,} worker process(es) needs "
+                     f"about {human_bytes(need)} of memory, {human_bytes(avail)} available: use fewer --workers")
+        need = MAP_MEMORY_BASE + defn.size * MAP_MEMORY_PER_IC
+        if maps and need > avail:
+            fail(f"{' and '.join(maps)}: drawing the map of {defn.size:,} ICs needs about {human_bytes(need)} of "
+                 f"memory, {human_bytes(avail)} available: scan without {' and '.join(maps)}, or a smaller grid")
+    if quick.free_bytes is not None and quick.bytes > quick.free_bytes:
+        fail(f"--out {str(out)!r}: this run writes about {human_bytes(quick.bytes)} ({quick.ics_todo:,} ICs), "
+             f"only {human_bytes(quick.free_bytes)} free there: free space, or scan in parts with --max-chunks N")
+    est = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
     if est.seconds is not None and est.seconds > MAX_UNCONFIRMED_S and not yes:
         # refuse only on an estimate that holds: measure once more (a busy moment can slow one measure down)
         again = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
@@ -264,12 +300,12 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="Output folder: a Parquet dataset, one row per IC, that any reader reads as it is (re-run to resume)."),
         slice_name: str = typer.Option("seed", "--slice", help=SLICE_HELP),
         window: Optional[str] = typer.Option(None, "--window", help=WINDOW_HELP),
-        z: Optional[str] = typer.Option(None, "--z", help="Z0,Z1: the z range with a named window on a 3-D slice."),
+        z: Optional[str] = typer.Option(None, "--z", help="Z0,Z1: the z range with a named window on a 3-D slice (z1 > z0, or z1 = z0 with one z point)."),
         res: Optional[str] = typer.Option(None, "--res", help=RES_HELP),
         sample: Optional[str] = typer.Option(None, "--sample", help="random or sobol: N points in --box instead of a grid."),
-        n: Optional[int] = typer.Option(None, "--n", help="Number of sample points (--sample)."),
-        box: Optional[str] = typer.Option(None, "--box", help="Sample box: a window name or x0,x1,y0,y1[,z0,z1]."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the random or scrambled Sobol sample."),
+        n: Optional[int] = typer.Option(None, "--n", help="Number of sample points (with --sample only)."),
+        box: Optional[str] = typer.Option(None, "--box", help="Sample box (with --sample only): a window name or x0,x1,y0,y1[,z0,z1]."),
+        seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the random or scrambled Sobol sample (with --sample only; default 0)."),
         points: Optional[Path] = typer.Option(None, "--points", help="CSV of slice coordinates (columns x,y[,z])."),
         origin: Optional[str] = typer.Option(None, "--origin", help="Custom slice origin VX,VY,VZ,LX,LY,LZ."),
         dirs: Optional[List[str]] = typer.Option(None, "--dir", help="Custom slice direction (6 numbers; 1 to 3 times)."),
@@ -354,7 +390,12 @@ def register(app: typer.Typer) -> None:
             check_folder(out_dir, defn)
         except (ScanMismatchError, FileExistsError) as e:
             fail(f"--out: {e}")
-        _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None)
+        import os
+
+        maps = [opt for opt, dest in (("--png", png_dest), ("--rrd", rrd_dest)) if dest is not None]
+        local = (workers or os.cpu_count() or 1) if dask else None
+        _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None, maps=maps,
+                        local_workers=local)
         try:
             report = scan(
                 defn, out_dir, threads=threads, progress=not quiet and sys.stderr.isatty(),

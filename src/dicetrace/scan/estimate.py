@@ -21,6 +21,16 @@ BYTES_PER_IC = 128
 BYTES_PER_CHUNK = 16 * 1024
 #: Memory per IC of a chunk in flight, bytes (contact-set buffers, summaries, the Arrow table).
 MEMORY_PER_IC = 1024
+#: Memory to draw a scan's map (``--png``, ``--rrd``: the whole scan is read), bytes: per IC (measured 120 for the
+#: PNG and 230 for the recording at 600², rounded up) and beyond the ICs (measured ~60 MiB).
+MAP_MEMORY_PER_IC = 512
+MAP_MEMORY_BASE = 128 << 20
+#: Memory of the whole rolls table held in memory (``scan(space)`` without a folder), bytes per IC (measured 260 for
+#: the table; the chunks and their concatenation are held at once).
+TABLE_MEMORY_PER_IC = 640
+#: Memory of one worker process of a local Dask cluster beyond its chunk (an interpreter with numba, pyarrow and
+#: the kernels loaded), bytes.
+DASK_WORKER_MEMORY = 256 << 20
 
 
 # -- estimating -------------------------------------------------------------------------------

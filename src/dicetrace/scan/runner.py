@@ -178,6 +178,19 @@ def _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask) 
     _check_dask(dask)
 
 
+def _check_table_memory(defn: ScanDefinition) -> None:
+    """Refuse (ValueError) a scan whose whole rolls table, held in memory, would not fit: a folder streams it."""
+    from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC
+    from dicetrace.simulate import available_memory
+    from dicetrace.sinks._common import human_bytes
+
+    need = defn.size * TABLE_MEMORY_PER_IC
+    avail = available_memory()
+    if avail is not None and need > avail:
+        raise ValueError(f"out: the rolls table of {defn.size:,} ICs held in memory needs about {human_bytes(need)}, "
+                         f"{human_bytes(avail)} available: give out= (a folder) to stream it to disk chunk by chunk")
+
+
 def scan(
     space,
     out=None,
@@ -229,7 +242,9 @@ def scan(
 
     Returns
     -------
-    pyarrow.Table (``out`` is None: sorted by ``ic_id``) or :class:`ScanReport`.
+    pyarrow.Table (``out`` is None: sorted by ``ic_id``; refused with a
+    ValueError, before any work, when it would not fit in the memory
+    available) or :class:`ScanReport`.
 
     Raises
     ------
@@ -252,6 +267,7 @@ def scan(
     _check_space_finite(defn)
     t0 = time.perf_counter()
     if out is None:
+        _check_table_memory(defn)
         tables = [t for _, t in iter_scan(defn, threads=threads, dask=dask, n_workers=n_workers)]
         table = pa.concat_tables(tables)
         if dask:
