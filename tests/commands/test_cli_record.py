@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -425,6 +426,43 @@ def test_serve_listens_on_the_address_bind_gives(tmp_path):
     assert b"widget.js" in page
     with socket.socket() as s:  # and nothing on 127.0.0.1
         assert s.connect_ex(("127.0.0.1", web)) != 0
+
+
+def listening_in_table(text: str, port: int) -> set[str]:
+    """The addresses listening on ``port`` in the text of /proc/net/tcp and tcp6 (as ``cat`` prints them)."""
+    import ipaddress
+
+    found = set()
+    for row in text.splitlines():
+        cols = row.split()
+        if len(cols) < 10 or cols[3] != "0A" or ":" not in cols[1]:
+            continue
+        addr_hex, port_hex = cols[1].split(":")
+        if int(port_hex, 16) == port:
+            raw = bytes.fromhex(addr_hex)
+            found.add(str(ipaddress.ip_address(b"".join(raw[k:k + 4][::-1] for k in range(0, len(raw), 4)))))
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="xvfb-run not on PATH (a display for the viewer)")
+@pytest.mark.skipif(not RERUN_CLI.exists(), reason="rerun CLI not installed")
+@pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="reads the listening sockets from /proc/net/tcp")
+def test_spawn_starts_a_viewer_listening_on_127_0_0_1_only(tmp_path):
+    """Under a virtual display: the viewer --spawn starts listens on 127.0.0.1 only (looked at while the display,
+    and so the detached viewer, still live; both end with it)."""
+    import os
+
+    port = free_port()
+    env = {**os.environ, "XDG_RUNTIME_DIR": str(tmp_path)}
+    script = (f"{sys.executable} -m dicetrace.cli record --slice seed --at 1.65,3.9 --spawn --port {port}; rc=$?; "
+              "echo TABLES; cat /proc/net/tcp /proc/net/tcp6 2>/dev/null; exit $rc")
+    res = subprocess.run(["xvfb-run", "-a", "sh", "-c", script], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=180)
+    assert res.returncode == 0, res.stderr
+    out, tables = res.stdout.split("TABLES", 1)
+    assert f"sent to rerun+http://127.0.0.1:{port}/proxy" in out
+    assert listening_in_table(tables, port) == {"127.0.0.1"}
 
 
 def test_channels_option_adds_forces_and_depths_and_the_default_stays_lean(tmp_path, dicetrace_cli):

@@ -393,7 +393,8 @@ class WebViewerServer:
                 pass
 
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        server_cls = type("Server", (ThreadingHTTPServer,), {"address_family": family, "daemon_threads": True})
+        server_cls = type("Server", (ThreadingHTTPServer,), {"address_family": family, "daemon_threads": True,
+                                                             "request_queue_size": 64})
         try:
             self.httpd = server_cls((host, port), Handler)
         except OSError as e:
