@@ -110,7 +110,8 @@ def is_loopback(host: str) -> bool:
 
 
 def parse_url(text: str | None) -> Target:
-    """A gRPC address: a port (``9876``), or a URL ``rerun+http://HOST:PORT/proxy`` (``rerun://``, ``rerun+https://``).
+    """A gRPC address: a port (``9876``), or a URL ``rerun+http://HOST:PORT/proxy`` (``rerun+https://``, or its
+    alias ``rerun://``: TLS).
 
     Raises :class:`ValueError` naming what is wrong.
     """
@@ -133,9 +134,10 @@ def parse_url(text: str | None) -> Target:
         raise ValueError(f"{text!r}: {e}") from None
     if not u.hostname:
         raise ValueError(f"{text!r} has no host")
+    tls = u.scheme in ("rerun", "rerun+https")  # rerun:// is Rerun's alias of rerun+https://
     if port is None:
-        port = 443 if u.scheme == "rerun+https" else DEFAULT_PORT
-    return Target(text, u.hostname, port, tls=u.scheme == "rerun+https")
+        port = 443 if tls else DEFAULT_PORT
+    return Target(text, u.hostname, port, tls=tls)
 
 
 def reachable(host: str, port: int, timeout_s: float = PROBE_TIMEOUT_S) -> bool:
