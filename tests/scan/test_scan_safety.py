@@ -180,58 +180,81 @@ def test_two_concurrent_scans_end_cleanly_with_the_single_run_dataset(tmp_path):
 
 # -- two scans of different definitions racing for a new folder ------------------------------------------------------
 
-#: Imports what a scan needs, says "ready", waits for "go" on stdin, then runs ``dicetrace ARGS``: both racers then
-#: reach the folder within a millisecond or so of each other.
-_RACER = (
-    "import sys\n"
-    "import dicetrace.scan.runner, dicetrace.scan.estimate, dicetrace.commands.scan, dicetrace.simulate\n"
-    "from dicetrace.cli import main\n"
-    "print('ready', flush=True)\n"
-    "sys.stdin.readline()\n"
-    "sys.argv = ['dicetrace', *sys.argv[1:]]\n"
-    "main()\n"
-)
+#: A scan process for many races: imports and loads what a scan needs, says "ready", then for each folder named on
+#: stdin runs ``dicetrace ARGS --out FOLDER`` and answers its exit code and standard error (JSON, one line).  Two
+#: such processes given the same folder at once reach it within a millisecond or so of each other.
+_RACER = r"""
+import contextlib, io, json, sys
+from dicetrace.cli import app
+from dicetrace.commands._common import run_app
+args = sys.argv[1:]
+print("ready", flush=True)
+for line in sys.stdin:
+    err = io.StringIO()
+    sys.argv = ["dicetrace", *args, "--out", line.strip()]
+    with contextlib.redirect_stderr(err):
+        try:
+            run_app(app)
+            rc = 0
+        except SystemExit as e:
+            rc = e.code or 0
+    print(json.dumps({"rc": rc, "err": err.getvalue()}), flush=True)
+"""
 
 
-def _racer(out: Path, res: str):
+def _racer(res: str):
     return subprocess.Popen(
         [sys.executable, "-c", _RACER, "scan", "--window", "home", "--res", res, "--chunk", "4", "--threads", "1",
-         "--out", str(out), "-q"],
+         "-q"],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
 
 
+def _answer(p, timeout: float = 120.0) -> dict:
+    """The racer's next answer, or a failure when none comes within ``timeout`` seconds."""
+    import selectors
+
+    with selectors.DefaultSelector() as sel:
+        sel.register(p.stdout, selectors.EVENT_READ)
+        if not sel.select(timeout):
+            pytest.fail(f"a racing scan did not answer within {timeout:g} s")
+    line = p.stdout.readline()
+    assert line, p.stderr.read()
+    return json.loads(line) if line.strip() != "ready" else {"ready": True}
+
+
 @pytest.mark.slow
 def test_two_scans_of_different_definitions_racing_for_a_new_folder_one_wins_the_other_refuses(tmp_path):
-    """20 races: exactly one scan completes a valid folder (its lock still in place), the other exits 2 in one line
-    (busy, or a different scan) and removes nothing of the winner's."""
-    for race in range(20):
-        out = tmp_path / f"race{race}" / "s"
-        procs = {"3": _racer(out, "3"), "4": _racer(out, "4")}
-        try:
-            for p in procs.values():
-                assert p.stdout.readline().strip() == "ready"
-            for p in procs.values():
-                p.stdin.write("go\n")
+    """20 races of two real scan processes (3x3 and 4x4 grids) released together on a new folder each time: exactly
+    one completes a valid folder (its lock still in place), the other exits 2 in one line (busy, or a different scan)
+    and removes nothing of the winner's."""
+    procs = {"3": _racer("3"), "4": _racer("4")}
+    try:
+        for p in procs.values():
+            assert _answer(p) == {"ready": True}
+        for race in range(20):
+            out = tmp_path / f"race{race}" / "s"
+            for p in procs.values():  # the folder and its parent do not exist yet
+                p.stdin.write(f"{out}\n")
                 p.stdin.flush()
-            results = {res: (p.communicate(timeout=120), p.returncode) for res, p in procs.items()}
-        finally:
-            for p in procs.values():
-                if p.poll() is None:
-                    p.kill()
-                    p.wait()
-        codes = sorted(rc for _, rc in results.values())
-        assert codes == [0, 2], (race, results)
-        winner = next(res for res, (_, rc) in results.items() if rc == 0)
-        (_, err), _ = next(v for v in results.values() if v[1] == 2)
-        lines = err.strip().splitlines()
-        assert len(lines) == 1 and lines[0].startswith("dicetrace: error: "), (race, err)
-        assert "another dicetrace scan is writing" in err or "holds a different scan" in err, (race, err)
-        assert sorted(p.name for p in out.iterdir()) == [LOCK, MANIFEST, "rolls"], (race, results)  # the lock stays
-        n = int(winner) ** 2
-        assert read_manifest(out)["definition"]["space"]["res"] == [int(winner)] * 2
-        assert (read_scan(out)["ic_id"] == np.arange(n)).all(), race
-
+            results = {res: _answer(p) for res, p in procs.items()}
+            assert sorted(r["rc"] for r in results.values()) == [0, 2], (race, results)
+            winner = next(res for res, r in results.items() if r["rc"] == 0)
+            err = next(r["err"] for r in results.values() if r["rc"] == 2)
+            lines = err.strip().splitlines()
+            assert len(lines) == 1 and lines[0].startswith("dicetrace: error: "), (race, err)
+            assert "another dicetrace scan is writing" in err or "holds a different scan" in err, (race, err)
+            assert sorted(p.name for p in out.iterdir()) == [LOCK, MANIFEST, "rolls"], (race, results)  # lock stays
+            assert read_manifest(out)["definition"]["space"]["res"] == [int(winner)] * 2
+            assert (read_scan(out)["ic_id"] == np.arange(int(winner) ** 2)).all(), race
+    finally:
+        for p in procs.values():
+            p.stdin.close()
+            try:
+                p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
 
 # -- checksums -------------------------------------------------------------------------------------------------------
 
