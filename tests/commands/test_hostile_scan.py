@@ -136,6 +136,7 @@ BAD = [
     case([*HOME3, "--scheduler", "http://127.0.0.1:8786"], "--scheduler", "http"),
     case([*HOME3, "--scheduler", "127.0.0.1"], "--scheduler", "needs a port"),
     case([*HOME3, "--scheduler", "tcp://127.0.0.1:{refused}"], "--scheduler", "refused"),
+    case(["--window", "red-sea", "--res", "400", "--scheduler", "tcp://127.0.0.1:{refused}"], "--scheduler", "refused"),
     case([*HOME3, "--workers", "2"], "--workers", "--dask"),
     case([*HOME3, "--dask", "--workers", "0"], "--workers", ">= 1"),
     case([*HOME3, "--dask", "--scheduler", "tcp://127.0.0.1:1"], "--dask", "--scheduler", "not both"),
@@ -155,12 +156,14 @@ BAD = [
 @pytest.mark.parametrize("args,names,out", BAD)
 def test_bad_input_is_one_line_exit_2_and_leaves_the_folder_byte_for_byte(snapshot, work, dicetrace_cli, assert_one_line_error,
                                                                           args, names, out, monkeypatch):
+    import dicetrace.scan.estimate as estimate
     import dicetrace.scan.runner as runner
 
     def no_work(*a, **k):
-        raise AssertionError("a chunk was computed before the input was refused")
+        raise AssertionError("a chunk (or the estimate's probe) was computed before the input was refused")
 
     monkeypatch.setattr(runner, "compute_chunk", no_work)
+    monkeypatch.setattr(estimate, "simulate_batch", no_work)  # every option is checked before the estimate computes
     args = [a.replace("{refused}", str(_refused_port())) for a in args]
     before = snapshot(work)
     res = dicetrace_cli("scan", *args, "--out", out, "-q", cwd=work)

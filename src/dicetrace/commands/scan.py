@@ -394,12 +394,21 @@ def register(app: typer.Typer) -> None:
 
         maps = [opt for opt, dest in (("--png", png_dest), ("--rrd", rrd_dest)) if dest is not None]
         local = (workers or os.cpu_count() or 1) if dask else None
-        _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None, maps=maps,
-                        local_workers=local)
+        client, closers = None, []
+        if scheduler is not None:  # reached (within DASK_CONNECT_TIMEOUT_S) before anything is computed
+            from dicetrace.scan.dask import _open_dask
+
+            try:
+                client, closers = _open_dask(scheduler, None)
+            except SchedulerError as e:
+                fail(f"--scheduler {scheduler}: {e}")
         try:
+            _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None, maps=maps,
+                            local_workers=local)
             report = scan(
                 defn, out_dir, threads=threads, progress=not quiet and sys.stderr.isatty(),
-                dask=scheduler or (True if dask else None), n_workers=workers, max_chunks=max_chunks, wait=wait,
+                dask=client if client is not None else (True if dask else None), n_workers=workers,
+                max_chunks=max_chunks, wait=wait,
             )
         except (ScanMismatchError, FileExistsError) as e:  # the folder changed since the check above
             fail(f"--out: {e}")
@@ -411,6 +420,9 @@ def register(app: typer.Typer) -> None:
             print(f"dicetrace: interrupted; finished chunks are kept in {str(out)!r}: re-run the same command to resume",
                   file=sys.stderr)
             raise
+        finally:
+            for x in closers:
+                x.close()
         done = report.chunks_skipped + report.chunks_computed
         if not quiet:
             msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (a Parquet dataset: read the folder as it is)  "
