@@ -10,10 +10,10 @@ them.  On a warm cache this takes a few seconds (loading, nothing compiled).
 
 Nothing is asserted here: a kernel that fails to compile or run fails its tests, which say why.
 
-Phase 1, every integrator of the table (one task per scheme): the step with the test stepping driver
-around it (``tests/core/test_integrators.py``) and the tracing run loop (``simulate``).  Phase 2, once
-every tracing loop is cached: ``run_roll_general`` (the chain of all of them) and the summary and
-batch loops of the schemes the suite runs batches or summaries with (``SUMMARY_INTEGRATORS``).
+One task per scheme of the integrator table.  Phase 1: the step with the test stepping driver around
+it (``tests/core/test_integrators.py``) and the tracing run loop (``simulate``).  Phase 2, in the same
+task once its step is cached: the summary and batch loops of the schemes the suite runs batches or
+summaries with (``SUMMARY_INTEGRATORS``).
 """
 
 from __future__ import annotations
@@ -60,24 +60,27 @@ def _phase1(name: str) -> str:
 
 
 def _phase2(task: str) -> str:
-    """``general``: run_roll_general; an integrator's name: its summary loop and batch kernel."""
+    """Integrator ``task``'s summary loop and batch kernel."""
     import numpy as np
 
     from dicetrace.core import loop
     from dicetrace.params import make_config
     from dicetrace.simulate import BATCH_BLOCK, simulate_batch
 
-    if task == "general":
-        cfg = make_config("seed")
-        empty = (np.zeros((0, loop.STATE_COLS)), np.zeros((0, loop.FORCE_COLS)), np.zeros((0, loop.ENERGY_COLS)))
-        loop.run_roll_general(_ic(), cfg.initial_offsets(), cfg.kernel_params(), cfg.numerics.integrator_id,
-                              np.zeros(64, np.uint8), np.zeros(64, np.int32), *empty)
-    else:
-        cfg = make_config("seed", integrator=task, t_max_s=0.05)
-        loop.run_summary(cfg.kernel_inputs(_ic()).ics, cfg.initial_offsets(), cfg.kernel_params(),
-                         cfg.numerics.integrator_id, np.zeros(64, np.uint8), np.zeros(64, np.int32))
-        simulate_batch(np.tile(_ic(), (BATCH_BLOCK + 1, 1)), config=cfg, threads=1)
+    cfg = make_config("seed", integrator=task, t_max_s=0.05)
+    loop.run_summary(cfg.kernel_inputs(_ic()).ics, cfg.initial_offsets(), cfg.kernel_params(),
+                     cfg.numerics.integrator_id, np.zeros(64, np.uint8), np.zeros(64, np.int32))
+    simulate_batch(np.tile(_ic(), (BATCH_BLOCK + 1, 1)), config=cfg, threads=1)
     return task
+
+
+def _scheme(task: tuple[str, bool]) -> str:
+    """Every kernel of one scheme the suite runs: phase 1, then phase 2 where ``task[1]`` says so."""
+    name, summary = task
+    _phase1(name)
+    if summary:
+        _phase2(name)
+    return name
 
 
 def _costliest_first(names):
@@ -103,14 +106,13 @@ def main(argv=None) -> int:
         print("compile_kernels: DICETRACE_CACHE is off, nothing to keep; skipped")
         return 0
     t0 = time.perf_counter()
-    first = _costliest_first(INTEGRATORS)
-    # semi-implicit Euler's summary loop holds core/fast.py's specialised kernel: the costliest after the chain
-    summaries = sorted(_costliest_first(_summary_integrators()), key=lambda n: n != "semi-implicit-euler")
-    second = ["general"] + summaries
+    # One task per scheme (its step, tracing loop, and where the suite needs them its summary loop and batch
+    # kernel, which load the step from the cache): no process waits on another, and none compiles a step twice.
+    summaries = _summary_integrators()
+    tasks = [(name, name in summaries) for name in _costliest_first(INTEGRATORS)]
     with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=get_context("spawn")) as pool:
-        for tasks, fn in ((first, _phase1), (second, _phase2)):
-            for done in pool.map(fn, tasks):
-                print(f"compile_kernels: {done} ready ({time.perf_counter() - t0:.0f} s)", flush=True)
+        for done in pool.map(_scheme, tasks):
+            print(f"compile_kernels: {done} ready ({time.perf_counter() - t0:.0f} s)", flush=True)
     print(f"compile_kernels: every kernel compiled or loaded in {time.perf_counter() - t0:.0f} s")
     return 0
 

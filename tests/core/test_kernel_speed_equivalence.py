@@ -2,7 +2,7 @@
 
 ``run_summary`` (the summary loop ``run_batch`` runs per IC) sends the summary path of semi-implicit Euler with the
 point-mass stop test (the ``seed`` preset) to ``fast.roll_summary_sie``;
-``run_roll_general`` is the original loop it must reproduce bit for bit
+the tracing loop (``run_roll``, the run loop with its trace code) is the original loop it must reproduce bit for bit
 (status, steps, outcome, contact sets and their steps).  The golden file
 ``tests/data/kernel_golden_2000.npz`` froze the results of the original
 kernel (before any optimisation) on 2000 seed-slice ICs, x, y uniform in
@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 
 from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll, run_roll_general, run_summary
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll, run_summary
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 from dicetrace.simulate import Record, simulate, simulate_batch
@@ -85,7 +85,7 @@ def test_serial_fast_path_matches_golden_and_general_loop(golden):
     cfg = make_config("seed")
     ics = golden["ics"][:400]
     fast = _serial(_summary, ics, cfg)
-    general = _serial(run_roll_general, ics, cfg)
+    general = _serial(run_roll, ics, cfg)
     _assert_same(fast, general)
     off = golden["set_offsets"]
     frozen = [
@@ -114,7 +114,7 @@ def test_fast_path_matches_general_loop_on_variants(label, kwargs):
     xy = rng.uniform(0.0, 20.0, size=(120, 2))
     ics = seed_slice(xy[:, 0], xy[:, 1])
     fast = _serial(_summary, ics, cfg)
-    _assert_same(fast, _serial(run_roll_general, ics, cfg))
+    _assert_same(fast, _serial(run_roll, ics, cfg))
     if "t_max_s" in kwargs:
         assert any(r[0] == 1 for r in fast), "expected some time-capped throws"
 
@@ -131,7 +131,7 @@ def test_fast_path_matches_general_loop_on_special_ics():
         [[0.0, 0.0, 0.0, 0.0, 100.0, 0.0], [0.0, 0.0, -50.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
          [-0.0, -0.0, 0.0, -0.0, 100.0, -0.0], [30.0, 0.0, 0.0, 0.0, 0.0, 250.0]],
     ])
-    _assert_same(_serial(_summary, ics, cfg), _serial(run_roll_general, ics, cfg))
+    _assert_same(_serial(_summary, ics, cfg), _serial(run_roll, ics, cfg))
 
 
 def test_fast_path_from_a_tilted_start():
@@ -145,7 +145,7 @@ def test_fast_path_from_a_tilted_start():
     rng = np.random.default_rng(3)
     xy = rng.uniform(0.0, 20.0, size=(100, 2))
     ics = seed_slice(xy[:, 0], xy[:, 1])
-    _assert_same(_serial(_summary, ics, cfg, off0), _serial(run_roll_general, ics, cfg, off0))
+    _assert_same(_serial(_summary, ics, cfg, off0), _serial(run_roll, ics, cfg, off0))
 
 
 def test_non_symmetric_start_falls_back_to_general_loop():
@@ -154,7 +154,7 @@ def test_non_symmetric_start_falls_back_to_general_loop():
     off0[0, 0] = np.nextafter(off0[0, 0], 0.0)
     assert not mirror_symmetric(off0)
     ics = seed_slice(np.array([1.65, 0.3]), np.array([3.9, 7.1]))
-    _assert_same(_serial(_summary, ics, cfg, off0), _serial(run_roll_general, ics, cfg, off0))
+    _assert_same(_serial(_summary, ics, cfg, off0), _serial(run_roll, ics, cfg, off0))
 
 
 def test_buffer_full_is_reported_identically():
@@ -164,7 +164,7 @@ def test_buffer_full_is_reported_identically():
     ic = seed_slice(1.65, 3.9)  # 23 contact sets
     for cap in (1, 5, 23):
         res = []
-        for fn in (_summary, run_roll, run_roll_general):
+        for fn in (_summary, run_roll):
             sets = np.zeros(cap, np.uint8)
             steps = np.zeros(cap, np.int32)
             res.append(fn(ic, off0, kp, 0, sets, steps, *EMPTY) + (sets.copy(), steps.copy()))
@@ -249,5 +249,5 @@ def test_an_overflowing_start_fails_at_the_same_step_on_every_path(integrator):
     integ = INTEGRATORS[integrator].kernel_id
     ic = np.array([1e300, 0, 0, 0, 0, 0])
     res = [fn(ic, cfg.initial_offsets(), kp, integ, np.zeros(8, np.uint8), np.zeros(8, np.int32), *EMPTY)
-           for fn in (_summary, run_roll, run_roll_general)]
-    assert [tuple(map(int, r)) for r in res] == [(2, 1, -1, 1)] * 3  # NON_FINITE, 1 step, no outcome, 1 set
+           for fn in (_summary, run_roll)]
+    assert [tuple(map(int, r)) for r in res] == [(2, 1, -1, 1)] * 2  # NON_FINITE, 1 step, no outcome, 1 set
