@@ -430,7 +430,8 @@ def _live_maps():
     from dicetrace.explore import OutcomeMap
 
     gc.collect()
-    return [o for o in gc.get_objects() if isinstance(o, OutcomeMap)]
+    # type(), not isinstance(): isinstance on a weak proxy whose referent has died raises ReferenceError
+    return [o for o in gc.get_objects() if type(o) is OutcomeMap]
 
 
 @pytest.mark.slow
