@@ -70,7 +70,8 @@ class ScanEstimate:
     seconds: float | None
     seconds_bound: float
     upper: bool = False
-    #: The machine's load (1-minute average) when it was calibrated, where it slows the scan down (else None).
+    #: The machine's load (threads running besides the probe) when it was calibrated, where it slows the scan down
+    #: (else None).
     load: float | None = None
 
     def describe(self) -> str:
@@ -148,10 +149,11 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     # at least CALIBRATION_MIN_S and CALIBRATION_MIN_REPS runs: one run of a millisecond says little on a busy
     # machine, where a run now and then waits for the processor; their mean is the throughput the scan will see.
     res = probe()
-    reps, t0, cpu0 = 0, time.perf_counter(), time.process_time()
+    reps, t0, cpu0, others = 0, time.perf_counter(), time.process_time(), []
     while True:
         probe()
         reps += 1
+        others.append(_running_besides_us())
         elapsed = time.perf_counter() - t0
         if elapsed >= CALIBRATION_MAX_S or (elapsed >= CALIBRATION_MIN_S and reps >= CALIBRATION_MIN_REPS):
             break
@@ -160,17 +162,29 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     capped = (steps >= cal.numerics.max_steps) & (cal.numerics.max_steps < max_steps)
     full = np.where(capped, float(max_steps), steps)
     per_ic = cpu / len(ids) * (full.sum() / max(steps.sum(), 1.0))
-    cores, load = effective_cores(nthreads)
+    seen = [x for x in others if x is not None]
+    cores, load = effective_cores(nthreads, sum(seen) / len(seen) if seen else None)
     return replace(est, seconds=ics_todo * per_ic / cores, upper=bool(capped.any()), load=load)
 
 
-def effective_cores(threads: int) -> tuple[float, float | None]:
+def _running_besides_us() -> float | None:
+    """Threads running or runnable on the machine now, besides the one reading (Linux ``/proc/loadavg``; else None)."""
+    try:
+        with open("/proc/loadavg") as f:
+            return max(0.0, float(f.read().split()[3].split("/")[0]) - 1.0)
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def effective_cores(threads: int, others: float | None = None) -> tuple[float, float | None]:
     """The processors ``threads`` threads of a scan will get: (cores, the load that limits them or None).
 
-    ``min(threads, cpus)`` on an idle machine; on a busy one (a 1-minute
-    load average of L runnable threads besides the scan's own) each runnable
-    thread gets ``cpus / (L + threads)`` of a processor.  Timing a probe
-    of a millisecond or so by the wall clock instead tells little: a thread
+    ``min(threads, cpus)`` on an idle machine; on a busy one, with L
+    threads running or waiting besides the scan's own, each gets
+    ``cpus / (L + threads)`` of a processor.  L is ``others`` (counted
+    while the probe ran), else the 1-minute load average (which lags: it
+    still counts work that has just ended).  Timing a probe of a
+    millisecond or so by the wall clock instead tells little: a thread
     that has just woken gets more than its share for a while.
     """
     try:
@@ -178,12 +192,14 @@ def effective_cores(threads: int) -> tuple[float, float | None]:
     except (AttributeError, OSError):
         cpus = os.cpu_count() or 1
     n = max(1, min(threads, cpus))
-    try:
-        load = max(0.0, os.getloadavg()[0])
-    except (AttributeError, OSError):
-        return float(n), None
+    load = others
+    if load is None:
+        try:
+            load = max(0.0, os.getloadavg()[0])
+        except (AttributeError, OSError):
+            return float(n), None
     share = min(1.0, cpus / (load + n))
-    return n * share, (load if share < 1.0 else None)
+    return n * share, (load if share < 0.9 else None)
 
 
 def _existing_parent(p: Path) -> Path:
