@@ -335,12 +335,12 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Scan a slice (grid), a sample or a list of points of IC space; one row per IC."""
         import math
+        import os
 
         from dicetrace.commands.simulate import build_config
         from dicetrace.scan import DEFAULT_CHUNK, ScanDefinition, ScanMismatchError, scan
-        from dicetrace.scan.dask import SchedulerError
+        from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address
         from dicetrace.scan.folder import ScanBusyError
-        from dicetrace.scan.dask import check_scheduler_address
         from dicetrace.scan.folder import _check_space_finite, check_folder
 
         sl = build_slice(slice_name, origin, dirs)
@@ -390,14 +390,10 @@ def register(app: typer.Typer) -> None:
             check_folder(out_dir, defn)
         except (ScanMismatchError, FileExistsError) as e:
             fail(f"--out: {e}")
-        import os
-
         maps = [opt for opt, dest in (("--png", png_dest), ("--rrd", rrd_dest)) if dest is not None]
         local = (workers or os.cpu_count() or 1) if dask else None
         client, closers = None, []
         if scheduler is not None:  # reached (within DASK_CONNECT_TIMEOUT_S) before anything is computed
-            from dicetrace.scan.dask import _open_dask
-
             try:
                 client, closers = _open_dask(scheduler, None)
             except SchedulerError as e:
