@@ -363,7 +363,8 @@ REFUSAL_WAIT_S = 10
 @pytest.fixture
 def peer():
     """``peer(kind) -> port``: a TCP peer on 127.0.0.1 that refuses ("refused": nothing listens), accepts and never
-    answers ("silent"), or answers garbage ("garbage"); closed in teardown."""
+    answers ("silent"), answers garbage ("garbage"), or answers the HTTP/2 handshake and then reads nothing
+    ("stalls"); closed in teardown."""
     import socket
 
     servers, stop = [], threading.Event()
@@ -387,6 +388,11 @@ def peer():
                 except OSError:
                     continue
                 held.append(c)  # silent: kept open, never written to
+                if kind == "stalls":  # answers the HTTP/2 handshake (an empty SETTINGS frame), then takes nothing
+                    try:
+                        c.sendall(bytes([0, 0, 0, 4, 0, 0, 0, 0, 0]))
+                    except OSError:
+                        pass
                 if kind == "garbage":
                     try:
                         c.sendall(b"HTTP/1.1 200 OK\r\nnot gRPC \x00\xff\xfe\r\n\r\n" * 8)
@@ -448,3 +454,21 @@ def test_spawn_onto_a_port_held_by_something_else_is_one_line_exit_2(tmp_path, p
     assert res.returncode == 2 and res.stdout == "", (res.returncode, res.stdout, res.stderr)
     (line,) = res.stderr.strip().splitlines()
     assert line.startswith(f"dicetrace: error: --spawn: port {port} is taken by something that is not a Rerun viewer")
+
+
+@pytest.mark.slow
+def test_connect_to_a_peer_that_takes_no_data_gives_up_within_the_flush_timeout(tmp_path, peer):
+    """A peer that passes the handshake and then reads nothing: the SDK's disconnect (and its shutdown hook at
+    exit) would wait forever; the command gives up at its flush timeout (3 s here instead of 60) in one line."""
+    import subprocess
+    import sys
+
+    port = peer("stalls")
+    code = ("import sys, dicetrace.sinks.rerun_stream as s; s.FLUSH_TIMEOUT_S = 3.0; "
+            "from dicetrace.cli import main; main()")
+    res = subprocess.run([sys.executable, "-c", code, "record", *AT, "--connect", "--url", str(port)], cwd=tmp_path,
+                         capture_output=True, text=True, timeout=REFUSAL_WAIT_S + 20)
+    assert res.returncode == 2 and res.stdout == "", (res.returncode, res.stdout, res.stderr)
+    (line,) = res.stderr.strip().splitlines()
+    assert line.startswith(f"dicetrace: error: could not send the recording to rerun+http://127.0.0.1:{port}/proxy")
+    assert list(tmp_path.iterdir()) == []

@@ -454,12 +454,13 @@ def register(app: typer.Typer) -> None:
                         wait_serving(serve_s)
                     except KeyboardInterrupt:
                         pass
+                st.close()  # bounded: the recording handed over, or one line
             except StreamError as e:
                 fail(str(e))
             finally:
                 try:
-                    st.close()
-                except KeyboardInterrupt:  # a Ctrl-C while the server shuts down (serving has ended)
+                    st.close()  # after a failure: given up within the same bound, its error already said
+                except (KeyboardInterrupt, StreamError):  # a Ctrl-C while the server shuts down (serving has ended)
                     pass
 
         outcomes = []

@@ -50,6 +50,9 @@ SCHEMES = ("rerun", "rerun+http", "rerun+https")
 PROBE_TIMEOUT_S = 2.0
 #: Longest wait for the recording to reach the target, s.
 FLUSH_TIMEOUT_S = 60.0
+#: Longest wait for a disconnect when nothing was sent (a server shutting down), and the least one ever gets, s.
+CLOSE_TIMEOUT_S = 10.0
+CLOSE_MIN_S = 2.0
 #: Longest wait for a spawned viewer to start listening, s.
 SPAWN_TIMEOUT_S = 20.0
 #: How long a viewer started here is watched after the recording reached it (it may fail to open its window), s.
@@ -424,6 +427,8 @@ class Stream:
         self.grpc_url: str | None = None
         self.web: WebViewerServer | None = None
         self.viewer: subprocess.Popen | None = None
+        self.deadline: float | None = None  # when the recording must have reached the sink (set by send)
+        self.closed = False
 
     def connect(self, target: Target) -> None:
         self.grpc_url = target.url
@@ -457,8 +462,11 @@ class Stream:
         self.web_url = web_viewer_url(host, web_port, self.grpc_url)
         return self.web_url
 
-    def send(self, log, timeout_s: float = FLUSH_TIMEOUT_S) -> None:
-        """``log(self.rec)`` and wait (at most ``timeout_s``) until it has reached the sink."""
+    def send(self, log, timeout_s: float | None = None) -> None:
+        """``log(self.rec)`` and wait until it has reached the sink: at most ``timeout_s`` (default
+        :data:`FLUSH_TIMEOUT_S`) for the flush and the hand-over together (see :meth:`close`)."""
+        timeout_s = FLUSH_TIMEOUT_S if timeout_s is None else timeout_s
+        self.deadline = time.monotonic() + timeout_s
         log(self.rec)
         try:
             self.rec.flush(timeout_sec=timeout_s)
@@ -472,12 +480,36 @@ class Stream:
             raise StreamError(f"--spawn: the Rerun viewer exited ({viewer_error(self.viewer)})")
 
     def close(self) -> None:
+        """Stop the web viewer and hand the rest of the recording over (``disconnect``), bounded.
+
+        The SDK's flush returns once the data is queued, and its disconnect waits, with no bound,
+        for a peer to take it: a peer that answered the handshake and then takes nothing would hold
+        the command (and, at exit, the SDK's shutdown hook) forever.  The disconnect runs in a
+        thread given what is left of :meth:`send`'s time (:data:`CLOSE_TIMEOUT_S` if nothing was
+        sent); past it the connection is abandoned (the SDK's shutdown hook too, so the process can
+        end) and :class:`StreamError` says so.  A second call returns at once.
+        """
+        if self.closed:
+            return
+        self.closed = True
         if self.web is not None:
             self.web.close()
-        try:
-            self.rec.disconnect()
-        except Exception:  # pragma: no cover - nothing more to report
-            pass
+        wait = CLOSE_TIMEOUT_S if self.deadline is None else max(CLOSE_MIN_S, self.deadline - time.monotonic())
+
+        def disconnect():
+            try:
+                self.rec.disconnect()
+            except Exception:  # pragma: no cover - nothing more to report
+                pass
+
+        worker = threading.Thread(target=disconnect, name="dicetrace-disconnect", daemon=True)
+        worker.start()
+        worker.join(wait)
+        if worker.is_alive():
+            self.rr.unregister_shutdown()  # its flush at exit would wait for the same peer
+            raise StreamError(f"could not send the recording to {self.grpc_url}: it took no data for "
+                              f"{FLUSH_TIMEOUT_S if self.deadline is not None else wait:g} s (the connection was "
+                              "given up)")
 
 
 def check_spawn(port: int, host: str = DEFAULT_BIND) -> str:
