@@ -1,11 +1,14 @@
-"""Initial conditions: validation, slices of IC space, windows, grids and samples.
+"""Initial conditions: slices of IC space, grids and samples.
 
 An IC is 6 numbers: the centre-of-mass velocity U (cm/s) and the angular
 momentum L (node-mass·cm²/s), in that order (``IC_FIELDS``).  For the
 ``seed`` preset L is in the 2019 program's sign convention (the negative of
 the physical one); the ``physical`` preset takes the physical L.  Slices map
 1–3 coordinates to an IC with the program's arithmetic (left to right, no
-fused multiply-add), so grids reproduce the program bit for bit.
+fused multiply-add), so grids reproduce the program bit for bit.  The check
+of ICs handed in and :class:`SliceICs` live in :mod:`dicetrace.ic_arrays`,
+windows and the grid point formula in :mod:`dicetrace.windows`; both are
+re-exported here.
 
 IC spaces (docs/model.md §11), all plain frozen dataclasses that turn
 into JSON-able dicts and back (``to_dict`` / :func:`space_from_dict`):
@@ -34,157 +37,19 @@ one chunk of ICs.
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 
+# IC_FIELDS, validate_ic(s) and WINDOWS are re-exported: users and the README import them from here.
+from dicetrace.ic_arrays import IC_FIELDS, SliceICs, as_real, validate_ic, validate_ics  # noqa: F401
 from dicetrace.params import L_CONVENTIONS
-
-IC_FIELDS = ("vx", "vy", "vz", "Lx", "Ly", "Lz")
+from dicetrace.windows import WINDOWS, get_window, grid_axis  # noqa: F401
 
 # Seed slice (writeup section 6.2): L = x·A + y·B (+ z·C) + L0, U = x·UA + y·UB (+ z·UC).
 SEED_L_DIRS = np.array([[3.2612, 3.1314, 0.0606], [2.1595, 4.5284, 3.9535], [4.5669, 3.1618, 0.4877]])
 SEED_U_DIRS = np.array([[2.7083, 3.4373, 4.4365], [2.4650, 1.4853, 0.6534], [1.3925, 2.7344, 4.7875]])
 SEED_L_ORIGIN = np.array([0.0, 100.0, 0.0])
-
-
-#: What numpy dtype kinds hold, for messages about ICs that are not real numbers.
-_DTYPE_KINDS = {"b": "booleans", "c": "complex numbers", "U": "text", "S": "bytes", "M": "dates", "m": "time spans", "V": "records"}
-
-
-def _as_real(x, what: str, shape: str) -> np.ndarray:
-    """``x`` as a float64 array when it holds real numbers (integers or floats), else ValueError naming ``what``.
-
-    Complex numbers, booleans, text, dates and other objects are refused, not cast:
-    numpy's cast would drop an imaginary part with only a warning, read ``"1.5"``
-    as 1.5 and ``True`` as 1.  An object array passes when every element is a
-    real number (``numbers.Real``: int, float, Fraction, numpy scalars; not bool).
-    """
-    try:
-        a = np.asarray(x)
-    except (TypeError, ValueError) as e:  # e.g. rows of different lengths
-        raise ValueError(f"{what} must be real numbers, {shape} ({' '.join(str(e).split())})") from None
-    kind = a.dtype.kind
-    if kind == "O":
-        for v in a.flat:
-            if isinstance(v, (bool, np.bool_)) or not isinstance(v, numbers.Real):
-                raise ValueError(f"{what} must be real numbers, {shape}: got {type(v).__name__} {_short(v)}")
-    elif kind not in "iuf":
-        raise ValueError(f"{what} must be real numbers, {shape}: got {_DTYPE_KINDS.get(kind, 'values')} (dtype {a.dtype})")
-    try:
-        return a.astype(np.float64, copy=False)
-    except (OverflowError, TypeError, ValueError):  # an integer beyond float64 in an object array
-        raise ValueError(f"{what} must be finite real numbers: a value is beyond float64's range") from None
-
-
-def _short(v) -> str:
-    r = repr(v)
-    return r if len(r) <= 40 else r[:37] + "..."
-
-
-def validate_ic(ic) -> np.ndarray:
-    """Return ``ic`` as a float64 (6,) array or raise ValueError naming the problem."""
-    a = _as_real(ic, "initial condition ic", "6 of them (vx,vy,vz,Lx,Ly,Lz)")
-    if a.shape != (6,):
-        raise ValueError(f"initial condition must have 6 components (vx,vy,vz,Lx,Ly,Lz), got {a.size}")
-    if not np.all(np.isfinite(a)):
-        bad = [IC_FIELDS[i] for i in range(6) if not math.isfinite(a[i])]
-        raise ValueError(f"initial condition is not finite in {', '.join(bad)}")
-    return a
-
-
-def validate_ics(ics) -> np.ndarray:
-    """(m, 6) float64 C-contiguous array of finite ICs, or ValueError.
-
-    A float64 C-contiguous (m, 6) input is returned as it is (no copy).
-    """
-    a = _as_real(ics, "initial conditions ics", "an (m, 6) array")
-    if a.ndim == 1:
-        a = a.reshape(1, -1)
-    if a.ndim != 2 or a.shape[1] != 6:
-        raise ValueError(f"initial conditions must be an (m, 6) array, got shape {a.shape}")
-    bad = ~np.isfinite(a).all(axis=1)
-    if bad.any():
-        raise ValueError(f"{int(bad.sum())} initial condition(s) are not finite (first: row {int(np.argmax(bad))})")
-    return np.ascontiguousarray(a)
-
-
-class SliceICs(np.ndarray):
-    """ICs that remember where on a slice they are: what :func:`seed_slice` returns.
-
-    A plain float64 array of ICs, (m, 6) or one IC (6,), with one more
-    attribute: ``coords``, their slice coordinates, (m, 3) or (3,) float64
-    (x, y, z; z is NaN on a 2-D slice).  :func:`~dicetrace.simulate.simulate_batch`
-    passes them on to its result, so ``simulate_batch(seed_slice(xs, ys)).to_pandas()``
-    has the ``x, y, z`` columns filled.
-
-    Selecting rows (``ics[:10]``, ``ics[mask]``, ``ics[[3, 1]]``, ``ics[5]``)
-    and ``ics.copy()`` keep the matching coordinates.  Anything else gives
-    ICs that no longer sit at those coordinates, or need not: arithmetic and
-    other ufuncs return a plain ndarray, and other views (``reshape``,
-    ``ics[:, 3:]``, ...) have ``coords`` None (their rows have no
-    coordinates, as for any plain array).
-    """
-
-    coords: np.ndarray | None
-
-    def __new__(cls, ics, coords):
-        obj = np.asarray(ics, dtype=np.float64).view(cls)
-        c = np.asarray(coords, dtype=np.float64)
-        if c.shape != obj.shape[:-1] + (3,):
-            raise ValueError(f"coords of shape {c.shape} do not match ICs of shape {obj.shape}")
-        obj.coords = c
-        return obj
-
-    def __array_finalize__(self, obj) -> None:
-        self.coords = None  # a view or a new array: its rows need not be the coordinates' (see __getitem__)
-
-    def __array_wrap__(self, arr, context=None, return_scalar=False):
-        # ufunc results (ics * sign, ics + 1, np.sin(ics), ...) are plain arrays: no longer at those coordinates
-        arr = arr.view(np.ndarray)
-        return arr[()] if return_scalar else arr
-
-    def __getitem__(self, key):
-        out = super().__getitem__(key)
-        if not isinstance(out, SliceICs) or self.coords is None:
-            return out
-        rows = self._rows(key)
-        if rows is not None and out.shape[-1:] == (6,):
-            try:
-                c = self.coords[rows]
-            except (IndexError, TypeError, ValueError):  # e.g. a mask over all 6 components: not whole rows
-                return out
-            if c.shape == out.shape[:-1] + (3,):
-                out.coords = c
-        return out
-
-    def _rows(self, key):
-        """The row part of ``key`` when it selects whole rows (all 6 components), else None."""
-        if self.ndim == 1:  # one IC: only the whole of it
-            whole = key is Ellipsis or (isinstance(key, slice) and key == slice(None))
-            return Ellipsis if whole or (isinstance(key, tuple) and key in ((), (Ellipsis,))) else None
-        if not isinstance(key, tuple):
-            return key
-        if len(key) == 1:
-            return key[0]
-        if len(key) == 2 and (key[1] is Ellipsis or (isinstance(key[1], slice) and key[1] == slice(None))):
-            return key[0]
-        return None
-
-    def copy(self, order="C"):
-        out = super().copy(order)
-        out.coords = None if self.coords is None else self.coords.copy()
-        return out
-
-    def __reduce__(self):
-        fn, args, state = super().__reduce__()
-        return fn, args, (state, self.coords)
-
-    def __setstate__(self, state):
-        nd_state, coords = state
-        super().__setstate__(nd_state)
-        self.coords = coords
 
 
 def seed_slice(x, y, z=None) -> SliceICs:
@@ -197,14 +62,14 @@ def seed_slice(x, y, z=None) -> SliceICs:
     ``simulate_batch(seed_slice(xs, ys))`` knows them (its table's ``x, y, z``).
     """
     scalar = np.ndim(x) == 0 and np.ndim(y) == 0 and (z is None or np.ndim(z) == 0)
-    xc = _as_real(x, "seed_slice x", "a number or an array")
-    yc = _as_real(y, "seed_slice y", "a number or an array")
+    xc = as_real(x, "seed_slice x", "a number or an array")
+    yc = as_real(y, "seed_slice y", "a number or an array")
     x = np.atleast_1d(xc)[:, None]
     y = np.atleast_1d(yc)[:, None]
     L = x * SEED_L_DIRS[0] + y * SEED_L_DIRS[1]
     U = x * SEED_U_DIRS[0] + y * SEED_U_DIRS[1]
     if z is not None:
-        z = np.atleast_1d(_as_real(z, "seed_slice z", "a number or an array"))[:, None]
+        z = np.atleast_1d(as_real(z, "seed_slice z", "a number or an array"))[:, None]
         L = L + z * SEED_L_DIRS[2]
         U = U + z * SEED_U_DIRS[2]
     L = L + SEED_L_ORIGIN
@@ -349,106 +214,9 @@ def get_slice(name: str) -> Slice:
         raise ValueError(f"unknown slice {name!r} (choose from {', '.join(SLICES)})") from None
 
 
-# -- windows --------------------------------------------------------------------------------
-
-#: Named windows on the seed slice, ((x0, x1), (y0, y1)): the writeup's eight, the program's zooms, the studies' zooms.
-WINDOWS: dict[str, tuple[tuple[float, float], tuple[float, float]]] = {
-    "home": ((0.0, 0.1), (0.0, 0.1)),
-    "zoom-out": ((0.0, 1.0), (0.0, 1.0)),
-    "more-out": ((0.0, 10.0), (0.0, 10.0)),
-    "most-out": ((0.0, 100.0), (0.0, 100.0)),
-    "red-sea": ((1.0, 2.0), (3.5, 4.5)),
-    "red-sea-2": ((1.4, 1.56), (3.95, 4.25)),
-    "party": ((0.02, 0.026), (0.01, 0.02)),
-    "green-island": ((0.055, 0.06), (0.035, 0.045)),
-    # The 2019 program's own windows (its interactive scatter, interactiveScatter/scatters.pde)
-    # beyond the writeup's: the zooms below party and green island (the vertex hunt).
-    "party-2": ((0.0197, 0.0205), (0.0177, 0.0186)),
-    "party-3": ((0.01975, 0.01984), (0.0182, 0.0183)),
-    "green-island-2": ((0.057, 0.0576), (0.042, 0.044)),
-    "green-island-3": ((0.05725, 0.0573), (0.04358, 0.04372)),
-    "green-island-4": ((0.057266, 0.057274), (0.043615, 0.043635)),
-    "green-island-5": ((0.057269, 0.0572702), (0.043621, 0.043625)),
-    "green-island-6.2-4": ((0.057269466, 0.0572694705), (0.043622917, 0.043622924)),
-    # Deeper red-sea zooms (study b), inside red sea 2 where its border is richest.
-    "red-sea-3": ((1.40, 1.45), (3.95, 4.02)),
-    "red-sea-4": ((1.405, 1.42), (3.955, 3.975)),
-}
-
 #: The writeup's three "red sea" topology throws on the seed slice (section 5.5).
 TOPOLOGY_POINTS = ((1.65, 3.9), (1.5, 4.0), (1.2, 4.4))
 
-
-def _ranges(r, ndim: int | None, what: str) -> tuple[tuple[float, float], ...]:
-    try:
-        pairs = tuple((float(a), float(b)) for a, b in r)
-    except (TypeError, ValueError):
-        raise ValueError(f"{what} must be (lo, hi) pairs, got {r!r}") from None
-    if ndim is not None and len(pairs) != ndim:
-        raise ValueError(f"{what} needs {ndim} (lo, hi) ranges for a {ndim}-D slice, got {len(pairs)}")
-    for lo, hi in pairs:
-        if not (math.isfinite(lo) and math.isfinite(hi)):
-            raise ValueError(f"{what} has a non-finite bound in {pairs}")
-    return pairs
-
-
-def _check_widths(pairs, points) -> None:
-    """Every range must have hi > lo (the one rule for windows, boxes and z ranges everywhere); a grid axis of one
-    point (``points[a] == 1``) may have lo == hi: that point is lo.  Never hi < lo."""
-    for a, (lo, hi) in enumerate(pairs):
-        one = points is not None and a < len(points) and points[a] == 1
-        if hi > lo or (one and hi == lo):
-            continue
-        axis = "xyz"[a] if a < 3 else f"axis {a}"
-        what = "zero" if hi == lo else "negative"
-        raise ValueError(f"the {axis} range must have {axis}1 > {axis}0 ({what} width), got {lo!r}, {hi!r}")
-
-
-def get_window(window, ndim: int = 2, z_range=None, *, points=None) -> tuple[tuple[float, float], ...]:
-    """Window ranges from a name in ``WINDOWS``, ``"x0,x1,y0,y1[,z0,z1]"`` or pairs.
-
-    A named (2-D) window on a 3-D slice needs ``z_range`` = (z0, z1).
-    Every range must be finite with hi > lo (a zero-width or inverted window
-    is refused, by every command and in the API alike); only a grid axis of
-    one point (``points``: the grid's points per axis) may have lo == hi.
-    """
-    if isinstance(window, str):
-        key = window.strip().lower().replace("_", "-").replace(" ", "-")
-        if key in WINDOWS:
-            pairs = WINDOWS[key]
-        else:
-            try:
-                vals = [float(v) for v in window.split(",")]
-            except ValueError:
-                raise ValueError(
-                    f"unknown window {window!r}: a name ({', '.join(WINDOWS)}) or x0,x1,y0,y1[,z0,z1]"
-                ) from None
-            if len(vals) % 2 or not 2 <= len(vals) <= 6:
-                raise ValueError(f"window {window!r} needs 2, 4 or 6 numbers (lo,hi per axis)")
-            pairs = tuple((vals[i], vals[i + 1]) for i in range(0, len(vals), 2))
-    else:
-        pairs = _ranges(window, None, "window")
-    pairs = tuple(pairs)
-    if z_range is not None:
-        if len(pairs) != 2:
-            raise ValueError("a z range goes with a 2-D window (x and y ranges)")
-        pairs = pairs + (tuple(float(v) for v in z_range),)
-    if len(pairs) == 2 and ndim == 3:
-        raise ValueError("a 3-D slice needs a z range too (x0,x1,y0,y1,z0,z1, or a named window plus z0,z1)")
-    pairs = _ranges(pairs, ndim, "window")
-    _check_widths(pairs, points)
-    return pairs
-
-
-def grid_axis(lo: float, hi: float, n: int) -> np.ndarray:
-    """The program's grid points ``lo + (p−1)/(n−1)·(hi−lo)``, p = 1..n (n = 1: ``lo``)."""
-    n = int(n)
-    if n < 1:
-        raise ValueError(f"a grid axis needs at least 1 point, got {n}")
-    if n == 1:
-        return np.array([float(lo)])
-    p1 = np.arange(n, dtype=np.float64)  # p − 1
-    return float(lo) + p1 / float(n - 1) * (float(hi) - float(lo))
 
 
 # -- IC spaces --------------------------------------------------------------------------------

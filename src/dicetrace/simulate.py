@@ -17,7 +17,7 @@ import numba
 from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
-from dicetrace.ics import SliceICs, validate_ic, validate_ics
+from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
 from dicetrace.status import Status
 

@@ -130,7 +130,7 @@ def resolve_window(window, ndim: int = 2) -> tuple[tuple[float, float], ...]:
     Names are the writeup's (``home``, ``zoom-out``, ``more-out``,
     ``most-out``, ``red-sea``, ``red-sea-2``, ``party``, ``green-island``).
     """
-    from dicetrace.ics import get_window
+    from dicetrace.windows import get_window
 
     if isinstance(window, str) or len(window) == ndim:
         return get_window(window, ndim)
@@ -142,7 +142,7 @@ def resolve_window(window, ndim: int = 2) -> tuple[tuple[float, float], ...]:
 
 def _grid_axis(lo: float, hi: float, n: int) -> np.ndarray:
     try:
-        from dicetrace.ics import grid_axis
+        from dicetrace.windows import grid_axis
     except ImportError:
         n = int(n)
         if n == 1:

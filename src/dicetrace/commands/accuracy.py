@@ -90,7 +90,7 @@ def register(app: typer.Typer) -> None:
         (from the repository root); a reduced run (--quick, --n, --seed, --window,
         --presets, --integrator) into analysis/ is refused.
         """
-        from dicetrace.ics import get_window
+        from dicetrace.windows import get_window
         from dicetrace.studies import accuracy as acc
         from dicetrace.studies.accuracy_render import write_study
 

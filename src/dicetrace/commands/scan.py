@@ -117,7 +117,7 @@ def _window(text: str, option: str, ndim: int, z: Optional[str], points=None):
     The rule is :func:`dicetrace.ics.get_window`'s, every command's: finite
     ranges of x1 > x0 (only a grid axis of one point, ``points``, may have x1 == x0).
     """
-    from dicetrace.ics import get_window
+    from dicetrace.windows import get_window
 
     if z is not None and ndim != 3:
         fail(f"--z: the slice is {ndim}-D: a z range applies only to a 3-D slice (seed3, seed3-ortho)")

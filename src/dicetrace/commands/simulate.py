@@ -201,7 +201,7 @@ def slice_ics(name: str, coords: np.ndarray, l_convention: str, what: str = "--a
     """
     from dicetrace.params import convert_l
 
-    from dicetrace.ics import IC_FIELDS
+    from dicetrace.ic_arrays import IC_FIELDS
 
     coords = np.asarray(coords, dtype=np.float64)
     sl = get_slice(name, coords.shape[1])

@@ -71,7 +71,7 @@ def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int 
               extent=(xs[0] - hx / 2, xs[-1] + hx / 2, ys[0] - hy / 2, ys[-1] + hy / 2))
     ax.set_xlabel("x")
     ax.set_ylabel("y")
-    from dicetrace.ics import WINDOWS
+    from dicetrace.windows import WINDOWS
 
     sl = defn.space.slice.name
     names = [n for n, w in WINDOWS.items() if tuple(w) == tuple(defn.space.window[:2])]

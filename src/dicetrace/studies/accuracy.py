@@ -48,9 +48,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from dicetrace.ics import SEED_SLICE, WINDOWS, Sample, get_window
+from dicetrace.ics import SEED_SLICE, Sample
 from dicetrace.params import INTEGRATORS, Config, convert_l, get_preset, make_config
 from dicetrace.status import Status
+from dicetrace.windows import WINDOWS, get_window
 
 #: Presets studied, in the order of the tables and plots.
 PRESETS = ("seed", "physical")

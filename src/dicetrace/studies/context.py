@@ -71,7 +71,7 @@ class Computed:
 
 def window_ranges(window) -> tuple[tuple[float, float], ...]:
     """Ranges of a window: a name in ``dicetrace.ics.WINDOWS``, or ranges (returned as tuples)."""
-    from dicetrace.ics import get_window
+    from dicetrace.windows import get_window
 
     if isinstance(window, str):
         return get_window(window, 2)
