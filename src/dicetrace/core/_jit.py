@@ -12,11 +12,20 @@ zeros and change only rounding (``FUSED``, docs/model.md §9).
 
 numba's cache checks only the source file of the cached function, so a
 kernel in ``loop.py`` would keep running old code after ``fast.py`` or
-``model.py`` changed.  ``_CoreCacheLocator`` stamps every cached kernel of
-``dicetrace.core`` (subpackages included) with a digest of all of
-``core/**/*.py`` and of the constants of the bottom layers that kernels
-compile in (the integrator table, the status codes, the mode constants and
-the field order of ``KernelParams``), so any change there recompiles them.
+``model.py`` changed.  The kernels of ``dicetrace.core`` (subpackages
+included) are therefore cached under a digest of all of ``core/**/*.py``
+and of the constants of the bottom layers that kernels compile in (the
+integrator table, the status codes, the mode constants and the field order
+of ``KernelParams``): any change there recompiles them.  The digest is the
+whole key, so the cache lives in the user's cache folder
+(:func:`cache_root`: ``DICETRACE_CACHE_DIR``, else ``$NUMBA_CACHE_DIR/dicetrace``,
+else ``$XDG_CACHE_HOME`` or ``~/.cache``, then ``dicetrace/kernels/<digest>``)
+and every checkout, clone or install of the same kernel sources shares it:
+a fresh clone of an unchanged release compiles nothing.  The six most
+recently used digests are kept, older ones removed.  Where that folder
+cannot be written, the cache falls back to ``__pycache__`` beside the
+sources (keyed by the digest and the files' times), and where nothing can
+be written, kernels compile without a disk cache (one line says so).
 
 :func:`specialise` makes compile-time variants of one Python source: a copy
 of a function whose named globals are replaced.  numba freezes globals as
@@ -30,6 +39,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import shutil
 import sys
 import types
 from pathlib import Path
@@ -80,31 +90,101 @@ def kernel_digest() -> str:
     return _core_digest()
 
 
+#: How many kernel digests :func:`cache_root` keeps (the most recently used; older ones are removed).
+KEEP_DIGESTS = 6
+
+
+def cache_root() -> Path:
+    """The folder under which compiled kernels are kept, one sub-folder per kernel digest."""
+    if os.environ.get("DICETRACE_CACHE_DIR"):
+        return Path(os.environ["DICETRACE_CACHE_DIR"])
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        return Path(os.environ["NUMBA_CACHE_DIR"]) / "dicetrace"
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "dicetrace" / "kernels"
+
+
+def prune_digests(root: Path, current: str, keep: int = KEEP_DIGESTS) -> list[Path]:
+    """Remove the digest folders under ``root`` beyond the ``keep`` most recently used (never ``current``); return them.
+
+    Best effort: a folder another process is using is only recompiled there
+    if it goes; nothing fails here.
+    """
+    try:
+        folders = [p for p in root.iterdir() if p.is_dir() and p.name != current]
+        folders.sort(key=lambda p: p.stat().st_mtime, reverse=True)
+    except OSError:
+        return []
+    gone = folders[max(0, keep - 1):]
+    for p in gone:
+        shutil.rmtree(p, ignore_errors=True)
+    return gone
+
+
 def _install_core_locator() -> None:
     try:
         from numba.core import caching
 
-        base = caching.InTreeCacheLocator
+        in_tree = caching.InTreeCacheLocator
+        mixin = caching._SourceFileBackedLocatorMixin
+        abstract = caching._CacheLocator
         impl = caching.CacheImpl
     except (ImportError, AttributeError):  # numba internals moved: keep numba's default
         return
     digest = kernel_digest()
+    key = digest[:20]
+    root = cache_root()
 
-    class _CoreCacheLocator(base):
+    def in_core(py_file) -> bool:
+        try:
+            return Path(py_file).resolve().is_relative_to(_CORE_DIR)
+        except OSError:
+            return False
+
+    class _CoreCacheLocator(mixin, abstract):
+        """Kernels of ``dicetrace.core`` in ``cache_root()/<digest>``, stamped by the digest alone."""
+
+        def __init__(self, py_func, py_file):
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            rel = Path(py_file).resolve().parent.relative_to(_CORE_DIR)
+            self._cache_path = str(root / key / rel)
+
+        def get_cache_path(self):
+            return self._cache_path
+
+        def get_source_stamp(self):
+            return digest
+
         @classmethod
         def from_function(cls, py_func, py_file):
+            if not in_core(py_file):
+                return None
+            self = cls(py_func, py_file)
             try:
-                if not Path(py_file).resolve().is_relative_to(_CORE_DIR):
-                    return None
+                self.ensure_cache_path()
             except OSError:
                 return None
-            return super().from_function(py_func, py_file)
+            return self
+
+    class _CoreInTreeCacheLocator(in_tree):
+        """Where the user cache folder cannot be written: ``__pycache__`` beside the sources, digest and times."""
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            return super().from_function(py_func, py_file) if in_core(py_file) else None
 
         def get_source_stamp(self):
             return (super().get_source_stamp(), digest)
 
     if not any(c.__name__ == "_CoreCacheLocator" for c in impl._locator_classes):
-        impl._locator_classes.insert(0, _CoreCacheLocator)
+        impl._locator_classes[0:0] = [_CoreCacheLocator, _CoreInTreeCacheLocator]
+        try:
+            (root / key).mkdir(parents=True, exist_ok=True)
+            os.utime(root / key)  # the most recently used digest
+        except OSError:
+            return
+        prune_digests(root, key)
 
 
 if CACHE:
@@ -121,7 +201,7 @@ def _without_disk_cache(why: str) -> None:
         _OPTIONS["cache"] = False
         sys.stderr.write(
             f"dicetrace: no writable folder for numba's kernel cache ({why}); compiling without the disk cache"
-            " (set NUMBA_CACHE_DIR to a writable folder to keep compiled kernels)\n"
+            " (set DICETRACE_CACHE_DIR to a writable folder to keep compiled kernels)\n"
         )
 
 
