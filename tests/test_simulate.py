@@ -367,7 +367,7 @@ def test_a_batch_holds_its_result_and_one_chunk_not_every_buffer():
     """
     import tracemalloc
 
-    from dicetrace.simulate import RESULT_BYTES_PER_IC, _chunk_bytes_per_ic
+    from dicetrace.batch_chunks import RESULT_BYTES_PER_IC, chunk_bytes_per_ic
 
     m, chunk = 20_000, 1024
     xy = np.random.default_rng(2).uniform(0.0, 5.0, size=(m, 2))
@@ -379,17 +379,17 @@ def test_a_batch_holds_its_result_and_one_chunk_not_every_buffer():
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
-    bound = m * (RESULT_BYTES_PER_IC + 5 * 4) + 2 * chunk * _chunk_bytes_per_ic(128)
+    bound = m * (RESULT_BYTES_PER_IC + 5 * 4) + 2 * chunk * chunk_bytes_per_ic(128)
     assert peak < bound < m * 128 * 6, (peak, bound)
     assert len(res) == m
 
 
 def test_a_batch_that_cannot_fit_is_refused_before_anything_runs(monkeypatch):
-    import dicetrace.simulate as sim
+    import dicetrace.batch_chunks as chunks
 
     ran = []
-    monkeypatch.setattr(sim, "_run_batch", lambda *a: ran.append(1))
-    monkeypatch.setattr(sim, "available_memory", lambda: 2**20)  # 1 MiB
+    monkeypatch.setattr(chunks, "_run_batch", lambda *a: ran.append(1))
+    monkeypatch.setattr(chunks, "available_memory", lambda: 2**20)  # 1 MiB
     ics = np.asarray(seed_slice(np.linspace(1, 2, 30_000), np.linspace(3.5, 4.5, 30_000)))
     with pytest.raises(ValueError) as info:
         simulate_batch(ics)

@@ -145,7 +145,7 @@ def test_the_default_output_folder_is_not_made_either(work, snapshot, no_work, d
 def test_a_size_that_does_not_fit_the_memory_available_is_refused(work, no_work, dicetrace_cli, assert_one_line_error,
                                                                    monkeypatch, args, option):
     """With 32 MiB available (MemAvailable, patched) a run whose estimate is larger is refused by name."""
-    monkeypatch.setattr("dicetrace.simulate.available_memory", lambda: 32 * 2**20)
+    monkeypatch.setattr("dicetrace.memory.available_memory", lambda: 32 * 2**20)
     line = assert_one_line_error(dicetrace_cli(*args, "--out", OUT, cwd=work), option, "32 MiB available")
     assert line.startswith(f"dicetrace: error: {option} ")
     assert no_work == [] and not (work / OUT).exists()

@@ -260,7 +260,7 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
         estimate_scan,
         human_seconds,
     )
-    from dicetrace.simulate import available_memory
+    from dicetrace.memory import available_memory
     from dicetrace.sinks._common import human_bytes
 
     quick = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks, calibrate=False)

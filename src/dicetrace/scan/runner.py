@@ -181,7 +181,7 @@ def _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask) 
 def _check_table_memory(defn: ScanDefinition) -> None:
     """Refuse (ValueError) a scan whose whole rolls table, held in memory, would not fit: a folder streams it."""
     from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC
-    from dicetrace.simulate import available_memory
+    from dicetrace.memory import available_memory
     from dicetrace.sinks._common import human_bytes
 
     need = defn.size * TABLE_MEMORY_PER_IC

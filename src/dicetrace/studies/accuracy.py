@@ -89,7 +89,7 @@ SEED_RANGE = (0, 2**64)
 
 def check_size(n: int) -> None:
     """Refuse (ValueError naming --n) a sample of ``n`` ICs whose runs will not fit in the available memory."""
-    from dicetrace.simulate import available_memory
+    from dicetrace.memory import available_memory
     from dicetrace.sinks._common import human_bytes
 
     need, avail = int(n) * BYTES_PER_IC, available_memory()

@@ -41,7 +41,7 @@ def largest_grid(names, options: Options) -> int:
 
 def check_memory(names, options: Options) -> None:
     """Refuse (ValueError naming --res) a run whose largest grid will not fit in the available memory."""
-    from dicetrace.simulate import available_memory
+    from dicetrace.memory import available_memory
     from dicetrace.sinks._common import human_bytes
 
     nodes = largest_grid(names, options)

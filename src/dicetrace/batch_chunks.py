@@ -1,0 +1,168 @@
+"""Running :func:`~dicetrace.simulate.simulate_batch` chunk by chunk: the contact-set buffers, the
+size of a chunk, the check that a batch fits in memory, and the kernel calls with their buffer growth.
+
+Each chunk's ICs go through the batch kernel (``run_batch``; up to one kernel
+block, ``BATCH_BLOCK``, through the single-throw loop instead) with ``cap``
+contact sets per IC; throws that fill their buffer are re-run with
+``CAP_GROWTH`` times more until they fit, and the chunk's sets are compacted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import numba
+
+from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
+from dicetrace.memory import available_memory
+from dicetrace.status import Status
+
+#: Contact sets per IC in the first pass (longer throws are re-run with ``CAP_GROWTH`` times more).
+DEFAULT_CAP = 128
+CAP_GROWTH = 8
+#: Largest first-pass buffer a caller may ask for, contact sets per IC.
+MAX_CAP = 2**31 - 1
+
+
+class _Threads:
+    """Context: numba threads for this thread's parallel regions (None: leave as is)."""
+
+    def __init__(self, n: int | None):
+        self.n = n
+
+    def __enter__(self):
+        self.old = numba.get_num_threads()
+        if self.n is not None:
+            numba.set_num_threads(max(1, min(int(self.n), numba.config.NUMBA_NUM_THREADS)))
+
+    def __exit__(self, *exc):
+        numba.set_num_threads(self.old)
+
+
+def _run_batch(kin, cap: int, threads):
+    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC.
+
+    Up to ``BATCH_BLOCK`` ICs (one work item of the batch kernel, so one
+    thread either way) run one by one through the single-throw loop instead:
+    the same results bit for bit, without compiling the batch kernel for
+    them (a first ``dicetrace simulate --ic`` compiles a third as much).
+    """
+    m = len(kin.ics)
+    if m <= BATCH_BLOCK:
+        return _run_serial(kin, cap)
+    out = (
+        np.zeros(m, dtype=np.int8),
+        np.zeros(m, dtype=np.int64),
+        np.zeros(m, dtype=np.int8),
+        np.zeros(m, dtype=np.int64),
+        np.zeros(m * cap, dtype=np.uint8),
+        np.zeros(m * cap, dtype=np.int32),
+    )
+    if m:
+        status, steps, outcome, nsets, sets, set_steps = out
+        with _Threads(threads), numba.parallel_chunksize(1):
+            run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, status, steps, outcome, nsets, sets, set_steps)
+    return out
+
+
+def _run_serial(kin, cap: int):
+    """``_run_batch``'s outputs from ``run_roll`` called IC by IC."""
+    m = len(kin.ics)
+    status, steps, outcome, nsets = (np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64))
+    sets, set_steps = np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32)
+    empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
+    for i in range(m):
+        status[i], steps[i], outcome[i], nsets[i] = run_roll(
+            kin.ics[i], kin.off0, kin.params, kin.integrator_id,
+            sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], *empty,
+        )
+    return status, steps, outcome, nsets, sets, set_steps
+
+
+#: Bytes a batch's result holds per IC whatever its throws: status and outcome (1 each);
+#: steps, t_settle_s, set_offsets and the set counts (8 each); at least one contact set (1, and 4 for its step).
+RESULT_BYTES_PER_IC = 1 + 1 + 8 + 8 + 8 + 8 + 5
+#: Bytes per IC of a chunk in flight besides its contact-set buffers (``cap`` sets of 1 + 4 bytes, and
+#: a 1-byte mask): the kernel's copy of the ICs (48), its outputs (1 + 8 + 1 + 8), their compacted copy.
+CHUNK_BYTES_PER_IC = 48 + 18 + 18
+#: Working memory of one chunk of :func:`simulate_batch` when no ``chunk`` is given.
+CHUNK_BYTES = 64 * 2**20
+
+
+def chunk_bytes_per_ic(cap: int) -> int:
+    return CHUNK_BYTES_PER_IC + 6 * cap
+
+
+def batch_chunk(cap: int = DEFAULT_CAP) -> int:
+    """ICs per chunk of :func:`simulate_batch` by default: about ``CHUNK_BYTES`` of buffers, whole kernel blocks."""
+    n = CHUNK_BYTES // chunk_bytes_per_ic(cap)
+    return max(BATCH_BLOCK, n // BATCH_BLOCK * BATCH_BLOCK)
+
+
+def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, what: str = "simulate_batch") -> None:
+    """Refuse (ValueError naming ``what``, the size and the limit) a batch that cannot fit in the available memory.
+
+    Counts what the result must hold whatever the throws (``RESULT_BYTES_PER_IC``,
+    48 more per IC when the ICs are returned converted, ``ics_copy``) and one
+    chunk in flight; the contact sets beyond the first of each throw (about
+    5 bytes each, 20–70 a throw) come on top, so this is a lower bound.
+    """
+    result = m * (RESULT_BYTES_PER_IC + (48 if ics_copy else 0))
+    flight = min(m, chunk) * chunk_bytes_per_ic(cap)
+    avail = available_memory()
+    if avail is not None and result + flight > avail:
+        gib = 2**30
+        raise ValueError(
+            f"{what}: {m:,} ICs need at least {(result + flight) / gib:.3g} GiB ({result / gib:.3g} GiB for their results, "
+            f"more with their contact sets, and {flight / gib:.3g} GiB for a chunk of {min(m, chunk):,} ICs with cap {cap:,}), "
+            f"more than the {avail / gib:.3g} GiB of memory available: pass fewer ICs per call"
+            + (" or a smaller chunk or cap" if flight > result else "")
+            + " (a scan writes its rows to disk chunk by chunk)"
+        )
+
+
+def run_chunk(kin, cap: int, threads):
+    """Summaries of the ICs of ``kin``: (status, steps, outcome, nsets, sets, set_steps), sets compacted.
+
+    Throws that fill their ``cap`` sets are re-run, all together, with
+    ``CAP_GROWTH`` times more until they fit.
+    """
+    m = len(kin.ics)
+    status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads)
+    extra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    todo = np.nonzero(status == Status.BUFFER_FULL)[0]
+    big = cap
+    while todo.size:
+        big *= CAP_GROWTH
+        st, sp, oc, ns, ss, sst = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads)
+        done = st != Status.BUFFER_FULL
+        for r in np.nonzero(done)[0]:
+            i = todo[r]
+            status[i], steps[i], outcome[i], nsets[i] = st[r], sp[r], oc[r], ns[r]
+            extra[int(i)] = (ss[r * big : r * big + ns[r]].copy(), sst[r * big : r * big + ns[r]].copy())
+        todo = todo[~done]
+    sets2, steps2 = sets.reshape(m, cap), set_steps.reshape(m, cap)
+    if not extra:
+        full = np.arange(cap)[None, :] < nsets[:, None]
+        return status, steps, outcome, nsets, sets2[full], steps2[full]
+    ends = np.cumsum(nsets)
+    flat_sets = np.empty(int(ends[-1]), dtype=np.uint8)
+    flat_steps = np.empty(int(ends[-1]), dtype=np.int32)
+    for i in range(m):
+        a, b = ends[i] - nsets[i], ends[i]
+        flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets2[i, : nsets[i]], steps2[i, : nsets[i]])
+    return status, steps, outcome, nsets, flat_sets, flat_steps
+
+
+def join_parts(parts: list, dtype, total: int) -> np.ndarray:
+    """The parts end to end, each part freed once copied (peak: the whole plus one part)."""
+    if len(parts) == 1:
+        return parts.pop()
+    out = np.empty(total, dtype=dtype)
+    pos = 0
+    while parts:
+        p = parts.pop(0)
+        out[pos : pos + len(p)] = p
+        pos += len(p)
+    return out
+
