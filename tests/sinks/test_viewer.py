@@ -80,7 +80,8 @@ def assert_pips_show_the_facing_numbers(roll, im: np.ndarray) -> list[int]:
     A face turned away would show through as its pips, its label or its colour on the visible
     plates: their pip counts or their foreign pixels catch it.  Returns the faces checked.
     """
-    from dicetrace.sinks.rerun import CM_COLOR, FACE_COLORS, _eye_for
+    from dicetrace.sinks.rerun import CM_COLOR, FACE_COLORS
+    from dicetrace.sinks.rerun_view import _eye_for
 
     h, w, _ = im.shape
     eye = np.asarray(_eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm)).position.as_arrow_array()

@@ -34,7 +34,8 @@ Optional channels (forces, penetration depths, node velocities) are
 logged only when asked: :mod:`dicetrace.sinks.rerun_channels`.  The same
 ``log(rec)`` (:func:`roll_logger`) feeds the file and the streaming sinks
 (:mod:`dicetrace.sinks.rerun_stream`); several throws compared:
-:mod:`dicetrace.sinks.rerun_compare`.
+:mod:`dicetrace.sinks.rerun_compare`.  The default blueprint and the camera
+that frames the throw: :mod:`dicetrace.sinks.rerun_view`.
 
 The recording property ``dicetrace`` (``rec.send_property``) holds the
 version, the full configuration (JSON), the IC and the summary:
@@ -50,8 +51,16 @@ from pathlib import Path
 
 import numpy as np
 
+import dicetrace
+from dicetrace.ic_arrays import IC_FIELDS
+from dicetrace.simulate import contact_events
 from dicetrace.sinks._common import Destination, destination, write_bytes
+from dicetrace.sinks.rerun_channels import arrow_scales, log_channels
 from dicetrace.sinks.rerun_pips import log_pips
+from dicetrace.sinks.rerun_view import default_blueprint
+
+# rerun (and pyarrow, to read a file back) are imported in the functions that use them, not here: they are heavy
+# at import, and rerun must not load before a streaming sink has set its log level (rerun_stream.quiet_sdk_logs)
 
 #: Face colours of the writeup: 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black (RGB).
 FACE_COLORS = np.array(
@@ -168,8 +177,6 @@ def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, t
     """
     scales = {}
     if channels:
-        from dicetrace.sinks.rerun_channels import arrow_scales
-
         scales = arrow_scales(roll, channels)
 
     def log(rec) -> None:
@@ -214,8 +221,6 @@ def encode_rrd(log, blueprint, *, application_id: str = "dicetrace", activate: b
 
 def metadata_values(roll, ic_label: str | None = None) -> dict:
     """The recording property ``dicetrace``: version, configuration, IC and summary (cf. the Parquet metadata)."""
-    import dicetrace
-
     return {
         "dicetrace_version": dicetrace.__version__,
         "config_json": json.dumps(roll.config.as_dict(), sort_keys=True),
@@ -245,9 +250,6 @@ def read_rrd_metadata(path) -> dict:
 
 def summary_markdown(roll, ic_label: str | None = None) -> str:
     """The summary document: IC, configuration, outcome, status, contact sequence."""
-    import dicetrace
-    from dicetrace.ics import IC_FIELDS
-
     cfg = roll.config
     lines = ["# dicetrace throw", ""]
     if ic_label:
@@ -294,8 +296,6 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
              scales=None) -> None:
     """Log one throw into an open recording stream (see the module docstring)."""
     import rerun as rr
-
-    from dicetrace.simulate import contact_events
 
     tr = roll.trace
     cfg = roll.config
@@ -413,8 +413,6 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     else:
         rec.log("contacts", rr.TextLog("no contact events", level="DEBUG"), static=True)
     if channels:
-        from dicetrace.sinks.rerun_channels import arrow_scales, log_channels
-
         log_channels(rec, roll, channels, rows, index, scales or arrow_scales(roll, channels))
 
 
@@ -515,148 +513,6 @@ def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_
     )
 
 
-#: The 3-D view's vertical field of view in Rerun's viewer (0.41: 55°), and the share of it the framing fills.
-VIEW_FOV_Y_DEG = 55.0
-FRAME_FILL = 0.9
-#: The default camera: its azimuth from the throw's travel, seen from beyond the resting place (deg), and elevation.
-EYE_AZIMUTH_DEG = 35.0
-EYE_ELEVATION_DEG = 30.0
-#: Most path points the framing looks at (the path is subsampled above it).
-FRAME_POINTS = 400
-
-
-def framed_points(cm: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray]:
-    """What the default camera frames: (centre-of-mass points, the resting place), from one path.
-
-    The path from the first row where the die may touch the ground (centre of mass within √3·half
-    of it: the bounces, where the outcome is decided) to its end, and the resting place; the drop
-    before the first bounce rises out of the frame.  A path that never comes down is framed whole.
-    """
-    cm = cm[np.isfinite(cm).all(axis=1)]
-    near = np.flatnonzero(cm[:, 2] <= np.sqrt(3.0) * half + 1e-9)
-    pts = cm[near[0]:] if len(near) else cm
-    if len(pts) > FRAME_POINTS:
-        pts = pts[np.linspace(0, len(pts) - 1, FRAME_POINTS).round().astype(int)]
-    return pts, cm[-1]
-
-
-def view_axes(travel: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The default camera's (forward, right, up) unit vectors for a throw whose horizontal travel is ``travel``.
-
-    It looks back along the travel from beyond the resting place, :data:`EYE_AZIMUTH_DEG` to the
-    travel's right and :data:`EYE_ELEVATION_DEG` from above (a travel shorter than half a side: along +y).
-    """
-    norm = float(np.hypot(*travel))
-    d = np.asarray(travel, dtype=float) / norm if norm > half else np.array([0.0, 1.0])
-    az, el = np.radians(EYE_AZIMUTH_DEG), np.radians(EYE_ELEVATION_DEG)
-    back = np.cos(az) * d + np.sin(az) * np.array([d[1], -d[0]])  # from the resting place towards the camera
-    fwd = -np.array([back[0] * np.cos(el), back[1] * np.cos(el), np.sin(el)])
-    right = np.cross(fwd, [0.0, 0.0, 1.0])
-    right /= np.linalg.norm(right)
-    return fwd, right, np.cross(right, fwd)
-
-
-def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: float):
-    """The camera closest to ``rest`` that sees every point of ``points`` with the whole die around it.
-
-    It looks from beyond the resting place back along the ``travel`` (horizontal, start to rest),
-    :data:`EYE_AZIMUTH_DEG` to its side and :data:`EYE_ELEVATION_DEG` from above; its distance is
-    the solution of a linear programme: every point's sphere of the die's circumradius lies within
-    :data:`FRAME_FILL` of the view's field of view (:data:`VIEW_FOV_Y_DEG`, both ways), as close to
-    the resting die as that allows; a second one centres the view at that distance (the tightest
-    side of the frame gets the most room).  It orbits around the point in front of it at the
-    resting die's depth.
-    """
-    import rerun.blueprint as rrb
-    from scipy.optimize import linprog
-
-    fwd, right, up = view_axes(travel, half)
-    k = np.tan(np.radians(VIEW_FOV_Y_DEG) / 2) * FRAME_FILL
-    rho = np.sqrt(3.0) * half * np.sqrt(1 + k * k)  # a die's circumsphere kept inside each side of the frustum
-    # for each point p and side a: a·(p - E) - k·fwd·(p - E) <= -rho  (p's sphere inside that side)
-    sides = np.stack([right, -right, up, -up])
-    pts = np.vstack([points, rest[None, :]])
-    a_ub = np.repeat(k * fwd[None, :] - sides, len(pts), axis=0)
-    b_ub = np.concatenate([-(pts @ (a - k * fwd)) - rho for a in sides])
-    res = linprog(-fwd, A_ub=a_ub, b_ub=b_ub, bounds=[(None, None)] * 3, method="highs")
-    if res.status != 0:  # pragma: no cover - a bounded, feasible programme
-        raise RuntimeError(f"framing the die: {res.message}")
-    # then, as close as that, centred: the eye that gives the tightest side the most room, left/right and
-    # up/down each (margins mh, mv: a frame filled one way may still have room the other way)
-    closest = float(fwd @ (rest - res.x))
-    n = len(pts)
-    margins = np.zeros((4 * n, 2))
-    margins[: 2 * n, 0] = margins[2 * n :, 1] = 1.0  # rows: right, left sides, then up, down
-    a2 = np.vstack([np.hstack([a_ub, margins]), np.append(-fwd, [0.0, 0.0])[None, :]])
-    b2 = np.append(b_ub, closest * (1 + 1e-9) + 1e-9 * half - float(fwd @ rest))
-    res2 = linprog(np.array([0.0, 0.0, 0.0, -1.0, -1.0]), A_ub=a2, b_ub=b2,
-                   bounds=[(None, None)] * 3 + [(0, None)] * 2, method="highs")
-    eye = res2.x[:3] if res2.status == 0 else res.x
-    target = eye + fwd * float(fwd @ (rest - eye))
-    return rrb.EyeControls3D(position=eye, look_target=target, eye_up=[0.0, 0.0, 1.0])
-
-
-def _eye_for(cm: np.ndarray, half: float):
-    """The default camera of a throw whose centre of mass follows ``cm`` (:func:`framing_eye`); None without a path."""
-    cm = cm[np.isfinite(cm).all(axis=1)]
-    if len(cm) == 0:
-        return None
-    points, rest = framed_points(cm, half)
-    return framing_eye(points, rest, cm[-1, :2] - cm[0, :2], half)
-
-
-def default_blueprint(roll=None, channels=()):
-    """3-D view of the world, energy plots, the contact log and the summary (and plots of scalar ``channels``).
-
-    With a ``roll``, the 3-D camera frames its path.
-    """
-    import rerun.blueprint as rrb
-
-    eye = None
-    if roll is not None and roll.trace is not None and roll.trace.cm_pos is not None:
-        eye = _eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm))
-
-    view3d = rrb.Spatial3DView(
-        origin="/world",
-        name="die",
-        eye_controls=eye,
-        background=(250, 250, 250),
-        line_grid=rrb.LineGrid3D(visible=False),  # the ground has its own grid (log_ground)
-    )
-    energy = rrb.TimeSeriesView(
-        origin="/energy",
-        name="energy (node-mass·cm²/s²)",
-        axis_x=rrb.TimeAxis(link="LinkToGlobal"),
-        plot_legend=rrb.PlotLegend(corner="RightTop"),
-    )
-    stop = rrb.TimeSeriesView(origin="/stop_test", name="stop-test energy", plot_legend=rrb.PlotLegend(corner="RightTop"))
-    right = rrb.Vertical(
-        energy,
-        stop,
-        rrb.Tabs(
-            rrb.TextLogView(
-                origin="/contacts",
-                name="contact events",
-                columns=rrb.TextLogColumns(
-                    timeline_columns=[rrb.encodings.TimelineColumn("sim_time")],
-                    text_log_columns=[rrb.encodings.TextLogColumn("Body")],
-                ),
-            ),
-            rrb.TextDocumentView(origin="/summary", name="summary"),
-            rrb.TimeSeriesView(origin="/stop_margin", name="stop-test margin (log10)"),
-            *_channel_views(channels),
-        ),
-        row_shares=[3, 2, 3])
-    return layout_blueprint(rrb, view3d, right)
-
-
-def layout_blueprint(rrb, view3d, right):
-    """dicetrace's layout: the 3-D view, ``right`` beside it; side panels collapsed, time following the end."""
-    return rrb.Blueprint(rrb.Horizontal(view3d, right, column_shares=[3, 2]), rrb.BlueprintPanel(state="collapsed"),
-                         rrb.SelectionPanel(state="collapsed"),
-                         rrb.TimePanel(state="collapsed", timeline="step", play_state="following"), auto_views=False)
-
-
 def read_rrd(path, *, static: bool = False) -> dict:
     """Read a recording's chunks back as one Arrow table per entity (needs only pyarrow).
 
@@ -692,11 +548,3 @@ def read_rrd(path, *, static: bool = False) -> dict:
             t = t.sort_by("step")
         out[entity] = t
     return out
-
-
-def _channel_views(channels) -> list:
-    if not channels:
-        return []
-    from dicetrace.sinks.rerun_channels import channel_views
-
-    return channel_views(channels)

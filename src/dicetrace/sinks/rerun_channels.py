@@ -22,6 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.params import convert_l
+
 CHANNELS = ("forces", "penetration", "velocities")
 NORMAL_COLOR = (200, 30, 200)
 FRICTION_COLOR = (0, 160, 200)
@@ -41,8 +43,6 @@ def parse_channels(text: str | None) -> frozenset:
 
 def node_velocities(roll) -> np.ndarray:
     """(n+1, 8, 3) node velocities u_k = U + x_k × ω, ω = L_program / inertia (the kernel's formula), cm/s."""
-    from dicetrace.params import convert_l
-
     tr = roll.trace
     cfg = roll.config
     ic_rows = np.concatenate([tr.cm_vel, tr.L], axis=1)

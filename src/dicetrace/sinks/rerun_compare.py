@@ -35,6 +35,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.sinks.rerun import _log_trail, encode_rrd, log_faces, log_ground, metadata_values
+from dicetrace.sinks.rerun_view import framed_points, framing_eye, layout_blueprint, view_axes
+
+# rerun is imported in the functions that log or lay out, not here: heavy at import, and it must not load before a
+# streaming sink has set its log level (rerun_stream.quiet_sdk_logs)
+
 #: One colour per throw (cycled): blue, orange, green, purple, brown, pink.
 THROW_COLORS = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [148, 103, 189], [140, 86, 75], [227, 119, 194]], dtype=np.uint8
@@ -133,8 +139,6 @@ def layout_offsets(states, half: float, layout: str = "overlay") -> np.ndarray:
     """(throws, 3) display offsets of each throw's die: zero for ``overlay``; for ``side`` a row from left to
     right as the default camera sees it (horizontal, across its line of sight), spaced so that no two paths
     (dice included) ever touch."""
-    from dicetrace.sinks.rerun import view_axes
-
     n = len(states)
     if layout == "overlay":
         return np.zeros((n, 3))
@@ -160,8 +164,6 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
     :data:`LAYOUTS`.  The divergence is always that of the real states, whatever the layout.
     """
     import rerun as rr
-
-    from dicetrace.sinks.rerun import _log_trail, log_faces, log_ground
 
     half = float(rolls[0].config.preset.half_side_cm)
     steps, t_s, divs = compare_series(rolls)
@@ -218,11 +220,9 @@ def compare_blueprint(rolls=None, layout: str = "overlay"):
     """3-D view of all throws, the log10 divergence plot and the summary.
 
     With ``rolls``, the 3-D camera frames every die's resting place and path from its first bounce (as
-    ``layout`` places them; :func:`dicetrace.sinks.rerun.framing_eye`), orbiting at their mean resting place.
+    ``layout`` places them; :func:`dicetrace.sinks.rerun_view.framing_eye`), orbiting at their mean resting place.
     """
     import rerun.blueprint as rrb
-
-    from dicetrace.sinks.rerun import framed_points, framing_eye, layout_blueprint
 
     eye = None
     if rolls:
@@ -248,8 +248,6 @@ def compare_logger(rolls, labels, *, name: str = "dicetrace compare", layout: st
     """``log(rec)`` of the compare recording (the file and the streaming sinks share it)."""
     import rerun as rr
 
-    from dicetrace.sinks.rerun import metadata_values
-
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
 
@@ -267,7 +265,5 @@ def compare_logger(rolls, labels, *, name: str = "dicetrace compare", layout: st
 def encode_compare_rrd(rolls, labels, *, name: str = "dicetrace compare", application_id: str = "dicetrace",
                        layout: str = "overlay") -> bytes:
     """The bytes of the compare recording of ``rolls`` (throw 0 the reference; ``layout``: :data:`LAYOUTS`)."""
-    from dicetrace.sinks.rerun import encode_rrd
-
     return encode_rrd(compare_logger(rolls, labels, name=name, layout=layout), compare_blueprint(rolls, layout),
                       application_id=application_id)
