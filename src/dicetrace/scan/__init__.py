@@ -24,11 +24,10 @@ from dicetrace.scan.read import (
     read_scan_table,
     scan_definition,
 )
+from dicetrace.scan.chunk_files import MANIFEST, ForeignFileError, rolls_dir
 from dicetrace.scan.estimate import ScanEstimate, estimate_scan
 from dicetrace.scan.folder import (
-    MANIFEST,
     CorruptChunkError,
-    ForeignFileError,
     ScanBusyError,
     ScanMismatchError,
     ScanWarning,
@@ -36,7 +35,6 @@ from dicetrace.scan.folder import (
     has_manifest,
     prepare_folder,
     read_manifest,
-    rolls_dir,
     write_chunk,
 )
 from dicetrace.scan.runner import ScanReport, iter_scan, scan

@@ -13,7 +13,8 @@ from dicetrace.scan.definition import ScanDefinition
 from dicetrace.simulate import simulate_batch
 from dicetrace.sinks._common import free_bytes, human_bytes
 
-from dicetrace.scan.folder import _check_int, chunk_files, has_manifest
+from dicetrace.scan.chunk_files import chunk_files
+from dicetrace.scan.folder import _check_int, has_manifest
 
 #: Bytes on disk per IC, a round upper estimate (measured 80–110 on the writeup's windows).
 BYTES_PER_IC = 128

@@ -39,14 +39,15 @@ Folders of older dicetrace versions are still read: a JSON manifest
 ``_scan.json`` with the chunk log ``_scan.chunks.jsonl`` beside it, and parts
 beside the manifest rather than in ``rolls/``; the next scan into such a
 folder turns it into this layout.
+
+The chunk files themselves (names, listing, checksums, the checks of
+``rolls/``) are :mod:`dicetrace.scan.chunk_files`'s.
 """
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
 import os
-import re
 import threading
 import time
 import uuid
@@ -57,15 +58,30 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from dicetrace.batch_chunks import DEFAULT_CAP
 from dicetrace.ics import Grid, Sample
+from dicetrace.scan.chunk_files import (
+    MANIFEST,
+    METADATA_KEY,
+    ROLLS_DIR,
+    check_rolls,
+    chunk_files,
+    file_sha256,
+    foreign_file,
+    move_legacy_parts,
+    part_name,
+    remember_digest,
+    verify_chunk,
+    verify_unlogged,
+)
+from dicetrace.scan.chunk_files import ForeignFileError, rolls_dir  # noqa: F401 (re-exported: users import them from here)
 from dicetrace.scan.definition import ScanDefinition, describe_differences
-from dicetrace.simulate import DEFAULT_CAP, simulate_batch
+from dicetrace.simulate import simulate_batch
 from dicetrace.sinks._common import OutputError, remove_quietly
 from dicetrace.tables import GRID_ROLLS_SCHEMA, rolls_table
 
-#: The manifest: a Parquet file of the rolls table's schema with no rows; its key-value metadata holds the scan
-#: definition (MANIFEST_KEY) and the chunk log (CHUNK_LOG_KEY).
-MANIFEST = "_scan.parquet"
+#: The manifest (MANIFEST): a Parquet file of the rolls table's schema with no rows; its key-value metadata holds
+#: the scan definition (MANIFEST_KEY) and the chunk log (CHUNK_LOG_KEY).
 MANIFEST_KEY = b"dicetrace.scan"
 #: The manifest's chunk log: chunk index → its file, rows, bytes and sha256 (a JSON object).
 CHUNK_LOG_KEY = b"dicetrace.chunks"
@@ -74,19 +90,11 @@ LEGACY_MANIFEST = "_scan.json"
 LEGACY_CHUNK_LOG = "_scan.chunks.jsonl"
 #: The folder's writer lock (held by the one scan writing into it).
 LOCK = ".dicetrace-scan.lock"
-METADATA_KEY = b"dicetrace"
 DICTIONARY_COLUMNS = ["preset", "integrator", "status", "outcome", "dt_s", "k"]
-#: The subfolder holding the rolls table: the chunk files, and nothing else.
-ROLLS_DIR = "rolls"
-_PART = re.compile(r"^part-(\d{6,})\.parquet$")
 
 
 class ScanMismatchError(ValueError):
     """The folder holds a scan with a different definition."""
-
-
-class ForeignFileError(FileExistsError):
-    """The scan folder holds something that is none of the scan's own files (the message names it)."""
 
 
 class ScanBusyError(RuntimeError):
@@ -99,15 +107,6 @@ class CorruptChunkError(ValueError):
 
 class ScanWarning(UserWarning):
     """Something a scan repaired on the way (a damaged chunk recomputed)."""
-
-
-def part_name(c: int) -> str:
-    return f"part-{c:06d}.parquet"
-
-
-def rolls_dir(folder) -> Path:
-    """The scan folder's Parquet dataset of rolls (``folder/rolls``): point any Parquet reader at it."""
-    return Path(folder) / ROLLS_DIR
 
 
 def _version() -> str:
@@ -232,14 +231,6 @@ def _write_manifest(folder: Path, manifest: dict, log: dict[int, dict]) -> None:
         remove_quietly(tmp)
 
 
-def file_sha256(path) -> tuple[str, int]:
-    """(SHA-256 hex digest, size in bytes) of a file."""
-    with open(path, "rb") as f:
-        digest = hashlib.file_digest(f, "sha256")
-        size = f.tell()
-    return digest.hexdigest(), size
-
-
 def read_chunk_log(folder) -> dict[int, dict]:
     """The chunk log of a scan folder: chunk index → its entry (file, rows, bytes, sha256).
 
@@ -312,89 +303,6 @@ def flush_chunk_log(folder) -> None:
     _log_chunks(Path(folder), [], force=True)
 
 
-def _parts_in(folder: Path) -> dict[int, Path]:
-    out = {}
-    try:
-        with os.scandir(folder) as it:
-            for e in it:
-                m = _PART.match(e.name)
-                if m:
-                    out[int(m.group(1))] = folder / e.name
-    except (FileNotFoundError, NotADirectoryError):
-        pass
-    return out
-
-
-def chunk_files(folder) -> dict[int, Path]:
-    """Chunk index → path of every ``part-NNNNNN.parquet`` in ``folder/rolls`` (one listing, any number of chunks).
-
-    A part left beside the manifest by an older dicetrace counts too, unless
-    ``rolls/`` holds the same chunk.
-    """
-    folder = Path(folder)
-    out = _parts_in(folder)
-    out.update(_parts_in(folder / ROLLS_DIR))
-    return dict(sorted(out.items()))
-
-
-def _move_legacy_parts(folder: Path) -> None:
-    """Move the parts an older dicetrace wrote beside the manifest into ``rolls/`` (holding the lock)."""
-    rolls = folder / ROLLS_DIR
-    for c, p in _parts_in(folder).items():
-        target = rolls / p.name
-        if not target.exists():
-            os.replace(p, target)
-
-
-#: Files this process has hashed (or written), by path: (size, mtime_ns, sha256).  A file whose size and
-#: modification time have not changed since is not hashed again (a scan's summary, map and recording
-#: each read the folder); another process always hashes afresh.
-_HASHED: dict[str, tuple[int, int, str]] = {}
-
-
-def _remember(path: Path, digest: str) -> None:
-    try:
-        st = os.stat(path)
-    except OSError:
-        return
-    _HASHED[str(Path(path).absolute())] = (st.st_size, st.st_mtime_ns, digest)
-
-
-def _known_digest(path: Path) -> str | None:
-    try:
-        st = os.stat(path)
-    except OSError:
-        return None
-    hit = _HASHED.get(str(Path(path).absolute()))
-    return hit[2] if hit is not None and hit[:2] == (st.st_size, st.st_mtime_ns) else None
-
-
-def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
-    """Why chunk file ``path`` is not the finished chunk its log ``entry`` describes (None: it is).
-
-    Without a log entry (a folder written before checksums were logged) the
-    file must decode completely and hold ``rows`` rows.
-    """
-    if entry is not None:
-        if entry.get("rows") != rows:
-            return f"it holds {entry.get('rows')} rows, the chunk has {rows}"
-        if _known_digest(path) == entry.get("sha256"):
-            return None
-        try:
-            digest, size = file_sha256(path)
-        except OSError as e:
-            return f"unreadable ({e.strerror or e})"
-        if size != entry.get("bytes") or digest != entry.get("sha256"):
-            return f"its SHA-256 differs from the one recorded in {MANIFEST}"
-        _remember(path, digest)
-        return None
-    try:
-        n = pq.read_table(path).num_rows
-    except Exception as e:  # noqa: BLE001 - any decoding error means "not a finished chunk"
-        return f"it does not decode ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
-    return None if n == rows else f"it holds {n} rows, the chunk has {rows}"
-
-
 def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
     """True if ``folder`` holds this scan's manifest, False if none; ScanMismatchError if another scan's."""
     if not has_manifest(folder):
@@ -431,42 +339,6 @@ def has_chunk_log(folder) -> bool:
     return (Path(folder) / MANIFEST).is_file() or (Path(folder) / LEGACY_CHUNK_LOG).is_file()
 
 
-def _foreign(path: Path, folder: Path, why: str) -> ForeignFileError:
-    return ForeignFileError(f"{str(path)!r} {why}: a scan folder holds only the files its manifest lists; "
-                            f"move it out of {str(folder)!r}, then re-run")
-
-
-def check_rolls(folder, defn: ScanDefinition) -> None:
-    """Refuse (:class:`ForeignFileError`, naming it) anything in ``rolls/`` that cannot be one of the scan's chunk files.
-
-    That is another name than ``part-NNNNNN.parquet``, a chunk index beyond
-    the scan, or something other than a regular file (a folder, a link).
-    It only lists the folder: whether a chunk file is the scan's own is
-    checked by :func:`prepare_folder`, holding the lock.
-    """
-    folder = Path(folder)
-    rolls = folder / ROLLS_DIR
-    if os.path.lexists(rolls) and not rolls.is_dir():
-        raise FileExistsError(f"{str(rolls)!r} is not a folder: the scan's rolls table goes there; move it away")
-    try:
-        with os.scandir(rolls) as it:
-            entries = sorted(it, key=lambda e: e.name)
-    except FileNotFoundError:
-        return
-    for e in entries:
-        p = rolls / e.name
-        m = _PART.match(e.name)
-        if not m or e.name != part_name(int(m.group(1))):
-            raise _foreign(p, folder, "is none of the scan's chunk files (rolls/ holds part-NNNNNN.parquet only)")
-        c = int(m.group(1))
-        if c >= defn.n_chunks:
-            raise _foreign(p, folder, f"is chunk {c:,}, beyond the scan's {defn.n_chunks:,} chunk(s)")
-        if not e.is_file(follow_symlinks=False):
-            kind = ("a folder" if e.is_dir(follow_symlinks=False) else "a link" if e.is_symlink()
-                    else "not a regular file")
-            raise _foreign(p, folder, f"is {kind}, not a chunk file")
-
-
 def check_folder(folder, defn: ScanDefinition) -> None:
     """Refuse an existing folder the scan ``defn`` cannot go into, touching nothing (only reading).
 
@@ -480,36 +352,6 @@ def check_folder(folder, defn: ScanDefinition) -> None:
     if not _check_manifest(folder, defn):
         _check_empty(folder)
     check_rolls(folder, defn)
-
-
-def _verify_unlogged(path: Path, defn: ScanDefinition, c: int) -> str | None:
-    """Why the chunk file ``path``, not in the chunk log, is not chunk ``c`` of the scan ``defn`` (None: it is).
-
-    It must decode whole, hold chunk ``c``'s ic_ids in order, and (where
-    its metadata says) be chunk ``c`` of this very scan: a copy of another
-    chunk, or of another scan's, is not adopted.
-    """
-    start, stop = defn.chunk_range(c)
-    try:
-        table = pq.read_table(path)
-    except Exception as e:  # noqa: BLE001 - any decoding error means "not a finished chunk"
-        return f"it does not decode ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
-    if table.num_rows != stop - start:
-        return f"it holds {table.num_rows} rows, the chunk has {stop - start}"
-    if "ic_id" not in table.column_names or not np.array_equal(
-            table.column("ic_id").to_numpy(zero_copy_only=False), np.arange(start, stop)):
-        return f"its ic_ids are not chunk {c}'s ({start}..{stop - 1})"
-    try:
-        meta = json.loads((table.schema.metadata or {})[METADATA_KEY])
-    except KeyError:
-        return None  # an older dicetrace's chunk: the ic_ids decide
-    except ValueError:
-        return "its dicetrace metadata is unreadable"
-    if meta.get("chunk_index", c) != c:
-        return f"it is chunk {meta.get('chunk_index')} (its metadata says), not chunk {c}"
-    if "scan" in meta and json.dumps(meta["scan"], sort_keys=True) != defn.canonical():
-        return "it belongs to a scan of another definition (its metadata says)"
-    return None
 
 
 def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
@@ -551,7 +393,7 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
             else:
                 damaged.append((p, why))
             continue
-        why = _verify_unlogged(p, defn, c)
+        why = verify_unlogged(p, defn, c)
         if why is None:  # the scan's own chunk, not logged yet (or a folder written before checksums were logged)
             digest, size = file_sha256(p)
             adopted.append({"chunk": c, "file": f"{ROLLS_DIR}/{part_name(c)}", "rows": stop - start, "bytes": size,
@@ -563,7 +405,7 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
             damaged.append((p, why))
     if foreign:
         (p, why), more = foreign[0], len(foreign) - 1
-        raise _foreign(p, folder, f"is not listed in {MANIFEST} and is not the scan's own chunk ({why})"
+        raise foreign_file(p, folder, f"is not listed in {MANIFEST} and is not the scan's own chunk ({why})"
                        + (f"; and {more} more such file(s)" if more else ""))
     if not has_manifest(folder):
         manifest = {
@@ -582,7 +424,7 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     for old in (LEGACY_MANIFEST, LEGACY_CHUNK_LOG):
         (folder / old).unlink(missing_ok=True)
     (folder / ROLLS_DIR).mkdir(exist_ok=True)
-    _move_legacy_parts(folder)
+    move_legacy_parts(folder)
     for p in [*folder.glob(".part-*.tmp"), *folder.glob(f".{MANIFEST}.*.tmp")]:
         p.unlink(missing_ok=True)
     for p, why in damaged:
@@ -617,7 +459,7 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
             os.fsync(f.fileno())
         digest, size = file_sha256(tmp)
         os.replace(tmp, path)
-        _remember(path, digest)
+        remember_digest(path, digest)
         _log_chunks(folder, [{"chunk": c, "file": _log_name(folder, path), "rows": table.num_rows, "bytes": size,
                               "sha256": digest}])
     except OSError as e:

@@ -18,16 +18,9 @@ import pyarrow.dataset as pads
 import pyarrow.parquet as pq
 
 from dicetrace.ics import Grid
+from dicetrace.scan.chunk_files import METADATA_KEY, chunk_files, verify_chunk
 from dicetrace.scan.definition import ScanDefinition
-from dicetrace.scan.folder import (
-    METADATA_KEY,
-    CorruptChunkError,
-    chunk_files,
-    has_chunk_log,
-    read_chunk_log,
-    read_manifest,
-    verify_chunk,
-)
+from dicetrace.scan.folder import CorruptChunkError, has_chunk_log, read_chunk_log, read_manifest
 
 #: Fill value of label_grid cells that the (partial) scan has not computed yet.
 MISSING = -2
