@@ -1,7 +1,7 @@
 """``record --serve``'s web viewer in a real headless browser (Debian's chromium through Playwright).
 
 Skipped, with the reason, where Playwright or a chromium is missing.  The page is served by
-dicetrace on the bound address (:class:`dicetrace.sinks.rerun_stream.WebViewerServer`): the
+dicetrace on the bound address (:class:`dicetrace.sinks.rerun_web.WebViewerServer`): the
 viewer starts, reads the recording from the gRPC server, and makes no request beyond the two
 local servers (its update check, a request to api.github.com, is turned off).
 """

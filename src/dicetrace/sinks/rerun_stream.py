@@ -9,8 +9,8 @@ The sinks of rerun's own example scripts (``rr.script_add_args``): the same
 Servers listen on :data:`DEFAULT_BIND` (127.0.0.1: this machine only) unless
 asked for another address: the gRPC server is the SDK's, bound there; the web
 viewer is rerun-notebook's build of Rerun's viewer, served by
-:class:`WebViewerServer` on the same address (the SDK's own web server listens
-on every interface and has no bind option in 0.41).
+:class:`dicetrace.sinks.rerun_web.WebViewerServer` on the same address (the SDK's
+own web server listens on every interface and has no bind option in 0.41).
 
 Every wait is bounded and every failure is one line (:class:`StreamError`):
 a ``--connect`` target must answer an HTTP/2 handshake within
@@ -35,8 +35,9 @@ import threading
 import time
 import urllib.parse
 from dataclasses import dataclass
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
+
+from dicetrace.sinks.rerun_web import WebViewerError, WebViewerServer
 
 #: The SDK's default gRPC address (``rerun+http://127.0.0.1:9876/proxy``).
 DEFAULT_PORT = 9876
@@ -290,135 +291,12 @@ def web_viewer_url(host: str, web_port: int, grpc_url: str) -> str:
     return f"http://{url_host(host)}:{web_port}/?url={urllib.parse.quote(grpc_url, safe='')}"
 
 
-#: The web viewer's page: rerun-notebook's build of Rerun's viewer, full window, opening the ``url`` of the query
-#: (a gRPC address; an unspecified host, 0.0.0.0 or [::], means the host this page came from).  It connects to
-#: this server and the gRPC port only (a Content-Security-Policy), and turns off the viewer's update check (its
-#: "check for updates on startup" setting, in this origin's localStorage) before the viewer starts: the viewer
-#: would ask api.github.com for its latest release.
-VIEWER_PAGE = """<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>dicetrace record: Rerun viewer</title>
-<meta http-equiv="Content-Security-Policy" content="connect-src 'self' http://*:__GRPC_PORT__">
-<link rel="stylesheet" href="widget.css">
-<style>html, body { margin: 0; height: 100%; overflow: hidden; } #viewer { width: 100vw; height: 100vh; }</style>
-</head><body><div id="viewer"></div>
-<script type="module">
-const box = document.getElementById("viewer");
-const given = new URLSearchParams(location.search).get("url") || "__GRPC_URL__";
-const url = given.replace(/^(rerun(\\+https?)?:\\/\\/)(0\\.0\\.0\\.0|\\[::\\])(?=[:\\/])/, (_, scheme) => scheme + location.host.replace(/:\\d+$/, ""));
-const size = () => [box.clientWidth, box.clientHeight];
-const handlers = {};
-const model = {
-  get: (k) => ({_url: url, _panel_states: null, _width: size()[0], _height: size()[1], _fallback_token: null,
-                _theme: null})[k],
-  on: (ev, f) => { (handlers[ev] = handlers[ev] || []).push(f); },
-  send: (m) => { if (m === "ready") document.body.dataset.ready = "1"; },
-};
-document.addEventListener("securitypolicyviolation", (ev) => {  // what the policy blocked, for the tests
-  document.body.dataset.blocked = ((document.body.dataset.blocked || "") + " " + ev.blockedURI).trim();
-});
-try {  // the viewer's settings: "app" in RON; turn its update check off before it reads them
-  const key = "app", off = "check_for_updates_on_startup:false", state = localStorage.getItem(key) || "";
-  localStorage.setItem(key, /check_for_updates_on_startup:/.test(state) ? state.replace(/check_for_updates_on_startup:true/g, off)
-                            : state.includes("(app_options:(") ? state.replace("(app_options:(", `(app_options:(${off},`)
-                            : `(app_options:(${off}))`);
-} catch (e) { console.warn("dicetrace: cannot turn off the Rerun viewer's update check:", e); }
-const mod = await import("./widget.js");
-mod.default.render({model, el: box});
-window.addEventListener("resize", () => {
-  (handlers["change:_width"] || []).forEach((f) => f(null, size()[0]));
-  (handlers["change:_height"] || []).forEach((f) => f(null, size()[1]));
-});
-</script></body></html>
-"""
-
-#: The files of the web viewer (rerun-notebook's ``static`` folder) and their content types.
-VIEWER_ASSETS = {"/widget.js": "text/javascript", "/widget.css": "text/css", "/re_viewer_bg.wasm": "application/wasm"}
-
-
-def viewer_assets_folder() -> Path | None:
-    """rerun-notebook's ``static`` folder (Rerun's web viewer), found without importing the package."""
-    import importlib.util
-
-    try:
-        spec = importlib.util.find_spec("rerun_notebook")
-    except (ImportError, ValueError):
-        return None
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    folder = Path(list(spec.submodule_search_locations)[0]) / "static"
-    return folder if all((folder / name.lstrip("/")).is_file() for name in VIEWER_ASSETS) else None
-
-
-class WebViewerServer:
-    """Rerun's web viewer over HTTP on ``host:port`` (threads of this process), opening ``grpc_url`` by default.
-
-    Serves the page and the viewer's three files, nothing else (GET and HEAD); :meth:`close` stops it.
-    """
-
-    def __init__(self, host: str, port: int, grpc_url: str) -> None:
-        folder = viewer_assets_folder()
-        if folder is None:
-            raise StreamError("--serve: Rerun's web viewer was not found (install rerun-notebook, as dicetrace's "
-                              "dependencies do)")
-        grpc_port = urllib.parse.urlsplit(grpc_url).port
-        page = VIEWER_PAGE.replace("__GRPC_URL__", grpc_url).replace("__GRPC_PORT__", str(grpc_port)).encode()
-
-        class Handler(BaseHTTPRequestHandler):
-            server_version = "dicetrace-record"
-
-            def _send(self, body_len: int, ctype: str) -> None:
-                self.send_response(200)
-                self.send_header("Content-Type", ctype)
-                self.send_header("Content-Length", str(body_len))
-                self.send_header("Cache-Control", "no-store")
-                self.end_headers()
-
-            def do_GET(self, head: bool = False) -> None:  # noqa: N802 - http.server's name
-                path = urllib.parse.urlsplit(self.path).path
-                try:
-                    if path in ("/", "/index.html"):
-                        self._send(len(page), "text/html; charset=utf-8")
-                        if not head:
-                            self.wfile.write(page)
-                    elif path in VIEWER_ASSETS:
-                        file = folder / path.lstrip("/")
-                        self._send(file.stat().st_size, VIEWER_ASSETS[path])
-                        if not head:
-                            with open(file, "rb") as f:
-                                shutil.copyfileobj(f, self.wfile)
-                    else:
-                        self.send_error(404)
-                except (BrokenPipeError, ConnectionResetError):  # the browser went away
-                    pass
-
-            def do_HEAD(self) -> None:  # noqa: N802
-                self.do_GET(head=True)
-
-            def log_message(self, *args) -> None:  # no access log on the terminal
-                pass
-
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        server_cls = type("Server", (ThreadingHTTPServer,), {"address_family": family, "daemon_threads": True,
-                                                             "request_queue_size": 64})
-        try:
-            self.httpd = server_cls((host, port), Handler)
-        except OSError as e:
-            raise StreamError(f"--serve: cannot listen on {host} port {port}: {e.strerror or e}") from None
-        self.thread = threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.2},
-                                       name="dicetrace-web-viewer", daemon=True)
-        self.thread.start()
-
-    def close(self) -> None:
-        self.httpd.shutdown()
-        self.httpd.server_close()
-
-
 class Stream:
     """One live recording stream to a sink; :meth:`send` logs and flushes, :meth:`close` disconnects."""
 
     def __init__(self, blueprint, *, application_id: str = "dicetrace") -> None:
         quiet_sdk_logs()
-        import rerun as rr
+        import rerun as rr  # here, not at the top: heavy at import, and only once its log level is set (above)
 
         self.rr = rr
         self.blueprint = blueprint
@@ -458,7 +336,10 @@ class Stream:
         except Exception as e:  # RuntimeError from the SDK
             raise StreamError(f"--serve: {e}") from None
         self.grpc_url = f"rerun+http://{url_host(host)}:{grpc_port}/proxy"
-        self.web = WebViewerServer(host, web_port, self.grpc_url)
+        try:
+            self.web = WebViewerServer(host, web_port, self.grpc_url)
+        except WebViewerError as e:
+            raise StreamError(f"--serve: {e}") from None
         self.web_url = web_viewer_url(host, web_port, self.grpc_url)
         return self.web_url
 
