@@ -25,6 +25,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from dicetrace.simulate import Roll
 from dicetrace.sinks._common import OutputError, Staging, destination, output_folder
 from dicetrace.tables import (  # noqa: F401  (re-exported: the sink's public names)
     CONTACTS_SCHEMA,
@@ -72,8 +73,6 @@ key "dicetrace".
 
 def tables_for(source, *, coords=None, ic_ids=None, metadata: Mapping | None = None) -> dict[str, pa.Table]:
     """All tables a source supports: rolls and contacts always, trajectory for one traced Roll."""
-    from dicetrace.simulate import Roll
-
     out = {
         "rolls": rolls_table(source, coords=coords, ic_ids=ic_ids, metadata=metadata),
         "contacts": contacts_table(source, ic_ids=ic_ids, metadata=metadata),

@@ -24,6 +24,9 @@ import numpy as np
 
 from dicetrace.params import convert_l
 
+# rerun is imported in the functions that log, not here: heavy at import, and it must not load before a streaming
+# sink has set its log level (rerun_stream.quiet_sdk_logs)
+
 CHANNELS = ("forces", "penetration", "velocities")
 NORMAL_COLOR = (200, 30, 200)
 FRICTION_COLOR = (0, 160, 200)

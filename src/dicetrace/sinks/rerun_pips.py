@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+# rerun is imported in the functions that log, not here: heavy at import, and it must not load before a streaming
+# sink has set its log level (rerun_stream.quiet_sdk_logs)
+
 #: Pip positions of each face value (row 0 = face 1) on a square of side 2, in the
 #: face's two in-plane axes (u, v): the standard layout (1 centre; 2 and 3 a diagonal;
 #: 4 the corners; 5 the corners and the centre; 6 two rows of three).
