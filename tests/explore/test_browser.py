@@ -36,9 +36,9 @@ def _window_of(page) -> str:
 
 
 def test_page_map_zoom_and_throw(browser, explorer, tmp_path, monkeypatch):
-    from dicetrace.explore import compute
+    from dicetrace.explore import outcome_map
 
-    monkeypatch.setattr(compute, "BLOCK", 4 * RES)  # the refined pass in strips of four rows
+    monkeypatch.setattr(outcome_map, "BLOCK", 4 * RES)  # the refined pass in strips of four rows
     page = browser.new_page(viewport={"width": 1300, "height": 900})
     errors = []
     page.on("pageerror", lambda e: errors.append(str(e)))

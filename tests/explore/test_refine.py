@@ -79,9 +79,9 @@ def test_maps_of_another_configuration_are_not_reused():
 
 
 def test_strips_stream_is_the_map_row_by_row(client, tmp_path, monkeypatch):
-    from dicetrace.explore import compute
+    from dicetrace.explore import outcome_map
 
-    monkeypatch.setattr(compute, "BLOCK", 4 * RES)  # four rows per strip
+    monkeypatch.setattr(outcome_map, "BLOCK", 4 * RES)  # four rows per strip
     with client.stream("GET", "/api/map.strips", params={"window": WINDOW, "res": RES}) as r:
         assert r.status_code == 200 and r.headers["content-type"].startswith("application/x-ndjson")
         strips, done = strip_lines(r.iter_lines())
@@ -98,9 +98,9 @@ def test_strips_stream_is_the_map_row_by_row(client, tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_strips_arrive_while_the_map_computes(monkeypatch):
-    from dicetrace.explore import Explorer, compute
+    from dicetrace.explore import Explorer, outcome_map
 
-    monkeypatch.setattr(compute, "BLOCK", 4 * 96)  # 24 strips of 4 rows
+    monkeypatch.setattr(outcome_map, "BLOCK", 4 * 96)  # 24 strips of 4 rows
     with Explorer(window="red-sea", res=RES) as ex:
         base = f"http://127.0.0.1:{ex.port}/api/map.strips?window=red-sea"
         urllib.request.urlopen(base + "&res=8", timeout=120).read()  # compiled and warm
@@ -138,9 +138,9 @@ def test_viewer_throw_is_record_recording_with_its_blueprint(client, tmp_path, d
 
 @pytest.mark.slow
 def test_a_newer_view_ends_the_stale_strips_stream_at_its_next_strip(monkeypatch):
-    from dicetrace.explore import Explorer, compute
+    from dicetrace.explore import Explorer, outcome_map
 
-    monkeypatch.setattr(compute, "BLOCK", 2 * 200)  # strips of 2 rows: 100 of them
+    monkeypatch.setattr(outcome_map, "BLOCK", 2 * 200)  # strips of 2 rows: 100 of them
     with Explorer(window="red-sea", res=RES) as ex:
         base = f"http://127.0.0.1:{ex.port}/api/map.strips?window=red-sea"
         urllib.request.urlopen(base + "&res=8", timeout=120).read()  # compiled and warm

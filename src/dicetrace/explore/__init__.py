@@ -9,7 +9,8 @@
 and :class:`Explorer` (served from a background thread).
 """
 
-from dicetrace.explore.compute import Cancelled, OutcomeMap, Worker, compute_map, throw_info, throw_rrd
+from dicetrace.explore.compute import Worker, throw_info, throw_rrd
+from dicetrace.explore.outcome_map import Cancelled, OutcomeMap, compute_map
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
 
 __all__ = [

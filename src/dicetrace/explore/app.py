@@ -41,8 +41,8 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
-from dicetrace.explore.compute import (Busy, Cancelled, OverBudget, Worker, scan_folder_for, strip_rows, throw_info,
-                                      throw_rrd)
+from dicetrace.explore.compute import Busy, OverBudget, Worker, scan_folder_for, throw_info, throw_rrd
+from dicetrace.explore.outcome_map import Cancelled, strip_rows
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
 
 #: The passes of a view and their resolution divisors: the page asks for each in turn.
