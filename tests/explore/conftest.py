@@ -14,9 +14,9 @@ def client(tmp_path):
     from starlette.testclient import TestClient
 
     from dicetrace.explore import View, create_app
-    from dicetrace.explore.view import parse_window
+    from dicetrace.ics import get_window
 
-    app = create_app(View(window=parse_window(WINDOW), res=(RES, RES)), out=tmp_path / "saved")
+    app = create_app(View(window=get_window(WINDOW), res=(RES, RES)), out=tmp_path / "saved")
     with TestClient(app, base_url="http://127.0.0.1") as c:  # a Host the explorer answers (not "testserver")
         yield c
 

@@ -48,9 +48,9 @@ def test_pass_grids_nest_bit_for_bit_in_the_full_grid(n):
 
 def test_refined_pass_takes_the_coarse_passes_results_and_equals_scan(tmp_path):
     from dicetrace.explore import View, Worker, compute_map
-    from dicetrace.explore.view import parse_window
+    from dicetrace.ics import get_window
 
-    view = View(window=parse_window(WINDOW), res=(31, 31))
+    view = View(window=get_window(WINDOW), res=(31, 31))
     assert view.coarse(4).res == (7, 7) and view.coarse(16).res == (2, 2)
     w = Worker()
     try:
@@ -70,10 +70,10 @@ def test_refined_pass_takes_the_coarse_passes_results_and_equals_scan(tmp_path):
 
 def test_maps_of_another_configuration_are_not_reused():
     from dicetrace.explore import View, compute_map
-    from dicetrace.explore.view import parse_window
+    from dicetrace.ics import get_window
 
-    view = View(window=parse_window(WINDOW), res=(31, 31))
-    other = compute_map(View(window=parse_window(WINDOW), res=(7, 7), gamma=0.02))
+    view = View(window=get_window(WINDOW), res=(31, 31))
+    other = compute_map(View(window=get_window(WINDOW), res=(7, 7), gamma=0.02))
     shifted = compute_map(View(window=((1.4, 1.57), (3.95, 4.25)), res=(7, 7)))
     assert compute_map(view, known=[other, shifted]).reused == 0
 

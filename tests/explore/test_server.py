@@ -107,14 +107,14 @@ def test_server_answers_while_a_map_computes():
 
 def test_a_newer_view_cancels_the_stale_map():
     from dicetrace.explore import Cancelled, View, Worker
-    from dicetrace.explore.view import parse_window
+    from dicetrace.ics import get_window
 
     w = Worker()
     try:
         w.submit_map(View(res=(8, 8))).result()  # the batch kernel compiled (more than 16 ICs)
         stale = w.submit_map(View(res=(400, 400)), client="c")  # ~20 strips of work
         time.sleep(0.2)
-        new_view = View(window=parse_window(WINDOW), res=(RES, RES))
+        new_view = View(window=get_window(WINDOW), res=(RES, RES))
         fresh = w.submit_map(new_view, client="c")
         with pytest.raises(Cancelled):
             stale.result(timeout=5)  # answered at once, far before its end (bounded wait)

@@ -21,7 +21,8 @@ from urllib.parse import urlencode
 
 import numpy as np
 
-from dicetrace.ics import SLICES, WINDOWS, Grid, get_slice
+from dicetrace.ics import SLICES, Grid, get_slice
+from dicetrace.windows import WINDOWS, get_window
 
 #: Largest resolution per axis (a 1024×1024 map is ~1M throws, ~10 s on 2 cores for ``seed``).
 MAX_RES = 1024
@@ -169,12 +170,10 @@ def _validate(v: View) -> None:
     for r in v.res:
         if not MIN_RES <= r <= MAX_RES:
             raise ViewError("res", f"must be between {MIN_RES} and {MAX_RES} per axis, got {v.res[0]},{v.res[1]}")
-    for axis, (lo, hi), n in zip("xy", v.window, v.res):
+    for axis, (lo, hi), n in zip("xy", _window(v.window), v.res):  # finite, x1 > x0: the one rule for windows
         for b in (lo, hi):
-            if not math.isfinite(b) or abs(b) > MAX_COORD:
-                raise ViewError("window", f"{axis} bounds must be finite numbers within ±{MAX_COORD:g}, got {lo!r}, {hi!r}")
-        if not hi > lo:
-            raise ViewError("window", f"the {axis} range must have {axis}1 > {axis}0 (zero or negative width), got {lo!r}, {hi!r}")
+            if abs(b) > MAX_COORD:
+                raise ViewError("window", f"{axis} bounds must be within ±{MAX_COORD:g}, got {lo!r}, {hi!r}")
         ulp = math.ulp(max(abs(lo), abs(hi)))
         if (hi - lo) / (n - 1) < MIN_ULPS_PER_PIXEL * ulp:
             raise ViewError(
@@ -199,16 +198,13 @@ def _validate(v: View) -> None:
         raise ViewError("preset", str(e)) from None
 
 
-def parse_window(text: str) -> tuple[tuple[float, float], tuple[float, float]]:
-    """A window from a name in ``WINDOWS`` or ``x0,x1,y0,y1`` (ViewError naming ``window``)."""
-    key = str(text).strip().lower().replace("_", "-")
-    if key in WINDOWS:
-        return WINDOWS[key]
-    parts = str(text).split(",")
-    if len(parts) != 4:
-        raise ViewError("window", f"a name ({', '.join(WINDOWS)}) or four numbers x0,x1,y0,y1, got {str(text)[:80]!r}")
-    x0, x1, y0, y1 = (_num("window", p) for p in parts)
-    return (x0, x1), (y0, y1)
+def _window(value) -> tuple[tuple[float, float], tuple[float, float]]:
+    """``value`` (a name in ``WINDOWS``, ``x0,x1,y0,y1`` or pairs) as the window's ranges, read and checked by the
+    one window parser, :func:`dicetrace.windows.get_window`; its ValueError becomes a ViewError naming ``window``."""
+    try:
+        return get_window(value, 2)
+    except ValueError as e:
+        raise ViewError("window", str(e)) from None
 
 
 def parse_res(text: str) -> tuple[int, int]:
@@ -238,7 +234,7 @@ def view_from_query(q, default: View | None = None) -> View:
     if "slice" in q:
         kw["slice"] = str(q["slice"])
     if "window" in q:
-        kw["window"] = parse_window(q["window"])
+        kw["window"] = _window(str(q["window"]))
     if "res" in q:
         kw["res"] = parse_res(q["res"])
     if "preset" in q:
