@@ -44,6 +44,7 @@ from starlette.routing import Route
 from dicetrace.explore.compute import Busy, OverBudget, Worker, scan_folder_for, throw_info, throw_rrd
 from dicetrace.explore.outcome_map import Cancelled, strip_rows
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
+from dicetrace.sinks.rerun_web import rerun_notebook_static
 
 #: The passes of a view and their resolution divisors: the page asks for each in turn.
 PASSES = {"preview": 16, "coarse": 4, "fine": 1}
@@ -428,13 +429,6 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
 
 def rerun_asset(name: str) -> Path | None:
     """A file of Rerun's web viewer as the rerun-notebook package ships it (found without importing it)."""
-    import importlib.util
-
-    try:
-        spec = importlib.util.find_spec("rerun_notebook")
-    except (ImportError, ValueError):
-        return None
-    if spec is None or not spec.submodule_search_locations:
-        return None
-    path = Path(list(spec.submodule_search_locations)[0]) / "static" / name
-    return path if path.is_file() else None
+    folder = rerun_notebook_static()
+    path = None if folder is None else folder / name
+    return path if path is not None and path.is_file() else None

@@ -77,7 +77,7 @@ from dicetrace.scan.chunk_files import (
 from dicetrace.scan.chunk_files import ForeignFileError, rolls_dir  # noqa: F401 (re-exported: users import them from here)
 from dicetrace.scan.definition import ScanDefinition, describe_differences
 from dicetrace.simulate import simulate_batch
-from dicetrace.sinks._common import OutputError, remove_quietly
+from dicetrace.sinks._common import OutputError, make_folders, remove_quietly
 from dicetrace.tables import GRID_ROLLS_SCHEMA, rolls_table
 
 #: The manifest (MANIFEST): a Parquet file of the rolls table's schema with no rows; its key-value metadata holds
@@ -475,26 +475,6 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
     return path
 
 
-def _make_folders(folder: Path) -> list[Path]:
-    """``mkdir -p folder``; the folders this call made, outermost first (one that another process made at the
-    same moment is not counted: it is not ours to remove)."""
-    missing = []
-    p = Path(folder)
-    while not os.path.lexists(p) and p != p.parent:
-        missing.append(p)
-        p = p.parent
-    made = []
-    for d in reversed(missing):
-        try:
-            d.mkdir()
-        except FileExistsError:
-            if not d.is_dir():
-                raise
-        else:
-            made.append(d)
-    return made
-
-
 class _FolderLock:
     """The folder's writer lock (``filelock``): the first thing a scan does to the folder.
 
@@ -522,7 +502,7 @@ class _FolderLock:
         deadline = time.monotonic() + self.wait
         for attempt in range(self.RETRIES + 1):
             try:
-                self.created += _make_folders(self.folder)
+                self.created += make_folders(self.folder)
             except OSError as e:
                 reason = os.strerror(e.errno) if e.errno else " ".join(str(e).split())
                 raise OutputError(f"cannot create the scan folder {str(self.folder)!r}: {reason}") from None

@@ -251,20 +251,25 @@ def output_folder(path, *, what: str = "output folder", expected_bytes: int | No
 
 
 def make_folders(folder: Path) -> list[Path]:
-    """``mkdir -p folder``; return the folders it created, outermost first (for :func:`remove_folders`)."""
-    folder = Path(folder)
+    """``mkdir -p folder``; return the folders this call created, outermost first (for :func:`remove_folders`).
+
+    A folder that another process made at the same moment is not counted: it is not ours to remove.
+    """
     missing = []
-    p = folder
+    p = Path(folder)
     while not os.path.lexists(p) and p != p.parent:
         missing.append(p)
         p = p.parent
+    made = []
     for d in reversed(missing):
         try:
             d.mkdir()
         except FileExistsError:
             if not d.is_dir():
                 raise
-    return list(reversed(missing))
+        else:
+            made.append(d)
+    return made
 
 
 def remove_folders(created: list[Path]) -> None:

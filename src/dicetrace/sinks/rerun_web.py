@@ -68,15 +68,22 @@ window.addEventListener("resize", () => {
 VIEWER_ASSETS = {"/widget.js": "text/javascript", "/widget.css": "text/css", "/re_viewer_bg.wasm": "application/wasm"}
 
 
-def viewer_assets_folder() -> Path | None:
-    """rerun-notebook's ``static`` folder (Rerun's web viewer), found without importing the package."""
+def rerun_notebook_static() -> Path | None:
+    """rerun-notebook's ``static`` folder (the files of Rerun's web viewer), found without importing the package."""
     try:
         spec = importlib.util.find_spec("rerun_notebook")
     except (ImportError, ValueError):
         return None
     if spec is None or not spec.submodule_search_locations:
         return None
-    folder = Path(list(spec.submodule_search_locations)[0]) / "static"
+    return Path(list(spec.submodule_search_locations)[0]) / "static"
+
+
+def viewer_assets_folder() -> Path | None:
+    """rerun-notebook's ``static`` folder when it holds every file of :data:`VIEWER_ASSETS`, else None."""
+    folder = rerun_notebook_static()
+    if folder is None:
+        return None
     return folder if all((folder / name.lstrip("/")).is_file() for name in VIEWER_ASSETS) else None
 
 
