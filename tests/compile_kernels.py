@@ -65,7 +65,8 @@ def _phase2(task: str) -> str:
 
     from dicetrace.core import loop
     from dicetrace.params import make_config
-    from dicetrace.simulate import BATCH_BLOCK, simulate_batch
+    from dicetrace.core.loop import BATCH_BLOCK
+    from dicetrace.simulate import simulate_batch
 
     cfg = make_config("seed", integrator=task, t_max_s=0.05)
     loop.run_summary(cfg.kernel_inputs(_ic()).ics, cfg.initial_offsets(), cfg.kernel_params(),

@@ -197,7 +197,8 @@ class Runs:
 def run_batch(ics_preset: np.ndarray, cfg: Config, *, threads: int | None = None, timed: bool = False,
               repeat: int = 1) -> Runs:
     """``simulate_batch`` over ICs already in the preset's convention (timed on request: one thread, best of ``repeat``)."""
-    from dicetrace.simulate import BATCH_BLOCK, simulate_batch
+    from dicetrace.core.loop import BATCH_BLOCK
+    from dicetrace.simulate import simulate_batch
 
     cpu = float("nan")
     if timed:
