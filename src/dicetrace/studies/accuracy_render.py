@@ -18,11 +18,8 @@ from dicetrace.studies.accuracy import (
     PRESETS,
     T_MAX_S,
     StudyResult,
-    best_within_budget,
-    budget_table,
-    cheapest_at_target,
-    zero_floor_settings,
 )
+from dicetrace.studies.accuracy_budgets import best_within_budget, budget_table, cheapest_at_target, zero_floor_settings
 from dicetrace.studies.text import fmt, grows, tol_text
 
 
