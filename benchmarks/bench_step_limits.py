@@ -17,9 +17,10 @@ study's zoom-out ICs and prints:
   none of these), against the accepted sub-steps in the same situation.
 
 The counters live in a field this script adds to a copy of the state record
-(``COUNTED``: ``STATE`` and ``limits``), which the instrumented driver runs
-in; the plain driver runs in ``STATE``.  Compiles one variant, and the core
-kernels it calls once more for that record (a few minutes on a cold cache).
+(``COUNTED``: ``STATE``'s fields at their offsets, then ``limits``), which the
+instrumented driver runs in; the plain driver runs in ``STATE``.  numba takes
+such a record as a subtype of ``STATE``, so the core kernels compiled for
+``STATE`` serve it too.  Compiles one variant (about a minute, nothing cached).
 
 Usage: ``python benchmarks/bench_step_limits.py [--n 300] [--preset physical] [--tol 1e-7]``
 (default: the preset's tolerance schedule).
@@ -29,9 +30,11 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import warnings
 
 import numba
 import numpy as np
+from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from bench_cost_split import _all, _edited, _jit, _jit_scheme
 from dicetrace.core import loop
@@ -123,6 +126,8 @@ def main() -> None:
     if args.n < 1:
         ap.error(f"--n must be at least 1, got {args.n}")
     numba.set_num_threads(1)
+    # COUNTED passed where STATE is compiled for: numba's record subtyping, which it calls experimental
+    warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
     ics = convert_l(sample_ics(n=args.n), "program", cfg.preset.l_convention)
     kin = cfg.kernel_inputs(ics)
     m = len(ics)
