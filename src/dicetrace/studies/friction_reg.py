@@ -52,7 +52,7 @@ IMPLICIT_RESULT = (
     "at equal agreement at every v_reg (one run on 300 throws, before the scheme was removed): at 10 cm/s "
     "0.947 agreement at 9.56 ms per throw against DOP853's 0.937 at 0.62 ms; at 3 cm/s 0.963 at 79.7 ms "
     "against 0.967 at 3 ms; at 1 cm/s 0.863 at 86.8 ms against the same 0.863 at 6.49 ms; at 0.3 cm/s "
-    "0.800 at 115 ms against 0.843 at 12.9 ms. Its sub-steps are limited by accuracy, not by the friction "
+    "0.800 at 115 ms against 0.843 at 12.9 ms. Its sub-steps were limited by accuracy, not by the friction "
     "law's stability bound: the stick–slip transitions and the die's ringing on its spring are physics "
     "the outcome depends on, to be followed, not damped (analysis/accuracy/TUNING.md §3 and §12)."
 )
