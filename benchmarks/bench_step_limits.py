@@ -16,9 +16,11 @@ study's zoom-out ICs and prints:
   impact's first sub-step, a rejection, a friction-limited sub-step, or
   none of these), against the accepted sub-steps in the same situation.
 
-The counters live in the Rosenbrock scheme's work area of the state record
-(``STATE.ros_j``), which Tsit5 never touches.  Compiles one variant (about a
-minute, nothing cached).
+The counters live in a field this script adds to a copy of the state record
+(``COUNTED``: ``STATE``'s fields at their offsets, then ``limits``), which the
+instrumented driver runs in; the plain driver runs in ``STATE``.  numba takes
+such a record as a subtype of ``STATE``, so the core kernels compiled for
+``STATE`` serve it too.  Compiles one variant (about a minute, nothing cached).
 
 Usage: ``python benchmarks/bench_step_limits.py [--n 300] [--preset physical] [--tol 1e-7]``
 (default: the preset's tolerance schedule).
@@ -28,15 +30,17 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import warnings
 
 import numba
 import numpy as np
+from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from bench_cost_split import _all, _edited, _jit, _jit_scheme
 from dicetrace.core import loop
 from dicetrace.core._jit import specialise
 from dicetrace.core.schemes import contact_substep, contact_tsit5
-from dicetrace.core.state import SUBSTEP_CAUSES, new_states
+from dicetrace.core.state import STATE, SUBSTEP_CAUSES, new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.studies.accuracy import T_MAX_S, sample_ics
 from dicetrace.studies.text import tol_text
@@ -47,11 +51,28 @@ OMEGA_EDGES = (0.1, 0.3, 1.0)
 #: What came before a sub-step attempt (a row of the counters).
 CONTEXTS = ("none of these", "an entry cut", "an exit cut", "an impact's start", "a rejection",
             "a friction-limited sub-step")
-#: Rows of ``STATE.ros_j`` that hold the counters.
+#: Rows of the counters (``COUNTED.limits``).
 ROW_LAM = 0  # + cause (error 0, friction 2): rows 0 and 2
 ROW_OMEGA = 3  # + cause: rows 3 and 5
 ROW_REJECTED = 6
 ROW_ACCEPTED = 7
+#: The counters' shape: a row each, a column per bucket or per context.
+LIMITS_SHAPE = (ROW_ACCEPTED + 1, max(len(CONTEXTS), len(LAM_EDGES) + 1, len(OMEGA_EDGES) + 1))
+#: The state record with the counters added (the driver reads every other field by name, as in ``STATE``).
+COUNTED = np.dtype(
+    {"names": [*STATE.names, "limits"],
+     "formats": [STATE.fields[n][0] for n in STATE.names] + [np.dtype((np.float64, LIMITS_SHAPE))]},
+    align=True,
+)
+
+
+def counted_states() -> np.ndarray:
+    """A (1,) ``COUNTED`` array: ``new_states(1)``'s values, the counters at zero."""
+    S = np.zeros(1, COUNTED)
+    base = new_states(1)
+    for name in STATE.names:
+        S[name] = base[name]
+    return S
 
 
 def _bucket(name: str, edges) -> str:
@@ -75,16 +96,16 @@ def instrumented_drive():
         ("                if cmin < th < cut:\n                    cut = th\n",
          "                if cmin < th < cut:\n                    cut = th\n                    centry = zs > 0.0\n"),
         ("                st.substeps[CAUSE_REJECTED] += 1\n",
-         f"                st.substeps[CAUSE_REJECTED] += 1\n                st.ros_j[{ROW_REJECTED}, ctx] += 1.0\n"
+         f"                st.substeps[CAUSE_REJECTED] += 1\n                st.limits[{ROW_REJECTED}, ctx] += 1.0\n"
          "                ctx = 4\n"),
         ("        st.substeps[cause] += 1\n",
          "        st.substeps[cause] += 1\n"
-         f"        st.ros_j[{ROW_ACCEPTED}, ctx] += 1.0\n"
+         f"        st.limits[{ROW_ACCEPTED}, ctx] += 1.0\n"
          "        if cause == CAUSE_ERROR or cause == CAUSE_FRICTION:\n"
          "            x = lam * hs\n" + _bucket("b", LAM_EDGES)
-         + f"            st.ros_j[{ROW_LAM} + cause, b] += 1.0\n"
+         + f"            st.limits[{ROW_LAM} + cause, b] += 1.0\n"
          "            x = hs * math.sqrt(kp.k)\n" + _bucket("c", OMEGA_EDGES)
-         + f"            st.ros_j[{ROW_OMEGA} + cause, c] += 1.0\n"
+         + f"            st.limits[{ROW_OMEGA} + cause, c] += 1.0\n"
          "        ctx = 0\n"
          "        if cause == CAUSE_CUT:\n            ctx = 1 if centry else 2\n"
          "        elif cause == CAUSE_FRICTION:\n            ctx = 5\n"),
@@ -105,6 +126,8 @@ def main() -> None:
     if args.n < 1:
         ap.error(f"--n must be at least 1, got {args.n}")
     numba.set_num_threads(1)
+    # COUNTED passed where STATE is compiled for: numba's record subtyping, which it calls experimental
+    warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
     ics = convert_l(sample_ics(n=args.n), "program", cfg.preset.l_convention)
     kin = cfg.kernel_inputs(ics)
     m = len(ics)
@@ -112,17 +135,17 @@ def main() -> None:
     for name, template in (("plain", contact_substep.drive), ("counted", instrumented_drive())):
         step = _jit_scheme(specialise(template, f"step_limits_{name}", **contact_tsit5.DRIVE_CONSTANTS))
         kernels[name] = _jit(loop.summary_loop(step, f"roll_limits_{name}"))
-    S = new_states(1)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
-    _all(kernels["plain"], kin.ics, kin.off0, kin.params, S, *out)
+    _all(kernels["plain"], kin.ics, kin.off0, kin.params, new_states(1), *out)
     plain = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()
-    counts = np.zeros((13, 13))
+    S = counted_states()
+    counts = np.zeros(LIMITS_SHAPE)
     causes = np.zeros(len(SUBSTEP_CAUSES))
     for i in range(m):  # one IC at a time: the counters are per throw
-        S[0]["ros_j"][:] = 0.0
+        S[0]["limits"][:] = 0.0
         one = tuple(a[i : i + 1] for a in out)
         _all(kernels["counted"], kin.ics[i : i + 1], kin.off0, kin.params, S, *one)
-        counts += S[0]["ros_j"]
+        counts += S[0]["limits"]
         causes += S[0]["substeps"]
     counted = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()
     counts /= m

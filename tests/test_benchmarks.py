@@ -14,6 +14,8 @@ import importlib.util
 import sys
 from pathlib import Path
 
+import numpy as np
+
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
@@ -43,7 +45,15 @@ def test_step_limits_counters_build():
     mod = _load("bench_step_limits")
     drive = mod.instrumented_drive()
     assert drive.__name__ == "drive_limits"
-    # every counter row the script reads lies inside the work area it borrows
-    assert max(mod.ROW_LAM + 2, mod.ROW_OMEGA + 2, mod.ROW_REJECTED, mod.ROW_ACCEPTED) < 13
-    assert len(mod.CONTEXTS) <= 13 and len(mod.LAM_EDGES) + 1 <= 13
+    # every counter the script writes lies inside the field it adds to the state record
+    rows, cols = mod.COUNTED.fields["limits"][0].shape
+    assert max(mod.ROW_LAM + 2, mod.ROW_OMEGA + 2, mod.ROW_REJECTED, mod.ROW_ACCEPTED) < rows
+    assert len(mod.CONTEXTS) <= cols and len(mod.LAM_EDGES) + 1 <= cols and len(mod.OMEGA_EDGES) + 1 <= cols
+    # which holds every field of the state record, with its values from new_states
+    S = mod.counted_states()
+    base = mod.new_states(1)
+    for name in mod.STATE.names:  # same type and offset: numba takes COUNTED as a subtype of STATE
+        assert S.dtype.fields[name][:2] == base.dtype.fields[name][:2], name
+        assert np.array_equal(S[0][name], base[0][name]), name
+    assert not S[0]["limits"].any()
     assert mod._ranges((0.1, 0.3)) == ["≤ 0.1", "0.1–0.3", "> 0.3"]

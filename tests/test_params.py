@@ -84,6 +84,19 @@ def test_get_preset_and_get_integrator_name_the_choices():
         get_integrator(["rk4"])  # unhashable: still a ValueError, not a TypeError
 
 
+def test_a_removed_integrator_is_refused_saying_so():
+    """contact-rosenbrock (kernel id 7) was removed: its name gets one line that says so and names the
+    choices; its id is free, not reused (the ids stored in scans and results keep their meaning)."""
+    with pytest.raises(ValueError) as exc:
+        get_integrator("contact-rosenbrock")
+    (line,) = str(exc.value).splitlines()
+    assert "'contact-rosenbrock'" in line and "removed" in line and "contact-tsit5" in line
+    with pytest.raises(ValueError, match="'contact-rosenbrock': it was removed"):
+        make_config("physical", integrator="contact-rosenbrock")
+    assert 7 not in {s.kernel_id for s in INTEGRATORS.values()}
+    assert INTEGRATORS["contact-tsit5"].kernel_id == 8 and INTEGRATORS["contact-dop853"].kernel_id == 6
+
+
 # -- Numerics ------------------------------------------------------------------------------------
 
 
@@ -115,6 +128,7 @@ def test_get_preset_and_get_integrator_name_the_choices():
         pytest.param({"tol_growth": TOL_GROWTH_MAX * 2}, "tolerance growth tol_growth", id="tol_growth>max"),
         pytest.param({"tol_growth": True}, "tolerance growth tol_growth", id="tol_growth=True"),
         pytest.param({"integrator": "magic"}, "unknown integrator 'magic'", id="integrator"),
+        pytest.param({"integrator": "contact-rosenbrock"}, "'contact-rosenbrock': it was removed", id="removed integrator"),
     ],
 )
 def test_numerics_refuses_a_bad_value_naming_the_field(changes, words):
@@ -307,7 +321,7 @@ def test_tol_growth_reaches_only_the_adaptive_kernels():
     assert Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"])) == cfg
 
 
-@pytest.mark.parametrize("integrator", ["contact-tsit5", "contact-adaptive", "contact-dop853", "contact-rosenbrock"])
+@pytest.mark.parametrize("integrator", ["contact-tsit5", "contact-adaptive", "contact-dop853"])
 def test_physical_schedule_is_the_default_of_every_error_controlled_integrator(integrator):
     num = make_config("physical", integrator=integrator).numerics
     assert (num.tol, num.tol_growth) == (2e-8, 10.0)

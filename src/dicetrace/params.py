@@ -19,7 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from dicetrace.integrators import INTEGRATORS, IntegratorSpec, get_integrator  # noqa: F401  (re-exported)
+from dicetrace.integrators import INTEGRATORS, IntegratorSpec, get_integrator, unknown_integrator  # noqa: F401  (re-exported)
 from dicetrace.stepsize import auto_dt
 
 
@@ -256,7 +256,7 @@ class Preset:
         if self.l_convention not in L_CONVENTIONS:
             raise ValueError(f"preset {self.name!r}: l_convention must be 'program' or 'physical'")
         if self.integrator not in INTEGRATORS:
-            raise ValueError(f"preset {self.name!r}: unknown integrator {self.integrator!r}")
+            raise ValueError(f"preset {self.name!r}: {unknown_integrator(self.integrator)}")
         tol = self.default_tol
         if tol is not None:
             if not _valid_tol(tol):
@@ -343,7 +343,7 @@ class Numerics:
         stop test, settle time).
     tol
         The error-controlled integrators only (``contact-adaptive``,
-        ``contact-dop853``, ``contact-tsit5``, ``contact-rosenbrock``:
+        ``contact-dop853``, ``contact-tsit5``:
         ``IntegratorSpec.adaptive``): the local error
         tolerance of their sub-steps (relative: position error per sub-step in
         units of the half side, velocity error in units of the die's current

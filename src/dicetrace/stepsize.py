@@ -72,7 +72,7 @@ def auto_dt(
     ``AUTO_DT_SAFETY`` of the integrator's bound (``IntegratorSpec.stability_bound``):
     dt = safety·bound/λ, per sub-step for ``contact-substep``.  The
     error-controlled schemes (``IntegratorSpec.adaptive``: contact-adaptive,
-    contact-dop853, contact-tsit5, contact-rosenbrock) get ``AUTO_DT_MAX_S``:
+    contact-dop853, contact-tsit5) get ``AUTO_DT_MAX_S``:
     their dt is only the cadence of the stop test and the longest sub-step,
     and their error control, not dt, keeps the sub-steps stable (the stability
     map, ``dicetrace stability``, finds every one of them stable at every dt

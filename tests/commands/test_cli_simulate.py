@@ -136,6 +136,7 @@ BAD = [
     case([], "--ic", "--slice", "no initial condition"),
     case([*IC, "--preset", "moon"], "--preset", "unknown preset 'moon'"),
     case([*IC, "--integrator", "magic"], "--integrator", "unknown integrator 'magic'"),
+    case([*IC, "--integrator", "contact-rosenbrock"], "--integrator", "'contact-rosenbrock'", "removed"),
     case([*IC, "--dt", "0"], "--dt", "'0'"),
     case([*IC, "--dt", "inf"], "--dt", "'inf'"),
     case([*IC, "--dt", "fast"], "--dt", "'fast'"),

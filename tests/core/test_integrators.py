@@ -414,7 +414,6 @@ def test_tol_growth_loosens_the_tolerance_with_the_throws_clock(integ):
 RESTITUTION_TOLS = {
     "contact-adaptive": ((1e-5, 1e-7, 1e-9), 1e-8),
     "contact-dop853": ((1e-6, 1e-8, 1e-10), 2e-11),
-    "contact-rosenbrock": ((1e-6, 1e-8, 1e-10), 1e-8),
     "contact-tsit5": ((1e-6, 1e-8, 1e-10), 2e-10),
 }
 
@@ -846,88 +845,6 @@ def test_contact_step_ends_with_the_forces_of_its_state(preset, integ):
             assert np.array_equal(S[0][name], fresh[0][name], equal_nan=True), name
         in_contact += contact
     assert in_contact > 50
-
-
-# -- contact-rosenbrock: the linearly implicit pair ------------------------------------------------
-
-
-def test_rosenbrock_tableau_is_order_3_w_method():
-    """ROS34PW2's coefficients: stiffly accurate (b = last row of α + γ), order 3 with the
-    exact Jacobian and with none (J = 0: a W-method keeps its order), embedded order 2,
-    on a pendulum with cubic damping against scipy's DOP853 at 1e-13."""
-    from scipy.integrate import solve_ivp
-
-    from dicetrace.core.schemes import contact_rosenbrock as ros
-
-    a, g, b, bh, gam = ros.ROS_ALPHA, ros.ROS_GAMMAS, ros.ROS_B, ros.ROS_BHAT, ros.ROS_GAMMA
-    np.testing.assert_allclose(b, a[-1] + g[-1] + gam * np.eye(4)[-1], rtol=0, atol=1e-15)
-    assert b.sum() == pytest.approx(1, abs=1e-15) and bh.sum() == pytest.approx(1, abs=1e-15)
-
-    def f(y):
-        return np.array([y[1], -np.sin(y[0]) - 0.3 * y[1] ** 3])
-
-    def jac(y):
-        return np.array([[0.0, 1.0], [-np.cos(y[0]), -0.9 * y[1] ** 2]])
-
-    def step(y0, h, J, w):
-        M = np.eye(2) - gam * h * J
-        k = []
-        for i in range(4):
-            yi = y0 + sum(a[i, j] * k[j] for j in range(i))
-            s = sum(g[i, j] * k[j] for j in range(i)) if i else 0 * y0
-            k.append(np.linalg.solve(M, h * f(yi) + h * J @ s))
-        return y0 + sum(w[i] * k[i] for i in range(4))
-
-    y0, T = np.array([1.0, 0.5]), 1.0
-    ref = solve_ivp(lambda t, y: f(y), (0, T), y0, method="DOP853", rtol=1e-13, atol=1e-14).y[:, -1]
-    for exact_j, w, order in ((True, b, 3), (False, b, 3), (True, bh, 2)):
-        errs = []
-        ns = [10, 20, 40, 80]
-        for n in ns:
-            y = y0.copy()
-            for _ in range(n):
-                y = step(y, T / n, jac(y) if exact_j else np.zeros((2, 2)), w)
-            errs.append(np.abs(y - ref).max())
-        s = slopes(T / np.array(ns), np.array(errs))
-        assert np.all(np.abs(s - order) < 0.1), (exact_j, order, errs, s)
-
-
-def test_rosenbrock_smooth_contact_order_3():
-    """The smooth sliding, spinning, rocking contact of ``test_smooth_contact_order`` with
-    fixed ROS34PW2 steps: the error against contact-substep at T/2¹⁰ falls at order 3
-    (through the kernel's finite-difference Jacobian and its LU solves)."""
-    hs = SMOOTH_T / 2.0 ** np.arange(4, 9)
-    errs = smooth_contact_errors("contact-rosenbrock", fixed_substeps("contact-rosenbrock", **SMOOTH), hs)
-    s = slopes(hs, errs)
-    assert np.all(s[-3:] > 2.8) and np.all(s[-3:] < 3.6), (errs, s)
-
-
-def test_rosenbrock_undamped_bounce_converges():
-    """The undamped flat bounce with fixed ROS34PW2 steps: exit/entry speed ratio → 1 at order 3."""
-    hs = T_CONTACT / 2.0 ** np.arange(4, 9)
-    ratio_err = bounce_ratio_errors("contact-rosenbrock", fixed_substeps("contact-rosenbrock", k=K_BOUNCE, gamma=0.0, mu=0.0, g=0.0), hs)
-    s = slopes(hs, ratio_err)
-    assert np.all(s[-3:] > 2.8), (ratio_err, s)
-
-
-def test_rosenbrock_resting_die_is_stable_beyond_the_explicit_friction_bound():
-    """A die set down on a face (too deep, sliding, spinning) for 10 s in FIXED sub-steps of
-    5 ms, with friction regularised at 0.5 cm/s: λ_f·h ≈ 16 for the friction law at rest
-    (μ·P/v_reg per unit effective mass, P = 8·|g|/4), where DOP853 needs ≤ 3 and RK4 ≤ 1
-    (``FRICTION_THETA``).  With no error control at all the energy never rises, the die
-    comes to rest at the equilibrium penetration 8·|g|/(4k) and stays there without drift.
-
-    (Not much further: the step linearises the friction law at its start, and where |u|
-    crosses v_reg inside a step much longer than 1/λ_f the linearisation fails; at 0.5 cm/s
-    fixed steps of 15 ms blow up, a known limit of linearly implicit methods.  Under error
-    control the sub-steps shrink there instead; analysis/accuracy/TUNING.md §3.)"""
-    from dicetrace.core.schemes.contact_substep import INV_MASS_NODE
-
-    kp = fixed_substeps("contact-rosenbrock", friction="per-node", clamp_normal=True, energy="rigid", v_reg_cm_s=0.5)
-    h = 0.005
-    lam_f = kp.mu * (8 * abs(kp.g) / 4) * INV_MASS_NODE / kp.v_reg_cm_s
-    assert lam_f * h > 5 * 3.0
-    assert_comes_to_rest("contact-rosenbrock", kp, h, z_tol=1e-9, v_tol=1e-8, drift_tol=1e-10)
 
 
 def test_hermite_root_is_the_first_crossing():

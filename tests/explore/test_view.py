@@ -54,6 +54,7 @@ def test_seed3_gets_its_z_and_a_flat_grid():
         ({"slice": "cube"}, "slice", "unknown slice"),
         ({"preset": "wood"}, "preset", "unknown preset"),
         ({"integrator": "leapfrog"}, "integrator", "unknown integrator"),
+        ({"integrator": "contact-rosenbrock"}, "integrator", "'contact-rosenbrock': it was removed"),
         ({"gamma": "-1"}, "gamma", "damping"),
         ({"dt": "1"}, "dt", "time step"),
         ({"dt": "inf"}, "dt", "finite"),

@@ -337,6 +337,18 @@ def bad(args, *names, gap=None):
     return pytest.param(args, names, id=" ".join(args), marks=marks)
 
 
+def test_a_definition_naming_a_removed_integrator_is_refused_in_one_line():
+    """A scan written with contact-rosenbrock (removed) reads as a definition no more: one line that says so."""
+    from dicetrace.params import make_config
+
+    d = ScanDefinition(Grid("seed", "home", 4), make_config("physical", integrator="contact-tsit5"), 10).to_dict()
+    d = json.loads(json.dumps(d).replace('"contact-tsit5"', '"contact-rosenbrock"'))
+    with pytest.raises(ValueError) as exc:
+        ScanDefinition.from_dict(d)
+    (line,) = str(exc.value).splitlines()
+    assert "'contact-rosenbrock'" in line and "removed" in line
+
+
 HOME5 = ["--window", "home", "--res", "5"]
 SCAN_BAD = [
     bad(["--window", "atlantis", "--res", "5"], "--window", "unknown window 'atlantis'"),
@@ -365,6 +377,7 @@ SCAN_BAD = [
     bad([*HOME5, "--set", "k=-1"], "--set", "k must be > 0"),
     bad([*HOME5, "--preset", "moon"], "--preset", "'moon'"),
     bad([*HOME5, "--integrator", "magic"], "--integrator", "'magic'"),
+    bad([*HOME5, "--integrator", "contact-rosenbrock"], "--integrator", "'contact-rosenbrock'", "removed"),
     bad([*HOME5, "--dt", "0"], "--dt", "'0'"),
     bad([*HOME5, "--t-max", "x"], "--t-max", "'x'"),
     bad([*HOME5, "--integrator", "contact-adaptive", "--tol", "5"], "--tol", "[1e-14, 1)"),

@@ -23,6 +23,7 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail
+from dicetrace.integrators import REMOVED, unknown_integrator
 from dicetrace.studies.outputs import default_out, prepare_out
 
 _REGENERATE = ("Default ./dicetrace-results/{name}; the committed results: --out analysis/accuracy "
@@ -34,6 +35,8 @@ def _names(text: str | None, allowed, option: str, what: str):
         return None
     vals = tuple(v.strip() for v in text.split(",") if v.strip())
     bad = [v for v in vals if v not in allowed]
+    if what == "integrator" and any(v in REMOVED for v in bad):  # a removed one: say why it is gone
+        fail(unknown_integrator(next(v for v in bad if v in REMOVED)))
     if bad or not vals:
         fail(f"{option}: unknown {what} {', '.join(bad) or repr(text)} (choose from {', '.join(allowed)})")
     return vals

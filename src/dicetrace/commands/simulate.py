@@ -107,13 +107,13 @@ def build_config(
     message names the option(s) at fault.  ``--tol`` or ``--tol-growth``
     with a fixed-step integrator is refused (it would have no effect).
     """
-    from dicetrace.params import INTEGRATORS, TOL_GROWTH_MAX, TOL_MIN, make_config
+    from dicetrace.params import INTEGRATORS, TOL_GROWTH_MAX, TOL_MIN, make_config, unknown_integrator
     from dicetrace.stepsize import impact_speed_cm_s
 
     base = preset_or_fail(preset)
     overrides = dict(overrides or {})
     if integrator is not None and integrator not in INTEGRATORS:
-        fail(f"--integrator: unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
+        fail(f"--integrator: {unknown_integrator(integrator)}")
     try:
         model = base.with_(**overrides) if overrides else base
     except (ValueError, TypeError) as e:

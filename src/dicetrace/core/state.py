@@ -21,10 +21,6 @@ scheme keeps from one step to the next:
     the work area of the embedded Runge–Kutta pairs (``schemes.erk``):
     stage derivatives, stage point, sub-step start of y = (X, U, L, q) and
     a weighted sum of stages.
-``ros_j``, ``ros_lu``, ``ros_piv``
-    the work area of the Rosenbrock–W scheme (``schemes.contact_rosenbrock``):
-    the Jacobian of y' = f(y) at the sub-step start, the LU factors of
-    I − γ·h·J and their row pivots.
 ``ahead``, ``fr_*``, ``dn_*``
     a scheme with dense output (``contact-tsit5``) lets its last sub-step
     of a step run past the step's end: ``ahead`` is how far the integration
@@ -118,9 +114,6 @@ STATE = np.dtype(
         ("dn_off", _F8, (8, 3)),
         ("dn_h", _F8),
         ("dn_w", _F8, 7),
-        ("ros_j", _F8, (13, 13)),
-        ("ros_lu", _F8, (13, 13)),
-        ("ros_piv", np.int64, 13),
         ("substeps", np.int64, SUBSTEP_CAUSES_N),
         ("tol_weight", _F8),
         ("tol_h", _F8),

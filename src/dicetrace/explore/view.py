@@ -156,7 +156,7 @@ def _num(param: str, text) -> float:
 
 
 def _validate(v: View) -> None:
-    from dicetrace.integrators import INTEGRATORS
+    from dicetrace.integrators import INTEGRATORS, unknown_integrator
     from dicetrace.params import PRESETS
 
     if v.slice not in SLICES:
@@ -164,7 +164,7 @@ def _validate(v: View) -> None:
     if v.preset not in PRESETS:
         raise ViewError("preset", f"unknown preset {v.preset!r} (choose from {', '.join(PRESETS)})")
     if v.integrator is not None and v.integrator not in INTEGRATORS:
-        raise ViewError("integrator", f"unknown integrator {v.integrator!r} (choose from {', '.join(INTEGRATORS)})")
+        raise ViewError("integrator", unknown_integrator(v.integrator))
     if len(v.res) != 2 or any(isinstance(r, bool) or not isinstance(r, (int, np.integer)) for r in v.res):
         raise ViewError("res", f"must be two whole numbers NX,NY, got {v.res!r}")
     for r in v.res:

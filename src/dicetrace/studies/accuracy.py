@@ -49,7 +49,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from dicetrace.ics import SEED_SLICE, Sample
-from dicetrace.params import INTEGRATORS, Config, convert_l, get_preset, make_config
+from dicetrace.params import INTEGRATORS, Config, convert_l, get_preset, make_config, unknown_integrator
 from dicetrace.status import Status
 from dicetrace.windows import WINDOWS, get_window
 
@@ -154,7 +154,7 @@ def check_integrators(integrators) -> tuple[str, ...]:
     integrators = tuple(integrators or INTEGRATORS)
     for name in integrators:
         if name not in INTEGRATORS:
-            raise ValueError(f"unknown integrator {name!r} (choose from {', '.join(INTEGRATORS)})")
+            raise ValueError(unknown_integrator(name))
     return integrators
 
 

@@ -22,7 +22,7 @@ from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsi
 #: Largest λ_f·h of the friction law (Tsit5's interval on the negative real
 #: axis reaches −3.51; a margin for the law's non-linearity and for λ_f, a
 #: per-node bound, being no bound on the die's whole friction Jacobian: at 3.3
-#: a late sub-step of a `physical` throw raised its energy, docs/model.md §9).
+#: a late sub-step of a `physical` throw raised its energy, analysis/accuracy/TUNING.md §2).
 FRICTION_THETA = 3.0
 #: An impact's first sub-step, as ω·h with ω = √k.
 H0 = 0.4
