@@ -247,10 +247,12 @@ def test_allowed_hosts_are_the_local_names_and_the_listening_address():
 def test_a_throw_past_its_time_limit_is_a_504_naming_dt(client, monkeypatch):
     from dicetrace.explore import app
 
-    monkeypatch.setattr(app, "THROW_TIMEOUT_S", 0.3)
-    r = client.get("/api/hover", params={"window": WINDOW, "res": RES, "i": 3, "j": 4, "dt": "1e-7"})  # seconds a throw
+    # 5.2 million steps at dt = 1e-7: at least ~0.05 s on any machine, far past a 2 ms limit (a 0.3 s limit
+    # was met by a fast, idle machine)
+    monkeypatch.setattr(app, "THROW_TIMEOUT_S", 0.002)
+    r = client.get("/api/hover", params={"window": WINDOW, "res": RES, "i": 3, "j": 4, "dt": "1e-7"})
     assert r.status_code == 504, r.text
-    assert r.json()["param"] == "dt" and r.json()["error"].startswith("dt: this throw took more than 0.3 s")
+    assert r.json()["param"] == "dt" and r.json()["error"].startswith("dt: this throw took more than 0.002 s")
     assert client.get("/api/health").json()["ok"] is True
 
 
