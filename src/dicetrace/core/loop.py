@@ -46,6 +46,7 @@ import math
 import numpy as np
 from numba import prange
 
+from dicetrace.core import fast
 from dicetrace.core._jit import jit, jit_parallel, specialise
 from dicetrace.core.free_flight import flight_steps, free_advance
 from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_heights, node_velocities
@@ -324,11 +325,16 @@ def _spec(integ: int):
         raise ValueError(f"no integrator has kernel id {integ!r} (see dicetrace.integrators.INTEGRATORS)") from None
 
 
-def _fast_summary(mod, trace: bool):
+#: The specialised summary kernels, by scheme: ``(applies, kernel)``, where ``kernel(ic, off0, kp, sets,
+#: set_steps)`` is bit-identical to the run loop's summary whenever ``applies(kp, off0)`` (``core.fast``).
+_FAST_SUMMARIES = {"semi_implicit_euler": (fast.applies, fast.roll_summary_sie)}
+
+
+def _fast_summary(scheme: str, trace: bool):
     """(applies, kernel) of a scheme's specialised summary kernel; never for a tracing loop."""
-    if trace or not hasattr(mod, "fast_summary"):
+    if trace or scheme not in _FAST_SUMMARIES:
         return _never, _no_kernel
-    return mod.fast_summary()
+    return _FAST_SUMMARIES[scheme]
 
 
 def summary_loop(step, name: str, *, exact_flight: bool = True):
@@ -353,11 +359,11 @@ def roll_kernel(integ: int, trace: bool):
     key = ("roll", scheme, bool(trace))
     if key not in _KERNELS:
         mod = scheme_module(_spec(integ))
-        applies, fast = _fast_summary(mod, trace)
+        applies, fast_kernel = _fast_summary(scheme, trace)
         name = f"roll_{scheme}_{'trace' if trace else 'summary'}"
         _KERNELS[key] = jit(
             specialise(_roll, name, STEP=mod.step, FLIGHT=getattr(mod, "EXACT_FLIGHT", False), TRACE=bool(trace),
-                       FAST_APPLIES=applies, FAST=fast)
+                       FAST_APPLIES=applies, FAST=fast_kernel)
         )
     return _KERNELS[key]
 
@@ -367,9 +373,10 @@ def batch_kernel(integ: int):
     scheme = _spec(integ).scheme
     key = ("batch", scheme)
     if key not in _KERNELS:
-        applies, fast = _fast_summary(scheme_module(_spec(integ)), False)
+        applies, fast_kernel = _fast_summary(scheme, False)
         _KERNELS[key] = jit_parallel(
-            specialise(_batch, f"batch_{scheme}", ROLL=roll_kernel(integ, False), FAST_APPLIES=applies, FAST=fast)
+            specialise(_batch, f"batch_{scheme}", ROLL=roll_kernel(integ, False), FAST_APPLIES=applies,
+                       FAST=fast_kernel)
         )
     return _KERNELS[key]
 

@@ -18,10 +18,10 @@ its scheme module here (``IntegratorSpec.scheme``); the module defines
     exact rotation, ``core.free_flight``): the run loop then crosses a free
     flight of several whole steps in one piece (``core.loop``);
 
-and, optionally, ``fast_summary() -> (applies, kernel)``: a specialised
-summary kernel (``kernel(ic, off0, kp, sets, set_steps)``, bit-identical
-to the run loop's summary) and the predicate ``applies(kp, off0)`` that
-says when it may run (imported only when that scheme's loop is built).  ``core.loop`` compiles one run loop per scheme.
+A scheme may also have a specialised summary kernel, bit-identical to the
+run loop's summary where it applies (``core.fast`` for this one's
+``semi_implicit_euler``); ``core.loop`` holds the table of them
+(``_FAST_SUMMARIES``) and compiles one run loop per scheme.
 
 Adding an integrator: one module here, one row in the table, its tests.
 """
