@@ -8,7 +8,7 @@ import pytest
 from dicetrace.ics import Grid
 from dicetrace.scan import label_grid, read_scan, scan
 from dicetrace.scan.map_rrd import CLASS_IDS, MAX_LABELLED, class_ids, nice_ticks, write_scan_rrd
-from dicetrace.scan.maps import OUTCOME_RGB
+from dicetrace.scan.colours import OUTCOME_RGB
 
 # not square (7 × 5), so that a transposed or flipped image cannot pass
 GRID = Grid("seed", ((1.0, 2.0), (3.5, 4.5)), (7, 5))

@@ -9,7 +9,7 @@ from viewer_shot import RERUN, XVFB, screenshot
 from dicetrace.ics import Grid
 from dicetrace.scan import label_grid, scan
 from dicetrace.scan.map_rrd import AXIS_RGB, BACKGROUND_RGB, legend_order, write_scan_rrd
-from dicetrace.scan.maps import OUTCOME_RGB
+from dicetrace.scan.colours import OUTCOME_RGB
 
 pytestmark = [pytest.mark.viewer, pytest.mark.slow]
 

@@ -293,7 +293,8 @@ def test_metadata_and_manifest(tmp_path):
 def test_png_and_rrd(tmp_path):
     from rerun.chunk import RrdReader
 
-    from dicetrace.scan.maps import outcome_png, write_scan_rrd
+    from dicetrace.scan.map_rrd import write_scan_rrd
+    from dicetrace.scan.maps import outcome_png
 
     out, png, rrd = tmp_path / "s", tmp_path / "map.png", tmp_path / "map.rrd"
     scan(Grid("seed", "party", 9), out)
@@ -303,7 +304,7 @@ def test_png_and_rrd(tmp_path):
     # the map shows each outcome of the grid in its colour, in proportion to its cells, and no other outcome
     import matplotlib.image
 
-    from dicetrace.scan.maps import OUTCOME_RGB
+    from dicetrace.scan.colours import OUTCOME_RGB
 
     img = np.round(matplotlib.image.imread(png)[..., :3] * 255).astype(int)
     grid = label_grid(out)

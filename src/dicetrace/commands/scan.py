@@ -429,7 +429,8 @@ def register(app: typer.Typer) -> None:
                 print(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish", file=sys.stderr)
         failed = _status_summary(out_dir, quiet)
         if png_dest is not None or rrd_dest is not None:
-            from dicetrace.scan.maps import outcome_png, write_scan_rrd
+            from dicetrace.scan.map_rrd import write_scan_rrd
+            from dicetrace.scan.maps import outcome_png
             from dicetrace.sinks._common import Staging
 
             with Staging() as staging:  # both maps, or neither

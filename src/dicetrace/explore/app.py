@@ -41,9 +41,12 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
+from dicetrace.explore.compare import compare_endpoint
 from dicetrace.explore.compute import Busy, OverBudget, Worker, scan_folder_for, throw_info, throw_rrd
 from dicetrace.explore.outcome_map import Cancelled, strip_rows
+from dicetrace.explore.page import page_html
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
+from dicetrace.scan.colours import outcome_rgb_table
 from dicetrace.sinks.rerun_web import rerun_notebook_static
 
 #: The passes of a view and their resolution divisors: the page asks for each in turn.
@@ -121,16 +124,6 @@ class SameOriginWrites:
         if origin.lower() != own:
             return f"Origin {origin[:100]!r} is not this server's ({own})"
         return None
-
-
-def outcome_rgb_table() -> np.ndarray:
-    """(8, 3) uint8: the colour of outcome -1..6 at row outcome + 1 (the scan map's colours)."""
-    from dicetrace.scan.maps import OUTCOME_RGB
-
-    t = np.zeros((8, 3), dtype=np.uint8)
-    for k, rgb in OUTCOME_RGB.items():
-        t[k + 1] = rgb
-    return t
 
 
 def map_png(outcome: np.ndarray) -> bytes:
@@ -232,8 +225,6 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
     (:func:`allowed_hosts`); every other ``Host:`` gets a 400.  ``map_budget_s``: the
     computing time one map may take (:class:`~dicetrace.explore.compute.Worker`'s ``budget_s``).
     """
-    from dicetrace.explore.compare import compare_endpoint
-    from dicetrace.explore.page import page_html
 
     default = default or View()
     worker = worker or Worker(threads=threads, budget_s=map_budget_s)

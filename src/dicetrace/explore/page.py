@@ -15,7 +15,12 @@ from __future__ import annotations
 import html
 import json
 
+from dicetrace.explore.compare import MAX_THROWS
 from dicetrace.explore.view import View
+from dicetrace.ics import SLICES
+from dicetrace.integrators import INTEGRATORS
+from dicetrace.params import PRESETS
+from dicetrace.scan.colours import OUTCOME_NAMES, OUTCOME_RGB, outcome_rgb_table
 
 
 def _options(names, selected) -> str:
@@ -26,18 +31,10 @@ def _options(names, selected) -> str:
 
 def page_html(default: View, *, can_save: bool) -> str:
     """The page; ``default`` is the view of a URL without parameters."""
-    from dicetrace.explore.app import outcome_rgb_table
-    from dicetrace.ics import SLICES
-    from dicetrace.integrators import INTEGRATORS
-    from dicetrace.params import PRESETS
-    from dicetrace.scan.maps import OUTCOME_NAMES, OUTCOME_RGB
-
     legend = "".join(
         f'<span class="key"><span class="sw" style="background:rgb{OUTCOME_RGB[o]}"></span>{html.escape(OUTCOME_NAMES[o])}</span>'
         for o in (1, 2, 3, 4, 5, 6, 0, -1)
     )
-    from dicetrace.explore.compare import MAX_THROWS
-
     cfg = {"default": default.to_query(), "canSave": can_save, "palette": outcome_rgb_table().tolist(),
            "maxCompare": MAX_THROWS}
     return (

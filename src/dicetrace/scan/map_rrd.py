@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dicetrace.scan.maps import OUTCOME_NAMES, OUTCOME_RGB
+from dicetrace.scan.colours import OUTCOME_NAMES, OUTCOME_RGB
 from dicetrace.sinks._common import destination, write_bytes
 
 #: Class id of each outcome: faces 1..6 keep their number; 0 is cells not computed yet (transparent).

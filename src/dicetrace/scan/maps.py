@@ -1,8 +1,7 @@
-"""Pictures of a scan: the outcome colours, the outcome map as a PNG (the Rerun map is :mod:`~dicetrace.scan.map_rrd`).
+"""The outcome map of a scan as a PNG (the Rerun map is :mod:`~dicetrace.scan.map_rrd`, the colours
+:mod:`~dicetrace.scan.colours`).
 
-matplotlib and rerun are imported inside the functions.  Colours are the
-writeup's: face 1 blue, 2 green, 3 red, 4 magenta, 5 yellow, 6 black;
-0 (undefined) grey, -1 (did not settle) white.
+matplotlib is imported inside the function (heavy, and only a map needs it).
 """
 
 from __future__ import annotations
@@ -11,27 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from dicetrace.scan.colours import OUTCOME_NAMES, OUTCOME_RGB
 from dicetrace.sinks._common import destination, staged
-
-#: RGB (0-255) of each outcome label -1..6.
-OUTCOME_RGB: dict[int, tuple[int, int, int]] = {
-    -1: (255, 255, 255),
-    0: (128, 128, 128),
-    1: (0, 0, 255),
-    2: (0, 128, 0),
-    3: (255, 0, 0),
-    4: (255, 0, 255),
-    5: (255, 255, 0),
-    6: (0, 0, 0),
-}
-OUTCOME_NAMES = {-1: "did not settle", 0: "undefined", 1: "1", 2: "2", 3: "3", 4: "4", 5: "5", 6: "6"}
-
-
-def _rgb_table() -> np.ndarray:
-    t = np.zeros((8, 3), dtype=np.uint8)
-    for k, rgb in OUTCOME_RGB.items():
-        t[k + 1] = rgb
-    return t
 
 
 def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int = 150, staging=None) -> Path:
@@ -95,10 +75,3 @@ def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int 
     finally:
         plt.close(fig)
     return Path(dest.given)
-
-
-def write_scan_rrd(folder, path, *, staging=None) -> Path:
-    """The scan map as a Rerun recording (image, hover points, axes, legend): see :mod:`dicetrace.scan.map_rrd`."""
-    from dicetrace.scan.map_rrd import write_scan_rrd as write
-
-    return write(folder, path, staging=staging)
