@@ -215,13 +215,22 @@ def read_metadata(path) -> dict:
 # -- normalising the sources --------------------------------------------------------------
 
 
+def _is_batch(source) -> bool:
+    """Whether ``source`` is a :class:`~dicetrace.simulate.BatchResult` (by what it holds: tables are built
+    from the results simulate returns and never import simulate, which builds its tables from here)."""
+    return all(hasattr(source, a) for a in ("set_offsets", "status_code", "t_settle_s", "coords", "config"))
+
+
+def _is_roll(source) -> bool:
+    """Whether ``source`` is a :class:`~dicetrace.simulate.Roll` (by what it holds, as :func:`_is_batch`)."""
+    return all(hasattr(source, a) for a in ("ic", "contact_sets", "contact_steps", "status", "config"))
+
+
 class _Summaries:
     """Summary arrays of m throws, from a BatchResult or from Rolls."""
 
     def __init__(self, source):
-        from dicetrace.simulate import BatchResult, Roll
-
-        if isinstance(source, BatchResult):
+        if _is_batch(source):
             self.config = source.config
             self.ics = np.asarray(source.ics, dtype=np.float64).reshape(-1, 6)
             self.outcome = np.asarray(source.outcome, dtype=np.int8)
@@ -233,11 +242,11 @@ class _Summaries:
             self.set_steps = np.asarray(source.set_steps, dtype=np.int64)
             self.coords = source.coords
             return
-        rolls = [source] if isinstance(source, Roll) else list(source)
+        rolls = [source] if _is_roll(source) else list(source)
         if not rolls:
             raise ValueError("no rolls to tabulate")
         for r in rolls:
-            if not isinstance(r, Roll):
+            if not _is_roll(r):
                 raise TypeError(f"expected Roll objects, got {type(r).__name__}")
         self.config = rolls[0].config
         for r in rolls[1:]:
