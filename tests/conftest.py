@@ -5,6 +5,7 @@ interpreter: numba's cache, rerun, pandas)."""
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -107,3 +108,25 @@ def _assert_one_line_error(res: CliResult, *names: str) -> str:
 def assert_one_line_error():
     """``check(result, *names)``: exit code 2, nothing on stdout, no traceback, one error line naming all ``names``."""
     return _assert_one_line_error
+
+
+# -- a headless browser ----------------------------------------------------------------------------
+
+CHROMIUM_CANDIDATES = ("chromium", "chromium-browser", "google-chrome")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Debian's chromium, headless, through Playwright (skipped, with the reason, where either is missing)."""
+    sync_api = pytest.importorskip("playwright.sync_api", reason="Playwright is not installed (pip install playwright)")
+    exe = next((shutil.which(n) for n in CHROMIUM_CANDIDATES if shutil.which(n)), None)
+    if exe is None:
+        pytest.skip("no chromium on PATH (Debian: apt-get install chromium)")
+    with sync_api.sync_playwright() as p:
+        try:
+            b = p.chromium.launch(executable_path=exe, headless=True,
+                                  args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"])
+        except Exception as e:  # a chromium that cannot start here
+            pytest.skip(f"chromium {exe} does not start headless: {str(e).splitlines()[0]}")
+        yield b
+        b.close()

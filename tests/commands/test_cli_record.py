@@ -5,6 +5,7 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,7 @@ pytest.importorskip("rerun")
 from dicetrace.ics import seed_slice  # noqa: E402
 from dicetrace.simulate import sets_to_text  # noqa: E402
 from dicetrace.sinks.rerun import read_rrd  # noqa: E402
+from local_processes import interrupt, not_left_running  # noqa: E402
 
 SEQ_1_65_3_9 = "0-6-68-8-0-3-0-1-0-8-48-4-24-2-0-2-4-0-6-0-48-0-6"
 
@@ -288,8 +290,6 @@ def decoded(path: Path, kind: str = "recording") -> dict:
 @pytest.mark.skipif(not RERUN_CLI.exists(), reason="rerun CLI not installed")
 @pytest.mark.parametrize("args", [("--slice", "seed", "--at", "1.65,3.9"), ("--slice", "seed", "--at", "1.65,3.9", "--nudge", "1e-6")])
 def test_connect_streams_the_same_content_and_blueprint_as_the_file(tmp_path, dicetrace_cli, args):
-    import signal
-
     port = free_port()
     got = tmp_path / "received.rrd"
     server = subprocess.Popen(
@@ -304,12 +304,7 @@ def test_connect_streams_the_same_content_and_blueprint_as_the_file(tmp_path, di
         assert res.returncode == 0, res.stderr
         assert f"wrote {out}  sent to rerun+http://127.0.0.1:{port}/proxy" in res.stdout
     finally:
-        server.send_signal(signal.SIGINT)
-        try:
-            server.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            server.kill()
-            server.wait(timeout=10)
+        interrupt(server, 30)
     sent, filed = decoded(got), decoded(out)
     assert ("/world/ground" in sent) and len(sent) > 8 and sum(len(v) for v in sent.values()) > 1000
     assert sent == filed
@@ -376,29 +371,20 @@ def listening_sockets(pid: int) -> set[tuple[str, int]]:
 def serve_and_look(tmp_path, *extra: str):
     """Start ``record --serve`` (the extra options given), and once it serves: its printed line, its listening
     sockets and its ports; stopped with Ctrl-C, as a user would."""
-    import signal
-
     grpc, web = free_port(), free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "dicetrace.cli", "record", "--ic", "14.08,11.46,9.87,13.8,122.8,15.5", "--serve",
          "--port", str(grpc), "--web-port", str(web), "--serve-for", "120", *extra],
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
-    try:
+    with not_left_running(proc):
         first = proc.stdout.readline()  # printed once both servers listen and the recording is served
         sockets = listening_sockets(proc.pid)
         page = None
         host = {"--bind": None, **dict(zip(extra[::2], extra[1::2]))}["--bind"] or "127.0.0.1"
-        import urllib.request
-
         with urllib.request.urlopen(f"http://{host}:{web}/", timeout=10) as r:
             page = r.read()
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
+        out, err = interrupt(proc, 60)
     assert proc.returncode == 0, err
     return first, sockets, grpc, web, page
 
@@ -499,8 +485,6 @@ def test_identical_ics_compared_through_the_cli_diverge_by_exactly_zero(tmp_path
 @pytest.mark.skipif(not RERUN_CLI.exists(), reason="rerun CLI not installed")
 def test_spawn_streams_to_the_viewer_listening_on_its_port(tmp_path, dicetrace_cli, monkeypatch):
     """--spawn reuses a viewer already listening on --port (the SDK's rule): here a gRPC server that saves what it gets."""
-    import signal
-
     port = free_port()
     got = tmp_path / "received.rrd"
     server = subprocess.Popen(
@@ -513,12 +497,7 @@ def test_spawn_streams_to_the_viewer_listening_on_its_port(tmp_path, dicetrace_c
         res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--spawn", "--port", str(port), cwd=tmp_path)
         assert res.returncode == 0, res.stderr
     finally:
-        server.send_signal(signal.SIGINT)
-        try:
-            server.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            server.kill()
-            server.wait(timeout=10)
+        interrupt(server, 30)
     assert [p.name for p in tmp_path.iterdir()] == ["received.rrd"]  # no file sink asked for
     out = tmp_path / "file.rrd"
     assert dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), cwd=tmp_path).returncode == 0
@@ -527,26 +506,18 @@ def test_spawn_streams_to_the_viewer_listening_on_its_port(tmp_path, dicetrace_c
 
 @pytest.mark.slow
 def test_serve_hosts_the_web_viewer_until_ctrl_c(tmp_path):
-    import signal
-    import urllib.request
-
     grpc, web = free_port(), free_port()
     proc = subprocess.Popen(
         [sys.executable, "-m", "dicetrace.cli", "record", "--ic", "14.08,11.46,9.87,13.8,122.8,15.5", "--serve",
          "--port", str(grpc), "--web-port", str(web)],
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
-    try:
+    with not_left_running(proc):
         first = proc.stdout.readline()  # printed once the recording is served
         assert first.startswith(f"serving the web viewer at http://127.0.0.1:{web}/"), first + proc.stderr.read()
         with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=10) as page:
             assert page.status == 200 and b"<html" in page.read().lower()
         wait_listening(grpc, 5)
-        proc.send_signal(signal.SIGINT)  # the user stops it
-        out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
+        out, err = interrupt(proc, 60)  # the user stops it
     assert proc.returncode == 0, err
     assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in out and "Traceback" not in err

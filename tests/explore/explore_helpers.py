@@ -52,3 +52,13 @@ def page_outcomes(page) -> np.ndarray:
     out = outcome_from_rgb(img)
     assert (out != -9).all()
     return out
+
+
+def shift_click(page, box, fx: float, fy: float) -> list:
+    """Shift-click the map at fraction (fx, fy) of its box and wait for the second pick; the picked throws."""
+    page.keyboard.down("Shift")
+    page.mouse.click(box["x"] + box["width"] * fx, box["y"] + box["height"] * fy)
+    page.keyboard.up("Shift")
+    page.wait_for_function("JSON.parse(document.getElementById('info').dataset.throws || '[]').length === 2",
+                           timeout=60_000)
+    return page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)")

@@ -13,7 +13,8 @@ from urllib.parse import parse_qs, urlparse
 import numpy as np
 import pytest
 
-from explore_helpers import RES as TEST_RES, WINDOW as TEST_WINDOW, page_outcomes, scan_outcomes, wait_ready
+from explore_helpers import RES as TEST_RES, WINDOW as TEST_WINDOW
+from explore_helpers import page_outcomes, scan_outcomes, shift_click, wait_ready
 
 pytestmark = pytest.mark.slow
 
@@ -87,12 +88,7 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path, monkeypatch):
     share = (img[:, : img.shape[1] // 2] == 250).all(axis=-1).mean()
     assert share > 0.1, f"record's blueprint is not the viewer's layout ({share:.3f} of the left half is its 3-D view)"
     # shift-click a second point: both throws listed, with their divergence (the viewer: test_shift_click_...)
-    page.keyboard.down("Shift")
-    page.mouse.click(box["x"] + box["width"] * 0.7, box["y"] + box["height"] * 0.3)
-    page.keyboard.up("Shift")
-    page.wait_for_function("JSON.parse(document.getElementById('info').dataset.throws || '[]').length === 2",
-                           timeout=60_000)
-    two = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)")
+    two = shift_click(page, box, 0.7, 0.3)
     assert two[0] == info and two[1]["ic"] != info["ic"]
     text = page.inner_text("#info")
     assert "throw 2:" in text and "divergence: |ΔIC|" in text and f"outcomes {info['outcome']} vs {two[1]['outcome']}" in text
@@ -255,11 +251,7 @@ def test_info_panel_shows_long_lines_whole(browser, explorer):
     picked = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
     assert (picked["i"], picked["j"]) == (best["i"], best["j"])
     # a second throw: the divergence line too
-    page.keyboard.down("Shift")
-    page.mouse.click(box["x"] + box["width"] * 0.3, box["y"] + box["height"] * 0.3)
-    page.keyboard.up("Shift")
-    page.wait_for_function("JSON.parse(document.getElementById('info').dataset.throws || '[]').length === 2",
-                           timeout=60_000)
+    shift_click(page, box, 0.3, 0.3)
     text = page.inner_text("#info")
     assert best["contact_sequence"] in text.replace("\n", "") and "Lz=" in text and "divergence" in text
     sizes = page.evaluate("""() => { const el = document.getElementById('info');

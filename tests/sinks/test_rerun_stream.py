@@ -8,14 +8,14 @@ local servers (its update check, a request to api.github.com, is turned off).
 
 from __future__ import annotations
 
-import shutil
-import signal
 import socket
 import subprocess
 import sys
 from urllib.parse import urlsplit
 
 import pytest
+
+from local_processes import interrupt
 
 pytestmark = pytest.mark.slow
 
@@ -24,22 +24,6 @@ def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-@pytest.fixture
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api", reason="Playwright is not installed (pip install playwright)")
-    exe = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
-    if exe is None:
-        pytest.skip("no chromium on PATH (Debian: apt-get install chromium)")
-    with sync_api.sync_playwright() as p:
-        try:
-            b = p.chromium.launch(executable_path=exe, headless=True,
-                                  args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"])
-        except Exception as e:  # a chromium that cannot start here
-            pytest.skip(f"chromium {exe} does not start headless: {str(e).splitlines()[0]}")
-        yield b
-        b.close()
 
 
 def test_served_web_viewer_reads_the_recording_and_asks_nothing_beyond_this_machine(tmp_path, browser):
@@ -72,9 +56,4 @@ def test_served_web_viewer_reads_the_recording_and_asks_nothing_beyond_this_mach
         assert page.evaluate("document.body.dataset.blocked || ''") == ""  # and nothing had to be blocked
         assert not errors, errors
     finally:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate(timeout=10)
+        interrupt(proc, 60)
