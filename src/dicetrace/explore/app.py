@@ -234,10 +234,7 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         return HTMLResponse(page_html(default, can_save=out is not None))
 
     async def view_info(request: Request) -> Response:
-        try:
-            v = _view(request, default)
-        except ViewError as e:
-            return _error(e)
+        v = _view(request, default)
         return JSONResponse({"query": v.to_query(), "window": v.window, "res": v.res, "ndim": v.ndim,
                              "limits": {"res": [MIN_RES, MAX_RES]}})
 
@@ -252,43 +249,22 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         fut = worker.submit_map(v, client)
         return await asyncio.wrap_future(fut)
 
-    async def _map_or_error(request: Request):
-        """(map, None), or (None, the error response: a bad view, superseded by a newer one, over budget, busy)."""
-        try:
-            return await _map(request), None
-        except ViewError as e:
-            return None, _error(e)
-        except (Cancelled, OverBudget, Busy) as e:
-            status, body = _map_refusal(e)
-            return None, JSONResponse(body, status_code=status)
-
     async def map_png_ep(request: Request) -> Response:
-        m, err = await _map_or_error(request)
-        if err is not None:
-            return err
+        m = await _map(request)
         png = await asyncio.to_thread(map_png, m.outcome)
         headers = {"X-Dicetrace-Wall-S": f"{m.wall_s:.6f}", "X-Dicetrace-Res": f"{m.view.res[0]},{m.view.res[1]}",
                    "X-Dicetrace-Counts": json.dumps(m.counts()), "Cache-Control": "no-store"}
         return Response(png, media_type="image/png", headers=headers)
 
     async def map_json_ep(request: Request) -> Response:
-        m, err = await _map_or_error(request)
-        if err is not None:
-            return err
+        m = await _map(request)
         return JSONResponse({"query": m.view.to_query(), "xs": m.xs.tolist(), "ys": m.ys.tolist(),
                              "outcome": m.outcome.tolist(), "steps": m.steps.tolist(),
                              "counts": m.counts(), "wall_s": m.wall_s})
 
     async def map_strips_ep(request: Request) -> Response:
-        try:
-            v = _view(request, default)
-        except ViewError as e:
-            return _error(e)
-        try:
-            fut = asyncio.wrap_future(worker.submit_map(v, request.query_params.get("client", "")[:64]))
-        except (Cancelled, Busy) as e:
-            status, body = _map_refusal(e)
-            return JSONResponse(body, status_code=status)
+        v = _view(request, default)
+        fut = asyncio.wrap_future(worker.submit_map(v, request.query_params.get("client", "")[:64]))
         rows = strip_rows(v)
 
         async def lines():
@@ -318,32 +294,16 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         return StreamingResponse(lines(), media_type="application/x-ndjson", headers={"Cache-Control": "no-store"})
 
     async def hover(request: Request) -> Response:
-        try:
-            v = _view(request, default)
-            i, j = _point(request, v)
-        except ViewError as e:
-            return _error(e)
-        try:
-            info = await _throw_within(worker.submit_throw(throw_info, v, i, j))
-        except TimeoutError as e:
-            return _error(e, 504)
-        except Busy as e:
-            return _error(e, 503)
-        return JSONResponse(info)
+        v = _view(request, default)
+        i, j = _point(request, v)
+        return JSONResponse(await _throw_within(worker.submit_throw(throw_info, v, i, j)))
 
     async def throw(request: Request) -> Response:
-        try:
-            v = _view(request, default)
-            i, j = _point(request, v)
-        except ViewError as e:
-            return _error(e)
+        v = _view(request, default)
+        i, j = _point(request, v)
         download = bool(request.query_params.get("download"))
-        try:  # for the viewer, record's blueprint made active
-            name, data, summary = await _throw_within(worker.submit_throw(throw_rrd, v, i, j, not download))
-        except TimeoutError as e:
-            return _error(e, 504)
-        except Busy as e:
-            return _error(e, 503)
+        # for the viewer, record's blueprint made active
+        name, data, summary = await _throw_within(worker.submit_throw(throw_rrd, v, i, j, not download))
         # no CORS header: the page's viewer fetches this from the page's own origin
         headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"]}
         if download:
@@ -354,12 +314,9 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         if out is None:
             return JSONResponse({"error": "saving is off: start the explorer with --out DIR (Explorer(out=...))",
                                  "param": "name"}, status_code=403)
-        try:
-            v = _view(request, default)
-            name = request.query_params.get("name", "")
-            scan_folder_for(out, name)
-        except ViewError as e:
-            return _error(e)
+        v = _view(request, default)
+        name = request.query_params.get("name", "")
+        scan_folder_for(out, name)
         try:
             summary = await asyncio.wrap_future(worker.submit_scan(v, out, name))
         except (ValueError, OSError) as e:  # a folder holding another scan, a full disk, ...
@@ -407,11 +364,22 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
 
     middleware = [Middleware(TrustedHostMiddleware, allowed_hosts=allowed_hosts(hosts), www_redirect=False),
                   Middleware(SameOriginWrites)]
-    async def on_busy(request: Request, exc: Exception) -> Response:  # any endpoint that meets a full worker
-        return _error(exc, 503)
+    def answer(status: int):
+        async def handler(request: Request, exc: Exception) -> Response:
+            return _error(exc, status)
 
-    app = Starlette(routes=routes, middleware=middleware, exception_handlers={Busy: on_busy, Exception: on_error},
-                    lifespan=lifespan)
+        return handler
+
+    async def refused(request: Request, exc: Exception) -> Response:
+        status, body = _map_refusal(exc)
+        return JSONResponse(body, status_code=status)
+
+    # what an endpoint raises, answered as one JSON error naming the parameter: a bad view or point (400), a
+    # throw past THROW_TIMEOUT_S (504, naming dt), a map superseded, over its budget, or a full worker
+    # (MAP_REFUSALS: 409, 422, 503; any endpoint)
+    handlers = {ViewError: answer(400), ThrowTimeout: answer(504), Cancelled: refused, OverBudget: refused,
+                Busy: refused, Exception: on_error}
+    app = Starlette(routes=routes, middleware=middleware, exception_handlers=handlers, lifespan=lifespan)
     app.state.worker = worker
     app.state.default = default
     app.state.out = out
