@@ -93,8 +93,6 @@ SEED_DIRS_6D = np.concatenate([SEED_U_DIRS, SEED_L_DIRS], axis=1)
 SEED_ORIGIN_6D = np.concatenate([np.zeros(3), SEED_L_ORIGIN])
 
 
-
-
 def _vec6(v, what: str) -> tuple[float, ...]:
     a = np.asarray(v, dtype=np.float64).reshape(-1)
     if a.shape != (6,):

@@ -342,8 +342,6 @@ def _check_orientation(orientation) -> None:
         raise ValueError(f"orientation must be a 3×3 rotation matrix, got shape {rot.shape}")
 
 
-
-
 def trace_bytes(rows: int, record: Record) -> int:
     """Bytes of the per-step trace arrays of ``rows`` rows (states, forces, energy as requested)."""
     cols = STATE_COLS * bool(record.states) + FORCE_COLS * bool(record.forces) + ENERGY_COLS * bool(record.energy)
@@ -428,7 +426,6 @@ class BatchResult:
     def to_pandas(self, **kwargs):
         """The ``rolls`` table as a pandas DataFrame (see :meth:`to_arrow`)."""
         return self.to_arrow(**kwargs).to_pandas()
-
 
 
 def simulate_batch(

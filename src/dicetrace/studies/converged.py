@@ -223,8 +223,6 @@ def _agreement_dict(a) -> dict:
             "kappa_stderr": a.kappa_stderr, "n": a.n}
 
 
-
-
 def compute(ctx: Context) -> Computed:
     opts = models(ctx.options.integrator, ctx.options.tol)
     res = ctx.res(201, 21)

@@ -15,7 +15,6 @@ from dicetrace.core.rotation import turn_by_omega
 from dicetrace.core.state import set_angular_momentum
 
 
-
 @jit(inline="always")
 def program_kick_drift(U0, U1, U2, X0, X1, X2, s0, s1, s2, kp, h):
     """The program's velocity and position update: U += (ΣF + (0, 0, 8g))/8·h, then X += U·h."""
