@@ -56,7 +56,7 @@ from dicetrace.core.schemes import contact_substep, contact_tsit5, erk
 from dicetrace.core.state import new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.simulate import simulate
-from dicetrace.studies.accuracy import T_MAX_S, sample_ics
+from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
 
 #: A scratch cell of the state that the step never reads before writing it
 #: (``erk.dense_state`` sets all of ``dn_w`` first): where a repeated part's

@@ -50,7 +50,7 @@ from dicetrace.core.state import SUBSTEP_CAUSES
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import convert_l, get_preset, make_config
 from dicetrace.simulate import simulate
-from dicetrace.studies.accuracy import SECOND_REFERENCE, T_MAX_S, agreement, run_batch, sample_ics
+from dicetrace.studies.study_accuracy import SECOND_REFERENCE, T_MAX_S, agreement, run_batch, sample_ics
 
 PRESETS = ("seed", "physical")
 SEED_PATH = ("semi-implicit-euler", 1e-3, None, 0.0)

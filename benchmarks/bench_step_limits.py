@@ -42,7 +42,7 @@ from dicetrace.core._jit import specialise
 from dicetrace.core.schemes import contact_substep, contact_tsit5
 from dicetrace.core.state import STATE, SUBSTEP_CAUSES, new_states
 from dicetrace.params import convert_l, make_config
-from dicetrace.studies.accuracy import T_MAX_S, sample_ics
+from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
 from dicetrace.studies.text import tol_text
 
 #: Bucket edges of λ_f·h and of ω·h.

@@ -9,7 +9,7 @@ import pytest
 
 import dicetrace
 from dicetrace.cli import NOISE_TYPES, app
-from dicetrace.studies import LETTERS, TITLES
+from dicetrace.studies import INTEGRATOR_TITLES, LETTERS, TITLES, module_name
 
 COMMANDS = ("record", "simulate", "scan", "accuracy", "stability", "analyze", "explore")
 
@@ -58,11 +58,14 @@ def test_analyze_help_explains_the_study_letters(dicetrace_cli, tmp_path, monkey
         assert re.search(rf"^ +{letter} +{name} +{re.escape(TITLES[name])} *$", res.stdout, re.M), (letter, res.stdout)
 
 
-@pytest.mark.parametrize("name", sorted(TITLES))
+@pytest.mark.parametrize("name", sorted(TITLES) + sorted(INTEGRATOR_TITLES))
 def test_each_title_is_its_modules_own(name):
     """The titles shown by analyze --help are the first docstring lines of the study modules (read, not imported)."""
-    spec = importlib.util.find_spec(f"dicetrace.studies.{name}")
+    spec = importlib.util.find_spec(module_name(name))
     with open(spec.origin, encoding="utf-8") as f:
         first = f.readline()
-    letter = {n: k for k, n in LETTERS.items()}[name]
-    assert first.rstrip().rstrip(".") == f'"""Study {letter} ({name}): {TITLES[name]}'
+    if name in TITLES:
+        letter = {n: k for k, n in LETTERS.items()}[name]
+        assert first.rstrip().rstrip(".") == f'"""Study {letter} ({name}): {TITLES[name]}'
+    else:
+        assert first.rstrip().rstrip(".") == f'"""Study {name}: {INTEGRATOR_TITLES[name]}'

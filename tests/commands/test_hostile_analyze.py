@@ -32,8 +32,8 @@ def no_work(monkeypatch):
         return started
 
     monkeypatch.setattr("dicetrace.studies.runner.run", sentinel("analyze"))
-    monkeypatch.setattr("dicetrace.studies.accuracy.study", sentinel("accuracy"))
-    monkeypatch.setattr("dicetrace.studies.stability.stability_map", sentinel("stability"))
+    monkeypatch.setattr("dicetrace.studies.study_accuracy.study", sentinel("accuracy"))
+    monkeypatch.setattr("dicetrace.studies.study_stability.stability_map", sentinel("stability"))
     return calls
 
 

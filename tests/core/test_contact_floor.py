@@ -44,7 +44,7 @@ def test_flipping_pair_gives_the_same_outcome():
 def test_no_outcome_flips_at_1e_12_on_40_home_ics():
     """contact-substep at its default 1 ms on physical: 10 of these 40 ICs flipped before the fix (well under a second warm)."""
     from dicetrace.params import convert_l
-    from dicetrace.studies.accuracy import perturb, sample_ics
+    from dicetrace.studies.study_accuracy import perturb, sample_ics
 
     ics = convert_l(sample_ics("home", 40, 0), "program", "physical")
     a = simulate_batch(ics, t_max_s=20.0, **OPTS)

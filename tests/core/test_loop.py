@@ -23,7 +23,7 @@ from dicetrace.core.schemes import step_of
 from dicetrace.core.state import age_tolerance, new_states
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import convert_l, make_config
-from dicetrace.studies.accuracy import T_MAX_S, sample_ics
+from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
 
 _CORE = _core_digest()[:16]
 TSIT5 = INTEGRATORS["contact-tsit5"]

@@ -143,7 +143,7 @@ def test_same_motion_in_both_conventions():
 
 def test_physical_preset_converges_with_contact_substep():
     """Halving contact-substep's step changes no outcome on 16 throws and the first 0.3 s agree to 1e-6 cm."""
-    from dicetrace.studies.accuracy import sample_ics
+    from dicetrace.studies.study_accuracy import sample_ics
 
     ics = sample_ics("zoom-out", 16, seed=5) * np.array([1, 1, 1, -1, -1, -1])
     a = simulate_batch(ics, preset="physical", integrator="contact-substep", dt_s=2.5e-4)
@@ -160,7 +160,7 @@ def test_physical_preset_converges_with_contact_substep():
 def test_physical_and_seed_differ_on_the_same_throws():
     """The corrections matter: on the same throws the physical die settles later on average
     (measured in analysis/accuracy: ≈ 1.1 s against 0.7 s on the zoom-out window)."""
-    from dicetrace.studies.accuracy import sample_ics
+    from dicetrace.studies.study_accuracy import sample_ics
 
     ics = sample_ics("zoom-out", 24, seed=1)
     s = simulate_batch(ics, preset="seed", integrator="contact-substep", dt_s=1e-3)
@@ -173,7 +173,7 @@ def test_tol_growth_spends_fewer_sub_steps_for_the_same_outcomes():
     """physical's default schedule, the tolerance loosening at 10 /s from a five times tighter
     start (docs/model.md §9): the same settled outcomes as a uniform 1e-7 on nearly every throw,
     with a third fewer sub-step attempts."""
-    from dicetrace.studies.accuracy import sample_ics
+    from dicetrace.studies.study_accuracy import sample_ics
 
     num = make_config("physical").numerics
     assert (num.tol, num.tol_growth) == (2e-8, 10.0)
@@ -196,7 +196,7 @@ def test_the_rigid_energy_never_rises_along_a_physical_throw():
     (kinetic, gravitational, elastic) never rises along the model's motion: at a step's end it
     may rise by rounding only (measured: up to 6e-8 on a total of ~1.2e5), and it falls through
     the stop threshold at the last step."""
-    from dicetrace.studies.accuracy import sample_ics
+    from dicetrace.studies.study_accuracy import sample_ics
 
     kp = make_config("physical").kernel_params()
     for ic in sample_ics(n=6, seed=4):
@@ -212,7 +212,7 @@ def test_a_throw_is_the_same_whether_its_step_ends_are_traced_or_not():
     """contact-tsit5 interpolates the state at a step's end; a summary run (``st.lazy``) computes
     only the node heights there, a traced run also the forces and node velocities.  They steer
     nothing: status, steps, outcome, the contact-set sequence and every sub-step count agree."""
-    from dicetrace.studies.accuracy import sample_ics
+    from dicetrace.studies.study_accuracy import sample_ics
 
     for ic in sample_ics(n=6, seed=4):
         a = simulate(ic, preset="physical", l_convention="program")

@@ -93,7 +93,7 @@ def test_numbers_are_sane(quick_run):
 
 def test_program_throws_are_the_reference_files():
     """The topology study's copy of the program's three throws is rows 1-3 of the reference data."""
-    from dicetrace.studies.topology import PROGRAM_THROWS
+    from dicetrace.studies.study_topology import PROGRAM_THROWS
 
     with open(REPO / "tests" / "data" / "reference" / "writeup_points.csv", newline="") as f:
         rows = list(csv.DictReader(f))[:3]

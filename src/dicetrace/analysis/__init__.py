@@ -21,7 +21,7 @@ from .boundaries import (
 from .agreement import Agreement, agreement
 from .cells import cells_table, label_cells, same_cell, slice_cell_components
 from .escape import EscapeRate, escape_rate, survival_function
-from .fractal_test import FractalTestResult, basins_fractal_test, smooth_boundary_sbb
+from .fractality import FractalTestResult, basins_fractal_test, smooth_boundary_sbb
 from .grouping import (
     UNDEFINED_LABEL, UNSETTLED_LABEL, AbstractGroupingConfig, GroupByContactSequence, GroupByOutcome,
     basins_fractions, basins_fractions_table, canonical_contact_sequence, contact_sequence_text,

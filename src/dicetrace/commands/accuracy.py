@@ -70,7 +70,7 @@ def _report(paths: dict, keys, quiet: bool) -> None:
 
 def register(app: typer.Typer) -> None:
     from dicetrace.params import INTEGRATORS, PRESETS
-    from dicetrace.studies.accuracy import DEFAULT_N, DEFAULT_SEED, DEFAULT_WINDOW, QUICK_N
+    from dicetrace.studies.study_accuracy import DEFAULT_N, DEFAULT_SEED, DEFAULT_WINDOW, QUICK_N
 
     @app.command("accuracy")
     def accuracy_cmd(
@@ -94,8 +94,8 @@ def register(app: typer.Typer) -> None:
         --presets, --integrator) into analysis/ is refused.
         """
         from dicetrace.windows import get_window
-        from dicetrace.studies import accuracy as acc
-        from dicetrace.studies.accuracy_render import write_study
+        from dicetrace.studies import study_accuracy as acc
+        from dicetrace.studies.study_accuracy_render import write_study
 
         # every option is checked before anything touches the disk or computes
         try:
@@ -140,7 +140,7 @@ def register(app: typer.Typer) -> None:
         --k) into analysis/ is refused.
         """
         from dicetrace.commands._common import parse_floats
-        from dicetrace.studies import stability as stab
+        from dicetrace.studies import study_stability as stab
 
         # every option is checked before anything touches the disk or computes
         ps = _names(presets, tuple(PRESETS), "--presets", "preset") or stab.PRESETS

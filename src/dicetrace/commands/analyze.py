@@ -142,7 +142,7 @@ def _checked_options(names, *, quick, res, seed, integrator, tol, no_cache):
     if tol is not None and not (math.isfinite(tol) and TOL_MIN <= tol < 1):
         fail(f"--tol must be a number in [{TOL_MIN:g}, 1), got {tol}")
     if integrator is not None or tol is not None:
-        from dicetrace.studies.converged import check_overrides
+        from dicetrace.studies.study_converged import check_overrides
 
         try:
             check_overrides(integrator, tol)

@@ -1,15 +1,25 @@
 """The studies of dicetrace, in one place: the registry of their names and the modules that run them.
 
+Every study starts the same way, ``dicetrace analyze NAME`` (:mod:`dicetrace.commands.analyze`).
+A study module is named ``study_<name>`` (``dicetrace.studies.study_settle``; its
+parts ``study_<name>_render`` ...): it samples, calls the measures of
+:mod:`dicetrace.analysis` and renders; the measures themselves live in
+``dicetrace.analysis`` (``dicetrace.analysis.settle``).  The other modules here are
+the machinery the studies share (context, outputs, report, runner, text).
+
 Two kinds, both shipped in the package and run from any folder:
 
-- the **writeup studies** (the writeup's nine, and the transient-chaos study j) (``dicetrace analyze NAME|all``), one module
+- the **writeup studies** (the writeup's nine, the transient-chaos study j, the referee's
+  items k and the converged maps l; ``dicetrace analyze NAME|all``), one module
   each, ``compute(ctx)`` then ``render(computed, out)`` (see
   :mod:`dicetrace.studies.context`); :func:`dicetrace.studies.runner.run`
   runs them and :mod:`dicetrace.studies.report` assembles ``REPORT.md``;
-- the **integrator studies**: the work-precision study
-  (:mod:`~dicetrace.studies.accuracy`, rendered by
-  :mod:`~dicetrace.studies.accuracy_render`; ``dicetrace accuracy``) and the
-  stable-step map (:mod:`~dicetrace.studies.stability`; ``dicetrace stability``).
+- the **integrator studies**, each run alone with options of its own: the work-precision study
+  (:mod:`~dicetrace.studies.study_accuracy`, rendered by
+  :mod:`~dicetrace.studies.study_accuracy_render`; ``dicetrace analyze accuracy``), the
+  stable-step map (:mod:`~dicetrace.studies.study_stability`; ``dicetrace analyze stability``)
+  and the friction-regularisation study (:mod:`~dicetrace.studies.study_friction`;
+  ``dicetrace analyze friction``).
 
 Where their outputs go (a working folder by default; the committed results
 only on purpose) is :mod:`dicetrace.studies.outputs`.
@@ -20,7 +30,9 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
-#: The writeup studies, in run order (module ``dicetrace.studies.<name>``; letters a..l).
+#: Prefix of a study's module name: study ``NAME`` is ``dicetrace.studies.study_NAME``.
+MODULE_PREFIX = "study_"
+#: The writeup studies, in run order (module ``dicetrace.studies.study_<name>``; letters a..l).
 WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation",
                    "transient", "referee", "converged")
 #: Letter of each writeup study (its figures' prefix) -> name.
@@ -40,8 +52,14 @@ TITLES = {
     "referee": "every claim the referee marked, redone with controls, error bars and enough scales",
     "converged": "converged maps beside the discrete ones: every measure of a map, side by side, with certificates",
 }
-#: The integrator studies (their own commands).
-INTEGRATOR_STUDIES = ("accuracy", "stability")
+#: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
+INTEGRATOR_STUDIES = ("accuracy", "stability", "friction")
+#: What each integrator study is about (the first line of its module's docstring).
+INTEGRATOR_TITLES = {
+    "accuracy": "the work-precision study of the integrators",
+    "stability": "the map of the integrators' stable steps",
+    "friction": "how near to Coulomb the physical die's friction can go: the regularisation study",
+}
 #: Every study's name.
 STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES
 
@@ -61,11 +79,17 @@ def resolve(names) -> list[str]:
     return out
 
 
-def study_module(name: str) -> ModuleType:
-    """The module of study ``name`` (``dicetrace.studies.<name>``)."""
+def module_name(name: str) -> str:
+    """The dotted name of study ``name``'s module (``dicetrace.studies.study_<name>``; ValueError naming the choices)."""
     if name not in STUDY_NAMES:
         raise ValueError(f"unknown study {name!r} (choose from {', '.join(STUDY_NAMES)})")
-    return importlib.import_module(f"dicetrace.studies.{name}")
+    return f"dicetrace.studies.{MODULE_PREFIX}{name}"
 
 
-__all__ = ["WRITEUP_STUDIES", "LETTERS", "TITLES", "INTEGRATOR_STUDIES", "STUDY_NAMES", "resolve", "study_module"]
+def study_module(name: str) -> ModuleType:
+    """The module of study ``name`` (``dicetrace.studies.study_<name>``)."""
+    return importlib.import_module(module_name(name))
+
+
+__all__ = ["MODULE_PREFIX", "WRITEUP_STUDIES", "LETTERS", "TITLES", "INTEGRATOR_STUDIES", "INTEGRATOR_TITLES",
+           "STUDY_NAMES", "resolve", "module_name", "study_module"]

@@ -1,6 +1,6 @@
 """What every writeup study shares: run options, the compute context and the render output.
 
-A study module (``dicetrace.studies.cells`` ...) has ``compute(ctx)`` and
+A study module (``dicetrace.studies.study_cells`` ...) has ``compute(ctx)`` and
 ``render(computed, out)``:
 
 - ``compute(ctx: Context) -> Computed`` simulates and measures.  It gets the
@@ -43,7 +43,7 @@ class Options:
     """How a study runs: ``quick`` (CI-sized grids), ``res`` (override of the main grid), the seed, the cache.
 
     ``integrator`` and ``tol`` override the integrator and tolerance of the
-    converged models (study k, :mod:`dicetrace.studies.converged`); the
+    converged models (study k, :mod:`dicetrace.studies.study_converged`); the
     other studies ignore them.
     """
 

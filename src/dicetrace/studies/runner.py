@@ -33,7 +33,7 @@ def largest_grid(names, options: Options) -> int:
     res² × the frames of study i); 0 without ``--res`` (the studies' own sizes, which fit)."""
     if options.res is None:
         return 0
-    from dicetrace.studies.animation import NZ
+    from dicetrace.studies.study_animation import NZ
 
     nz = NZ[1 if options.quick else 0] if "animation" in names else 1
     return int(options.res) ** 2 * nz

@@ -2,7 +2,7 @@
 
 The quick run (its part of the shared ``dicetrace analyze all --quick``, tests/studies/conftest.py: 21²
 grids, CI-sized perturbations) checks the pipeline end to end and that
-:func:`~dicetrace.studies.converged.rerender` reproduces the run's tables from its JSON and cached
+:func:`~dicetrace.studies.study_converged.rerender` reproduces the run's tables from its JSON and cached
 grids (render changes no number). The full run is ``dicetrace analyze converged --out analysis``.
 """
 
@@ -17,7 +17,7 @@ import pytest
 
 from dicetrace.analysis import agreement
 from dicetrace.studies import LETTERS, resolve
-from dicetrace.studies import converged as conv
+from dicetrace.studies import study_converged as conv
 from dicetrace.studies.context import Options
 
 
@@ -185,7 +185,7 @@ def test_rerender_reproduces_the_tables_without_simulating(study_l, tmp_path):
 
 def test_alpha_pert_change_says_whether_it_passes_the_threshold():
     """The section-l sentence on α by perturbation follows the z of the home and zoom-out changes."""
-    from dicetrace.studies.converged import _alpha_pert_change
+    from dicetrace.studies.study_converged import _alpha_pert_change
 
     def by(zh, zz):
         return {w: {"changes": [{"key": "alpha_pert", "z": z}]} for w, z in (("home", zh), ("zoom-out", zz))}

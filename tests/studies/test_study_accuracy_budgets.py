@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from dicetrace.params import INTEGRATORS
-from dicetrace.studies import accuracy as acc
-from dicetrace.studies import accuracy_budgets as budgets
+from dicetrace.studies import study_accuracy as acc
+from dicetrace.studies import study_accuracy_budgets as budgets
 
 
 def _row(integ, ms, agree, flips=0, preset="physical"):

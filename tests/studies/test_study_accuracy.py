@@ -11,7 +11,7 @@ import pytest
 
 from dicetrace.params import INTEGRATORS, make_config
 from dicetrace.status import Status
-from dicetrace.studies import accuracy as acc
+from dicetrace.studies import study_accuracy as acc
 
 
 @pytest.mark.slow
@@ -163,7 +163,7 @@ def test_own_floor_counts_flips_of_the_setting_itself():
 
 def test_a_setting_names_its_tolerance_growth():
     """A run whose tolerance loosens over the throw is told apart from the uniform one everywhere it is named."""
-    from dicetrace.studies.accuracy_render import _settings_text, setting
+    from dicetrace.studies.study_accuracy_render import _settings_text, setting
 
     uniform = {"integrator": "contact-tsit5", "dt_s": 1e-3, "tol": 2e-8, "tol_growth": 0.0}
     graded = dict(uniform, tol_growth=10.0)

@@ -1,4 +1,4 @@
-"""Figures and tables of study k (referee), from :func:`dicetrace.studies.referee.compute`'s numbers."""
+"""Figures and tables of study k (referee), from :func:`dicetrace.studies.study_referee.compute`'s numbers."""
 
 from __future__ import annotations
 

@@ -114,7 +114,7 @@ def test_auto_dt_default_integrator_and_message_is_one_line():
 
 
 def test_corpus_is_extreme():
-    from dicetrace.studies.stability import extreme_corpus
+    from dicetrace.studies.study_stability import extreme_corpus
 
     ics, labels = extreme_corpus()
     assert len(ics) == len(labels) >= 12
@@ -125,7 +125,7 @@ def test_corpus_is_extreme():
 
 def test_stability_map_small():
     """Semi-implicit Euler at the seed's k: stable below its linear bound 2/ω, and dt auto is stable."""
-    from dicetrace.studies.stability import stability_map
+    from dicetrace.studies.study_stability import stability_map
 
     rows = stability_map(quick=True, presets=("seed",), integrators=("semi-implicit-euler",), k_values=(5e5,), bisections=4)
     (r,) = rows

@@ -2,7 +2,7 @@
 
 Everything is drawn from a run's results (``converged.json``), so a finished
 run can be rendered again without simulating
-(:func:`dicetrace.studies.converged.rerender`).
+(:func:`dicetrace.studies.study_converged.rerender`).
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.studies.context import Computed, Output
-from dicetrace.studies.converged_changes import CHANGE_SIGMA, MEASURES
+from dicetrace.studies.study_converged_changes import CHANGE_SIGMA, MEASURES
 from dicetrace.studies.text import fmt, md_table, pm, tol_text
 
 MODEL_TITLES = {"discrete": "discrete (seed, dt = 1 ms)", "converged": "converged seed", "physical": "physical"}

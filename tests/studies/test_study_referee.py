@@ -71,7 +71,7 @@ def test_alpha_verdict_text_follows_the_data():
     """The k3 verdict quotes α with its error, or the number of scales when a two-scale fit has
     none, and says what f(ε) does at the smallest scales: flat at zero (no point changes), or
     a few points that still change (a numerical floor)."""
-    from dicetrace.studies.referee import _alpha_text, _zero_up_to, alpha_small_scale_note
+    from dicetrace.studies.study_referee import _alpha_text, _zero_up_to, alpha_small_scale_note
 
     eps = [1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3]
     clean = {"n": 2000, "eps_rel": eps, "f": [0, 0, 0, 0, 0.004, 0.04], "alpha": 0.71, "alpha_stderr": None,

@@ -1,6 +1,6 @@
 """The accuracy study's results read for a choice: the best setting within a CPU budget, the cheapest at the target.
 
-Functions of a finished study's rows (:class:`~dicetrace.studies.accuracy.StudyResult`
+Functions of a finished study's rows (:class:`~dicetrace.studies.study_accuracy.StudyResult`
 ``rows``: one per preset × integrator × step or tolerance, with its CPU time per IC and
 its agreement with the reference), as the summary's budget and target tables use them.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from dicetrace.params import INTEGRATORS
-from dicetrace.studies.accuracy import BASELINE_INTEGRATOR, PRESETS, TARGET_AGREEMENT, StudyResult
+from dicetrace.studies.study_accuracy import BASELINE_INTEGRATOR, PRESETS, TARGET_AGREEMENT, StudyResult
 
 
 def best_within_budget(rows: list[dict], preset: str, integrator: str | None, budget_ms: float) -> dict | None:

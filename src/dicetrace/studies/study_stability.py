@@ -1,6 +1,6 @@
-"""The map of the integrators' stable steps (``dicetrace stability``): computation and rendering.
+"""Study stability: the map of the integrators' stable steps.
 
-:func:`stability_map` finds, for each preset × integrator × stiffness k, the
+Computation and rendering (``dicetrace analyze stability``): :func:`stability_map` finds, for each preset × integrator × stiffness k, the
 largest dt (log bisection) at which every IC of an extreme corpus (violent
 drops, spins, grazing throws) ends without a blow-up or a non-finite state,
 and compares it with the linear bound ω·dt < ``IntegratorSpec.stability_bound``
@@ -19,7 +19,7 @@ from dicetrace.ics import SEED_SLICE
 from dicetrace.params import INTEGRATORS, Config, Numerics, convert_l, get_preset
 from dicetrace.stepsize import auto_dt, impact_speed_cm_s
 from dicetrace.status import Status
-from dicetrace.studies.accuracy import PRESETS, check_integrators
+from dicetrace.studies.study_accuracy import PRESETS, check_integrators
 from dicetrace.studies.text import fmt
 
 K_VALUES = (5e5, 5e5 * 10**0.5, 5e6, 5e6 * 10**0.5, 5e7)

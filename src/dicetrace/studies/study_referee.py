@@ -1,7 +1,7 @@
 """Study k (referee): every claim the referee marked, redone with controls, error bars and enough scales.
 
 Seven parts, each answering one referee item of issue 11 (figures and
-tables by :mod:`dicetrace.studies.referee_render`):
+tables by :mod:`dicetrace.studies.study_referee_render`):
 
 1. **vertices**: triple-junction box counts (:mod:`dicetrace.analysis.junctions`)
    over ≥ 6 box sizes, first on a map with a known triple point and on one
@@ -250,7 +250,7 @@ def edge_rates(ctx: Context) -> dict:
     from dicetrace.analysis import edge_balance_rate
     from dicetrace.analysis.edge import edge_jacobian_rate, edge_release_rate, pooled_rate
     from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
-    from dicetrace.studies.settle import borders, fit_border, free_pivot_rate
+    from dicetrace.studies.study_settle import borders, fit_border, free_pivot_rate
 
     out: dict = {"analytic_fixed_pivot": edge_balance_rate(), "analytic_free_pivot": free_pivot_rate()}
     releases = []
@@ -316,7 +316,7 @@ def one_cell(ctx: Context) -> dict:
     from dicetrace.analysis import find_periods
     from dicetrace.analysis.onecell import join_fraction, resolution_verdict, shift_overlap_test
     from dicetrace.analysis.cells import slice_cell_components
-    from dicetrace.studies.repetition import STACK_DEPTH, texture_labels
+    from dicetrace.studies.study_repetition import STACK_DEPTH, texture_labels
 
     res = ctx.res(401, 61)
     s = ctx.sample("zoom-out", res)
@@ -475,6 +475,6 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out) -> None:
-    from dicetrace.studies.referee_render import render as _render
+    from dicetrace.studies.study_referee_render import render as _render
 
     _render(c, out)

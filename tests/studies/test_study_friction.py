@@ -1,4 +1,4 @@
-"""The friction-regularisation study (``python -m dicetrace.studies.friction_reg``), quick size."""
+"""The friction-regularisation study (``python -m dicetrace.studies.study_friction``), quick size."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from dicetrace.studies import friction_reg as fr
+from dicetrace.studies import study_friction as fr
 
 
 @pytest.mark.slow
@@ -17,7 +17,7 @@ def test_quick_study_writes_its_tables(tmp_path):
     """--quick: 8 ICs, v_reg 10 and 3 cm/s, two tolerances; every run is in the CSV, every
     throw settles and is counted in the faces, and agreement is 1 for a run with itself."""
     res = subprocess.run(
-        [sys.executable, "-m", "dicetrace.studies.friction_reg", "--out", str(tmp_path), "--quick"],
+        [sys.executable, "-m", "dicetrace.studies.study_friction", "--out", str(tmp_path), "--quick"],
         capture_output=True, text=True, timeout=600,
     )
     assert res.returncode == 0, res.stderr

@@ -1,6 +1,6 @@
-"""The work-precision study of the integrators: its computation (``dicetrace accuracy``).
+"""Study accuracy: the work-precision study of the integrators.
 
-:func:`study` runs, for each preset × integrator × step (× tolerance for an
+Its computation (``dicetrace analyze accuracy``): :func:`study` runs, for each preset × integrator × step (× tolerance for an
 error-controlled integrator; the steps and tolerances are the integrator's
 ``IntegratorSpec.study_dt_s`` / ``quick_dt_s`` / ``study_tol`` /
 ``quick_tol``), a seeded uniform sample of ICs from a named window of the seed
@@ -36,7 +36,7 @@ than the 1e-9 chaos floor allows a perturbation to, and a second reference
 from a different integrator (``SECOND_REFERENCE``) agrees with it (the
 fraction and its Wilson interval).
 
-It returns a :class:`StudyResult`; :mod:`dicetrace.studies.accuracy_render`
+It returns a :class:`StudyResult`; :mod:`dicetrace.studies.study_accuracy_render`
 writes it (CSV, plot, Markdown).
 """
 

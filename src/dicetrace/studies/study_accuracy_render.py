@@ -1,6 +1,6 @@
 """Rendering of the work-precision study: its Markdown summary, its plot and its files (CSV, JSON).
 
-:func:`write_study` writes what :func:`dicetrace.studies.accuracy.study`
+:func:`write_study` writes what :func:`dicetrace.studies.study_accuracy.study`
 computed: ``study.csv``, ``orders.csv``, ``reference.csv``, ``presets.json``
 (both presets ran), ``work_precision.png`` and ``summary.md``.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from dicetrace.params import INTEGRATORS
-from dicetrace.studies.accuracy import (
+from dicetrace.studies.study_accuracy import (
     BASELINE_INTEGRATOR,
     FLOOR_REL,
     FLOOR_WINDOW,
@@ -19,7 +19,7 @@ from dicetrace.studies.accuracy import (
     T_MAX_S,
     StudyResult,
 )
-from dicetrace.studies.accuracy_budgets import best_within_budget, budget_table, cheapest_at_target, zero_floor_settings
+from dicetrace.studies.study_accuracy_budgets import best_within_budget, budget_table, cheapest_at_target, zero_floor_settings
 from dicetrace.studies.text import fmt, grows, tol_text
 
 

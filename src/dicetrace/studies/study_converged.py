@@ -29,12 +29,12 @@ resolution and by random-pair perturbation, the boundary's dimension, the
 basin entropies Sb and Sbb, the Wada merge test, settle-time statistics and
 the escape rate κ, and the repetition measures (outcome autocorrelation,
 texture period vectors) — with the functions the other studies use
-(:func:`dicetrace.studies.fractal.measures`,
-:func:`dicetrace.studies.cells.cell_stats`, the repetition helpers).
+(:func:`dicetrace.studies.study_fractal.measures`,
+:func:`dicetrace.studies.study_cells.cell_stats`, the repetition helpers).
 
 Which measures change between models is judged in
-:mod:`dicetrace.studies.converged_changes`; the tables, answers and figures
-are drawn by :mod:`dicetrace.studies.converged_render`.
+:mod:`dicetrace.studies.study_converged_changes`; the tables, answers and figures
+are drawn by :mod:`dicetrace.studies.study_converged_render`.
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ import numpy as np
 from pathlib import Path
 
 from dicetrace.studies.context import Computed, Context, Options, Output
-from dicetrace.studies.converged_changes import CHANGE_SIGMA, changes
-from dicetrace.studies.converged_render import render, verdict_text
+from dicetrace.studies.study_converged_changes import CHANGE_SIGMA, changes
+from dicetrace.studies.study_converged_render import render, verdict_text
 
 NAME = "converged"
 WINDOWS = ("home", "zoom-out", "more-out", "red-sea")
@@ -59,7 +59,7 @@ BORDERS_FULL = 12
 
 def models(integrator: str | None = None, tol: float | None = None) -> dict[str, dict]:
     """make_config options of each model: those of study j (transient), with the converged models' overrides."""
-    from dicetrace.studies.transient import MODELS
+    from dicetrace.studies.study_transient import MODELS
 
     out = {m: dict(MODELS[m]) for m in MODEL_NAMES}
     for m in ("converged", "physical"):
@@ -115,7 +115,7 @@ def settle_divergence(ctx: Context, s, cfg) -> dict:
     """Section g's settle-time divergence T ≈ T0 − ln(d)/λ at borders of this map: λ over all fitted sides
     (mean ± se, median ± bootstrap se) and over the clean fits (r < −0.995)."""
     from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
-    from dicetrace.studies.settle import border_pairs, fit_border, summarise
+    from dicetrace.studies.study_settle import border_pairs, fit_border, summarise
 
     classify, settle = classify_on_slice("seed", config=cfg), settle_on_slice("seed", config=cfg)
     dists = np.logspace(-11, -4, ctx.pick(22, 8))
@@ -138,7 +138,7 @@ def settle_divergence(ctx: Context, s, cfg) -> dict:
 def repetition_stats(s) -> dict:
     """The repetition measures of section c on one map: outcome autocorrelation and texture periods."""
     from dicetrace.analysis import find_periods, label_autocorrelation
-    from dicetrace.studies.repetition import off_centre_max, periods_rows, stripe_spacing, texture_labels
+    from dicetrace.studies.study_repetition import off_centre_max, periods_rows, stripe_spacing, texture_labels
 
     g, h = s.labels, s.spacing
     res = g.shape[0]
@@ -160,7 +160,7 @@ def face_stats(g: np.ndarray, ref: np.ndarray | None) -> dict:
     from scipy.stats import chi2_contingency
 
     from dicetrace.analysis import basins_fractions_table
-    from dicetrace.studies.cells import block_fraction_stderr
+    from dicetrace.studies.study_cells import block_fraction_stderr
 
     fr = {str(int(r.label)): {"fraction": float(r.fraction), "count": int(r.count),
                          "block_stderr": block_fraction_stderr(g, int(r.label))}
@@ -179,8 +179,8 @@ def measure_map(ctx: Context, window: str, model: str, opts: dict, res: int, ref
     from dicetrace.analysis import agreement
     from dicetrace.analysis.simulator import classify_on_slice
     from dicetrace.analysis.transient import certify_map
-    from dicetrace.studies.cells import cell_stats
-    from dicetrace.studies.fractal import measures
+    from dicetrace.studies.study_cells import cell_stats
+    from dicetrace.studies.study_fractal import measures
 
     cfg = model_config(opts)
     s = ctx.sample(window, res, **opts)

@@ -1,4 +1,4 @@
-"""How near to Coulomb can the `physical` die's friction go: the regularisation study.
+"""Study friction: how near to Coulomb the physical die's friction can go: the regularisation study.
 
 The ``physical`` preset regularises its per-node friction,
 F_xy = −μ·P·u_xy / √(|u_xy|² + v_reg²), at ``v_reg_cm_s`` = 10 cm/s: Coulomb's
@@ -25,7 +25,7 @@ affordable was measured by this study with the linearly implicit
 ``contact-rosenbrock`` (since removed): it cost more than DOP853 at equal
 agreement at every v_reg (:data:`IMPLICIT_RESULT`, written into ``v_reg.md``).
 
-Run it with ``python -m dicetrace.studies.friction_reg --out analysis/accuracy``
+Run it with ``python -m dicetrace.studies.study_friction --out analysis/accuracy``
 (it writes ``v_reg.csv`` and ``v_reg.md``; ``--quick`` for a small check).
 """
 
@@ -39,7 +39,7 @@ import numpy as np
 
 from dicetrace.analysis.agreement import agreement
 from dicetrace.params import make_config
-from dicetrace.studies.accuracy import T_MAX_S, run_batch, sample_ics
+from dicetrace.studies.study_accuracy import T_MAX_S, run_batch, sample_ics
 
 V_REGS = (10.0, 3.0, 1.0, 0.3)
 TOLS = (1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11)
@@ -187,7 +187,7 @@ def main(argv=None) -> None:
     t0 = time.perf_counter()
     rows = study(**kw)
     summary = summarise(rows)
-    cmd = "python -m dicetrace.studies.friction_reg --out " + str(args.out) + (" --quick" if args.quick else "")
+    cmd = "python -m dicetrace.studies.study_friction --out " + str(args.out) + (" --quick" if args.quick else "")
     render(rows, summary, args.out, cmd, time.perf_counter() - t0)
     print(f"wrote {args.out / 'v_reg.md'}")
 
