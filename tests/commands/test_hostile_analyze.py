@@ -1,4 +1,5 @@
-"""``dicetrace analyze``, ``accuracy`` and ``stability`` against a hostile user: every option is checked first.
+"""``dicetrace analyze`` (every study, the integrator studies included), and the aliases ``accuracy`` and
+``stability``, against a hostile user: every option is checked first.
 
 Each bad value is one line on stderr naming its option (``--res``, ``--tol``, ...) and exit code 2, before
 the command touches the disk or computes: the output folder is not created and the working folder is
@@ -34,6 +35,7 @@ def no_work(monkeypatch):
     monkeypatch.setattr("dicetrace.studies.runner.run", sentinel("analyze"))
     monkeypatch.setattr("dicetrace.studies.study_accuracy.study", sentinel("accuracy"))
     monkeypatch.setattr("dicetrace.studies.study_stability.stability_map", sentinel("stability"))
+    monkeypatch.setattr("dicetrace.studies.study_friction.study", sentinel("friction"))
     return calls
 
 
@@ -110,6 +112,25 @@ BAD = [
     case(["stability", "--k", ""], "--k"),
     case(["stability", "--presets", "nope"], "--presets", "nope"),
     case(["stability", "--integrator", "nope,rk4"], "--integrator", "nope"),
+    # the one door: the integrator studies by name, their own checks, and options a study does not take
+    case(["analyze", "accuracy", "--n", "1"], "--n"),
+    case(["analyze", "accuracy", "--window", "nope"], "--window", "nope"),
+    case(["analyze", "accuracy", "--seed", str(2**64)], "--seed"),
+    case(["analyze", "accuracy", "--integrator", "nope"], "--integrator", "nope"),
+    case(["analyze", "stability", "--k", "0"], "--k"),
+    case(["analyze", "stability", "--presets", "nope"], "--presets", "nope"),
+    case(["analyze", "accuracy", "--res", "41"], "--res", "accuracy"),
+    case(["analyze", "accuracy", "--tol", "1e-6"], "--tol", "accuracy"),
+    case(["analyze", "stability", "--seed", "3"], "--seed", "stability"),
+    case(["analyze", "stability", "--window", "home"], "--window", "stability"),
+    case(["analyze", "friction", "--integrator", "rk4"], "--integrator", "friction"),
+    case(["analyze", "friction", "--n", "20"], "--n", "friction"),
+    case(["analyze", "cells", "--window", "home"], "--window", "writeup"),
+    case(["analyze", "all", "--quick", "--k", "5e5"], "--k", "writeup"),
+    case(["analyze", "converged", "--quiet"], "--quiet", "writeup"),
+    case(["analyze", "accuracy", "cells"], "accuracy", "alone"),
+    case(["analyze", "cells", "friction"], "friction", "alone"),
+    case(["analyze", "--report-only", "--window", "home"], "--window", "--report-only"),
 ]
 
 
@@ -160,6 +181,11 @@ def test_a_size_that_does_not_fit_the_memory_available_is_refused(work, no_work,
       "--integrator", "rk4,contact-substep"], "accuracy"),
     (["accuracy", "--quick", "--window", "0,1,3,4"], "accuracy"),
     (["stability", "--quick", "--k", "5e5,5e6", "--presets", "physical"], "stability"),
+    (["analyze", "accuracy", "--quick", "--window", "red-sea", "--n", "20", "--seed", "3", "--presets", "seed",
+      "--integrator", "rk4,contact-substep", "--threads", "1", "-q"], "accuracy"),
+    (["analyze", "stability", "--quick", "--k", "5e5,5e6", "--presets", "physical"], "stability"),
+    (["analyze", "friction", "--quick"], "friction"),
+    (["analyze", "Friction", "--quick", "--quiet"], "friction"),
 ])
 def test_good_options_pass_the_checks(work, no_work, dicetrace_cli, args, started):
     """Valid options reach the study (the sentinel): the checks refuse only what is bad."""
@@ -168,10 +194,25 @@ def test_good_options_pass_the_checks(work, no_work, dicetrace_cli, args, starte
     assert (work / OUT).is_dir()  # made once every option had passed
 
 
-@pytest.mark.parametrize("command", [["analyze", "wedge", "--quick"], ["accuracy", "--quick"], ["stability", "--quick"]])
+@pytest.mark.parametrize("command", [["analyze", "wedge", "--quick"], ["accuracy", "--quick"], ["stability", "--quick"],
+                                     ["analyze", "friction", "--quick"]])
 @pytest.mark.parametrize("where", ["afile", "afile/deeper"])
 def test_an_output_folder_that_cannot_be_made_is_one_line(work, snapshot, no_work, dicetrace_cli, assert_one_line_error,
                                                           command, where):
     before = snapshot(work)
     assert_one_line_error(dicetrace_cli(*command, "--out", where, cwd=work), "--out", "afile")
+    assert no_work == [] and snapshot(work) == before
+
+
+@pytest.mark.parametrize("study", ["accuracy", "stability", "friction"])
+def test_a_reduced_integrator_study_into_committed_results_is_refused(work, snapshot, no_work, dicetrace_cli,
+                                                                      assert_one_line_error, study):
+    """analysis/accuracy takes only full runs: a --quick one is refused by name, before any work."""
+    from dicetrace.studies.outputs import COMMITTED_MARKER
+
+    (work / "analysis" / "accuracy").mkdir(parents=True)
+    (work / "analysis" / COMMITTED_MARKER).write_text("")
+    before = snapshot(work)
+    res = dicetrace_cli("analyze", study, "--quick", "--out", "analysis/accuracy", cwd=work)
+    assert_one_line_error(res, "--out", "--quick")
     assert no_work == [] and snapshot(work) == before

@@ -1,10 +1,8 @@
-"""The friction-regularisation study (``python -m dicetrace.studies.study_friction``), quick size."""
+"""The friction-regularisation study (``dicetrace analyze friction``), quick size."""
 
 from __future__ import annotations
 
 import csv
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -13,14 +11,13 @@ from dicetrace.studies import study_friction as fr
 
 
 @pytest.mark.slow
-def test_quick_study_writes_its_tables(tmp_path):
+def test_quick_study_writes_its_tables(tmp_path, dicetrace_cli):
     """--quick: 8 ICs, v_reg 10 and 3 cm/s, two tolerances; every run is in the CSV, every
     throw settles and is counted in the faces, and agreement is 1 for a run with itself."""
-    res = subprocess.run(
-        [sys.executable, "-m", "dicetrace.studies.study_friction", "--out", str(tmp_path), "--quick"],
-        capture_output=True, text=True, timeout=600,
-    )
+    res = dicetrace_cli("analyze", "friction", "--quick", "--quiet", "--out", "fr", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines() == ["wrote fr/v_reg.csv", "wrote fr/v_reg.md"]
+    tmp_path = tmp_path / "fr"
     with open(tmp_path / "v_reg.csv") as f:
         rows = list(csv.DictReader(f))
     q = fr.QUICK
@@ -34,6 +31,7 @@ def test_quick_study_writes_its_tables(tmp_path):
     tightest = [r for r in rows if r["integrator"] == "contact-dop853" and float(r["tol"]) == q["tols"][-1]]
     assert [float(r["agreement_with_tightest"]) for r in tightest] == [1.0] * len(q["v_regs"])
     text = (tmp_path / "v_reg.md").read_text()
+    assert "Command: `dicetrace analyze friction --quick --quiet --out fr`" in text
     assert "| 10 | yes |" in text or "| 10 | no |" in text
     assert text.rstrip().endswith(fr.IMPLICIT_RESULT)  # the removed implicit scheme's measured result, kept
 

@@ -9,8 +9,9 @@ can never overwrite them.  The commands that regenerate them are in
 ``analysis/README.md``::
 
     dicetrace analyze all --out analysis              # figures, results/*.json, REPORT.md
-    dicetrace accuracy --out analysis/accuracy
-    dicetrace stability --out analysis/accuracy
+    dicetrace analyze accuracy --out analysis/accuracy
+    dicetrace analyze stability --out analysis/accuracy
+    dicetrace analyze friction --out analysis/accuracy
 """
 
 from __future__ import annotations
@@ -23,11 +24,12 @@ RESULTS_ROOT = Path("dicetrace-results")
 #: Marker file of a folder of committed results.
 COMMITTED_MARKER = ".committed-results"
 #: Default output folder of each command (``analyze`` writes all writeup studies into one, with REPORT.md).
-DEFAULT_FOLDERS = {"analyze": "analysis", "accuracy": "accuracy", "stability": "stability"}
+DEFAULT_FOLDERS = {"analyze": "analysis", "accuracy": "accuracy", "stability": "stability", "friction": "friction"}
 
 
 def default_out(command: str) -> Path:
-    """``./dicetrace-results/<folder>`` of a command (``analyze``, ``accuracy``, ``stability``)."""
+    """``./dicetrace-results/<folder>`` of the writeup studies (``analyze``) or of an integrator study
+    (``accuracy``, ``stability``, ``friction``)."""
     return RESULTS_ROOT / DEFAULT_FOLDERS[command]
 
 

@@ -25,13 +25,14 @@ affordable was measured by this study with the linearly implicit
 ``contact-rosenbrock`` (since removed): it cost more than DOP853 at equal
 agreement at every v_reg (:data:`IMPLICIT_RESULT`, written into ``v_reg.md``).
 
-Run it with ``python -m dicetrace.studies.study_friction --out analysis/accuracy``
-(it writes ``v_reg.csv`` and ``v_reg.md``; ``--quick`` for a small check).
+Run it with ``dicetrace analyze friction --out analysis/accuracy`` (it writes
+``v_reg.csv`` and ``v_reg.md``; ``--quick`` for a small check, into
+``./dicetrace-results/friction`` by default).  The committed ``v_reg.md`` was
+written when the study was started as ``python -m dicetrace.studies.friction_reg``.
 """
 
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -131,8 +132,8 @@ def summarise(rows: list[dict]) -> list[dict]:
     return out
 
 
-def render(rows: list[dict], summary: list[dict], out: Path, command: str, wall_s: float) -> None:
-    """``v_reg.csv`` (every run) and ``v_reg.md`` (the tables and the answer) in ``out``."""
+def render(rows: list[dict], summary: list[dict], out: Path, command: str, wall_s: float) -> dict[str, Path]:
+    """``v_reg.csv`` (every run) and ``v_reg.md`` (the tables and the answer) in ``out``; their paths."""
     import pandas as pd
 
     out.mkdir(parents=True, exist_ok=True)
@@ -173,24 +174,4 @@ def render(rows: list[dict], summary: list[dict], out: Path, command: str, wall_
         )
     lines += ["", IMPLICIT_RESULT]
     (out / "v_reg.md").write_text("\n".join(lines) + "\n")
-
-
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True, help="folder for v_reg.csv and v_reg.md")
-    ap.add_argument("--quick", action="store_true", help="a small check: 8 ICs, v_reg 10 and 3, two tolerances")
-    args = ap.parse_args(argv)
-    import numba
-
-    numba.set_num_threads(1)
-    kw = QUICK if args.quick else {}
-    t0 = time.perf_counter()
-    rows = study(**kw)
-    summary = summarise(rows)
-    cmd = "python -m dicetrace.studies.study_friction --out " + str(args.out) + (" --quick" if args.quick else "")
-    render(rows, summary, args.out, cmd, time.perf_counter() - t0)
-    print(f"wrote {args.out / 'v_reg.md'}")
-
-
-if __name__ == "__main__":
-    main()
+    return {"csv": out / "v_reg.csv", "summary": out / "v_reg.md"}
