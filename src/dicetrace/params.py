@@ -19,33 +19,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from dicetrace.config_values import ConfigError  # noqa: F401  (re-exported)
+from dicetrace.config_values import is_number as _is_number, plain as _plain, read_number as _read_number, show as _show
 from dicetrace.integrators import INTEGRATORS, IntegratorSpec, get_integrator, unknown_integrator  # noqa: F401  (re-exported)
 from dicetrace.stepsize import auto_dt
-
-
-def _is_number(v) -> bool:
-    """A real number that is not a bool (``dt_s=True`` is no step); numpy reals count.
-
-    An integer beyond float64's range (``t_max_s=10**400``) is no number either:
-    the checks that follow (``math.isfinite``) would raise OverflowError on it.
-    """
-    if not isinstance(v, (int, float, np.integer, np.floating)) or isinstance(v, (bool, np.bool_)):
-        return False
-    try:
-        float(v)
-    except OverflowError:
-        return False
-    return True
-
-
-def _plain(v):
-    """A numpy scalar as the Python number it holds (stored, printed and written as JSON like one)."""
-    return v.item() if isinstance(v, np.generic) else v
-
-
-def _show(v) -> str:
-    """A value for a message: 100.0, not np.float64(100.0)."""
-    return repr(_plain(v))
 
 
 #: Default friction regularisation speed of the per-node law, cm/s (see Preset).
@@ -139,6 +116,19 @@ def _valid_tol(v) -> bool:
     return _is_number(v) and math.isfinite(v) and TOL_MIN <= v < 1
 
 
+def _spec(integrator) -> IntegratorSpec:
+    """The integrator named ``integrator``, or ConfigError naming the field."""
+    try:
+        return get_integrator(integrator)
+    except ValueError as e:
+        raise ConfigError("integrator", str(e)) from None
+
+
+def _valid_positive(v) -> bool:
+    """A time step or time cap, s: a finite number > 0 (``Numerics.dt_s``, ``Numerics.t_max_s``)."""
+    return _is_number(v) and math.isfinite(v) and v > 0
+
+
 def _valid_tol_growth(v) -> bool:
     """A tolerance growth rate, 1/s: a finite number in [0, TOL_GROWTH_MAX] (``Numerics.tol_growth``, ``Preset.default_tol_growth``)."""
     return _is_number(v) and math.isfinite(v) and 0 <= v <= TOL_GROWTH_MAX
@@ -220,52 +210,52 @@ class Preset:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
-            raise ValueError(f"preset name must be a string, got {_show(self.name)}")
+            raise ConfigError("name", f"preset name must be a string, got {_show(self.name)}")
         for name in ("k", "gamma", "mu", "g", "half_side_cm", "z0_cm", "v_reg_cm_s"):
             v = getattr(self, name)
             if not _is_number(v) or not math.isfinite(v):
-                raise ValueError(f"preset {self.name!r}: {name} must be a finite number, got {_show(v)}")
+                raise ConfigError(name, f"preset {self.name!r}: {name} must be a finite number, got {_show(v)}")
             object.__setattr__(self, name, _plain(v))
         if self.k <= 0:
-            raise ValueError(f"preset {self.name!r}: stiffness k must be > 0, got {self.k!r}")
+            raise ConfigError("k", f"preset {self.name!r}: stiffness k must be > 0, got {self.k!r}")
         if self.gamma < 0:
-            raise ValueError(f"preset {self.name!r}: damping gamma must be >= 0, got {self.gamma!r}")
+            raise ConfigError("gamma", f"preset {self.name!r}: damping gamma must be >= 0, got {self.gamma!r}")
         if self.mu < 0:
-            raise ValueError(f"preset {self.name!r}: friction coefficient mu must be >= 0, got {self.mu!r}")
+            raise ConfigError("mu", f"preset {self.name!r}: friction coefficient mu must be >= 0, got {self.mu!r}")
         if self.g > 0:
-            raise ValueError(
-                f"preset {self.name!r}: gravity g must be <= 0 (cm/s² along z; negative points down, the default is "
+            raise ConfigError(
+                "g", f"preset {self.name!r}: gravity g must be <= 0 (cm/s² along z; negative points down, the default is "
                 f"-980; positive would lift the die away from the ground), got {self.g!r}"
             )
         if self.half_side_cm <= 0:
-            raise ValueError(f"preset {self.name!r}: half_side_cm must be > 0, got {self.half_side_cm!r}")
+            raise ConfigError("half_side_cm", f"preset {self.name!r}: half_side_cm must be > 0, got {self.half_side_cm!r}")
         if self.z0_cm < self.half_side_cm:
-            raise ValueError(
-                f"preset {self.name!r}: z0_cm (the start height of the centre) must be >= half_side_cm "
+            raise ConfigError(
+                "z0_cm", f"preset {self.name!r}: z0_cm (the start height of the centre) must be >= half_side_cm "
                 f"({self.half_side_cm!r}: the die starts on or above the ground), got {self.z0_cm!r}"
             )
         if self.v_reg_cm_s <= 0:
-            raise ValueError(f"preset {self.name!r}: v_reg_cm_s must be > 0, got {self.v_reg_cm_s!r}")
+            raise ConfigError("v_reg_cm_s", f"preset {self.name!r}: v_reg_cm_s must be > 0, got {self.v_reg_cm_s!r}")
         if not isinstance(self.clamp_normal, (bool, np.bool_)):
-            raise ValueError(f"preset {self.name!r}: clamp_normal must be True or False, got {_show(self.clamp_normal)}")
+            raise ConfigError("clamp_normal", f"preset {self.name!r}: clamp_normal must be True or False, got {_show(self.clamp_normal)}")
         object.__setattr__(self, "clamp_normal", bool(self.clamp_normal))
         if self.friction not in ("spectral", "per-node"):
-            raise ValueError(f"preset {self.name!r}: friction must be 'spectral' or 'per-node', got {self.friction!r}")
+            raise ConfigError("friction", f"preset {self.name!r}: friction must be 'spectral' or 'per-node', got {self.friction!r}")
         if self.energy not in ("point-mass", "rigid"):
-            raise ValueError(f"preset {self.name!r}: energy must be 'point-mass' or 'rigid', got {self.energy!r}")
+            raise ConfigError("energy", f"preset {self.name!r}: energy must be 'point-mass' or 'rigid', got {self.energy!r}")
         if self.l_convention not in L_CONVENTIONS:
-            raise ValueError(f"preset {self.name!r}: l_convention must be 'program' or 'physical'")
+            raise ConfigError("l_convention", f"preset {self.name!r}: l_convention must be 'program' or 'physical'")
         if self.integrator not in INTEGRATORS:
-            raise ValueError(f"preset {self.name!r}: {unknown_integrator(self.integrator)}")
+            raise ConfigError("integrator", f"preset {self.name!r}: {unknown_integrator(self.integrator)}")
         tol = self.default_tol
         if tol is not None:
             if not _valid_tol(tol):
-                raise ValueError(f"preset {self.name!r}: default_tol must be None or a number in [{TOL_MIN:g}, 1), "
+                raise ConfigError("default_tol", f"preset {self.name!r}: default_tol must be None or a number in [{TOL_MIN:g}, 1), "
                                  f"got {_show(tol)}")
             object.__setattr__(self, "default_tol", _plain(tol))
         gr = self.default_tol_growth
         if not _valid_tol_growth(gr):
-            raise ValueError(f"preset {self.name!r}: default_tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] "
+            raise ConfigError("default_tol_growth", f"preset {self.name!r}: default_tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] "
                              f"(1/s), got {_show(gr)}")
         object.__setattr__(self, "default_tol_growth", _plain(gr))
 
@@ -319,7 +309,7 @@ def get_preset(name: str) -> Preset:
     try:
         return PRESETS[name]
     except KeyError:
-        raise ValueError(f"unknown preset {name!r} (choose from {', '.join(PRESETS)})") from None
+        raise ConfigError("preset", f"unknown preset {name!r} (choose from {', '.join(PRESETS)})") from None
 
 
 @dataclass(frozen=True)
@@ -369,35 +359,29 @@ class Numerics:
     tol_growth: float = 0.0
 
     def __post_init__(self) -> None:
-        get_integrator(self.integrator)
-        if not _is_number(self.dt_s) or not math.isfinite(self.dt_s) or self.dt_s <= 0:
-            raise ValueError(f"time step dt must be a finite number > 0, got {_show(self.dt_s)}")
-        if not _is_number(self.t_max_s) or not math.isfinite(self.t_max_s) or self.t_max_s <= 0:
-            raise ValueError(f"time cap t_max must be a finite number > 0, got {_show(self.t_max_s)}")
-        object.__setattr__(self, "dt_s", _plain(self.dt_s))
-        object.__setattr__(self, "t_max_s", _plain(self.t_max_s))
+        _spec(self.integrator)
+        for name, what in (("dt_s", "time step dt"), ("t_max_s", "time cap t_max")):
+            v = getattr(self, name)
+            if not _valid_positive(v):
+                raise ConfigError(name, f"{what} must be a finite number > 0, got {_show(v)}")
+            object.__setattr__(self, name, _plain(v))
         if self.dt_s > self.t_max_s:
-            raise ValueError(
-                f"time step dt ({self.dt_s!r} s) is longer than the time cap t_max ({self.t_max_s!r} s): "
-                "not even one step fits"
-            )
+            raise ConfigError(("t_max_s", "dt_s"), f"time step dt ({self.dt_s!r} s) is longer than the time cap t_max "
+                              f"({self.t_max_s!r} s): not even one step fits")
         if self.t_max_s / self.dt_s > 2**40:
-            raise ValueError(
-                f"time cap / dt is too large: t_max {self.t_max_s!r} s / dt {self.dt_s!r} s = "
-                f"{self.t_max_s / self.dt_s:.3g} steps (at most 2**40)"
-            )
+            raise ConfigError(("t_max_s", "dt_s"), f"time cap / dt is too large: t_max {self.t_max_s!r} s / dt "
+                              f"{self.dt_s!r} s = {self.t_max_s / self.dt_s:.3g} steps (at most 2**40)")
         sub = self.substeps
         if not _is_number(sub) or not math.isfinite(sub) or int(sub) != sub or sub < 1:
-            raise ValueError(f"substeps must be an integer >= 1, got {_show(sub)}")
+            raise ConfigError("substeps", f"substeps must be an integer >= 1, got {_show(sub)}")
         object.__setattr__(self, "substeps", _plain(sub))
         if not _valid_tol(self.tol):
-            raise ValueError(f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {_show(self.tol)}")
+            raise ConfigError("tol", f"tolerance tol must be a number in [{TOL_MIN:g}, 1), got {_show(self.tol)}")
+        if not _valid_tol_growth(self.tol_growth):
+            raise ConfigError("tol_growth", f"tolerance growth tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] "
+                              f"(1/s), got {_show(self.tol_growth)}")
         object.__setattr__(self, "tol", _plain(self.tol))
-        gr = self.tol_growth
-        if not _valid_tol_growth(gr):
-            raise ValueError(f"tolerance growth tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] (1/s), "
-                             f"got {_show(gr)}")
-        object.__setattr__(self, "tol_growth", _plain(gr))
+        object.__setattr__(self, "tol_growth", _plain(self.tol_growth))
 
     @property
     def max_steps(self) -> int:
@@ -501,23 +485,29 @@ def make_config(
     *,
     integrator: str | None = None,
     dt_s: float | str | None = None,
-    t_max_s: float | None = None,
+    t_max_s: float | str | None = None,
     v_impact_cm_s: float | None = None,
-    tol: float | None = None,
-    tol_growth: float | None = None,
+    tol: float | str | None = None,
+    tol_growth: float | str | None = None,
+    strict: bool = False,
     **overrides,
 ) -> Config:
-    """Build a :class:`Config` from a preset name and optional overrides.
+    """Build a :class:`Config` from a preset name and optional overrides: the one validator of a configuration.
 
     ``overrides`` are :class:`Preset` fields (``k``, ``gamma``, ``mu``, ...).
+    ``dt_s``, ``t_max_s``, ``tol`` and ``tol_growth`` may be numbers or their
+    text (a command's options, read here and nowhere else).
     ``dt_s="auto"`` picks the step with :func:`auto_dt` for impacts at
     ``v_impact_cm_s`` (cm/s; see :func:`impact_speed_cm_s`), or raises
-    ValueError when no step fits the budget.  ``tol``: the local error
+    ConfigError when no step fits the budget.  ``tol``: the local error
     tolerance of the error-controlled integrators; ``tol_growth``: the rate,
     1/s, at which it loosens over a throw (see :class:`Numerics`).  When
     neither is given, an error-controlled integrator takes the preset's
     ``default_tol`` and ``default_tol_growth`` (``physical``: 2e-8 loosening
     at 10 /s), or ``Numerics``' defaults (a uniform 1e-7) when it has none.
+    Either given to a fixed-step integrator has no effect: a UserWarning, or
+    with ``strict`` a ConfigError.  Bad values raise :class:`ConfigError`
+    naming the field.
     """
     if isinstance(preset, str):
         p = get_preset(preset)
@@ -534,51 +524,44 @@ def make_config(
             )
         p = p.with_(**overrides)
     kw = {"integrator": p.integrator if integrator is None else integrator}
-    integrator = kw["integrator"]
-    spec = get_integrator(integrator)
-    for name, what, value in (("tol", "the error tolerance", tol), ("tol_growth", "the growth of the error tolerance",
-                                                                     tol_growth)):
-        if value is not None and not spec.adaptive:
-            import warnings
-
-            warnings.warn(
-                f"{name} ({what} of the error-controlled sub-steps of "
-                f"{', '.join(n for n, sp in INTEGRATORS.items() if sp.adaptive)}) has no effect on {integrator}, "
-                "whose steps are fixed",
-                UserWarning,
-                stacklevel=2,
-            )
+    spec = _spec(kw["integrator"])
     if v_impact_cm_s is not None and (not _is_number(v_impact_cm_s) or not math.isfinite(v_impact_cm_s)
                                       or v_impact_cm_s < 0):
-        raise ValueError(f"v_impact_cm_s must be a finite number >= 0, got {_show(v_impact_cm_s)}")
-    if isinstance(dt_s, str):
-        if dt_s.strip().lower() != "auto":
-            raise ValueError(f"time step dt must be a number > 0 or 'auto', got {dt_s!r}")
-        dt_s = auto_dt(
-            p,
-            integrator,
-            v_impact_cm_s=v_impact_cm_s,
-            t_max_s=Numerics.t_max_s if t_max_s is None else t_max_s,
-            substeps=Numerics.substeps,
-        )
-    if dt_s is not None:
-        kw["dt_s"] = dt_s
-    if t_max_s is not None:
-        kw["t_max_s"] = t_max_s
+        raise ConfigError("v_impact_cm_s", f"v_impact_cm_s must be a finite number >= 0, got {_show(v_impact_cm_s)}")
+    given = {"tol": tol, "tol_growth": tol_growth}
+    auto = isinstance(dt_s, str) and dt_s.strip().lower() == "auto"
+    for name, what, value in (("dt_s", "time step dt must be a number > 0 or 'auto'", None if auto else dt_s),
+                              ("t_max_s", "time cap t_max must be a number > 0", t_max_s),
+                              ("tol", f"tolerance tol must be a number in [{TOL_MIN:g}, 1)", tol),
+                              ("tol_growth", "tolerance growth tol_growth must be a number (1/s)", tol_growth)):
+        if value is not None:
+            kw[name] = _read_number(name, what, value)
+    if auto and _valid_positive(kw.get("t_max_s", Numerics.t_max_s)):  # else Numerics refuses the time cap below
+        try:
+            kw["dt_s"] = auto_dt(p, kw["integrator"], v_impact_cm_s=v_impact_cm_s,
+                                 t_max_s=kw.get("t_max_s", Numerics.t_max_s), substeps=Numerics.substeps)
+        except ValueError as e:
+            raise ConfigError("dt_s", str(e)) from None
     if tol is None and tol_growth is None and spec.adaptive and p.default_tol is not None:
-        tol, tol_growth = p.default_tol, p.default_tol_growth  # the preset's schedule
-    if tol is not None:
-        kw["tol"] = tol
-    if tol_growth is not None:
-        kw["tol_growth"] = tol_growth
-    return Config(preset=p, numerics=Numerics(**kw))
+        kw["tol"], kw["tol_growth"] = p.default_tol, p.default_tol_growth  # the preset's schedule
+    numerics = Numerics(**kw)
+    for name, value in given.items():
+        if value is not None and not spec.adaptive:
+            msg = (f"{name} {_show(kw[name])} ({', '.join(n for n, sp in INTEGRATORS.items() if sp.adaptive)} only) "
+                   f"has no effect on {kw['integrator']}, whose steps are fixed")
+            if strict:
+                raise ConfigError(name, msg)
+            import warnings
+
+            warnings.warn(msg, UserWarning, stacklevel=2)
+    return Config(preset=p, numerics=numerics)
 
 
 def resolve_config(config: "Config | str | None" = None, /, **options) -> Config:
     """The configuration of an API call: ``config`` itself, or :func:`make_config` of the options.
 
     Every entry point (``simulate``, ``simulate_batch``, ``scan``, the
-    studies) takes ``config=`` or the keyword options of :func:`make_config`
+    studies, the analysis callables) takes ``config=`` or the keyword options of :func:`make_config`
     (``preset``, ``integrator``, ``dt_s``, ``t_max_s``, ``tol``, ``tol_growth``,
     ``v_impact_cm_s`` and :class:`Preset` field overrides), never both: a
     given Config already fixes them.  ``config`` may also be a preset name.
@@ -588,13 +571,12 @@ def resolve_config(config: "Config | str | None" = None, /, **options) -> Config
     if config is None or isinstance(config, (str, Preset)):
         if config is not None:
             if "preset" in options:
-                raise ValueError("give the preset once: config='NAME' or preset='NAME'")
+                raise ConfigError("preset", "give the preset once: config='NAME' or preset='NAME'")
             options["preset"] = config
         return make_config(**options)
     if not isinstance(config, Config):
         raise TypeError(f"config must be a dicetrace.params.Config or a preset name, not {type(config).__name__}")
     if options:
-        raise ValueError(
-            f"pass either config or {', '.join(sorted(options))}, not both (the config already fixes them)"
-        )
+        raise ConfigError(tuple(sorted(options)),
+                          f"pass either config or {', '.join(sorted(options))}, not both (the config already fixes them)")
     return config
