@@ -28,7 +28,7 @@ untimed run.  ``--v-reg`` sets ``physical``'s friction regularisation
 to see what the sub-steps cost without friction; ``--dt`` the step of the
 contact schemes (the seed path and the reference keep 1 ms).
 Each error-controlled scheme also gets a line at each tolerance of the
-study that loosens over the throw (``IntegratorSpec.study_graded``; ``tol_growth``,
+study that loosens over the throw (the study grids' ``study_graded``; ``tol_growth``,
 docs/model.md §9; ``physical``'s default among them, marked "(default)");
 ``--graded RATE:TOL`` (repeatable) replaces them by tolerance TOL loosening at
 RATE per second.
@@ -51,6 +51,7 @@ from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import convert_l, get_preset, make_config
 from dicetrace.simulate import simulate
 from dicetrace.studies.study_accuracy import SECOND_REFERENCE, T_MAX_S, agreement, run_batch, sample_ics
+from dicetrace.studies.study_accuracy_grids import GRIDS
 
 PRESETS = ("seed", "physical")
 SEED_PATH = ("semi-implicit-euler", 1e-3, None, 0.0)
@@ -63,8 +64,8 @@ def runs(tol_range, only, dt=1e-3, graded=None) -> list[tuple[str, float, float 
     out = [SEED_PATH, ("contact-substep", dt, None, 0.0)]
     for name, spec in INTEGRATORS.items():
         if spec.adaptive and (not only or name in only):
-            out += [(name, dt, tol, 0.0) for tol in spec.study_tol if lo <= tol <= hi]
-            out += [(name, dt, tol, rate) for rate, tol in (spec.study_graded if graded is None else graded)]
+            out += [(name, dt, tol, 0.0) for tol in GRIDS[name].study_tol if lo <= tol <= hi]
+            out += [(name, dt, tol, rate) for rate, tol in (GRIDS[name].study_graded if graded is None else graded)]
     return [r for r in out if not only or r[0] in only or r == SEED_PATH]
 
 

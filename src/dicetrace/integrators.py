@@ -2,9 +2,11 @@
 
 Bottom layer (imports nothing of the package).  The kernels dispatch on
 ``kernel_id``; ``Numerics`` validates names against it; ``dt = "auto"`` reads
-the stability bound; the accuracy study reads its grids and plot colour.
-Adding an integrator is one scheme file in ``dicetrace.core``, one row here,
-and its tests.
+the stability bound.  What the studies show of an integrator (the accuracy
+study's steps and tolerances, its plot colour) is theirs
+(``dicetrace.studies.study_accuracy_grids``).  Adding an integrator is one
+scheme file in ``dicetrace.core``, one row here, one row of the accuracy
+study's grids, and its tests.
 """
 
 from __future__ import annotations
@@ -40,16 +42,6 @@ class IntegratorSpec:
         sub-step.
     adaptive
         Error-controlled sub-steps (``Numerics.tol`` is its tolerance).
-    study_dt_s, quick_dt_s
-        Steps of the work-precision study (full and ``--quick``), s; each
-        divides the study's first-impact horizon grid of 8 ms.
-    study_tol, quick_tol
-        Tolerances of the study (adaptive schemes only).
-    study_graded, quick_graded
-        (tol_growth, tol) pairs of the study: tolerances that loosen over a
-        throw (``Numerics.tol_growth``; adaptive schemes only).
-    color
-        Its colour in the study's plots (matplotlib name).
     summary
         One line for ``--help`` and the docs.
     """
@@ -59,16 +51,9 @@ class IntegratorSpec:
     order: int
     stability_bound: float
     summary: str
-    color: str
     scheme: str
-    study_dt_s: tuple[float, ...]
-    quick_dt_s: tuple[float, ...]
     substepped: bool = False
     adaptive: bool = False
-    study_tol: tuple[float, ...] = ()
-    quick_tol: tuple[float, ...] = ()
-    study_graded: tuple[tuple[float, float], ...] = ()
-    quick_graded: tuple[tuple[float, float], ...] = ()
 
 
 _RK4_BOUND = 2.0 * math.sqrt(2.0)  # RK4's interval on the imaginary axis
@@ -82,75 +67,48 @@ INTEGRATORS: dict[str, IntegratorSpec] = {
     s.name: s
     for s in (
         IntegratorSpec(
-            "semi-implicit-euler", 0, 1, 2.0, "the 2019 program's scheme (default for seed)", "tab:blue",
+            "semi-implicit-euler", 0, 1, 2.0, "the 2019 program's scheme (default for seed)",
             scheme="semi_implicit_euler",
-            study_dt_s=(1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5, 1.5625e-5, 7.8125e-6),
-            quick_dt_s=(1e-3, 2.5e-4),
         ),
         IntegratorSpec(
-            "forward-euler", 1, 1, 0.0, "textbook forward Euler (what the writeup says it used)", "tab:red",
+            "forward-euler", 1, 1, 0.0, "textbook forward Euler (what the writeup says it used)",
             scheme="forward_euler",
-            study_dt_s=(1e-3, 2.5e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5),
-            quick_dt_s=(1e-4, 5e-5),
         ),
         IntegratorSpec(
-            "verlet", 2, 2, 2.0, "velocity Verlet", "tab:green",
+            "verlet", 2, 2, 2.0, "velocity Verlet",
             scheme="verlet",
-            study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
-            quick_dt_s=(1e-3, 2.5e-4),
         ),
         IntegratorSpec(
-            "rk4", 3, 4, _RK4_BOUND, "classical Runge-Kutta on the Lie group (commutator-free)", "tab:purple",
+            "rk4", 3, 4, _RK4_BOUND, "classical Runge-Kutta on the Lie group (commutator-free)",
             scheme="rk4",
-            study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
-            quick_dt_s=(1e-3, 2.5e-4),
         ),
         IntegratorSpec(
             "contact-substep", 4, 4, _RK4_BOUND,
-            "contact-aware RK4: exact free flight, kink-aligned sub-steps in contact", "tab:orange",
+            "contact-aware RK4: exact free flight, kink-aligned sub-steps in contact",
             scheme="contact_substep",
-            study_dt_s=(8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4),
-            quick_dt_s=(2e-3, 1e-3),
             substepped=True,
         ),
         IntegratorSpec(
             "contact-adaptive", 5, 4, _RK4_BOUND,
-            "contact-substep with error-controlled sub-steps (tolerance tol)", "tab:brown",
+            "contact-substep with error-controlled sub-steps (tolerance tol)",
             scheme="contact_substep",
-            study_dt_s=(1e-3,),
-            quick_dt_s=(1e-3,),
             substepped=True,
             adaptive=True,
-            study_tol=(1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
-            quick_tol=(1e-4, 1e-6),
-            study_graded=((10.0, 2e-8),),
         ),
         IntegratorSpec(
             "contact-dop853", 6, 8, 5.96,
             "contact-adaptive's sub-stepping with the order-8 Dormand-Prince pair (DOP853)",
-            "tab:pink",
             scheme="contact_dop853",
-            study_dt_s=(1e-3,),
-            quick_dt_s=(1e-3,),
             substepped=True,
             adaptive=True,
-            study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
-            quick_tol=(1e-6, 1e-8),
         ),
         IntegratorSpec(
             "contact-tsit5", 8, 5, _TSIT5_BOUND,
             "contact-adaptive's sub-stepping with Tsitouras' 5(4) pair (Tsit5): "
             "six stages, where the contact caps most sub-steps",
-            "tab:olive",
             scheme="contact_tsit5",
-            study_dt_s=(1e-3,),
-            quick_dt_s=(1e-3,),
             substepped=True,
             adaptive=True,
-            study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9),
-            quick_tol=(1e-6, 1e-8),
-            study_graded=((10.0, 2e-8), (10.0, 5e-8)),
-            quick_graded=((10.0, 1e-6),),
         ),
     )
 }

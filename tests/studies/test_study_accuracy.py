@@ -12,6 +12,7 @@ import pytest
 from dicetrace.params import INTEGRATORS, make_config
 from dicetrace.status import Status
 from dicetrace.studies import study_accuracy as acc
+from dicetrace.studies.study_accuracy_grids import GRIDS, color, grid
 
 
 @pytest.mark.slow
@@ -32,16 +33,18 @@ def test_quick_study_cli_runs(tmp_path):
         rows = list(csv.DictReader(f))
     assert list(rows[0]) == list(acc.STUDY_COLUMNS)
     # every preset × integrator × quick step (× quick tolerance, uniform or growing, for an error-controlled one)
-    per_preset = sum(len(s.quick_dt_s) * max(1, (len(s.quick_tol) + len(s.quick_graded)) * s.adaptive)
-                     for s in INTEGRATORS.values())
+    per_preset = sum(len(GRIDS[n].quick_dt_s) * max(1, (len(GRIDS[n].quick_tol) + len(GRIDS[n].quick_graded))
+                                                    * s.adaptive)
+                     for n, s in INTEGRATORS.items())
     assert len(rows) == 2 * per_preset
-    assert any(s.quick_graded for s in INTEGRATORS.values())
+    assert any(g.quick_graded for g in GRIDS.values())
     for name, spec in INTEGRATORS.items():
         mine = [r for r in rows if r["integrator"] == name]
-        assert {float(r["dt_s"]) for r in mine} == set(spec.quick_dt_s)
+        grid = GRIDS[name]
+        assert {float(r["dt_s"]) for r in mine} == set(grid.quick_dt_s)
         if spec.adaptive:
             settings = {(float(r["tol"]), float(r["tol_growth"])) for r in mine}
-            assert settings == {(t, 0.0) for t in spec.quick_tol} | {(t, g) for g, t in spec.quick_graded}
+            assert settings == {(t, 0.0) for t in grid.quick_tol} | {(t, g) for g, t in grid.quick_graded}
         else:
             assert all(r["tol"] in ("", "nan") and r["tol_growth"] in ("", "nan") for r in mine)
     for r in rows:
@@ -104,10 +107,23 @@ def test_fit_order_on_synthetic_errors():
     assert np.isnan(acc.fit_order(dts[:1], errs[:1]))
 
 
+def test_every_integrator_has_a_study_grid_and_a_colour():
+    """The study's grids cover the integrator table, one distinct colour each; tolerances only for adaptive ones."""
+    assert list(GRIDS) == list(INTEGRATORS)
+    assert len({g.color for g in GRIDS.values()}) == len(GRIDS)
+    for name, spec in INTEGRATORS.items():
+        g = grid(name)
+        assert color(name) == g.color and g.study_dt_s and g.quick_dt_s
+        assert bool(g.study_tol) == spec.adaptive and bool(g.quick_tol) == spec.adaptive
+        assert not (g.study_graded or g.quick_graded) or spec.adaptive
+    with pytest.raises(ValueError, match="no study grid"):
+        grid("nope")
+
+
 def test_horizon_is_on_every_grid():
     h = acc.first_impact_horizon(0.1713)
     assert h >= 0.1713 + acc.FIRST_IMPACT_AFTER_S
-    steps = [s.study_dt_s + s.quick_dt_s for s in INTEGRATORS.values()]
+    steps = [g.study_dt_s + g.quick_dt_s for g in GRIDS.values()]
     for dts in steps + [[acc.REFERENCE.dt_s, acc.REFERENCE.check_dt_s]]:
         for dt in dts:
             n = h / dt
@@ -123,12 +139,12 @@ def test_agreement_counts_unsettled_as_disagreement():
 
 
 def test_study_runs_come_from_the_integrator_table():
-    """The steps and tolerances of a study run are its spec's, nothing else."""
+    """The steps and tolerances of a study run are its grid's, nothing else."""
     adaptive = next(n for n, s in INTEGRATORS.items() if s.adaptive)
-    spec = INTEGRATORS[adaptive]
+    spec = GRIDS[adaptive]
     assert acc.study_runs(adaptive) == ([(dt, tol, 0.0) for dt in spec.study_dt_s for tol in spec.study_tol]
                                         + [(dt, tol, g) for dt in spec.study_dt_s for g, tol in spec.study_graded])
-    assert acc.study_runs("rk4", quick=True) == [(dt, None, None) for dt in INTEGRATORS["rk4"].quick_dt_s]
+    assert acc.study_runs("rk4", quick=True) == [(dt, None, None) for dt in GRIDS["rk4"].quick_dt_s]
     # physical's default schedule is one of the study's settings, so the study measures the default
     phys = make_config("physical").numerics
     assert (phys.dt_s, phys.tol, phys.tol_growth) in acc.study_runs(phys.integrator)

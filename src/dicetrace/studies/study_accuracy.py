@@ -1,10 +1,11 @@
 """Study accuracy: the work-precision study of the integrators.
 
-Its computation (``dicetrace analyze accuracy``): :func:`study` runs, for each preset × integrator × step (× tolerance for an
-error-controlled integrator; the steps and tolerances are the integrator's
-``IntegratorSpec.study_dt_s`` / ``quick_dt_s`` / ``study_tol`` /
-``quick_tol``), a seeded uniform sample of ICs from a named window of the seed
-slice and measures against a converged reference:
+Its computation (``dicetrace analyze accuracy``): :func:`study` runs, for
+each preset × integrator × step (× tolerance for an error-controlled
+integrator; the steps and tolerances are the integrator's row of the study's
+grids, :mod:`dicetrace.studies.study_accuracy_grids`), a seeded uniform sample
+of ICs from a named window of the seed slice and measures against a converged
+reference:
 
 - **outcome agreement**: fraction of ICs whose outcome equals the
   reference's (a run that does not settle disagrees);
@@ -51,6 +52,7 @@ import numpy as np
 from dicetrace.ics import SEED_SLICE, Sample
 from dicetrace.params import INTEGRATORS, Config, convert_l, get_preset, make_config, unknown_integrator
 from dicetrace.status import Status
+from dicetrace.studies.study_accuracy_grids import grid
 from dicetrace.windows import WINDOWS, get_window
 
 #: Presets studied, in the order of the tables and plots.
@@ -138,11 +140,13 @@ STUDY_COLUMNS = (
 
 
 def study_runs(integrator: str, quick: bool = False) -> list[tuple[float, float | None, float | None]]:
-    """(dt, tol, tol_growth) of every run of ``integrator`` in the study: its spec's steps × tolerances, uniform
+    """(dt, tol, tol_growth) of every run of ``integrator`` in the study: its grid's steps × tolerances, uniform
     (growth 0) then loosening over the throw (``study_graded``); fixed steps: tol and growth None."""
-    s = INTEGRATORS[integrator]
+    if integrator not in INTEGRATORS:
+        raise ValueError(unknown_integrator(integrator))
+    s = grid(integrator)
     dts = s.quick_dt_s if quick else s.study_dt_s
-    if not s.adaptive:
+    if not INTEGRATORS[integrator].adaptive:
         return [(dt, None, None) for dt in dts]
     tols = s.quick_tol if quick else s.study_tol
     graded = s.quick_graded if quick else s.study_graded

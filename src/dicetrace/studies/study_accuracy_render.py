@@ -19,6 +19,7 @@ from dicetrace.studies.study_accuracy import (
     T_MAX_S,
     StudyResult,
 )
+from dicetrace.studies.study_accuracy_grids import color
 from dicetrace.studies.study_accuracy_budgets import best_within_budget, budget_table, cheapest_at_target, zero_floor_settings
 from dicetrace.studies.text import fmt, grows, tol_text
 
@@ -230,19 +231,19 @@ def plot_study(res: StudyResult, path) -> None:
             graded = [r for r in mine if grows(r)]
             rr = [r for r in mine if not grows(r)]
             c = [r["cpu_ms_per_ic"] for r in rr]
-            ax.plot(c, [r["outcome_agreement"] for r in rr], "o-", color=INTEGRATORS[integ].color, label=integ)
+            ax.plot(c, [r["outcome_agreement"] for r in rr], "o-", color=color(integ), label=integ)
             if graded:
                 ax.plot([r["cpu_ms_per_ic"] for r in graded], [r["outcome_agreement"] for r in graded], "*",
-                        ms=9, color=INTEGRATORS[integ].color, label=f"{integ}, tol growing over the throw")
+                        ms=9, color=color(integ), label=f"{integ}, tol growing over the throw")
             for r in mine:
                 lab = f"{r['tol']:.0e}" if np.isfinite(r.get("tol", float("nan"))) else f"{r['dt_s']:g}"
                 if grows(r):
                     lab += f"↑{r['tol_growth']:g}/s"
                 ax.annotate(lab, (r["cpu_ms_per_ic"], r["outcome_agreement"]), fontsize=6,
-                            xytext=(2, 2), textcoords="offset points", color=INTEGRATORS[integ].color)
+                            xytext=(2, 2), textcoords="offset points", color=color(integ))
             e = np.array([r["first_impact_error_cm"] for r in rr], float)
             e = np.where(np.isfinite(e), e, np.nan)
-            bx.plot(c, e, "o-", color=INTEGRATORS[integ].color, label=integ)
+            bx.plot(c, e, "o-", color=color(integ), label=integ)
         for rel, ls in zip(PERTURBATIONS, (":", "--", "-.")):
             ax.axhline(ref[f"chaos_floor_{rel:.0e}"], color="k", ls=ls, lw=1, label=f"chaos floor δ={rel:g}")
         ax.axhline(1 / 6, color="grey", lw=0.8, ls="-", alpha=0.5, label="chance (1/6)")

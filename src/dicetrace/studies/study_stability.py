@@ -20,6 +20,7 @@ from dicetrace.params import INTEGRATORS, Config, Numerics, convert_l, get_prese
 from dicetrace.stepsize import auto_dt, impact_speed_cm_s
 from dicetrace.status import Status
 from dicetrace.studies.study_accuracy import PRESETS, check_integrators
+from dicetrace.studies.study_accuracy_grids import color
 from dicetrace.studies.text import fmt
 
 K_VALUES = (5e5, 5e5 * 10**0.5, 5e6, 5e6 * 10**0.5, 5e7)
@@ -230,10 +231,10 @@ def plot_stability(rows: list[dict], path) -> None:
             if not rr:
                 continue
             k = [r["k"] for r in rr]
-            ax.plot(k, [max(r["dt_stable_s"], 1e-7) for r in rr], "o-", color=INTEGRATORS[integ].color, label=f"{integ}: largest stable dt")
+            ax.plot(k, [max(r["dt_stable_s"], 1e-7) for r in rr], "o-", color=color(integ), label=f"{integ}: largest stable dt")
             if rr[0]["linear_bound_dt_s"] > 0:
-                ax.plot(k, [r["linear_bound_dt_s"] for r in rr], ":", color=INTEGRATORS[integ].color, label=f"{integ}: linear bound")
-            ax.plot(k, [r["auto_dt_s"] for r in rr], "x", color=INTEGRATORS[integ].color, ms=7)
+                ax.plot(k, [r["linear_bound_dt_s"] for r in rr], ":", color=color(integ), label=f"{integ}: linear bound")
+            ax.plot(k, [r["auto_dt_s"] for r in rr], "x", color=color(integ), ms=7)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel("ground stiffness k (1/s², per unit mass)")
