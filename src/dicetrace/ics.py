@@ -43,8 +43,9 @@ import numpy as np
 
 # IC_FIELDS, validate_ic(s) and WINDOWS are re-exported: users and the README import them from here.
 from dicetrace.ic_arrays import IC_FIELDS, SliceICs, as_real, validate_ic, validate_ics  # noqa: F401
-from dicetrace.params import L_CONVENTIONS
-from dicetrace.windows import WINDOWS, get_window, grid_axis  # noqa: F401
+from dicetrace.params import L_CONVENTIONS, ConfigError
+from dicetrace.params import _show
+from dicetrace.windows import WINDOWS, _is_count, get_res, get_window, grid_axis  # noqa: F401
 
 # Seed slice (writeup section 6.2): L = x·A + y·B (+ z·C) + L0, U = x·UA + y·UB (+ z·UC).
 SEED_L_DIRS = np.array([[3.2612, 3.1314, 0.0606], [2.1595, 4.5284, 3.9535], [4.5669, 3.1618, 0.4877]])
@@ -254,24 +255,6 @@ MAX_AXIS_POINTS = 2**31 - 1
 MAX_SOBOL_POINTS = 2**30
 
 
-def _is_count(v) -> bool:
-    """A whole number (an int, a numpy integer or an integral float), not a bool."""
-    if isinstance(v, (bool, np.bool_)):
-        return False
-    if isinstance(v, (int, np.integer)):
-        return True
-    return isinstance(v, (float, np.floating)) and math.isfinite(v) and float(v).is_integer()
-
-
-def _show(v) -> str:
-    """A value for a message: numpy scalars as Python numbers (100, not np.int64(100))."""
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, tuple):
-        return "(" + ", ".join(_show(x) for x in v) + ("," if len(v) == 1 else "") + ")"
-    return repr(v)
-
-
 def _slice_of(s) -> "Slice":
     if isinstance(s, str):
         return get_slice(s)
@@ -298,7 +281,8 @@ class Grid:
     window
         ((x0, x1), (y0, y1)[, (z0, z1)]), slice coordinates, or a name.
     res
-        Points per axis (nx, ny[, nz]); one int means the same on every axis.
+        Points per axis (nx, ny[, nz]); one int means the same on every axis;
+        or their text, ``"N"`` or ``"NX,NY[,NZ]"`` (:func:`dicetrace.windows.get_res`).
 
     ``ic_id = (i·ny + j)·nz + k`` (row-major, x slowest); the point is
     ``(xs[i], ys[j], zs[k])`` with the axes of :meth:`axes`.
@@ -312,22 +296,7 @@ class Grid:
     def __post_init__(self) -> None:
         sl = _slice_of(self.slice)
         object.__setattr__(self, "slice", sl)
-        res = self.res
-        if isinstance(res, (int, np.integer)) and not isinstance(res, (bool, np.bool_)):
-            res = (res,) * sl.ndim
-        try:
-            res = tuple(res)
-        except TypeError:
-            raise ValueError(f"resolution must be an integer or one integer per axis, got {_show(res)}") from None
-        if any(not _is_count(r) for r in res):
-            raise ValueError(f"resolution must be whole numbers >= 1 on every axis, got {_show(res)}")
-        res = tuple(int(r) for r in res)
-        if len(res) == 1 and sl.ndim > 1:
-            res = res * sl.ndim
-        if len(res) != sl.ndim:
-            raise ValueError(f"resolution {res} does not match the {sl.ndim}-D slice {sl.name!r}")
-        if any(r < 1 for r in res):
-            raise ValueError(f"resolution must be >= 1 on every axis, got {res}")
+        res = get_res(self.res, sl.ndim)
         object.__setattr__(self, "res", res)
         object.__setattr__(self, "window", get_window(self.window, sl.ndim, points=res))
 
@@ -388,14 +357,14 @@ class Sample:
         object.__setattr__(self, "slice", sl)
         object.__setattr__(self, "box", get_window(self.box, sl.ndim))
         if not _is_count(self.n) or self.n < 1:
-            raise ValueError(f"sample size n must be an integer >= 1, got {_show(self.n)}")
+            raise ConfigError("n", f"sample size n must be an integer >= 1, got {_show(self.n)}")
         object.__setattr__(self, "n", int(self.n))
         if not isinstance(self.method, str) or self.method not in SAMPLE_METHODS:
-            raise ValueError(f"unknown sample method {_show(self.method)} (choose from {', '.join(SAMPLE_METHODS)})")
+            raise ConfigError("method", f"unknown sample method {_show(self.method)} (choose from {', '.join(SAMPLE_METHODS)})")
         if self.method == "sobol" and self.n > MAX_SOBOL_POINTS:
-            raise ValueError(f"a sobol sample has at most 2**30 = {MAX_SOBOL_POINTS:,} points, got n = {self.n:,}")
+            raise ConfigError("n", f"a sobol sample has at most 2**30 = {MAX_SOBOL_POINTS:,} points, got n = {self.n:,}")
         if not _is_count(self.seed) or self.seed < 0 or self.seed >= 2**64:
-            raise ValueError(f"sample seed must be an integer in [0, 2**64), got {_show(self.seed)}")
+            raise ConfigError("seed", f"sample seed must be an integer in [0, 2**64), got {_show(self.seed)}")
         object.__setattr__(self, "seed", int(self.seed))
 
     @property

@@ -35,9 +35,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dicetrace.params import Config, make_config
+from dicetrace.params import Config, resolve_config
 from dicetrace.simulate import simulate_batch
 from dicetrace.status import Status
+from dicetrace.windows import get_res, get_window, grid_axis
 
 from .grouping import UNSETTLED_LABEL, canonical_contact_sequence
 
@@ -125,30 +126,14 @@ def resolve_slice(slice_spec) -> _ResolvedSlice:
 
 
 def resolve_window(window, ndim: int = 2) -> tuple[tuple[float, float], ...]:
-    """Window ranges ``((x0, x1), (y0, y1)[, (z0, z1)])`` from a name or pairs.
+    """Window ranges ``((x0, x1), (y0, y1)[, (z0, z1)])`` from a name, ``"x0,x1,y0,y1"`` or pairs.
 
     Names are the writeup's (``home``, ``zoom-out``, ``more-out``,
-    ``most-out``, ``red-sea``, ``red-sea-2``, ``party``, ``green-island``).
+    ``most-out``, ``red-sea``, ``red-sea-2``, ``party``, ``green-island``)
+    and the program's zooms; read and checked by the one window parser,
+    :func:`dicetrace.windows.get_window`.
     """
-    from dicetrace.windows import get_window
-
-    if isinstance(window, str) or len(window) == ndim:
-        return get_window(window, ndim)
-    pairs = tuple((float(a), float(b)) for a, b in window)
-    if len(pairs) != ndim:
-        raise ValueError(f"window needs {ndim} (lo, hi) ranges, got {len(pairs)}")
-    return pairs
-
-
-def _grid_axis(lo: float, hi: float, n: int) -> np.ndarray:
-    try:
-        from dicetrace.windows import grid_axis
-    except ImportError:
-        n = int(n)
-        if n == 1:
-            return np.array([float(lo)])
-        return float(lo) + np.arange(n, dtype=np.float64) / float(n - 1) * (float(hi) - float(lo))
-    return grid_axis(lo, hi, n)
+    return get_window(window, ndim)
 
 
 def window_axes(window, res) -> list[np.ndarray]:
@@ -158,17 +143,12 @@ def window_axes(window, res) -> list[np.ndarray]:
     ----------
     window : str or sequence of (lo, hi)
         See :func:`resolve_window`; its length fixes the dimension.
-    res : int or sequence of int
-        Points per axis.
+    res : int, sequence of int, or their text
+        Points per axis (read by the one resolution parser, :func:`dicetrace.windows.get_res`).
     """
     ndim = len(window) if not isinstance(window, str) else 2
     win = resolve_window(window, ndim)
-    res = (int(res),) * len(win) if np.isscalar(res) else tuple(int(r) for r in res)
-    if len(res) != len(win):
-        raise ValueError(f"res {res} does not match the {len(win)}-D window")
-    if any(r < 1 for r in res):
-        raise ValueError("res must be >= 1 on every axis")
-    return [_grid_axis(lo, hi, n) for (lo, hi), n in zip(win, res)]
+    return [grid_axis(lo, hi, n) for (lo, hi), n in zip(win, get_res(res, len(win)))]
 
 
 def window_points(window, res) -> tuple[np.ndarray, tuple[int, ...], list[np.ndarray]]:
@@ -229,13 +209,9 @@ def _as_points(points, ndim: int | None) -> np.ndarray:
 
 
 def _resolve_config(config: Config | None, preset: str, overrides: dict) -> Config:
-    if config is None:
-        return make_config(preset, **overrides)
-    if overrides:
-        from dataclasses import replace
-
-        return replace(config, preset=config.preset.with_(**overrides))
-    return config
+    """The configuration of an analysis call by the rule of every entry point (:func:`dicetrace.params.resolve_config`):
+    ``config``, or ``preset`` with the options (:func:`~dicetrace.params.make_config`'s); never both."""
+    return resolve_config(config, **overrides) if config is not None else resolve_config(preset=preset, **overrides)
 
 
 def run_on_slice(
@@ -266,7 +242,9 @@ def run_on_slice(
         Points per :func:`~dicetrace.simulate.simulate_batch` call.
     **overrides
         :class:`~dicetrace.params.Preset` fields (``gamma`` in s/cm, ``k``,
-        ``mu``, ...) applied on top of ``config`` or ``preset``.
+        ``mu``, ...) and the other options of :func:`~dicetrace.params.make_config`
+        applied to ``preset``; with a ``config`` they are refused (it already
+        fixes them: :func:`~dicetrace.params.resolve_config`).
 
     Returns
     -------

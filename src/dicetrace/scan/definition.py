@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from dicetrace.ics import MAX_AXIS_POINTS, MAX_ICS, IcSpace, space_from_dict
-from dicetrace.params import Config, Numerics, Preset
+from dicetrace.params import Config, ConfigError, Numerics, Preset, _show
 
 FORMAT = "dicetrace-scan/1"
 #: ICs per chunk (one Parquet file, one Dask task): ~0.3 s of work on one core.
@@ -23,15 +23,9 @@ DEFAULT_CHUNK = 8192
 MAX_CHUNK = 1 << 24
 
 
-def _show(v) -> str:
-    """A value for a message: numpy scalars as plain Python numbers (100, not np.float64(100.0))."""
-    if isinstance(v, np.generic):
-        v = v.item()
-    return repr(v)
-
-
 def config_from_dict(d: dict) -> Config:
-    """Inverse of ``Config.as_dict()``."""
+    """Inverse of ``Config.as_dict()``: a configuration read back (a manifest, a Dask task) passes the same
+    checks, :class:`~dicetrace.params.Preset`'s and :class:`~dicetrace.params.Numerics`', as one built anew."""
     return Config(preset=Preset(**d["preset"]), numerics=Numerics(**d["numerics"]))
 
 
@@ -56,18 +50,19 @@ class ScanDefinition:
         c = self.chunk
         if (isinstance(c, bool) or not isinstance(c, (int, float, np.integer, np.floating))
                 or not math.isfinite(c) or int(c) != c or c < 1):
-            raise ValueError(f"chunk must be an integer >= 1, got {_show(c)}")
+            raise ConfigError("chunk", f"chunk must be an integer >= 1, got {_show(c)}")
         if int(c) > MAX_CHUNK:
-            raise ValueError(f"chunk must be at most {MAX_CHUNK:,} ICs (one chunk is held in memory), got {int(c):,}")
+            raise ConfigError("chunk", f"chunk must be at most {MAX_CHUNK:,} ICs (one chunk is held in memory), got {int(c):,}")
         object.__setattr__(self, "chunk", int(c))
         size = self.space.size
+        what = {"grid": "res", "sample": "n"}.get(self.space.kind, "points")  # what sets the size
         if size > MAX_ICS:
-            raise ValueError(
-                f"the space has {size:,} ICs ({size:.3g}): more than a scan can number (ic_id is int64, at most {MAX_ICS:.3g})"
+            raise ConfigError(
+                what, f"the space has {size:,} ICs ({size:.3g}): more than a scan can number (ic_id is int64, at most {MAX_ICS:.3g})"
             )
         if isinstance(self.space, Grid) and max(self.space.res) > MAX_AXIS_POINTS:
-            raise ValueError(
-                f"the grid has {max(self.space.res):,} points on an axis: a scan takes at most {MAX_AXIS_POINTS:,} "
+            raise ConfigError(
+                "res", f"the grid has {max(self.space.res):,} points on an axis: a scan takes at most {MAX_AXIS_POINTS:,} "
                 "(grid indices are int32)"
             )
 
