@@ -56,6 +56,16 @@ def test_analyze_help_explains_the_study_letters(dicetrace_cli, tmp_path, monkey
     assert res.returncode == 0
     for letter, name in LETTERS.items():
         assert re.search(rf"^ +{letter} +{name} +{re.escape(TITLES[name])} *$", res.stdout, re.M), (letter, res.stdout)
+    for name, title in INTEGRATOR_TITLES.items():  # every study has this one door, the friction study included
+        assert re.search(rf"^ +{name} +{re.escape(title)} *$", res.stdout, re.M), (name, res.stdout)
+
+
+@pytest.mark.parametrize("alias", ["accuracy", "stability"])
+def test_the_old_study_commands_say_they_are_aliases(dicetrace_cli, tmp_path, monkeypatch, alias):
+    monkeypatch.setenv("COLUMNS", "200")
+    res = dicetrace_cli(alias, "--help", cwd=tmp_path)
+    assert res.returncode == 0
+    assert f"Alias of `dicetrace analyze {alias}` (the same options)" in res.stdout
 
 
 @pytest.mark.parametrize("name", sorted(TITLES) + sorted(INTEGRATOR_TITLES))

@@ -6,7 +6,8 @@ nothing else of the repository is at hand) into a fresh virtual environment;
 then,
 through the installed entry point and with a temporary folder as the current
 directory, ``dicetrace analyze all --quick --out DIR``, ``dicetrace accuracy
---quick --out DIR``, a small ``dicetrace stability --quick`` and a study
+--quick --out DIR`` (the alias), a small ``dicetrace analyze stability --quick``,
+``dicetrace analyze friction --quick`` and a study
 without ``--out`` (default ``./dicetrace-results/<study>``): nothing may come
 from the source tree.  One test, so that parallel workers do not install
 twice.  It takes 5–15 minutes on 2 cores (the install, and numba compiling
@@ -87,10 +88,12 @@ def test_installed_package_runs_the_studies_from_any_folder(tmp_path):
     _check_analyze(work / "analysis-out")
     _run([exe, "accuracy", "--quick", "--quiet", "--out", work / "accuracy-out"], work, env)
     _check_accuracy(work / "accuracy-out")
-    _run([exe, "stability", "--quick", "--quiet", "--integrator", "semi-implicit-euler", "--presets", "seed",
+    _run([exe, "analyze", "stability", "--quick", "--quiet", "--integrator", "semi-implicit-euler", "--presets", "seed",
           "--out", work / "stability-out"], work, env)
     assert "semi-implicit-euler" in (work / "stability-out" / "stability.md").read_text()
-    assert sorted(p.name for p in work.iterdir()) == ["accuracy-out", "analysis-out", "stability-out"]
+    _run([exe, "analyze", "friction", "--quick", "--quiet", "--out", work / "friction-out"], work, env)
+    assert "Command: `dicetrace analyze friction --quick --quiet --out " in (work / "friction-out" / "v_reg.md").read_text()
+    assert sorted(p.name for p in work.iterdir()) == ["accuracy-out", "analysis-out", "friction-out", "stability-out"]
     # without --out: the working folder ./dicetrace-results/<study>
     _run([exe, "analyze", "wedge", "--quick"], work, env)
     assert (work / "dicetrace-results" / "analysis" / "results" / "wedge.json").exists()

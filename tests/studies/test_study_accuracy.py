@@ -1,4 +1,4 @@
-"""``dicetrace accuracy``: the work-precision study (quick size, default output folder) and its pieces."""
+"""``dicetrace analyze accuracy``: the work-precision study (quick size, default output folder) and its pieces."""
 
 from __future__ import annotations
 
@@ -18,15 +18,16 @@ from dicetrace.studies.study_accuracy_grids import GRIDS, color, grid
 @pytest.mark.slow
 def test_quick_study_cli_runs(tmp_path):
     """No --out: the results go to ./dicetrace-results/accuracy of the current folder (a bounded wait, no time
-    assert: speed belongs in benchmarks/)."""
+    assert: speed belongs in benchmarks/); the summary names the command as typed."""
     res = subprocess.run(
-        [sys.executable, "-m", "dicetrace.cli", "accuracy", "--quick", "--quiet"],
+        [sys.executable, "-m", "dicetrace.cli", "analyze", "accuracy", "--quick", "--quiet"],
         capture_output=True, text=True, timeout=600, cwd=tmp_path,
     )
     assert res.returncode == 0, res.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dicetrace-results"]
     assert "wrote dicetrace-results/accuracy/summary.md" in res.stdout
     tmp_path = tmp_path / "dicetrace-results" / "accuracy"
+    assert "Command: `dicetrace analyze accuracy --quick --quiet`" in (tmp_path / "summary.md").read_text()
     for name in ("study.csv", "orders.csv", "reference.csv", "work_precision.png", "summary.md"):
         assert (tmp_path / name).stat().st_size > 0
     with open(tmp_path / "study.csv") as f:
