@@ -188,6 +188,7 @@ def test_bad_input_through_the_console_script(tmp_path):
     """The real process: exit code 2, one line naming the option, no traceback."""
     res = run_cli("--ic", "1,2,3,4,5,6", "--t-max", "soon", cwd=tmp_path)
     assert res.returncode == 2 and res.stdout == ""
-    assert res.stderr.startswith("dicetrace: error: --t-max ") and res.stderr.count("\n") == 1
+    assert res.stderr.startswith("dicetrace: error: --t-max: ") and res.stderr.count("\n") == 1
+    assert "'soon'" in res.stderr
     assert "Traceback" not in res.stderr
     assert list(tmp_path.iterdir()) == []

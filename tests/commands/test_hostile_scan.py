@@ -94,7 +94,7 @@ BAD = [
     case(["--window", "home", "--res", "-3"], "--res", ">= 1"),
     case([*HOME3, "--chunk", "100000000"], "--chunk", "at most"),
     case(["--sample", "sobol", "--n", "2000000000", "--box", "home"], "--n", "2**30"),
-    case(["--sample", "random", "--n", "5", "--box", "home", "--seed", "-1"], "--seed", ">= 0"),
+    case(["--sample", "random", "--n", "5", "--box", "home", "--seed", "-1"], "--seed", "[0, 2**64)", "-1"),
     case(["--sample", "random", "--n", "0", "--box", "home"], "--n", ">= 1"),
     case(["--sample", "random", "--n", "5", "--box", "1,0"], "--box"),
     case(["--window", "1e308,1.5e308,0,1", "--res", "3"], "--window", "non-finite"),

@@ -22,6 +22,7 @@ import typer
 from dicetrace.commands._compiling import compile_notice
 
 EXIT_BAD_INPUT = 2
+EXIT_NUMERICAL_FAILURE = 1  # a throw ended in a numerical failure (non_finite, blow_up): simulate, record, scan --strict
 EXIT_INTERNAL = 70  # EX_SOFTWARE: a defect, not the user's input
 
 #: Set to 1 to let an unexpected exception through with its traceback (for reporting a defect).

@@ -23,7 +23,7 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail, output_dir
-from dicetrace.commands.simulate import INTEGRATOR_HELP, PRESET_HELP
+from dicetrace.commands.options import INTEGRATOR_HELP, PRESET_HELP
 
 WINDOW_HELP = "Start window: a name (red-sea, home, party, green-island, ...) or x0,x1,y0,y1."
 

@@ -37,20 +37,18 @@ import typer
 
 import numpy as np
 
-from dicetrace.commands._common import fail, output_dir, parse_floats
-from dicetrace.commands.simulate import (
+from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
+from dicetrace.commands.options import (
     AT_HELP,
     DT_HELP,
-    EXIT_NUMERICAL_FAILURE,
     IC_HELP,
     INTEGRATOR_HELP,
-    TOL_GROWTH_HELP,
-    TOL_HELP,
     PRESET_HELP,
     SLICE_HELP,
     T_MAX_HELP,
+    TOL_GROWTH_HELP,
+    TOL_HELP,
     build_config,
-    check_output_file,
     fmt_num,
     ic_from_options,
     preset_or_fail,
@@ -125,7 +123,7 @@ def check_output_folder(path: Path) -> Path:
     """
     path = output_dir(path, "--parquet")
     for name in ("rolls", "contacts", "trajectory"):
-        dest = check_output_file(path / f"{name}.parquet", "--parquet")
+        dest = output_file(path / f"{name}.parquet", "--parquet")
         if dest.kind != "file":
             fail(f"--parquet {str(path)!r}: {name}.parquet is not a regular file")
     return path
@@ -347,7 +345,8 @@ def register(app: typer.Typer) -> None:
             all_ics = [the_ic]
             labels = [ic_label(the_ic, coords, desc)]
         else:
-            conv = preset_or_fail(preset or "seed").l_convention
+            model = preset_or_fail(preset or "seed")  # looked up once: its L convention reads the ICs, then the config
+            conv = model.l_convention
             if len(ics) > 1 and (slice_name is not None or at is not None):
                 fail("give either several --ic or --slice/--at, not both")
             the_ic, coords, desc = ic_from_options(ics[0] if ics else None, slice_name, at, conv)
@@ -357,14 +356,14 @@ def register(app: typer.Typer) -> None:
             all_ics.append(all_ics[0] * (1.0 + eps))
             labels.append(f"throw 0's IC × (1 + {eps:g})")
         if scan is None:
-            cfg = build_config(preset or "seed", integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
+            cfg = build_config(model, integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
                                tol_growth=tol_growth)
         name = default_name(the_ic, coords, desc, cfg, chans)
         if comparing:
             name = compare_name(name, all_ics, eps, layout or "overlay")
         if out is None and mode is None:
             out = DEFAULT_FOLDER / f"{name}.rrd"
-        dest = None if out is None else check_output_file(out, "--out", suffix=".rrd")
+        dest = None if out is None else output_file(out, "--out", suffix=".rrd")
         if parquet is not None:
             check_output_folder(parquet)
             if dest is not None and dest.target is not None and os.path.realpath(parquet) == os.path.realpath(dest.target):

@@ -40,8 +40,17 @@ from typing import List, Optional
 import numpy as np
 import typer
 
-from dicetrace.commands._common import fail, output_dir, output_file, parse_floats
-from dicetrace.commands.simulate import EXIT_NUMERICAL_FAILURE, INTEGRATOR_HELP, TOL_GROWTH_HELP, TOL_HELP, fmt_num
+from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
+from dicetrace.commands.options import (
+    INTEGRATOR_HELP,
+    PRESET_HELP,
+    TOL_GROWTH_HELP,
+    TOL_HELP,
+    build_config,
+    config_errors,
+    fmt_num,
+    preset_or_fail,
+)
 
 SLICE_HELP = "Slice of IC space: seed (the writeup's 2-D), seed3 (3-D), seed-ortho, seed3-ortho (Gram–Schmidt)."
 WINDOW_HELP = (
@@ -54,23 +63,6 @@ MAX_UNCONFIRMED_S = 3600.0
 #: A run estimated to take longer than this (s), or to write more than LARGE_SCAN_BYTES, says so first.
 LARGE_SCAN_S = 60.0
 LARGE_SCAN_BYTES = 1 << 30
-
-
-def _parse_res(text: str, ndim: int) -> tuple[int, ...]:
-    parts = [p.strip() for p in text.split(",")]
-    try:
-        vals = [int(p) for p in parts]
-    except ValueError:
-        fail(f"--res must be integers N or NX,NY[,NZ], got {text!r}")
-    if any(v > 10**30 for v in vals):
-        fail(f"--res {text!r}: far too many points")
-    if len(vals) == 1:
-        vals = vals * ndim
-    if len(vals) != ndim:
-        fail(f"--res needs {ndim} numbers for a {ndim}-D slice, got {len(vals)} in {text!r}")
-    if any(v < 1 for v in vals):
-        fail(f"--res must be >= 1 on every axis, got {text!r}")
-    return tuple(vals)
 
 
 def _read_points(path: Path, ndim: int) -> np.ndarray:
@@ -111,28 +103,15 @@ def build_slice(slice_name: str, origin: Optional[str], dirs: Optional[List[str]
     return SLICES[slice_name]
 
 
-def _window(text: str, option: str, ndim: int, z: Optional[str], points=None):
-    """Window ranges of ``--window``/``--box`` (with ``--z``), or a one-line failure naming the option.
-
-    The rule is :func:`dicetrace.ics.get_window`'s, every command's: finite
-    ranges of x1 > x0 (only a grid axis of one point, ``points``, may have x1 == x0).
-    """
-    from dicetrace.windows import get_window
-
-    if z is not None and ndim != 3:
-        fail(f"--z: the slice is {ndim}-D: a z range applies only to a 3-D slice (seed3, seed3-ortho)")
-    zr = parse_floats(z, 2, "--z") if z is not None else None
-    try:
-        return get_window(text, ndim, zr, points=points)
-    except ValueError as e:
-        msg = str(e)
-        opt = "--z" if "z range" in msg and (z is not None or "needs a z range" in msg) else option
-        fail(f"{opt}: {msg}" + ("" if repr(text) in msg or opt == "--z" else f" (got {text!r})"))
-
-
 def build_space(sl, window, z, res, sample, n, box, seed, points):
-    """The IC space from the options (grid, sample or points), or a one-line failure naming the option."""
-    from dicetrace.ics import SAMPLE_METHODS, Grid, Points, Sample
+    """The IC space from the options (grid, sample or points), or a one-line failure naming the option.
+
+    Windows, boxes, z ranges and resolutions are read and checked by the one
+    parser of each (:func:`dicetrace.windows.get_window`, ``get_res``); the
+    spaces check the rest; what they refuse names its option (``config_errors``).
+    """
+    from dicetrace.ics import Grid, Points, Sample
+    from dicetrace.windows import get_res, get_window
 
     given = [name for name, v in (("--window/--res", window or res), ("--sample", sample), ("--points", points)) if v]
     if len(given) > 1:
@@ -143,51 +122,35 @@ def build_space(sl, window, z, res, sample, n, box, seed, points):
                 fail(f"{name} goes with --sample (random or sobol), which is not given")
     if points is not None and z is not None:
         fail("--z goes with a named --window or --box on a 3-D slice, not with --points")
-    if seed is None:
-        seed = 0
+    if z is not None and sl.ndim != 3:
+        fail(f"--z: the slice is {sl.ndim}-D: a z range applies only to a 3-D slice (seed3, seed3-ortho)")
     if points is not None:
         try:
             return Points(sl, _read_points(points, sl.ndim))
         except ValueError as e:
             fail(f"--points {str(points)!r}: {e}")
     if sample is not None:
-        if sample not in SAMPLE_METHODS:
-            fail(f"--sample: unknown sample method {sample!r} (choose from {', '.join(SAMPLE_METHODS)})")
         if n is None:
             fail("--sample needs --n N (how many ICs)")
         if box is None:
             fail("--sample needs --box x0,x1,y0,y1[,z0,z1] (or a window name)")
-        if n < 1:
-            fail(f"--n: the sample size must be >= 1, got {n}")
-        if seed < 0:
-            fail(f"--seed must be an integer >= 0, got {seed}")
-        rng = _window(box, "--box", sl.ndim, z)
-        try:
-            return Sample(sl, rng, n, sample, seed)
-        except ValueError as e:
-            msg = str(e)
-            fail(f"{'--seed' if 'seed' in msg else '--n'}: {msg}")
+        with config_errors(window="--box"):
+            return Sample(sl, get_window(box, sl.ndim, z), n, sample, 0 if seed is None else seed)
     if window is None:
         fail("give --window NAME or x0,x1,y0,y1[,z0,z1] (with --res), or --sample, or --points")
     if res is None:
         fail("--window needs --res N (points per axis), e.g. --res 400 or --res 200,200,50")
-    shape = _parse_res(res, sl.ndim)
-    rng = _window(window, "--window", sl.ndim, z, points=shape)
-    try:
-        return Grid(sl, rng, shape)
-    except ValueError as e:
-        fail(f"--res {res}: {e}")
+    with config_errors():
+        shape = get_res(res, sl.ndim)
+        return Grid(sl, get_window(window, sl.ndim, z, points=shape), shape)
 
 
-def parse_overrides(preset_name: str, items: List[str]) -> dict:
-    """``--set NAME=VALUE`` items as Preset field overrides (numbers, booleans or words)."""
+def parse_overrides(preset, items: List[str]) -> dict:
+    """``--set NAME=VALUE`` items as overrides of the Preset ``preset``'s fields (numbers, booleans or words)."""
     from dataclasses import fields
-
-    from dicetrace.commands.simulate import preset_or_fail
 
     if not items:
         return {}
-    preset = preset_or_fail(preset_name)
     names = {f.name: f for f in fields(preset) if f.name != "name"}
     changes = {}
     for item in items:
@@ -309,7 +272,7 @@ def register(app: typer.Typer) -> None:
         points: Optional[Path] = typer.Option(None, "--points", help="CSV of slice coordinates (columns x,y[,z])."),
         origin: Optional[str] = typer.Option(None, "--origin", help="Custom slice origin VX,VY,VZ,LX,LY,LZ."),
         dirs: Optional[List[str]] = typer.Option(None, "--dir", help="Custom slice direction (6 numbers; 1 to 3 times)."),
-        preset: str = typer.Option("seed", "--preset", help="Model preset: seed (the 2019 program, bit for bit) or physical."),
+        preset: str = typer.Option("seed", "--preset", help=PRESET_HELP),
         integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
         dt: Optional[str] = typer.Option(None, "--dt", help="Time step, s (default 0.001), or 'auto' (chosen from the stiffness k for a 300 cm/s impact; 0.001 for the error-controlled schemes; refused when no step fits)."),
         t_max: Optional[str] = typer.Option(None, "--t-max", help="Time cap, s (default 60)."),
@@ -337,7 +300,6 @@ def register(app: typer.Typer) -> None:
         import math
         import os
 
-        from dicetrace.commands.simulate import build_config
         from dicetrace.scan import DEFAULT_CHUNK, ScanDefinition, ScanMismatchError, scan
         from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address
         from dicetrace.scan.folder import ScanBusyError
@@ -345,8 +307,9 @@ def register(app: typer.Typer) -> None:
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
-        cfg = build_config(preset, integrator, dt, t_max, tol=tol, tol_growth=tol_growth,
-                           overrides=parse_overrides(preset, sets or []))
+        model = preset_or_fail(preset)  # looked up once: the --set fields, then the config
+        cfg = build_config(model, integrator, dt, t_max, tol=tol, tol_growth=tol_growth,
+                           overrides=parse_overrides(model, sets or []))
         if chunk is not None and chunk < 1:
             fail(f"--chunk must be >= 1, got {chunk}")
         if threads is not None and threads < 1:
@@ -376,11 +339,8 @@ def register(app: typer.Typer) -> None:
             fail("--png - and --rrd -: only one output can go to standard output")
         if chunk is None:  # resuming: keep the folder's chunk size
             chunk = _existing_chunk(out) or DEFAULT_CHUNK
-        try:
+        with config_errors():
             defn = ScanDefinition(space, cfg, chunk)
-        except ValueError as e:
-            opt = "--chunk" if "chunk" in str(e) else {"grid": f"--res {res}", "sample": "--n"}.get(space.kind, "--points")
-            fail(f"{opt}: {e}")
         try:
             _check_space_finite(defn)
         except ValueError as e:

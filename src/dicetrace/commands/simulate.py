@@ -11,8 +11,9 @@ rows only the first ``TTY_HEAD``, the outcomes of all, and how to get them.
 Exit codes: 0 done; 1 some IC ended in a numerical failure (status
 ``non_finite`` or ``blow_up``: the rows are still printed); 2 bad input.
 
-The helpers here (``build_config``, ``ic_from_options``, ...) are shared with
-``dicetrace record``.
+The options it shares with ``record``, ``scan`` and ``explore`` (their help
+texts, ``build_config``, ``ic_from_options``, ...) are in
+:mod:`dicetrace.commands.options`.
 """
 
 from __future__ import annotations
@@ -28,221 +29,27 @@ from typing import Optional
 import numpy as np
 import typer
 
-from dicetrace.commands._common import fail, output_file, parse_floats
-from dicetrace.params import INTEGRATORS, PRESETS, TOL_LOOSEST, TOL_MIN, Numerics
+from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_file
+from dicetrace.commands.options import (
+    AT_HELP,
+    DT_HELP,
+    IC_HELP,
+    INTEGRATOR_HELP,
+    PRESET_HELP,
+    SLICE_HELP,
+    T_MAX_HELP,
+    TOL_GROWTH_HELP,
+    TOL_HELP,
+    build_config,
+    fmt_num,
+    get_slice,
+    ic_from_options,
+    preset_or_fail,
+    slice_ics,
+)
 from dicetrace.status import Status
 
 FORMATS = ("table", "csv", "json")
-EXIT_NUMERICAL_FAILURE = 1
-
-IC_HELP = (
-    "One IC: VX,VY,VZ,LX,LY,LZ: centre-of-mass velocity (cm/s) and angular momentum "
-    "(node-mass·cm²/s; for the seed preset in the 2019 program's sign convention)."
-)
-SLICE_HELP = (
-    "Slice of IC space that --at (or the x,y[,z] columns of --ics) refers to: seed (the writeup's; "
-    "with 3 coordinates its 3-D slice), seed3, seed-ortho or seed3-ortho."
-)
-AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
-PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
-INTEGRATOR_HELP = (
-    f"Integrator: {', '.join(INTEGRATORS)} (default: the preset's own, "
-    + ", ".join(f"{p.integrator} for {name}" for name, p in PRESETS.items()) + ")."
-)
-#: The integrators with error-controlled sub-steps (those that take --tol).
-ADAPTIVE = ", ".join(name for name, spec in INTEGRATORS.items() if spec.adaptive)
-#: The presets whose error-controlled integrators loosen their tolerance by default, as help text.
-SCHEDULES = "; ".join(f"{name}: {p.default_tol:g} loosening at {p.default_tol_growth:g}/s"
-                      for name, p in PRESETS.items() if p.default_tol is not None)
-TOL_HELP = (
-    f"{ADAPTIVE} only: local error tolerance of their sub-steps, in [{TOL_MIN:g}, 1) "
-    f"(default: the preset's schedule when neither --tol nor --tol-growth is given ({SCHEDULES}), "
-    f"else {Numerics.tol:g}; smaller is more accurate and slower)."
-)
-TOL_GROWTH_HELP = (
-    f"{ADAPTIVE} only: the rate, 1/s, at which their tolerance loosens over a throw: tol·exp(RATE·t) at time t, "
-    f"never looser than {TOL_LOOSEST:g} (default: the preset's schedule when neither --tol nor --tol-growth is "
-    f"given ({SCHEDULES}), else 0: the same tolerance throughout; docs/model.md §9)."
-)
-DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable; 0.001 for the error-controlled schemes, whose error control keeps them stable (refused in one line when no step fits)."
-T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
-
-
-# -- shared with `dicetrace record` ------------------------------------------------------------
-
-
-def parse_positive(text: str | None, option: str, what: str) -> float | None:
-    """A finite number > 0 from an option's text (None stays None)."""
-    if text is None:
-        return None
-    try:
-        v = float(text.strip())
-    except ValueError:
-        fail(f"{option} must be a number ({what}), got {text!r}")
-    if not (math.isfinite(v) and v > 0):
-        fail(f"{option} must be a finite number > 0 ({what}), got {text!r}")
-    return v
-
-
-def preset_or_fail(name: str):
-    """The :class:`~dicetrace.params.Preset` named ``--preset NAME``, or a one-line failure."""
-    from dicetrace.params import get_preset
-
-    try:
-        return get_preset(name)
-    except ValueError as e:
-        fail(f"--preset: {e}")
-
-
-def build_config(
-    preset: str, integrator: str | None, dt: str | None, t_max: str | None, ics=None, tol: str | None = None,
-    overrides: dict | None = None, tol_growth: str | None = None,
-):
-    """The validated Config of a command, built once from the options' text, or a one-line failure.
-
-    ``--dt auto`` picks the step from the final model (the preset with
-    ``overrides`` applied) and the fastest first impact of ``ics`` (see
-    ``dicetrace.params.auto_dt``), or refuses.  Values are validated where
-    they enter: numbers here, everything else by ``make_config``; every
-    message names the option(s) at fault.  ``--tol`` or ``--tol-growth``
-    with a fixed-step integrator is refused (it would have no effect).
-    """
-    from dicetrace.params import INTEGRATORS, TOL_GROWTH_MAX, TOL_MIN, make_config, unknown_integrator
-    from dicetrace.stepsize import impact_speed_cm_s
-
-    base = preset_or_fail(preset)
-    overrides = dict(overrides or {})
-    if integrator is not None and integrator not in INTEGRATORS:
-        fail(f"--integrator: {unknown_integrator(integrator)}")
-    try:
-        model = base.with_(**overrides) if overrides else base
-    except (ValueError, TypeError) as e:
-        fail(f"--set: {e}")
-    v_impact = None
-    dt_text = dt
-    if dt is not None and dt.strip().lower() == "auto":
-        dt = "auto"
-        if ics is not None:
-            with np.errstate(all="ignore"):
-                v_impact = impact_speed_cm_s(ics, model)
-            if not math.isfinite(v_impact):
-                fail("--dt auto: the ICs are too fast to bound their impact speed")
-    else:
-        dt = parse_positive(dt, "--dt", "the time step in s, or 'auto'")
-    t_max = parse_positive(t_max, "--t-max", "the time cap in s")
-    tol = parse_positive(tol, "--tol", f"the local error tolerance of {ADAPTIVE}")
-    integ = integrator or model.integrator
-    if tol is not None and not TOL_MIN <= tol < 1:
-        fail(f"--tol: tolerance tol must be a number in [{TOL_MIN:g}, 1), got {fmt_num(tol)}")
-    growth = None
-    if tol_growth is not None:
-        try:
-            growth = float(tol_growth.strip())
-        except ValueError:
-            fail(f"--tol-growth must be a number (a rate in 1/s), got {tol_growth!r}")
-        if not (math.isfinite(growth) and 0 <= growth <= TOL_GROWTH_MAX):
-            fail(f"--tol-growth must be a number in [0, {TOL_GROWTH_MAX:g}] (a rate in 1/s), got {tol_growth!r}")
-    for option, value in (("--tol", tol), ("--tol-growth", growth)):
-        if value is not None and not INTEGRATORS[integ].adaptive:
-            fail(f"{option} {fmt_num(value)} applies only to the integrators with error-controlled sub-steps "
-                 f"({ADAPTIVE}); {integ} has fixed steps: drop {option}")
-    try:
-        return make_config(base, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol,
-                           tol_growth=growth, **overrides)
-    except (ValueError, TypeError) as e:
-        msg = str(e)
-        if "time cap / dt" in msg or "longer than the time cap" in msg:
-            fail(f"--t-max {t_max_text(t_max)} with --dt {dt_text or '0.001 (the default)'}: {msg}")
-        if msg.startswith("dt auto"):
-            fail(f"--dt auto: {msg[len('dt auto: '):]}" + (f" (--t-max {t_max_text(t_max)})" if t_max else ""))
-        for needle, opt in (("integrator", "--integrator"), ("time step dt", "--dt"), ("time cap t_max", "--t-max"),
-                            ("tol", "--tol")):
-            if needle in msg:
-                fail(f"{opt}: {msg}")
-        fail(f"--set: {msg}" if overrides else f"--preset {preset}: {msg}")
-
-
-def t_max_text(t_max) -> str:
-    return "60 (the default)" if t_max is None else fmt_num(t_max)
-
-
-def check_output_file(path, option: str = "--out", suffix: str | None = None):
-    """The checked output Destination of ``option`` (see ``_common.output_file``), or a one-line failure.
-
-    ``os.access`` says yes to root everywhere, even on read-only file systems;
-    creating a probe file is the real test.  An existing ``path`` is untouched.
-    """
-    return output_file(path, option, suffix=suffix)
-
-
-def get_slice(name: str | None, ndim: int | None = None):
-    """The named slice (``dicetrace.ics.SLICES``) with ``ndim`` coordinates, or a one-line failure.
-
-    ``seed`` given 3 coordinates is the writeup's 3-D seed slice (``seed3``),
-    as :func:`dicetrace.ics.seed_slice` with z.
-    """
-    from dicetrace.ics import SLICES
-
-    if name not in SLICES:
-        fail(f"--slice: unknown slice {name!r} (choose from {', '.join(SLICES)})")
-    sl = SLICES[name]
-    if ndim is not None and sl.ndim != ndim:
-        if name == "seed" and ndim == 3 and "seed3" in SLICES:
-            return SLICES["seed3"]
-        fail(f"--at: slice {name!r} is {sl.ndim}-D: give {sl.ndim} coordinates ({','.join('XYZ'[: sl.ndim])}), got {ndim}")
-    return sl
-
-
-def slice_ics(name: str, coords: np.ndarray, l_convention: str, what: str = "--at") -> np.ndarray:
-    """ICs (m, 6) of slice ``name`` at coordinates (m, ndim), in the preset's L convention.
-
-    The seed slices give the 2019 program's L; a preset that takes the
-    physical L (``physical``) gets it negated, so the throw is the same.
-    """
-    from dicetrace.params import convert_l
-
-    from dicetrace.ic_arrays import IC_FIELDS
-
-    coords = np.asarray(coords, dtype=np.float64)
-    sl = get_slice(name, coords.shape[1])
-    with np.errstate(all="ignore"):  # overflow shows as a non-finite IC, refused below in one line
-        ics = np.asarray(sl.ics(coords), dtype=np.float64).reshape(-1, 6)
-    bad = ~np.isfinite(ics).all(axis=1)
-    if bad.any():
-        i = int(np.argmax(bad))
-        at = ",".join(fmt_num(v) for v in coords[i])
-        comps = ", ".join(f for f, ok in zip(IC_FIELDS, np.isfinite(ics[i])) if not ok)
-        fail(f"{what} {at}: slice {name!r} gives a non-finite IC there ({comps}): the coordinates are too large")
-    return convert_l(ics, sl.l_convention, l_convention)
-
-
-def ic_from_options(ic: str | None, slice_name: str | None, at: str | None, l_convention: str):
-    """One IC from ``--ic`` or ``--slice NAME --at X,Y[,Z]`` (in the preset's ``l_convention``).
-
-    Returns (ic (6,), coords (k,) or None, description dict).
-    """
-    if ic is not None and (at is not None or slice_name is not None):
-        fail("give either --ic or --slice/--at, not both")
-    if ic is not None:
-        vals = parse_floats(ic, 6, "--ic (VX,VY,VZ,LX,LY,LZ)")
-        return np.array(vals, dtype=np.float64), None, {"kind": "ic"}
-    if at is None:
-        if slice_name is not None:
-            fail(f"--slice {slice_name} needs --at X,Y (or X,Y,Z)")
-        fail("no initial condition: give --ic VX,VY,VZ,LX,LY,LZ or --slice seed --at X,Y")
-    if slice_name is None:
-        fail("--at needs --slice (e.g. --slice seed --at 1.65,3.9)")
-    get_slice(slice_name)
-    coords = parse_floats(at, None, "--at")
-    if len(coords) not in (1, 2, 3):
-        fail(f"--at needs 2 (X,Y) or 3 (X,Y,Z) comma-separated numbers, got {len(coords)} in {at!r}")
-    c = np.array(coords, dtype=np.float64)
-    return slice_ics(slice_name, c[None, :], l_convention)[0], c, {"kind": "slice", "slice": slice_name}
-
-
-def fmt_num(v: float) -> str:
-    """Compact number for names and tables (10 significant digits)."""
-    return f"{float(v):.10g}"
 
 
 # -- CSV input -----------------------------------------------------------------------------
@@ -501,19 +308,19 @@ def register(app: typer.Typer) -> None:
 
             if not _stdout_open():
                 fail("standard output is closed: give --out FILE")
-        dest = check_output_file(out if out is not None else STDOUT, "--out")
-        conv = preset_or_fail(preset).l_convention
+        dest = output_file(out if out is not None else STDOUT, "--out")
+        model = preset_or_fail(preset)  # looked up once: its L convention reads the ICs, then the config
         if ics is not None:
             if ic is not None or at is not None:
                 fail("give one source of ICs: --ics FILE, --ic, or --slice/--at")
-            ic_arr, coords = read_ics_csv(ics, slice_name, conv)
+            ic_arr, coords = read_ics_csv(ics, slice_name, model.l_convention)
             source = {"ics_file": str(ics)}
         else:
-            one, c, desc = ic_from_options(ic, slice_name, at, conv)
+            one, c, desc = ic_from_options(ic, slice_name, at, model.l_convention)
             ic_arr = one[None, :]
             coords = None if c is None else c[None, :]
             source = desc
-        cfg = build_config(preset, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth)
+        cfg = build_config(model, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth)
 
         batch = run_ics(ic_arr, cfg)
         names, rows = result_rows(batch, coords)

@@ -1,0 +1,210 @@
+"""The options several commands share: their help texts, and how their values reach the configuration.
+
+``simulate``, ``record``, ``scan`` and ``explore`` take the same model
+options (``--preset``, ``--integrator``, ``--dt``, ``--t-max``, ``--tol``,
+``--tol-growth``) and ``simulate`` and ``record`` the same IC options
+(``--ic``, ``--slice``, ``--at``).  The option text goes as it is to the
+configuration layer (:func:`dicetrace.params.make_config`, the one parser
+and validator of a configuration; :func:`dicetrace.windows.get_window` and
+``get_res`` for windows and resolutions): no command checks a value itself.
+What that layer refuses it raises as a :class:`~dicetrace.params.ConfigError`
+naming the field; :func:`config_errors` turns it into one line naming the
+option (``FIELD_OPTIONS``), exit code 2.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+
+import numpy as np
+
+from dicetrace.commands._common import fail, parse_floats
+from dicetrace.params import INTEGRATORS, PRESETS, TOL_LOOSEST, TOL_MIN, ConfigError, Numerics
+
+IC_HELP = (
+    "One IC: VX,VY,VZ,LX,LY,LZ: centre-of-mass velocity (cm/s) and angular momentum "
+    "(node-mass·cm²/s; for the seed preset in the 2019 program's sign convention)."
+)
+SLICE_HELP = (
+    "Slice of IC space that --at (or the x,y[,z] columns of --ics) refers to: seed (the writeup's; "
+    "with 3 coordinates its 3-D slice), seed3, seed-ortho or seed3-ortho."
+)
+AT_HELP = "X,Y (2-D) or X,Y,Z (3-D seed slice): coordinates on --slice."
+PRESET_HELP = "Model preset: seed (the 2019 program, bit for bit) or physical."
+INTEGRATOR_HELP = (
+    f"Integrator: {', '.join(INTEGRATORS)} (default: the preset's own, "
+    + ", ".join(f"{p.integrator} for {name}" for name, p in PRESETS.items()) + ")."
+)
+#: The integrators with error-controlled sub-steps (those that take --tol).
+ADAPTIVE = ", ".join(name for name, spec in INTEGRATORS.items() if spec.adaptive)
+#: The presets whose error-controlled integrators loosen their tolerance by default, as help text.
+SCHEDULES = "; ".join(f"{name}: {p.default_tol:g} loosening at {p.default_tol_growth:g}/s"
+                      for name, p in PRESETS.items() if p.default_tol is not None)
+TOL_HELP = (
+    f"{ADAPTIVE} only: local error tolerance of their sub-steps, in [{TOL_MIN:g}, 1) "
+    f"(default: the preset's schedule when neither --tol nor --tol-growth is given ({SCHEDULES}), "
+    f"else {Numerics.tol:g}; smaller is more accurate and slower)."
+)
+TOL_GROWTH_HELP = (
+    f"{ADAPTIVE} only: the rate, 1/s, at which their tolerance loosens over a throw: tol·exp(RATE·t) at time t, "
+    f"never looser than {TOL_LOOSEST:g} (default: the preset's schedule when neither --tol nor --tol-growth is "
+    f"given ({SCHEDULES}), else 0: the same tolerance throughout; docs/model.md §9)."
+)
+DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable; 0.001 for the error-controlled schemes, whose error control keeps them stable (refused in one line when no step fits)."
+T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
+
+#: The option that sets each field the configuration layer names in a ConfigError (``dicetrace.params``,
+#: ``dicetrace.windows``, ``dicetrace.ics``, ``dicetrace.scan``).  A Preset field not here comes from the
+#: preset itself, or from ``--set`` where a command has it.
+FIELD_OPTIONS = {
+    "preset": "--preset", "integrator": "--integrator", "dt_s": "--dt", "t_max_s": "--t-max", "tol": "--tol",
+    "tol_growth": "--tol-growth", "window": "--window", "z": "--z", "res": "--res", "chunk": "--chunk",
+    "n": "--n", "seed": "--seed", "method": "--sample", "points": "--points",
+}
+#: How an error naming several options shows one the user did not give.
+DEFAULT_TEXT = {"--dt": f"{Numerics.dt_s:g} (the default)", "--t-max": f"{Numerics.t_max_s:g} (the default)"}
+
+
+def option_line(e: ConfigError, given: dict | None = None, *, fallback: str = "--preset", **renamed) -> str:
+    """The one line of a ConfigError: ``--option: message``, naming the option that sets the field at fault.
+
+    ``renamed``: field → option where a command's option for it differs
+    (``window="--box"``); ``fallback``: the option of any other field (a
+    Preset field: ``--set`` or the preset).  A message that begins with the
+    field's own name reads as the option's (``--dt auto: ...``); an error
+    naming several options says the value of each (from ``given``, option →
+    text, or the default).
+    """
+    table = {**FIELD_OPTIONS, **renamed}
+    options = list(dict.fromkeys(table.get(f, fallback) for f in e.fields))
+    msg = e.message
+    if len(options) > 1:
+        given = given or {}
+        values = [f"{o} {given[o] if given.get(o) is not None else DEFAULT_TEXT.get(o, '')}".rstrip() for o in options]
+        return f"{' with '.join(values)}: {msg}"
+    word = options[0].lstrip("-").replace("-", "_")
+    if msg.startswith(word + " "):
+        return options[0] + msg[len(word):]
+    return f"{options[0]}: {msg}"
+
+
+@contextlib.contextmanager
+def config_errors(given: dict | None = None, *, fallback: str = "--preset", **renamed):
+    """Run the block; a ConfigError raised in it (however deep) becomes one line naming the option (exit 2)."""
+    try:
+        yield
+    except ConfigError as e:
+        fail(option_line(e, given, fallback=fallback, **renamed))
+
+
+def preset_or_fail(name: str):
+    """The :class:`~dicetrace.params.Preset` named ``--preset NAME`` (looked up once a command), or a one-line failure."""
+    from dicetrace.params import get_preset
+
+    with config_errors():
+        return get_preset(name)
+
+
+def build_config(
+    preset, integrator: str | None, dt: str | None, t_max: str | None, ics=None, tol: str | None = None,
+    overrides: dict | None = None, tol_growth: str | None = None,
+):
+    """The Config of a command, built once from its options' text, or a one-line failure naming the option.
+
+    ``preset``: the :class:`~dicetrace.params.Preset` (see :func:`preset_or_fail`)
+    or its name; ``overrides``: its fields from ``--set``.  Every value is
+    read and checked by :func:`dicetrace.params.make_config`, strictly: ``--tol``
+    or ``--tol-growth`` with a fixed-step integrator is refused (it would
+    have no effect).  ``--dt auto`` picks the step from the final model and
+    the fastest first impact of ``ics`` (see ``dicetrace.stepsize.auto_dt``),
+    or refuses.
+    """
+    from dicetrace.params import make_config
+    from dicetrace.stepsize import impact_speed_cm_s
+
+    given = {"--preset": getattr(preset, "name", preset), "--integrator": integrator, "--dt": dt, "--t-max": t_max,
+             "--tol": tol, "--tol-growth": tol_growth}
+    model = preset_or_fail(preset) if isinstance(preset, str) else preset
+    with config_errors(given, fallback="--set" if overrides else "--preset"):
+        model = model.with_(**overrides) if overrides else model
+        v_impact = None
+        if dt is not None and dt.strip().lower() == "auto" and ics is not None:
+            with np.errstate(all="ignore"):
+                v_impact = impact_speed_cm_s(ics, model)
+            if not math.isfinite(v_impact):
+                fail("--dt auto: the ICs are too fast to bound their impact speed")
+        return make_config(model, integrator=integrator, dt_s=dt, t_max_s=t_max, v_impact_cm_s=v_impact, tol=tol,
+                           tol_growth=tol_growth, strict=True)
+
+
+def fmt_num(v: float) -> str:
+    """Compact number for names and tables (10 significant digits)."""
+    return f"{float(v):.10g}"
+
+
+# -- the IC options ----------------------------------------------------------------------------
+
+
+def get_slice(name: str | None, ndim: int | None = None):
+    """The named slice (``dicetrace.ics.SLICES``) with ``ndim`` coordinates, or a one-line failure.
+
+    ``seed`` given 3 coordinates is the writeup's 3-D seed slice (``seed3``),
+    as :func:`dicetrace.ics.seed_slice` with z.
+    """
+    from dicetrace.ics import SLICES
+
+    if name not in SLICES:
+        fail(f"--slice: unknown slice {name!r} (choose from {', '.join(SLICES)})")
+    sl = SLICES[name]
+    if ndim is not None and sl.ndim != ndim:
+        if name == "seed" and ndim == 3 and "seed3" in SLICES:
+            return SLICES["seed3"]
+        fail(f"--at: slice {name!r} is {sl.ndim}-D: give {sl.ndim} coordinates ({','.join('XYZ'[: sl.ndim])}), got {ndim}")
+    return sl
+
+
+def slice_ics(name: str, coords: np.ndarray, l_convention: str, what: str = "--at") -> np.ndarray:
+    """ICs (m, 6) of slice ``name`` at coordinates (m, ndim), in the preset's L convention.
+
+    The seed slices give the 2019 program's L; a preset that takes the
+    physical L (``physical``) gets it negated, so the throw is the same.
+    """
+    from dicetrace.ic_arrays import IC_FIELDS
+    from dicetrace.params import convert_l
+
+    coords = np.asarray(coords, dtype=np.float64)
+    sl = get_slice(name, coords.shape[1])
+    with np.errstate(all="ignore"):  # overflow shows as a non-finite IC, refused below in one line
+        ics = np.asarray(sl.ics(coords), dtype=np.float64).reshape(-1, 6)
+    bad = ~np.isfinite(ics).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        at = ",".join(fmt_num(v) for v in coords[i])
+        comps = ", ".join(f for f, ok in zip(IC_FIELDS, np.isfinite(ics[i])) if not ok)
+        fail(f"{what} {at}: slice {name!r} gives a non-finite IC there ({comps}): the coordinates are too large")
+    return convert_l(ics, sl.l_convention, l_convention)
+
+
+def ic_from_options(ic: str | None, slice_name: str | None, at: str | None, l_convention: str):
+    """One IC from ``--ic`` or ``--slice NAME --at X,Y[,Z]`` (in the preset's ``l_convention``).
+
+    Returns (ic (6,), coords (k,) or None, description dict).
+    """
+    if ic is not None and (at is not None or slice_name is not None):
+        fail("give either --ic or --slice/--at, not both")
+    if ic is not None:
+        vals = parse_floats(ic, 6, "--ic (VX,VY,VZ,LX,LY,LZ)")
+        return np.array(vals, dtype=np.float64), None, {"kind": "ic"}
+    if at is None:
+        if slice_name is not None:
+            fail(f"--slice {slice_name} needs --at X,Y (or X,Y,Z)")
+        fail("no initial condition: give --ic VX,VY,VZ,LX,LY,LZ or --slice seed --at X,Y")
+    if slice_name is None:
+        fail("--at needs --slice (e.g. --slice seed --at 1.65,3.9)")
+    get_slice(slice_name)
+    coords = parse_floats(at, None, "--at")
+    if len(coords) not in (1, 2, 3):
+        fail(f"--at needs 2 (X,Y) or 3 (X,Y,Z) comma-separated numbers, got {len(coords)} in {at!r}")
+    c = np.array(coords, dtype=np.float64)
+    return slice_ics(slice_name, c[None, :], l_convention)[0], c, {"kind": "slice", "slice": slice_name}
