@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -218,3 +220,41 @@ def test_selecting_rows_keeps_coordinates_and_anything_else_drops_them():
 def test_seed_slice_refuses_coordinates_that_are_not_real_numbers(bad):
     with pytest.raises(ValueError, match="seed_slice x must be real numbers"):
         seed_slice(bad, 3.9)
+
+
+@pytest.mark.parametrize(
+    "res, ndim, expected",
+    [("8", 2, (8, 8)), (" 4, 3 ", 2, (4, 3)), ("2,3,1", 3, (2, 3, 1)), (5, 3, (5, 5, 5)), ((2.0, 3), 2, (2, 3)),
+     (np.int64(6), 2, (6, 6)), ([7], 2, (7, 7))],
+)
+def test_get_res_is_the_one_reader_of_a_resolution(res, ndim, expected):
+    from dicetrace.windows import get_res
+
+    assert get_res(res, ndim) == expected
+    assert Grid("seed3" if ndim == 3 else "seed", ((0, 1),) * ndim, res).res == expected  # Grid reads it so
+
+
+@pytest.mark.parametrize(
+    "res, words",
+    [("2.5", "whole numbers, N or NX,NY, got '2.5'"), ("3,3,3", "needs 2 numbers NX,NY"), ("-3", ">= 1 on every axis"),
+     ("", "whole numbers"), (True, "one integer per axis"), ((3, 0), ">= 1"), (2.5, "one integer per axis"), ("9" * 5000, "whole")],
+)
+def test_get_res_refuses_naming_res(res, words):
+    from dicetrace.params import ConfigError
+    from dicetrace.windows import get_res
+
+    with pytest.raises(ConfigError, match=re.escape(words)) as exc:
+        get_res(res, 2)
+    assert exc.value.field == "res"
+
+
+def test_get_window_names_the_z_range_apart_and_quotes_a_window_given_as_text():
+    from dicetrace.params import ConfigError
+
+    assert get_window("home", 3, "0,0.5") == ((0.0, 0.1), (0.0, 0.1), (0.0, 0.5))
+    for window, z, field, words in (("home", "0.5,0", "z", "z1 > z0"), ("home", "0,x", "z", "two numbers"),
+                                    ("home", None, "z", "needs a z range"), ("1,0,0,1", None, "window", "(got '1,0,0,1')"),
+                                    ("atlantis", None, "window", "unknown window 'atlantis'")):
+        with pytest.raises(ConfigError, match=re.escape(words)) as exc:
+            get_window(window, 3 if z or field == "z" else 2, z)
+        assert exc.value.field == field, (window, z)

@@ -23,6 +23,7 @@ from dicetrace.params import (
     get_integrator,
     get_preset,
     make_config,
+    ConfigError,
     resolve_config,
 )
 from dicetrace.stepsize import AUTO_DT_FE_GAIN, AUTO_DT_MAX_S, AUTO_DT_MAX_STEPS, AUTO_DT_SAFETY, auto_dt, impact_speed_cm_s, stiff_rates
@@ -383,3 +384,53 @@ def test_resolve_config_takes_a_config_or_options_never_both():
         resolve_config("seed", preset="physical")
     with pytest.raises(TypeError, match="config must be"):
         resolve_config(42)
+
+
+# -- one validator, one error ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "make, fields",
+    [
+        (lambda: Numerics(tol=0.0), ("tol",)),
+        (lambda: Numerics(tol_growth=-1.0), ("tol_growth",)),
+        (lambda: Numerics(dt_s=0.0), ("dt_s",)),
+        (lambda: Numerics(integrator="magic"), ("integrator",)),
+        (lambda: Numerics(dt_s=2.0, t_max_s=1.0), ("t_max_s", "dt_s")),
+        (lambda: Preset(gamma=-1.0), ("gamma",)),
+        (lambda: get_preset("moon"), ("preset",)),
+        (lambda: make_config(integrator="magic"), ("integrator",)),
+        (lambda: make_config(tol="abc"), ("tol",)),
+        (lambda: make_config(dt_s="fast"), ("dt_s",)),
+        (lambda: make_config(dt_s="auto", integrator="forward-euler", t_max_s=1e9), ("dt_s",)),
+        (lambda: make_config(tol=1e-5, strict=True), ("tol",)),
+        (lambda: resolve_config(make_config(), gamma=0.1, tol=1e-7), ("gamma", "tol")),
+    ],
+)
+def test_every_check_raises_config_error_naming_the_field(make, fields):
+    with pytest.raises(ConfigError) as exc:
+        make()
+    assert exc.value.fields == fields and exc.value.field == fields[0]
+    assert isinstance(exc.value, ValueError) and str(exc.value) == exc.value.message
+
+
+def test_make_config_reads_option_text_as_the_number_it_spells():
+    """The text of a command's option gives the very configuration its number does (no second parser)."""
+    text = make_config("physical", dt_s=" 0.0005 ", t_max_s="2", tol="3e-8", tol_growth="5")
+    num = make_config("physical", dt_s=0.0005, t_max_s=2.0, tol=3e-8, tol_growth=5.0)
+    assert text == num and text.kernel_params() == num.kernel_params()
+    assert all(type(getattr(text.numerics, f)) is float for f in ("dt_s", "t_max_s", "tol", "tol_growth"))
+    with pytest.raises(ConfigError, match=r"got '-0'$"):  # a refused value is shown as it was given
+        make_config(dt_s="-0")
+    with pytest.raises(ConfigError, match="time step dt"):
+        Numerics(dt_s="1e-3")  # Numerics itself takes numbers only
+
+
+def test_a_tolerance_a_fixed_step_integrator_ignores_warns_or_with_strict_is_refused():
+    with pytest.warns(UserWarning, match="tol 1e-05 .*no effect on rk4"):
+        make_config(integrator="rk4", tol=1e-5)
+    with pytest.raises(ConfigError, match="tol_growth '10' .*no effect on rk4"):
+        make_config(integrator="rk4", tol_growth="10", strict=True)
+    with pytest.raises(ConfigError, match=r"\[1e-14, 1\)"):  # the range first, whatever the integrator
+        make_config(integrator="rk4", tol="1e-300", strict=True)
+    assert make_config("physical", tol="1e-7", strict=True).numerics.tol == 1e-7

@@ -139,3 +139,17 @@ def test_feeds_the_analysis_callables():
     assert br.width < 1e-6
     assert c.n_evals == br.n_evals
 
+
+
+def test_a_config_with_options_is_refused_as_by_every_entry_point():
+    """The analysis callables take a config or the options, never both: params.resolve_config's one rule."""
+    from dicetrace.params import ConfigError, make_config, resolve_config
+
+    cfg = make_config("seed", t_max_s=0.2)
+    with pytest.raises(ConfigError, match="pass either config or gamma, not both") as exc:
+        classify_on_slice("seed", config=cfg, gamma=0.01)
+    assert exc.value.fields == ("gamma",)
+    with pytest.raises(ConfigError, match="pass either config or gamma"):
+        resolve_config(cfg, gamma=0.01)
+    assert classify_on_slice("seed", config=cfg).config is cfg
+    assert classify_on_slice("seed", preset="physical", gamma=0.01).config == make_config("physical", gamma=0.01)

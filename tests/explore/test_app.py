@@ -118,6 +118,11 @@ def test_throw_rrd_is_the_record_recording_of_that_point(client, tmp_path):
         ("/api/hover", {"x": "9", "y": "4"}, "x,y"),
         ("/api/hover", {"i": "99", "j": "0"}, "i,j"),
         ("/api/throw.rrd", {"i": "a", "j": "0"}, "i,j"),
+        # refused by the configuration layer (make_config, get_res), not by the explorer: a ConfigError naming its field
+        ("/api/map.png", {"preset": "wood"}, "preset"),
+        ("/api/map.json", {"integrator": "leapfrog"}, "integrator"),
+        ("/api/hover", {"preset": "physical", "integrator": "contact-rosenbrock", "i": "1", "j": "1"}, "integrator"),
+        ("/api/map.png", {"res": "3,4,5"}, "res"),
     ],
 )
 def test_bad_parameters_get_a_400_naming_them(client, path, params, param):

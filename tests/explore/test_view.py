@@ -83,3 +83,17 @@ def test_pixel_is_the_nearest_grid_point():
     assert v.pixel(0.0, 0.0) == (0, 0)
     assert v.pixel(0.31, 1.6) == (3, 3)
     assert v.pixel(1.0, 2.0) == (10, 4)
+
+
+def test_a_view_holds_its_config_built_once(monkeypatch):
+    """The Config is built with the view (make_config, the one validator), not again each time it is asked for."""
+    import dicetrace.params as params
+
+    calls = []
+    real, start = params.make_config, View()
+    monkeypatch.setattr(params, "make_config", lambda *a, **k: calls.append(1) or real(*a, **k))
+    v = view_from_query({"window": "home", "res": "8", "preset": "physical", "gamma": "0.01"}, start)
+    assert len(calls) == 1
+    assert v.config() is v.config() and len(calls) == 1
+    assert v.config() == real("physical", gamma=0.01)
+    assert v == View(window=((0.0, 0.1), (0.0, 0.1)), res=(8, 8), preset="physical", gamma=0.01)  # read: name, "N"

@@ -2,10 +2,15 @@
 
 A :class:`View` is a slice, a 2-D window of it (``x0,x1,y0,y1``; the third
 coordinate ``z`` of a 3-D slice is fixed per view), a resolution and a
-configuration (preset, integrator, damping γ, time step).  It round-trips
-through a URL query (:meth:`View.to_query` / :func:`view_from_query`), so a
-view can be shared and reopened.  Bad input raises :class:`ViewError`
-naming the parameter, never anything else.
+configuration (preset, integrator, damping γ, time step), built once with
+the view (:meth:`View.config`).  It round-trips through a URL query
+(:meth:`View.to_query` / :func:`view_from_query`), so a view can be shared
+and reopened.  The window and resolution are read by the one parser of
+each (:func:`dicetrace.windows.get_window`, ``get_res``), the configuration
+checked by :func:`dicetrace.params.make_config`; what they refuse (a
+:class:`~dicetrace.params.ConfigError` naming its field) and the
+explorer's own limits raise :class:`ViewError` naming the parameter, never
+anything else.
 
 Zooming stops at the float64 limit of the slice coordinates: adjacent
 pixels must be at least ``MIN_ULPS_PER_PIXEL`` units in the last place apart
@@ -16,13 +21,12 @@ Beyond that neighbouring pixels would be the same IC.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from urllib.parse import urlencode
 
-import numpy as np
-
 from dicetrace.ics import SLICES, Grid, get_slice
-from dicetrace.windows import WINDOWS, get_window
+from dicetrace.params import ConfigError
+from dicetrace.windows import WINDOWS, get_res, get_window
 
 #: Largest resolution per axis (a 1024×1024 map is ~1M throws, ~10 s on 2 cores for ``seed``).
 MAX_RES = 1024
@@ -55,7 +59,9 @@ class View:
     ``window`` is ((x0, x1), (y0, y1)) in slice coordinates, ``res`` (nx, ny)
     the grid points per axis (the program's formula, so a view is exactly a
     ``dicetrace scan`` grid), ``z`` the third coordinate of a 3-D slice.
-    ``gamma`` and ``dt`` None mean the preset's and the default.
+    ``window`` may also be a name or ``"x0,x1,y0,y1"``, ``res`` ``"N"`` or
+    ``"NX,NY"``: they are read into those forms.  ``gamma`` and ``dt`` None
+    mean the preset's and the default.
     """
 
     slice: str = "seed"
@@ -66,9 +72,13 @@ class View:
     gamma: float | None = None
     dt: float | None = None
     z: float | None = None
+    _config: object = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "window", _read("window", get_window, self.window, 2))
+        object.__setattr__(self, "res", _read("res", get_res, self.res, 2))
         _validate(self)
+        object.__setattr__(self, "_config", _make_config(self))
 
     # -- derived -----------------------------------------------------------------------
 
@@ -77,11 +87,8 @@ class View:
         return SLICES[self.slice].ndim
 
     def config(self):
-        """The :class:`~dicetrace.params.Config` of this view."""
-        from dicetrace.params import make_config
-
-        overrides = {} if self.gamma is None else {"gamma": self.gamma}
-        return make_config(self.preset, integrator=self.integrator, dt_s=self.dt, **overrides)
+        """The :class:`~dicetrace.params.Config` of this view (built once, with the view)."""
+        return self._config
 
     def grid(self, res: tuple[int, int] | None = None) -> Grid:
         """The IC grid of this view (at ``res``, default the view's); a 3-D slice gets z0 = z1 = z, nz = 1."""
@@ -155,22 +162,22 @@ def _num(param: str, text) -> float:
     return v
 
 
-def _validate(v: View) -> None:
-    from dicetrace.integrators import INTEGRATORS, unknown_integrator
-    from dicetrace.params import PRESETS
+def _read(param: str, parse, value, ndim: int):
+    """``value`` read by its one parser (``get_window``, ``get_res``); what it refuses becomes a ViewError."""
+    try:
+        return parse(value, ndim)
+    except ConfigError as e:
+        raise ViewError(param, e.message) from None
 
+
+def _validate(v: View) -> None:
+    """The explorer's own limits (what it computes live); the configuration is the configuration layer's."""
     if v.slice not in SLICES:
         raise ViewError("slice", f"unknown slice {v.slice!r} (choose from {', '.join(SLICES)})")
-    if v.preset not in PRESETS:
-        raise ViewError("preset", f"unknown preset {v.preset!r} (choose from {', '.join(PRESETS)})")
-    if v.integrator is not None and v.integrator not in INTEGRATORS:
-        raise ViewError("integrator", unknown_integrator(v.integrator))
-    if len(v.res) != 2 or any(isinstance(r, bool) or not isinstance(r, (int, np.integer)) for r in v.res):
-        raise ViewError("res", f"must be two whole numbers NX,NY, got {v.res!r}")
     for r in v.res:
         if not MIN_RES <= r <= MAX_RES:
             raise ViewError("res", f"must be between {MIN_RES} and {MAX_RES} per axis, got {v.res[0]},{v.res[1]}")
-    for axis, (lo, hi), n in zip("xy", _window(v.window), v.res):  # finite, x1 > x0: the one rule for windows
+    for axis, (lo, hi), n in zip("xy", v.window, v.res):
         for b in (lo, hi):
             if abs(b) > MAX_COORD:
                 raise ViewError("window", f"{axis} bounds must be within ±{MAX_COORD:g}, got {lo!r}, {hi!r}")
@@ -192,32 +199,22 @@ def _validate(v: View) -> None:
         raise ViewError("gamma", f"the damping γ must be in [{GAMMA_RANGE[0]:g}, {GAMMA_RANGE[1]:g}] s/cm, got {v.gamma!r}")
     if v.dt is not None and not DT_RANGE[0] <= v.dt <= DT_RANGE[1]:
         raise ViewError("dt", f"the time step must be in [{DT_RANGE[0]:g}, {DT_RANGE[1]:g}] s, got {v.dt!r}")
+
+
+#: The query parameter that sets each field a ConfigError names (any other: the preset's).
+CONFIG_PARAMS = {"preset": "preset", "integrator": "integrator", "dt_s": "dt", "gamma": "gamma"}
+
+
+def _make_config(v: View):
+    """The view's Config, by :func:`dicetrace.params.make_config` (the one validator); its ConfigError as a ViewError
+    naming the query parameter."""
+    from dicetrace.params import make_config
+
+    overrides = {} if v.gamma is None else {"gamma": v.gamma}
     try:
-        v.config()
-    except (TypeError, ValueError) as e:
-        raise ViewError("preset", str(e)) from None
-
-
-def _window(value) -> tuple[tuple[float, float], tuple[float, float]]:
-    """``value`` (a name in ``WINDOWS``, ``x0,x1,y0,y1`` or pairs) as the window's ranges, read and checked by the
-    one window parser, :func:`dicetrace.windows.get_window`; its ValueError becomes a ViewError naming ``window``."""
-    try:
-        return get_window(value, 2)
-    except ValueError as e:
-        raise ViewError("window", str(e)) from None
-
-
-def parse_res(text: str) -> tuple[int, int]:
-    parts = str(text).split(",")
-    if len(parts) not in (1, 2):
-        raise ViewError("res", f"N or NX,NY, got {str(text)[:40]!r}")
-    vals = []
-    for p in parts:
-        p = p.strip()
-        if not p.isdigit() or len(p) > 7:
-            raise ViewError("res", f"must be whole numbers between {MIN_RES} and {MAX_RES}, got {str(text)[:40]!r}")
-        vals.append(int(p))
-    return (vals[0], vals[0]) if len(vals) == 1 else (vals[0], vals[1])
+        return make_config(v.preset, integrator=v.integrator, dt_s=v.dt, **overrides)
+    except ConfigError as e:
+        raise ViewError(CONFIG_PARAMS.get(e.field, "preset"), e.message) from None
 
 
 #: The query parameters a view reads.
@@ -233,10 +230,9 @@ def view_from_query(q, default: View | None = None) -> View:
     kw = {}
     if "slice" in q:
         kw["slice"] = str(q["slice"])
-    if "window" in q:
-        kw["window"] = _window(str(q["window"]))
-    if "res" in q:
-        kw["res"] = parse_res(q["res"])
+    for name in ("window", "res"):  # read by View, with their one parsers
+        if name in q:
+            kw[name] = str(q[name])
     if "preset" in q:
         kw["preset"] = str(q["preset"])
     for name in ("integrator",):
