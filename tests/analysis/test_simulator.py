@@ -140,7 +140,6 @@ def test_feeds_the_analysis_callables():
     assert c.n_evals == br.n_evals
 
 
-
 def test_a_config_with_options_is_refused_as_by_every_entry_point():
     """The analysis callables take a config or the options, never both: params.resolve_config's one rule."""
     from dicetrace.params import ConfigError, make_config, resolve_config

@@ -200,7 +200,8 @@ def test_bad_input_through_the_console_script(tmp_path):
     """The real process: exit code 2, one line naming the option, no traceback."""
     res = run_cli("record", "--slice", "seed", "--at", "1,2", "--dt", "-0.5", cwd=tmp_path)
     assert res.returncode == 2 and res.stdout == ""
-    assert res.stderr.startswith("dicetrace: error: --dt ") and res.stderr.count("\n") == 1
+    assert res.stderr.startswith("dicetrace: error: --dt: ") and res.stderr.count("\n") == 1
+    assert "'-0.5'" in res.stderr
     assert "Traceback" not in res.stderr
     assert list(tmp_path.iterdir()) == []
 
