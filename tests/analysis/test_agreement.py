@@ -41,3 +41,51 @@ def test_the_programs_step_is_not_converged_and_the_adaptive_one_is():
     fine = certify_map("red-sea", 20, integrator="contact-adaptive", tol=1e-6)
     assert fine.converged and fine.tightened.fraction > 0.98 and fine.tight_config.numerics.tol == pytest.approx(1e-7)
     assert fine.floor.fraction < fine.tightened.fraction
+
+
+def test_face_stats_chi2_tells_different_face_counts_apart():
+    from dicetrace.analysis.agreement import face_stats
+
+    rng = np.random.default_rng(0)
+    a = rng.integers(1, 7, (60, 60))
+    same = rng.integers(1, 7, (60, 60))
+    skew = np.where(rng.random((60, 60)) < 0.3, 3, a)
+    assert face_stats(same, a)["chi2_p_vs_discrete"] > 1e-3
+    assert face_stats(skew, a)["chi2_p_vs_discrete"] < 1e-10
+    fr = face_stats(a, None)["fractions"]
+    assert sum(f["fraction"] for f in fr.values()) == pytest.approx(1.0)
+    assert all(f["block_stderr"] > 0 for f in fr.values())
+
+
+def test_counts_chi2_p_leaves_out_empty_categories():
+    from dicetrace.analysis.agreement import counts_chi2_p
+
+    assert counts_chi2_p([50, 50, 0], [49, 51, 0]) > 0.5  # the empty third category would make the test undefined
+    assert counts_chi2_p([100, 20, 50, 50, 50, 30], [50] * 6) < 1e-4
+
+
+def test_settled_agreement_counts_unsettled_as_disagreement():
+    from dicetrace.analysis.agreement import settled_agreement
+
+    assert settled_agreement([1, 2, 3], [True] * 3, [1, 2, 3], [True] * 3) == 1.0
+    assert settled_agreement([1, 2, -1], [True, True, False], [1, 2, -1], [True] * 3) == pytest.approx(2 / 3)
+    assert settled_agreement([1, 2, 4], [True] * 3, [1, 2, 3], [True, False, True]) == pytest.approx(1 / 3)
+
+
+def test_compare_presets_on_the_same_throws():
+    from types import SimpleNamespace
+
+    from dicetrace.analysis.agreement import compare_presets
+
+    def runs(outcome, settled, t, changes, first):
+        return SimpleNamespace(outcome=np.array(outcome), settled=np.array(settled), t_settle_s=np.array(t),
+                               n_changes=np.array(changes), t_first_contact_s=np.array(first))
+    a = runs([1, 2, 3, 0], [True, True, True, False], [1.0, 2.0, 3.0, 9.0], [4, 6, 8, 0], [0.1, 0.2, np.inf, 0.3])
+    b = runs([1, 5, 3, 3], [True, True, True, True], [2.0, 2.0, 6.0, 1.0], [2, 2, 2, 2], [0.1, 0.1, 0.1, 0.1])
+    c = compare_presets(a, b)
+    assert c["same_outcome"] == pytest.approx(0.5)
+    assert c["outcome_counts_seed"][0] == 1 and c["outcome_counts_physical"][3] == 2
+    assert c["mean_settle_time_seed_s"] == pytest.approx(2.0) and c["mean_settle_time_physical_s"] == pytest.approx(10 / 3)
+    assert c["median_settle_time_ratio"] == pytest.approx(2.0)
+    assert c["mean_contact_changes_seed"] == pytest.approx(6.0)
+    assert c["mean_first_contact_s"] == pytest.approx(0.2)  # finite first contacts only

@@ -162,3 +162,49 @@ def test_label_cells_all_excluded_and_single_node():
     assert n == 0 and not ids.any()
     ids, n = label_cells(np.array([[5]]))
     assert n == 1 and ids.tolist() == [[1]]
+
+
+# -- the statistics of a map's cells (studies a and l) ---------------------------------------------------
+
+
+def test_cell_stats_of_a_known_map():
+    """Four quadrants of two labels (two cells each: 100 nodes) and one singleton inside a quadrant."""
+    from dicetrace.analysis.cells import cell_stats
+
+    g = np.ones((20, 20), dtype=np.int64)
+    g[:10, 10:] = 2
+    g[10:, :10] = 2
+    g[5, 5] = 3  # a singleton, away from the edge
+    st = cell_stats(g)
+    assert st["n_cells"] == 5 and st["n_nodes"] == 400 and st["n_singletons"] == 1
+    assert sorted(st["sizes"].tolist()) == [1, 99, 100, 100, 100]
+    assert st["frac_nodes_in_singletons"] == pytest.approx(1 / 400)
+    assert st["largest_cell_frac"] == pytest.approx(0.25) and st["n_cells_ge_100"] == 3
+    assert st["frac_nodes_in_edge_cells"] == pytest.approx(399 / 400)  # all but the singleton
+    assert st["cells_per_1000_nodes"] == pytest.approx(12.5)
+
+
+def test_block_fraction_stderr_is_zero_for_a_uniform_spread_and_grows_with_clumping():
+    from dicetrace.analysis.cells import block_fraction_stderr
+
+    stripes = np.tile(np.array([1, 2]), (40, 20))  # every block holds half of each label
+    assert block_fraction_stderr(stripes, 1) == 0.0
+    halves = np.ones((40, 40), dtype=np.int64)
+    halves[:, 20:] = 2  # blocks are all 1 or all 2: fractions 1,1,0,0 in each row of blocks
+    assert block_fraction_stderr(halves, 1) == pytest.approx(np.std([1, 1, 0, 0] * 4, ddof=1) / 4)
+
+
+def test_slice_joins_tells_a_tube_from_separate_cells():
+    """Two 2-D cells of slice 0 joined by a tube through z are one 3-D cell; two columns are two."""
+    from dicetrace.analysis.cells import slice_joins
+
+    g = np.ones((12, 12, 4), dtype=np.int64)
+    g[2:5, 2:5, :] = 2
+    g[7:10, 7:10, :] = 2
+    apart = slice_joins(g, 5)
+    assert apart["frac_cells_joined"] == 0.0 and apart["n_cells_2d"] == 3
+    g[2:10, 2:10, 3] = 2  # a bridge in the top layer joins the two columns
+    joined = slice_joins(g, 5)
+    assert joined["frac_cells_joined"] == pytest.approx(2 / 3)  # the two label-2 cells; the label-1 cell is alone
+    assert {r["label"]: r["components_3d"] for r in joined["per_label"]} == {1: 1, 2: 1}
+    assert "half_res" not in joined  # 4 nodes in z: too few for the half-resolution check

@@ -99,3 +99,14 @@ def test_unsaturated_exponent_needs_unsaturated_points():
 def test_saturation_level_of_uniform_labels():
     # six equally likely faces: 1 − 6·(1/6)² = 5/6 exactly
     assert saturation_level(np.repeat(np.arange(1, 7), 10)) == pytest.approx(5 / 6, rel=1e-12)
+
+
+def test_convergence_order_on_synthetic_errors():
+    from dicetrace.analysis.scaling import convergence_order
+
+    dts = np.array([1e-3, 5e-4, 2.5e-4, 1.25e-4])
+    assert convergence_order(dts, 3.0 * dts**2) == pytest.approx(2.0)
+    # a rounding floor and an unresolved point are left out
+    errs = np.array([0.9, 2e-6, 1.25e-7, 1e-14])
+    assert convergence_order(dts, errs) == pytest.approx(4.0)
+    assert np.isnan(convergence_order(dts[:1], errs[:1]))

@@ -68,3 +68,11 @@ def test_excluded_labels_do_not_make_junctions():
     assert np.all(c.meet3 == 0)
     c = junction_box_counts(g, exclude=())
     assert np.all(c.meet3 >= 1)
+
+
+def test_junction_row_of_the_three_sectors():
+    from dicetrace.analysis.junctions import junction_row
+
+    r = junction_row("three sectors", three_sector_map(129), model="control")
+    assert r["map"] == "three sectors" and r["model"] == "control" and r["res"] == 129
+    assert r["dim_meet3"] == 0.0 and r["n_vertex_boxes_smallest"] == 1

@@ -93,3 +93,40 @@ def test_prefix_entropy_ignores_the_fall_of_counts_when_sequences_end():
     e = prefix_entropy(seqs, max_len=30)
     assert e.h == pytest.approx(math.log(2), rel=0.05)
     assert e.n_range[1] <= 12  # 2^n ≤ 4000 and most sequences still running
+
+
+# -- the contact-sequence measures of study d -------------------------------------------------------------
+
+
+def test_simpson_is_the_chance_that_two_throws_share_a_label():
+    from dicetrace.analysis.prefixes import simpson
+
+    assert simpson(np.array([10])) == 1.0
+    assert simpson(np.array([1, 1])) == 0.0
+    assert simpson(np.array([2, 2])) == pytest.approx(2 * 2 / 12)
+    assert np.isnan(simpson(np.array([1])))
+
+
+def test_prefix_codes_group_equal_prefixes():
+    from dicetrace.analysis.prefixes import prefix_codes
+
+    seqs = np.array(["1-12-2", "1-12-3", "1-2", "4"])
+    c1, c2, c3 = prefix_codes(seqs, 3)
+    assert c1[0] == c1[1] == c1[2] != c1[3]
+    assert c2[0] == c2[1] != c2[2]
+    assert len(set(c3.tolist())) == 4  # every whole sequence differs
+
+
+def test_fast_components_match_label_cells_inside_the_mask():
+    from dicetrace.analysis import label_cells
+    from dicetrace.analysis.prefixes import fast_components
+
+    rng = np.random.default_rng(0)
+    codes = rng.integers(0, 3, (30, 30))
+    mask = rng.random((30, 30)) < 0.8
+    ids, n = fast_components(codes, mask)
+    ref, _ = label_cells(np.where(mask, codes, -1), exclude=(-1,))
+    assert n == len(np.unique(ref[mask])) and (ids[~mask] == 0).all()
+    # the same partition: a bijection between the two labellings on the mask
+    pairs = set(zip(ids[mask].tolist(), ref[mask].tolist()))
+    assert len(pairs) == n

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from analysis_synthetic import lattice_grid
 from dicetrace.analysis import find_periods, label_autocorrelation, periodic_cells_connected
@@ -70,3 +71,47 @@ def test_repeated_regions_connect_only_through_a_bridge():
     bridged[:, :, 4] = 2  # a lid of label 2 joins every column
     res2 = periodic_cells_connected(bridged, (12, 0), label=2)
     assert res2.connected.all()
+
+
+# -- the repetition measures of one map (studies c and l) ------------------------------------------------
+
+
+def test_texture_is_the_denser_half_of_the_borders():
+    from dicetrace.analysis.repetition import texture_labels
+
+    g = np.ones((60, 60), dtype=np.int64)
+    g[:, :30] = np.where(np.arange(30) % 2, 1, 2)[None, :]  # left half: a border at every node
+    tex = texture_labels(g, 2.0)
+    assert set(np.unique(tex)) == {0, 1}
+    assert tex[:, :25].all() and not tex[:, 35:].any()
+
+
+def test_off_centre_max_skips_the_central_peak():
+    from dicetrace.analysis.repetition import off_centre_max
+
+    corr = np.zeros((41, 41))
+    corr[20, 20] = 1.0
+    corr[20, 21] = 0.9  # inside the excluded radius
+    corr[20, 28] = 0.4  # beyond it, within half the lags
+    corr[20, 40] = 0.8  # beyond half the lags
+    assert off_centre_max(corr, 3) == pytest.approx(0.4)
+
+
+def test_stripe_spacing_is_the_distance_between_stripes():
+    from dicetrace.analysis.repetition import stripe_spacing
+
+    rows = [{"dx": 0.0, "dy": 1.0}, {"dx": 3.0, "dy": 5.0}]  # along the stripes, then across them
+    assert stripe_spacing(rows) == pytest.approx(3.0)
+    assert stripe_spacing(rows[:1]) is None
+
+
+def test_repetition_stats_find_the_period_of_a_lattice():
+    from types import SimpleNamespace
+
+    from dicetrace.analysis.repetition import repetition_stats
+
+    g = np.tile(np.repeat(np.repeat(np.array([[1, 2], [3, 4]]), 5, axis=0), 5, axis=1), (4, 4))  # period 10 nodes
+    st = repetition_stats(SimpleNamespace(labels=g, spacing=(0.1, 0.1)))
+    assert st["outcome_offcentre_max_corr"] == pytest.approx(1.0)
+    lengths = sorted(p["length"] for p in st["outcome_periods"])
+    assert lengths[0] == pytest.approx(1.0)  # 10 nodes of 0.1

@@ -102,3 +102,59 @@ def test_edge_balance_rate():
     assert edge_balance_rate(inertia_factor=0.5) == pytest.approx(
         math.sqrt(980 * math.sqrt(2) / 4.0), rel=1e-14
     )
+
+
+def test_settle_stats_border_and_interior():
+    from types import SimpleNamespace
+
+    from dicetrace.analysis.settle import settle_stats
+
+    g = np.ones((20, 20), dtype=np.int64)
+    g[:, 10:] = 2
+    t = np.full(g.shape, 0.5)
+    t[:, 9:11] = 1.5  # slow along the border
+    s = SimpleNamespace(labels=g, t_settle_s=t)
+    st = settle_stats(s)
+    assert st["border_mean"] == pytest.approx(1.5) and st["interior_mean"] == pytest.approx(0.5)
+    assert st["n_unsettled"] == 0 and st["median"] == pytest.approx(0.5) and st["max"] == pytest.approx(1.5)
+
+
+# -- borders located and fitted, and their λ summarised (studies g, k and l) ------------------------------
+
+
+def test_free_pivot_rate_is_twice_the_fixed_pivot_rate():
+    """A cube on an edge: √(6g/(√2 s)) on a frictionless floor, √(3g/(2√2 s)) with the pivot held: ratio 2."""
+    from dicetrace.analysis.settle import free_pivot_rate
+
+    assert free_pivot_rate() == pytest.approx(2 * edge_balance_rate())
+    assert free_pivot_rate() == pytest.approx(math.sqrt(6 * 980.0 / (math.sqrt(2) * 2.0)))
+
+
+def test_border_pairs_are_neighbours_with_two_settled_outcomes():
+    from types import SimpleNamespace
+
+    from dicetrace.analysis.settle import border_pairs
+
+    g = np.ones((6, 6), dtype=np.int64)
+    g[:, 3:] = 2
+    g[0, 3] = -1  # unsettled: no pair with it
+    s = SimpleNamespace(labels=g, axes=(np.arange(6) * 0.1, np.arange(6) * 0.1))
+    pairs = border_pairs(s, 100, np.random.default_rng(0))
+    assert len(pairs) == 5
+    assert all(a[0] == b[0] and b[1] - a[1] == pytest.approx(0.1) and a[1] == pytest.approx(0.2) for a, b in pairs)
+    assert len(border_pairs(s, 2, np.random.default_rng(0))) == 2
+
+
+def test_divergence_summary_and_lambdas():
+    from dicetrace.analysis.settle import divergence_lambdas, divergence_summary
+
+    fits = [{"lo": {"lambda": 20.0, "r": -0.999}, "hi": {"lambda": 24.0, "r": -0.99}},
+            {"lo": None, "hi": {"lambda": 22.0, "r": -0.9999}}]
+    s = divergence_summary(fits)
+    assert s["n_fits"] == 3 and s["n_clean"] == 2 and s["median"] == 22.0
+    assert s["clean_mean"] == pytest.approx(21.0) and s["clean_min"] == 20.0 and s["clean_max"] == 22.0
+    assert s["median_stderr"] > 0
+    lam = divergence_lambdas(fits)
+    assert "all" not in lam and "r" not in lam and lam["n_borders"] == 2
+    assert lam["lambdas"].tolist() == [20.0, 24.0, 22.0] and lam["mean"] == pytest.approx(22.0)
+    assert lam["mean_stderr"] == pytest.approx(2.0 / math.sqrt(3))

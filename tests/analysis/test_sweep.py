@@ -56,3 +56,40 @@ def test_a_map_without_borders_has_no_alpha():
     assert np.isnan(table.loc["one", "alpha"]) and np.isnan(table.loc["one", "alpha_perturbation"])
     assert np.isfinite(table.loc["half", "alpha"])
     assert np.isfinite(table.loc["half", "alpha_perturbation"]) and table.loc["half", "boundary_fraction"] > 0
+
+
+def test_map_measures_of_a_smooth_and_a_fractal_map():
+    """Study b's set of measures (without perturbation): a straight border against Newton's fractal basins."""
+    from types import SimpleNamespace
+
+    from dicetrace.analysis.sweep import map_measures
+
+    def sample(classify, ranges, n):
+        g = sample_grid(classify, ranges, (n, n))
+        return SimpleNamespace(labels=g, spacing=((ranges[0][1] - ranges[0][0]) / (n - 1),) * 2, window=ranges,
+                               extent=ranges)
+
+    smooth = map_measures("line", sample(line_classify, [(0, 1), (0, 1)], 81), None, np.random.default_rng(0),
+                          perturb=False)
+    fractal = map_measures("newton", sample(newton_classify, [(-0.5, 0.5), (-0.5, 0.5)], 81), None,
+                           np.random.default_rng(0), perturb=False)
+    assert smooth["window"] == "line" and smooth["res"] == 81 and smooth["n_outcomes"] == 2
+    assert "wada_merge_r" not in smooth and "alpha_pert" not in smooth  # two outcomes; no perturbation asked
+    assert fractal["n_outcomes"] == 3 and "wada_merge_r" in fractal
+    # a line's border: dimension ≈ 1 (the mask method reads 1.17 on 81² nodes), α ≈ 1; the fractal's: more, less
+    assert 0.9 < smooth["dim_mask"] < 1.25 and fractal["dim_mask"] > smooth["dim_mask"] + 0.2
+    assert smooth["alpha_res"] == pytest.approx(1.0, abs=0.1) and fractal["alpha_res"] < smooth["alpha_res"] - 0.3
+
+
+def test_map_measures_perturbation_uses_the_classifier():
+    from types import SimpleNamespace
+
+    from dicetrace.analysis.sweep import map_measures
+
+    g = sample_grid(line_classify, [(0, 1), (0, 1)], (41, 41))
+    s = SimpleNamespace(labels=g, spacing=(0.025, 0.025), window=[(0, 1), (0, 1)], extent=[(0, 1), (0, 1)])
+    r = map_measures("line", s, line_classify, np.random.default_rng(1), perturb=True, n_points=4000,
+                     eps_rel=np.logspace(-3, -1, 3))
+    assert r["pert_n"] == 4000 and len(r["pert_f"]) == 3 and r["pert_eps"] == pytest.approx(np.logspace(-3, -1, 3))
+    assert r["alpha_pert"] == pytest.approx(1.0, abs=0.25)  # a smooth border: f ∝ ε (4000 points: ± 0.2)
+    assert "wada_grid_G" not in r  # two outcomes: no Wada test

@@ -56,3 +56,48 @@ def test_the_ftle_field_is_higher_on_cell_borders():
     assert 0.5 < border.mean() < 0.95
     test = stats.mannwhitneyu(m.ftle[border], m.ftle[~border], alternative="greater")
     assert test.pvalue < 1e-4 and np.median(m.ftle) > 0
+
+
+# -- the certificate of a map and its verdict --------------------------------------------------------
+
+
+def _cert(base, tight, near):
+    from dicetrace.analysis import agreement
+    from dicetrace.analysis.transient import MapCertificate
+
+    a_t, a_f = agreement(base, tight), agreement(base, near)
+    return MapCertificate(a_t, a_f, bool(a_t.ci[1] >= a_f.ci[0]), np.asarray(base), None)
+
+
+def test_verdict_needs_the_floor_and_more_than_chance():
+    from dicetrace.analysis.transient import converged_verdict
+
+    rng = np.random.default_rng(1)
+    base = rng.integers(1, 7, 4000)
+    other = rng.integers(1, 7, 4000)
+    copy = base.copy()
+    copy[:40] = other[:40]  # 99 % agreement
+    assert converged_verdict(_cert(base, copy, copy))
+    # below a floor of 99 %: not converged
+    half = base.copy()
+    half[:2000] = other[:2000]
+    assert not converged_verdict(_cert(base, half, copy))
+    # the floor at chance and the certificate at chance too: certify_map's rule passes it, the verdict does not
+    c = _cert(base, other, rng.integers(1, 7, 4000))
+    assert c.converged or c.tightened.ci[1] < c.floor.ci[0]
+    assert not converged_verdict(c)
+
+
+def test_certify_map_reuses_a_given_base_map():
+    from dicetrace.analysis.simulator import sample_window
+    from dicetrace.analysis.transient import certify_map
+    from dicetrace.params import make_config
+
+    cfg = make_config("seed")
+    s = sample_window("home", 5, config=cfg)
+    a = certify_map("home", 5, config=cfg)
+    b = certify_map("home", 5, config=cfg, base=s.labels)
+    assert np.array_equal(a.labels, b.labels)
+    assert a.tightened == b.tightened and a.floor == b.floor
+    with pytest.raises(ValueError, match="base has"):
+        certify_map("home", 5, config=cfg, base=s.labels[:2])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from analysis_synthetic import near_miss_classify, sector_classify
 from dicetrace.analysis import find_vertices
@@ -79,3 +80,30 @@ def test_far_apart_vertices_in_one_root_cluster_sparsely():
         assert len(row) == 1
         assert np.hypot(row.x.iloc[0] - centre[0], row.y.iloc[0] - centre[1]) < 1e-11
     assert elapsed < 5.0
+
+
+# -- the memory guard and the triple-box count of study f -------------------------------------------------
+
+
+def test_guarded_find_vertices_refuses_a_large_image_and_restores_numpy():
+    from dicetrace.analysis import vertices as V
+    from dicetrace.analysis.vertices import guarded_find_vertices
+
+    ok = guarded_find_vertices(sector_classify, (0.0, 1.0), (0.0, 1.0), 32, tol=1e-6)
+    assert (ok["status"] == "vertex").sum() == 1
+    with pytest.raises(MemoryError, match="find_vertices asked for"):
+        guarded_find_vertices(sector_classify, (0.0, 1.0), (0.0, 1.0), 32, tol=1e-6, limit=10)
+    assert V.np is np
+
+
+def test_triple_boxes_count_squares_with_three_outcomes():
+    from dicetrace.analysis.vertices import triple_boxes
+
+    g = np.ones((9, 9), dtype=np.int64)
+    g[:, 5:] = 2
+    assert triple_boxes(g, 2) == 0  # two outcomes only
+    g[:3, :3] = 3  # away from the 1|2 border (columns 4 and 5): no box of 2 intervals holds all three
+    assert triple_boxes(g, 2) == 0
+    g[0, 4] = 3  # now the closed box of rows 0–2, columns 4–6 holds 3, 1 and 2
+    assert triple_boxes(g, 2) == 1
+    assert triple_boxes(g, 4) == 1  # boxes of 4 intervals: rows 0–4 × columns 4–8 (columns 0–4 hold no 2)

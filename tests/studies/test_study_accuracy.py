@@ -99,15 +99,6 @@ def test_perturbation_has_the_stated_relative_size():
         np.testing.assert_allclose(r, rel, rtol=1e-3)  # rounding of the sum at 1e-12
 
 
-def test_fit_order_on_synthetic_errors():
-    dts = np.array([1e-3, 5e-4, 2.5e-4, 1.25e-4])
-    assert acc.fit_order(dts, 3.0 * dts**2) == pytest.approx(2.0)
-    # a rounding floor and an unresolved point are left out
-    errs = np.array([0.9, 2e-6, 1.25e-7, 1e-14])
-    assert acc.fit_order(dts, errs) == pytest.approx(4.0)
-    assert np.isnan(acc.fit_order(dts[:1], errs[:1]))
-
-
 def test_every_integrator_has_a_study_grid_and_a_colour():
     """The study's grids cover the integrator table, one distinct colour each; tolerances only for adaptive ones."""
     assert list(GRIDS) == list(INTEGRATORS)

@@ -10,12 +10,10 @@ from __future__ import annotations
 
 import json
 import shutil
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from dicetrace.analysis import agreement
 from dicetrace.studies import LETTERS, resolve
 from dicetrace.studies import study_converged as conv
 from dicetrace.studies.context import Options
@@ -46,30 +44,6 @@ def test_integrator_overrides_are_not_the_committed_settings():
     assert not Options(tol=1e-8).full
 
 
-def _cert(base, tight, near):
-    from dicetrace.analysis.transient import MapCertificate
-
-    a_t, a_f = agreement(base, tight), agreement(base, near)
-    return MapCertificate(a_t, a_f, bool(a_t.ci[1] >= a_f.ci[0]), np.asarray(base), None)
-
-
-def test_verdict_needs_the_floor_and_more_than_chance():
-    rng = np.random.default_rng(1)
-    base = rng.integers(1, 7, 4000)
-    other = rng.integers(1, 7, 4000)
-    copy = base.copy()
-    copy[:40] = other[:40]  # 99 % agreement
-    assert conv.converged_verdict(_cert(base, copy, copy))
-    # below a floor of 99 %: not converged
-    half = base.copy()
-    half[:2000] = other[:2000]
-    assert not conv.converged_verdict(_cert(base, half, copy))
-    # the floor at chance and the certificate at chance too: certify_map's rule passes it, the verdict does not
-    c = _cert(base, other, rng.integers(1, 7, 4000))
-    assert c.converged or c.tightened.ci[1] < c.floor.ci[0]
-    assert not conv.converged_verdict(c)
-
-
 def _row(**kw):
     base = {"boundary_fraction": 0.9, "boundary_fraction_block_stderr": 0.01, "alpha": 0.1,
             "alpha_block_stderr": None, "alpha_stderr": 0.02, "alpha_pert": 0.5, "alpha_pert_stderr": 0.05,
@@ -93,44 +67,6 @@ def test_changes_flag_differences_beyond_three_sigma_only():
     assert "dim_mask" not in ch  # a zero error bar: not judged
     assert "kappa" not in ch  # no value: not judged
     assert ch["faces"]["changed"]
-
-
-def test_face_stats_chi2_tells_different_face_counts_apart():
-    rng = np.random.default_rng(0)
-    a = rng.integers(1, 7, (60, 60))
-    same = rng.integers(1, 7, (60, 60))
-    skew = np.where(rng.random((60, 60)) < 0.3, 3, a)
-    assert conv.face_stats(same, a)["chi2_p_vs_discrete"] > 1e-3
-    assert conv.face_stats(skew, a)["chi2_p_vs_discrete"] < 1e-10
-    fr = conv.face_stats(a, None)["fractions"]
-    assert sum(f["fraction"] for f in fr.values()) == pytest.approx(1.0)
-    assert all(f["block_stderr"] > 0 for f in fr.values())
-
-
-def test_settle_stats_border_and_interior():
-    g = np.ones((20, 20), dtype=np.int64)
-    g[:, 10:] = 2
-    t = np.full(g.shape, 0.5)
-    t[:, 9:11] = 1.5  # slow along the border
-    s = SimpleNamespace(labels=g, t_settle_s=t)
-    st = conv.settle_stats(s)
-    assert st["border_mean"] == pytest.approx(1.5) and st["interior_mean"] == pytest.approx(0.5)
-    assert st["n_unsettled"] == 0 and st["median"] == pytest.approx(0.5) and st["max"] == pytest.approx(1.5)
-
-
-def test_certify_map_reuses_a_given_base_map():
-    from dicetrace.analysis.simulator import sample_window
-    from dicetrace.analysis.transient import certify_map
-    from dicetrace.params import make_config
-
-    cfg = make_config("seed")
-    s = sample_window("home", 5, config=cfg)
-    a = certify_map("home", 5, config=cfg)
-    b = certify_map("home", 5, config=cfg, base=s.labels)
-    assert np.array_equal(a.labels, b.labels)
-    assert a.tightened == b.tightened and a.floor == b.floor
-    with pytest.raises(ValueError, match="base has"):
-        certify_map("home", 5, config=cfg, base=s.labels[:2])
 
 
 #: The grid of the quick run of study l.

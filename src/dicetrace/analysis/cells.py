@@ -23,7 +23,8 @@ from skimage import measure
 
 from ._grid import as_label_grid, encode_labels, structure
 
-__all__ = ["label_cells", "cells_table", "same_cell", "slice_cell_components"]
+__all__ = ["label_cells", "cells_table", "same_cell", "slice_cell_components", "block_fraction_stderr", "cell_stats",
+           "slice_joins"]
 
 
 def label_cells(
@@ -231,3 +232,63 @@ def slice_cell_components(
     table["component_3d"] = comp.astype(np.int64)
     table["n_cells_in_component"] = table.groupby("component_3d")["cell_id"].transform("size")
     return table
+
+
+def block_fraction_stderr(grid: np.ndarray, label: int, n_blocks: int = 4) -> float:
+    """Stderr of a basin fraction from its spread over n_blocks² sub-grids."""
+    nx, ny = grid.shape
+    ex = np.linspace(0, nx, n_blocks + 1).astype(int)
+    ey = np.linspace(0, ny, n_blocks + 1).astype(int)
+    vals = [np.mean(grid[ex[a]:ex[a + 1], ey[b]:ey[b + 1]] == label) for a in range(n_blocks) for b in range(n_blocks)]
+    return float(np.std(vals, ddof=1) / np.sqrt(len(vals)))
+
+
+def cell_stats(grid: np.ndarray) -> dict:
+    """Statistics of the cells of a 2-D outcome map (face connectivity): how many, their sizes (``sizes``: every
+    cell's node count), singletons, the largest, and the share of nodes in cells that touch the map's edge."""
+    t = cells_table(grid, connectivity="face")
+    sizes = t["size"].to_numpy()
+    n = grid.size
+    return {
+        "n_cells": int(len(t)),
+        "n_nodes": int(n),
+        "cells_per_1000_nodes": 1000.0 * len(t) / n,
+        "n_singletons": int((sizes == 1).sum()),
+        "frac_nodes_in_singletons": float(sizes[sizes == 1].sum() / n),
+        "n_cells_ge_10": int((sizes >= 10).sum()),
+        "n_cells_ge_100": int((sizes >= 100).sum()),
+        "largest_cell_frac": float(sizes.max() / n),
+        "largest_cell_label": int(t.loc[t["size"].idxmax(), "label"]),
+        "median_size": float(np.median(sizes)),
+        "mean_size": float(sizes.mean()),
+        "frac_nodes_in_edge_cells": float(sizes[t["touches_edge"].to_numpy()].sum() / n),
+        "sizes": sizes,
+    }
+
+
+def slice_joins(g: np.ndarray, min_cell: int) -> dict:
+    """How many 2-D cells of slice z = 0 of the 3-D stack ``g`` share a 3-D component with another 2-D cell of that
+    slice (cells of at least ``min_cell`` nodes), in all and per label; with ``half_res``, the same at half the
+    resolution in all three axes (is the answer resolution-dependent?) when every axis has 9 nodes or more."""
+    t = slice_cell_components(g, 0)
+    big = t[t["size"] >= min_cell]
+    joined = big[big["n_cells_in_component"] > 1]
+    z0 = {
+        "n_cells_2d": int(len(t)), f"n_cells_2d_ge{min_cell}": int(len(big)),
+        "n_components_3d_of_those": int(big["component_3d"].nunique()),
+        "frac_cells_joined": float(len(joined) / max(len(big), 1)),
+        "frac_area_joined": float(joined["size"].sum() / max(big["size"].sum(), 1)),
+        "per_label": [{"label": int(lab), "cells_2d": int(len(grp)), "components_3d": int(grp["component_3d"].nunique())}
+                      for lab, grp in big.groupby("label")],
+    }
+    # the same at half the resolution in all three axes (is the answer resolution-dependent?)
+    if min(g.shape) >= 9:
+        g2 = g[::2, ::2, ::2]
+        t2 = slice_cell_components(g2, 0)
+        b2 = t2[t2["size"] >= max(2, min_cell // 4)]
+        z0["half_res"] = {
+            "res": g2.shape, "n_cells_2d_big": int(len(b2)),
+            "n_components_3d_of_those": int(b2["component_3d"].nunique()),
+            "frac_cells_joined": float((b2["n_cells_in_component"] > 1).sum() / max(len(b2), 1)),
+        }
+    return z0

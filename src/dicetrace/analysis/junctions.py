@@ -40,8 +40,8 @@ import numpy as np
 from ._grid import as_label_grid
 from .boundaries import fit_power_law
 
-__all__ = ["JunctionCounts", "JunctionDimension", "junction_box_counts", "junction_dimension",
-           "three_sector_map", "strip_map"]
+__all__ = ["JunctionCounts", "JunctionDimension", "junction_box_counts", "junction_dimension", "three_sector_map",
+           "strip_map", "junction_row"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -191,3 +191,15 @@ def strip_map(res: int, *, width: float = 0.02, tilt: float = 0.3, labels=(1, 2,
     x, y = np.meshgrid(ax, ax, indexing="ij")
     s = (x - 0.5) * math.cos(tilt) + (y - 0.5) * math.sin(tilt)
     return np.where(s < 0, labels[0], np.where(s < width, labels[1], labels[2]))
+
+
+def junction_row(name: str, grid, **extra) -> dict:
+    """The junction measures of one map ``grid`` named ``name`` (with ``extra`` columns): box counts of boxes where
+    three outcomes meet (``meet3``) or are present (``any3``), and the dimension of each."""
+    c = junction_box_counts(grid)
+    dm = junction_dimension(c.box_sizes, c.meet3)
+    da = junction_dimension(c.box_sizes, c.any3)
+    return {"map": name, **extra, "res": int(grid.shape[0]), "box_sizes": c.box_sizes, "any3": c.any3,
+            "meet3": c.meet3, "dim_meet3": dm.dimension, "dim_meet3_stderr": dm.stderr, "clamped": dm.clamped,
+            "scales_used": dm.n_scales, "dim_any3": da.dimension, "dim_any3_stderr": da.stderr,
+            "n_vertex_boxes_smallest": int(len(c.centres_meet3))}

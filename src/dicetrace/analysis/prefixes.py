@@ -24,7 +24,8 @@ import numpy as np
 
 from .boundaries import fit_power_law
 
-__all__ = ["coarse_grain", "prefix_counts", "PrefixEntropy", "prefix_entropy"]
+__all__ = ["coarse_grain", "prefix_counts", "PrefixEntropy", "prefix_entropy", "simpson", "prefix_codes",
+           "fast_components"]
 
 
 def coarse_grain(sets, steps, end_step: int, *, min_steps: int) -> tuple:
@@ -105,3 +106,55 @@ def prefix_entropy(sequences: Sequence[Sequence], *, max_len: int = 60, min_coun
         sub = [seqs[i] for i in pick]
         subs.append(_fit(*prefix_counts(sub, max_len, with_alive=True), min_count, max_fill)[0])
     return PrefixEntropy(h, se, rng_n, counts, subs[0], subs[1], m)
+
+
+def simpson(counts: np.ndarray) -> float:
+    """Probability that two throws drawn (without replacement) share the label."""
+    n = counts.sum()
+    return float((counts * (counts - 1)).sum() / (n * (n - 1))) if n > 1 else float("nan")
+
+
+def prefix_codes(seqs: np.ndarray, kmax: int) -> list[np.ndarray]:
+    """Integer class of every throw's first k contact sets, k = 1..kmax (equal code = equal prefix).
+
+    Sequences shorter than k keep their whole sequence as the prefix (a sentinel pads them).
+    """
+    parts = [str(q).split("-") for q in seqs.ravel()]
+    n = len(parts)
+    width = max(len(p) for p in parts)
+    mat = np.full((n, max(width, kmax)), -1, dtype=np.int64)  # -1: the sequence has ended
+    for i, p in enumerate(parts):
+        mat[i, : len(p)] = [int(x) for x in p]  # a set's text (ascending node digits) read as a number
+    codes, cur = [], np.zeros(n, dtype=np.int64)
+    for k in range(kmax):
+        _, cur = np.unique(cur * 1_000_000_000 + mat[:, k], return_inverse=True)
+        cur = cur.astype(np.int64).ravel()
+        codes.append(cur.reshape(seqs.shape))
+    return codes
+
+
+def fast_components(codes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """Connected regions of equal code (face neighbours) among the nodes in ``mask``; 0 outside.
+
+    Same result as ``label_cells`` restricted to ``mask``, in one pass over the edges (label_cells
+    loops over the labels, which is slow for tens of thousands of contact sequences).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    idx = np.arange(codes.size).reshape(codes.shape)
+    rows, cols = [], []
+    for off in ((1, 0), (0, 1)):
+        a = (slice(0, codes.shape[0] - off[0]), slice(0, codes.shape[1] - off[1]))
+        b = (slice(off[0], None), slice(off[1], None))
+        same = (codes[a] == codes[b]) & mask[a] & mask[b]
+        rows.append(idx[a][same])
+        cols.append(idx[b][same])
+    r, c = np.concatenate(rows), np.concatenate(cols)
+    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(codes.size, codes.size))
+    _, lab = connected_components(graph, directed=False)
+    lab = lab.reshape(codes.shape)
+    out = np.zeros(codes.shape, dtype=np.int64)
+    _, inv = np.unique(lab[mask], return_inverse=True)
+    out[mask] = inv.ravel() + 1
+    return out, int(inv.max() + 1) if mask.any() else 0

@@ -9,6 +9,7 @@ a period vector are connected through the third dimension.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable, Iterable, Sequence
 
 import numpy as np
@@ -18,7 +19,8 @@ from scipy import ndimage
 from ._grid import as_label_grid, encode_labels
 from .cells import label_cells
 
-__all__ = ["label_autocorrelation", "find_periods", "periodic_cells_connected"]
+__all__ = ["label_autocorrelation", "find_periods", "periodic_cells_connected", "texture_labels", "off_centre_max",
+           "periods_rows", "stripe_spacing", "period_overlaps", "repetition_stats"]
 
 _PERIOD_COLUMNS = ["label", "di", "dj", "dx", "dy", "length", "strength", "n_overlap"]
 
@@ -284,3 +286,83 @@ def periodic_cells_connected(
     best["partner_component_3d"] = [int(comp_flat[rep[c]]) for c in best["partner_cell_id"]]
     best["connected"] = best["component_3d"] == best["partner_component_3d"]
     return best[cols].astype({"cell_id": np.int64, "partner_cell_id": np.int64})
+
+
+def texture_labels(grid: np.ndarray, sigma_nodes: float) -> np.ndarray:
+    """1 where the smoothed density of cell borders is above its median, else 0."""
+    from .boundaries import boundary_mask
+
+    dens = ndimage.gaussian_filter(boundary_mask(grid).astype(float), sigma_nodes)
+    return (dens > np.median(dens)).astype(np.int64)
+
+
+def off_centre_max(corr: np.ndarray, exclude_radius: int) -> float:
+    """Largest autocorrelation away from the centre (beyond ``exclude_radius``, within half the lags)."""
+    n0, n1 = (corr.shape[0] - 1) // 2, (corr.shape[1] - 1) // 2
+    i, j = np.indices(corr.shape)
+    far = (i - n0) ** 2 + (j - n1) ** 2 > exclude_radius**2
+    inner = (np.abs(i - n0) <= n0 // 2) & (np.abs(j - n1) <= n1 // 2)
+    return float(corr[far & inner].max())
+
+
+def periods_rows(df, window: str, kind: str) -> list[dict]:
+    """The rows of a :func:`find_periods` table as plain dicts, tagged with ``window`` and ``kind`` (the field)."""
+    return [{"window": window, "field": kind, "di": int(r.di), "dj": int(r.dj), "dx": float(r.dx), "dy": float(r.dy),
+             "length": float(r.length), "strength": float(r.strength)} for r in df.itertuples()]
+
+
+def stripe_spacing(rows: list[dict]) -> float | None:
+    """Distance between stripes: |v1 × v2| / |v1| for a 2-vector basis (v1 the shorter)."""
+    if len(rows) < 2:
+        return None
+    v1 = np.array([rows[0]["dx"], rows[0]["dy"]])
+    v2 = np.array([rows[1]["dx"], rows[1]["dy"]])
+    return float(abs(v1[0] * v2[1] - v1[1] * v2[0]) / np.linalg.norm(v1))
+
+
+def period_overlaps(g, h, win, period_xy, min_period_cell) -> list[dict]:
+    """For each period vector (slice units) of a 3-D stack ``g`` (spacing ``h``, ranges ``win``): how many cells of
+    slice z = 0 the shift maps onto themselves (overlap > 0.5, at least ``min_period_cell`` nodes) and how many of
+    those are one 3-D cell with their image (:func:`periodic_cells_connected`).  Vectors shorter than 5 % of the
+    window (the along-stripe vector of a stripe texture) or longer than the grid are skipped."""
+    from .cells import cells_table
+
+    sizes = cells_table(g[:, :, 0]).set_index("cell_id")["size"]
+    width = min(w[1] - w[0] for w in win[:2])
+    res_p = []
+    for v in period_xy:
+        di, dj = int(round(v[0] / h[0])), int(round(v[1] / h[1]))
+        if math.hypot(v[0], v[1]) < 0.05 * width or abs(di) >= g.shape[0] or abs(dj) >= g.shape[1]:
+            continue  # the along-stripe vector of a stripe texture (a few nodes): not a repetition
+        pc = periodic_cells_connected(g, (di, dj), k=0)
+        pc["size"] = sizes.reindex(pc["cell_id"]).to_numpy()
+        big_any = pc["size"] >= min_period_cell
+        big = pc[big_any & (pc["overlap"] > 0.5)]
+        res_p.append({
+            "period": (float(v[0]), float(v[1])), "period_nodes": (di, dj),
+            "n_cells_tested": int(len(pc)),
+            "n_big_matched": int(len(big)),
+            "min_cell_nodes": min_period_cell,
+            "median_overlap_big": float(pc[big_any]["overlap"].median()) if big_any.any() else None,
+            "frac_connected_big": float(big["connected"].mean()) if len(big) else None,
+            "frac_connected_all": float(pc["connected"].mean()) if len(pc) else None,
+        })
+    return res_p
+
+
+def repetition_stats(s) -> dict:
+    """The repetition measures of study c on one map ``s`` (``labels``, ``spacing``): outcome autocorrelation and
+    periods, and those of the texture (:func:`texture_labels`)."""
+    g, h = s.labels, s.spacing
+    res = g.shape[0]
+    tex = texture_labels(g, max(1.0, 0.015 * (res - 1)))
+    rows_tex = periods_rows(find_periods(tex, spacing=h, min_strength=0.1), "", "texture")
+    rows_out = periods_rows(find_periods(g, spacing=h, min_strength=0.3), "", "outcome")
+    return {
+        "outcome_offcentre_max_corr": off_centre_max(label_autocorrelation(g), int(0.05 * res)),
+        "n_outcome_periods": len(rows_out),
+        "outcome_periods": [{k: r[k] for k in ("dx", "dy", "length", "strength")} for r in rows_out],
+        "texture_offcentre_max_corr": off_centre_max(label_autocorrelation(tex), int(0.05 * res)),
+        "texture_periods": [{k: r[k] for k in ("dx", "dy", "length", "strength")} for r in rows_tex],
+        "texture_stripe_spacing": stripe_spacing(rows_tex),
+    }

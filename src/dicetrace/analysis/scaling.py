@@ -28,7 +28,8 @@ import numpy as np
 
 from .boundaries import fit_power_law
 
-__all__ = ["LocalSlopes", "local_slopes", "UnsaturatedExponent", "unsaturated_exponent", "saturation_level"]
+__all__ = ["LocalSlopes", "local_slopes", "UnsaturatedExponent", "unsaturated_exponent", "saturation_level",
+           "convergence_order"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,3 +106,33 @@ def unsaturated_exponent(eps, f, n, *, f_sat: float, max_fraction: float = 0.1,
     a_s, a_se = (float(sl.slope[k]), float(sl.stderr[k])) if k >= 0 else (math.nan, math.nan)
     se = fit.slope_stderr if math.isfinite(fit.slope_stderr) else math.nan
     return UnsaturatedExponent(float(fit.slope), float(se), float(eps_c), float(f_sat), used, a_s, a_se, sl)
+
+
+def convergence_order(dts, errs) -> float:
+    """Slope of log(err) against log(dt) where the error converges.
+
+    Uses the longest run of consecutive points (from the finest step up)
+    whose error decreases with dt and stays above 1e-13 cm and below 0.5 cm
+    (beyond that the first impact is no longer resolved).  NaN with fewer
+    than 2 such points.
+    """
+    d = np.asarray(dts, float)
+    e = np.asarray(errs, float)
+    order = np.argsort(d)
+    d, e = d[order], e[order]
+    good = np.isfinite(e) & (e > 1e-13) & (e < 0.5)
+    idx = [i for i in range(len(d)) if good[i]]
+    if len(idx) < 2:
+        return float("nan")
+    run = [idx[0]]
+    for i in idx[1:]:
+        if i == run[-1] + 1 and e[i] > e[run[-1]]:
+            run.append(i)
+        elif len(run) < 2:
+            run = [i]
+        else:
+            break
+    if len(run) < 2:
+        return float("nan")
+    slope, _ = np.polyfit(np.log(d[run]), np.log(e[run]), 1)
+    return float(slope)

@@ -10,7 +10,11 @@ the border spends a time ``~ -ln(d) / lambda`` near the edge:
 :func:`bisect_boundary` locates a border along a segment, :func:`settle_profile`
 samples the settle time at distances from it, and :func:`fit_settle_divergence`
 fits the law. :func:`edge_balance_rate` gives the rate predicted for a
-uniform cube rocking on an edge.
+uniform cube rocking on an edge (:func:`free_pivot_rate` on a frictionless floor).
+:func:`fit_border` does all three for one border between two points (found by
+:func:`border_pairs` on a map), :func:`divergence_summary` and
+:func:`divergence_lambdas` summarise the λ of many borders, and
+:func:`settle_stats` the settle times of a whole map.
 """
 
 from __future__ import annotations
@@ -30,6 +34,13 @@ __all__ = [
     "fit_settle_divergence",
     "settle_profile",
     "edge_balance_rate",
+    "free_pivot_rate",
+    "border_pairs",
+    "fit_border",
+    "divergence_summary",
+    "divergence_lambdas",
+    "refit_halves",
+    "settle_stats",
 ]
 
 
@@ -315,3 +326,126 @@ def edge_balance_rate(
     r = s / math.sqrt(2.0)
     i_edge = (float(inertia_factor) + 0.5) * s * s  # per unit mass
     return math.sqrt(float(g) * r / i_edge)
+
+
+def free_pivot_rate(half_side_cm: float = 1.0, g: float = 980.0) -> float:
+    """Edge-balance rate with a frictionless floor: only the CM height couples, I_cm = m s²/6.
+
+    At small tilt φ the CM moves vertically only (no horizontal force), so the kinetic energy is
+    ½ I_cm φ'² (+ O(φ²)), and λ² = m g r / I_cm with r = s/√2.
+    """
+    s = 2.0 * half_side_cm
+    return math.sqrt(g * (s / math.sqrt(2.0)) / (s * s / 6.0))
+
+
+def border_pairs(s, n_borders: int, rng: np.random.Generator) -> list:
+    """Up to ``n_borders`` random face-neighbour pairs of the map ``s`` (a WindowSample) whose outcomes differ,
+    both settled: ((x, y), (x', y')) each."""
+    g = s.labels
+    ax, ay = s.axes
+    pairs = []
+    for off in ((1, 0), (0, 1)):
+        a = g[: g.shape[0] - off[0], : g.shape[1] - off[1]]
+        b = g[off[0]:, off[1]:]
+        ii, jj = np.nonzero((a != b) & (a > 0) & (b > 0))
+        for i, j in zip(ii, jj):
+            pairs.append(((ax[i], ay[j]), (ax[i + off[0]], ay[j + off[1]])))
+    pick = rng.choice(len(pairs), size=min(n_borders, len(pairs)), replace=False)
+    return [pairs[q] for q in pick]
+
+
+def fit_border(classify, settle, pa, pb, dists) -> tuple[dict, object]:
+    """Bisect one border between ``pa`` and ``pb`` (``classify``), sample the settle time at distances ``dists`` on
+    both sides (``settle``) and fit T ≈ T0 − ln(d)/λ on each side with six points or more: (numbers, the profile)."""
+    br = bisect_boundary(classify, pa, pb, tol=1e-12)
+    prof = settle_profile(settle, br, dists)
+    out = {"p_lo": br.p_lo, "p_hi": br.p_hi, "width": br.width, "label_lo": br.label_lo, "label_hi": br.label_hi,
+           "n_evals": br.n_evals}
+    for side, lab in (("lo", br.label_lo), ("hi", br.label_hi)):
+        p = prof[prof.side == side]
+        ok = (p.label == lab).to_numpy()
+        out[f"{side}_n_ok"] = int(ok.sum())
+        if ok.sum() >= 6:
+            f = fit_settle_divergence(p.d[ok], p.t_settle_s[ok])
+            out[side] = {"lambda": f.lambda_per_s, "lambda_stderr": f.lambda_stderr, "t0": f.t0_s, "r": f.rvalue}
+        else:
+            out[side] = None
+    out["t_range_s"] = [float(prof.t_settle_s.min()), float(prof.t_settle_s.max())]
+    return out, prof
+
+
+def divergence_summary(fits: list[dict]) -> dict:
+    """λ over the sides of :func:`fit_border` results: median with quartiles and a bootstrap stderr (seeded), and the
+    mean ± stderr, min and max of the clean fits (r < −0.995); ``all`` and ``r`` hold every side's λ and r."""
+    lam = np.array([f[side]["lambda"] for f in fits for side in ("lo", "hi") if f.get(side)])
+    r = np.array([f[side]["r"] for f in fits for side in ("lo", "hi") if f.get(side)])
+    clean = lam[r < -0.995]
+    out = {"n_fits": int(len(lam)), "n_clean": int(len(clean))}
+    if len(lam):
+        out.update(median=float(np.median(lam)), q25=float(np.quantile(lam, 0.25)),
+                   q75=float(np.quantile(lam, 0.75)))
+        # bootstrap stderr of the median
+        rng = np.random.default_rng(0)
+        bs = [np.median(lam[rng.integers(0, len(lam), len(lam))]) for _ in range(500)]
+        out["median_stderr"] = float(np.std(bs, ddof=1)) if len(lam) > 1 else None
+    if len(clean):
+        out.update(clean_mean=float(clean.mean()),
+                   clean_stderr=float(clean.std(ddof=1) / math.sqrt(len(clean))) if len(clean) > 1 else None,
+                   clean_min=float(clean.min()), clean_max=float(clean.max()))
+    out["all"] = lam
+    out["r"] = r
+    return out
+
+
+def settle_stats(s) -> dict:
+    """Settle-time statistics of a map ``s`` (``labels``, ``t_settle_s``): quantiles, border against interior, and
+    the escape rate κ."""
+    from .boundaries import boundary_mask
+    from .escape import escape_rate
+
+    t, g = s.t_settle_s, s.labels
+    ok = g > 0
+    tt = t[ok]
+    border = boundary_mask(g) & ok
+    inner = ~boundary_mask(g) & ok
+    out = {
+        "n_settled": int(ok.sum()), "n_unsettled": int((g == -1).sum()),
+        "mean": float(tt.mean()), "mean_stderr": float(tt.std(ddof=1) / math.sqrt(len(tt))) if len(tt) > 1 else None,
+        "median": float(np.median(tt)), "q90": float(np.quantile(tt, 0.9)), "max": float(tt.max()),
+        "border_mean": float(t[border].mean()) if border.any() else None,
+        "interior_mean": float(t[inner].mean()) if inner.any() else None,
+    }
+    try:
+        k = escape_rate(tt, min_tail=10, censored_at=float(np.max(t)) if (g == -1).any() else None)
+        out.update(kappa=k.kappa, kappa_stderr=k.stderr, kappa_t0=k.t0, kappa_t1=k.t1)
+    except ValueError as e:
+        out.update(kappa=None, kappa_stderr=None, kappa_error=str(e))
+    return out
+
+
+def divergence_lambdas(fits: list[dict]) -> dict:
+    """:func:`divergence_summary` of :func:`fit_border` results with every side's λ as ``lambdas`` (no ``all``,
+    ``r``), the number of borders and, with any λ, their mean ± stderr."""
+    out = divergence_summary(fits)
+    lam = np.asarray(out.pop("all"), dtype=float)
+    out.pop("r")
+    out["n_borders"] = len(fits)
+    out["lambdas"] = lam
+    if len(lam):
+        out["mean"] = float(lam.mean())
+        out["mean_stderr"] = float(lam.std(ddof=1) / math.sqrt(len(lam))) if len(lam) > 1 else None
+    return out
+
+
+def refit_halves(prof, lab_by_side) -> tuple[list, list]:
+    """λ refitted on the near and the far half (in log distance) of each side of a :func:`settle_profile`, sides
+    whose points carry their label in ``lab_by_side``; halves with four points or more: (near λs, far λs)."""
+    near, far = [], []
+    split = math.sqrt(prof.d.min() * prof.d.max())
+    for side, lab in lab_by_side.items():
+        p = prof[(prof.side == side) & (prof.label == lab)]
+        for sel, acc in ((p.d <= split, near), (p.d > split, far)):
+            q = p[sel]
+            if len(q) >= 4:
+                acc.append(fit_settle_divergence(q.d, q.t_settle_s).lambda_per_s)
+    return near, far

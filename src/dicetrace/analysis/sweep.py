@@ -4,6 +4,7 @@ The writeup found that a higher damping coefficient gives a "less chaotic"
 initial-condition space. :func:`chaos_sweep` makes that a table: for each
 parameter value's label grid it computes the boundary fraction, the
 uncertainty exponent, and the basin entropies, with error bars.
+:func:`map_measures` is the fuller set of one map (study b's table).
 """
 
 from __future__ import annotations
@@ -17,12 +18,14 @@ import pandas as pd
 from ._grid import as_label_grid
 from .boundaries import (
     basin_entropy,
+    boundary_dimension,
     boundary_mask,
     uncertainty_exponent,
     uncertainty_exponent_perturbation,
+    uncertainty_exponent_resolution,
 )
 
-__all__ = ["chaos_measures", "chaos_sweep"]
+__all__ = ["chaos_measures", "chaos_sweep", "map_measures"]
 
 
 def _blocks(arr: np.ndarray, n_blocks: int) -> list[np.ndarray]:
@@ -184,3 +187,64 @@ def chaos_sweep(
     except TypeError:
         pass
     return out
+
+
+def map_measures(w, s, classify, rng: np.random.Generator, *, perturb: bool, wada_grid: bool = True,
+                 wada_levels: int = 12, wada_segments: int = 300, n_points: int = 4000,
+                 eps_rel=np.logspace(-8, -2, 7), log: Callable[[str], None] | None = None) -> dict:
+    """The measures of the map ``s`` of window ``w`` (study b's table: :func:`chaos_measures`, the box-counting
+    dimension of its border, α from coarser grids, the Wada merge test), a sample with ``labels``, ``spacing``,
+    ``window`` (ranges) and ``extent``.
+
+    ``perturb``: also those that call ``classify`` — α by perturbation at ``n_points`` random points and ε =
+    ``eps_rel`` × the window's width and, with ``wada_grid``, the Wada refinement (``wada_levels`` levels, at most
+    ``wada_segments`` segments).  ``rng`` draws everything random, in that order; ``log`` hears of a perturbation
+    fit that failed (fewer than two ε with a nonzero fraction: α is NaN then).
+    """
+    from .wada import wada_grid_test, wada_merge_test
+
+    g = s.labels
+    h = s.spacing[0]
+    W = s.window[0][1] - s.window[0][0]
+    row: dict = {"window": w, "ranges": s.window, "res": g.shape[0], "spacing": h}
+    row.update(chaos_measures(g, spacing=h, n_blocks=4, n_boot=200, rng=rng))
+    bd = boundary_dimension(g, method="mask")
+    row["dim_mask"], row["dim_mask_stderr"] = bd.dimension, bd.stderr
+    if (g.shape[0] - 1) % 4 == 0 and g.shape[0] >= 41:
+        ur = uncertainty_exponent_resolution([g, g[::2, ::2], g[::4, ::4]], [h, 2 * h, 4 * h])
+        row["alpha_res"], row["alpha_res_f"] = ur.alpha, ur.f
+    labs = sorted(set(np.unique(g).tolist()) - {-1, 0})
+    row["n_outcomes"] = len(labs)
+    if len(labs) >= 3:
+        wm = wada_merge_test(g, r_max=5, tol=0.01, exclude=(-1, 0))
+        row["wada_merge_r"] = wm.r_wada
+        row["wada_merge_far_r5"] = float(wm.far_fraction[-1])
+        row["wada_merge_far_r1"] = float(wm.far_fraction[min(1, len(wm.far_fraction) - 1)])
+        if perturb and wada_grid:
+            wg = wada_grid_test(classify, g, s.extent, max_level=wada_levels, max_segments=wada_segments,
+                                exclude=(-1, 0), rng=rng)
+            row["wada_grid_G"] = float(wg.wada_fraction[-1])
+            row["wada_grid_G_curve"] = wg.wada_fraction
+            row["wada_grid_segments"] = wg.n_segments
+            row["wada_grid_levels"] = int(wg.levels[-1])
+            row["wada_grid_evals"] = wg.n_evals
+            row["wada_grid_wada"] = wg.wada
+    if perturb:
+        npts = n_points
+        rel = np.asarray(eps_rel, dtype=float)
+        eps = W * rel
+        lo = np.array([r[0] for r in s.window])
+        hi = np.array([r[1] for r in s.window])
+        pts = lo + rng.random((npts, 2)) * (hi - lo)
+        try:
+            up = uncertainty_exponent_perturbation(classify, pts, eps, rng)
+            row["alpha_pert"], row["alpha_pert_stderr"] = up.alpha, up.alpha_stderr
+            row["pert_f"] = up.f
+        except ValueError as e:  # fewer than two eps with a nonzero fraction
+            if log is not None:
+                log(f"{w}: no perturbation fit ({e})")
+            row["alpha_pert"], row["alpha_pert_stderr"] = math.nan, math.nan
+            row["pert_f"] = np.full(len(eps), math.nan)
+        row["pert_eps"], row["pert_n"] = eps, npts
+        row["pert_eps_rel"] = rel
+    return row

@@ -25,7 +25,7 @@ from .grouping import UNSETTLED_LABEL
 from .simulator import BATCH_POINTS, _resolve_config, _run, resolve_slice, resolve_window, window_points
 
 __all__ = ["DIVERGENCE_TIME_SCALE_S", "throw_divergence", "throw_lyapunov", "FTLEMap", "ftle_on_slice",
-           "MapCertificate", "certify_map"]
+           "MapCertificate", "certify_map", "converged_verdict"]
 
 #: Time scale (s) that turns velocities into lengths in the state distance of :func:`throw_divergence`.
 DIVERGENCE_TIME_SCALE_S = 0.01
@@ -232,3 +232,11 @@ def certify_map(window, res, slice_spec="seed", *, config: Config | None = None,
     a_tight, a_floor = agreement(base, fine), agreement(base, near)
     converged = a_tight.ci[1] >= a_floor.ci[0]
     return MapCertificate(a_tight, a_floor, bool(converged), base.reshape(shape), tight)
+
+
+def converged_verdict(cert) -> bool:
+    """Converged: the certificate is not below the chaos floor (:func:`certify_map`'s rule) and its agreement
+    beats chance (Cohen's κ more than 3 standard errors above 0; where the floor itself is at chance, a map at
+    chance would otherwise pass)."""
+    t = cert.tightened
+    return bool(cert.converged and t.kappa - 3 * t.kappa_stderr > 0)

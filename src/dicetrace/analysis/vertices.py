@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 from scipy import ndimage
 
-__all__ = ["find_vertices"]
+__all__ = ["find_vertices", "guarded_find_vertices", "triple_boxes"]
 
 _COLUMNS = ["root", "status", "x", "y", "size_x", "size_y", "depth", "labels", "n_squares"]
 
@@ -257,3 +257,47 @@ def find_vertices(
     out = out.sort_values(["root", "x", "y"]).reset_index(drop=True)
     out.attrs["n_evals"] = n_evals
     return out
+
+
+class _GuardedNumpy:
+    """numpy, except that ``zeros`` refuses arrays above ``limit`` elements (raises MemoryError).
+
+    :func:`find_vertices` draws the squares of each root on a dense boolean image spanning their bounding
+    box at the current level; when a root's squares are spread out at a deep level that image needs
+    terabytes. This guard turns that into a reported failure instead of exhausting memory.
+    """
+
+    def __init__(self, limit: int, real=np):
+        self._limit = int(limit)
+        self._np = real
+
+    def __getattr__(self, name):
+        return getattr(self._np, name)
+
+    def zeros(self, shape, *a, **k):
+        if int(self._np.prod(shape, dtype=self._np.float64)) > self._limit:
+            raise MemoryError(f"find_vertices asked for a {shape} image")
+        return self._np.zeros(shape, *a, **k)
+
+
+def guarded_find_vertices(*a, limit: int = 50_000_000, **k) -> pd.DataFrame:
+    """:func:`find_vertices` (same arguments) refusing, with MemoryError, any image above ``limit`` elements."""
+    global np
+    real = np
+    np = _GuardedNumpy(limit, real)
+    try:
+        return find_vertices(*a, **k)
+    finally:
+        np = real
+
+
+def triple_boxes(g: np.ndarray, b: int) -> int:
+    """Number of closed b×b-interval squares of the grid holding ≥ 3 outcomes (1..6)."""
+    count = np.zeros(((g.shape[0] - 1) // b, (g.shape[1] - 1) // b), dtype=np.int64)
+    for lab in range(1, 7):
+        ind = g == lab
+        if not ind.any():
+            continue
+        win = np.lib.stride_tricks.sliding_window_view(ind, (b + 1, b + 1))[::b, ::b]
+        count += win[: count.shape[0], : count.shape[1]].any(axis=(2, 3))
+    return int((count >= 3).sum())

@@ -142,7 +142,7 @@ def register(app: typer.Typer) -> None:
                                          "OUT/results/*.json (no simulation)."),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="Integrator studies: no progress lines."),
     ) -> None:
-        from dicetrace.studies.context import DEFAULT_SEED, Options
+        from dicetrace.studies.context import DEFAULT_SEED
 
         # every option is checked before anything touches the disk or computes
         given = {"--quick": quick, "--out": out is not None, "--res": res is not None, "--seed": seed is not None,

@@ -49,6 +49,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from dicetrace.analysis.agreement import compare_presets, settled_agreement
+from dicetrace.analysis.scaling import convergence_order
 from dicetrace.ics import SEED_SLICE, Sample
 from dicetrace.params import INTEGRATORS, Config, convert_l, get_preset, make_config, unknown_integrator
 from dicetrace.status import Status
@@ -239,8 +241,8 @@ def own_floor(ics_preset: np.ndarray, cfg: Config, seed: int, *, rel: float = FL
 
 
 def agreement(a: Runs, ref: Runs) -> float:
-    """Fraction of ICs with the reference's outcome (unsettled runs disagree)."""
-    return float(np.mean(a.settled & ref.settled & (a.outcome == ref.outcome)))
+    """Fraction of ICs with the reference's outcome (unsettled runs disagree): :func:`settled_agreement`."""
+    return settled_agreement(a.outcome, a.settled, ref.outcome, ref.settled)
 
 
 def first_impact_horizon(t_first_contact_s: float) -> float:
@@ -274,36 +276,6 @@ def run_trajectory(ic_preset: np.ndarray, cfg: Config, horizon_s: float) -> Traj
     if r.status is Status.TIME_CAP and r.steps == c.numerics.max_steps:
         pos = tr.node_pos[-1].copy()
     return Trajectory(pos, float(drift))
-
-
-def fit_order(dts, errs) -> float:
-    """Slope of log(err) against log(dt) where the error converges.
-
-    Uses the longest run of consecutive points (from the finest step up)
-    whose error decreases with dt and stays above 1e-13 cm and below 0.5 cm
-    (beyond that the first impact is no longer resolved).  NaN with fewer
-    than 2 such points.
-    """
-    d = np.asarray(dts, float)
-    e = np.asarray(errs, float)
-    order = np.argsort(d)
-    d, e = d[order], e[order]
-    good = np.isfinite(e) & (e > 1e-13) & (e < 0.5)
-    idx = [i for i in range(len(d)) if good[i]]
-    if len(idx) < 2:
-        return float("nan")
-    run = [idx[0]]
-    for i in idx[1:]:
-        if i == run[-1] + 1 and e[i] > e[run[-1]]:
-            run.append(i)
-        elif len(run) < 2:
-            run = [i]
-        else:
-            break
-    if len(run) < 2:
-        return float("nan")
-    slope, _ = np.polyfit(np.log(d[run]), np.log(e[run]), 1)
-    return float(slope)
 
 
 # -- the study -------------------------------------------------------------------------------
@@ -486,30 +458,13 @@ def study(
                 "integrator": integ,
                 "declared_order": INTEGRATORS[integ].order,
                 # error-controlled runs: the exponent of the error against tol at one dt
-                "fitted_order_first_impact": fit_order([x for x, _ in errs], [e for _, e in errs])
+                "fitted_order_first_impact": convergence_order([x for x, _ in errs], [e for _, e in errs])
                 if len(errs) >= 2 else float("nan"),
                 "against": "tol" if against_tol else "dt",
             })
     notes = [] if window in WINDOWS else [f"window given as coordinates: {window}"]
     comparison = compare_presets(ref_runs["seed"], ref_runs["physical"]) if {"seed", "physical"} <= set(ref_runs) else {}
     return StudyResult(rows, orders, references, window, n, seed, quick, seed_cost, notes, comparison)
-
-
-def compare_presets(seed: Runs, phys: Runs) -> dict:
-    """Outcomes and settle times of the two presets' references on the same throws."""
-    both = seed.settled & phys.settled
-    nan = float("nan")
-    return {
-        "same_outcome": float(np.mean(both & (seed.outcome == phys.outcome))),
-        "outcome_counts_seed": {int(f): int(np.sum(seed.outcome == f)) for f in range(0, 7)},
-        "outcome_counts_physical": {int(f): int(np.sum(phys.outcome == f)) for f in range(0, 7)},
-        "mean_settle_time_seed_s": float(np.mean(seed.t_settle_s[both])) if both.any() else nan,
-        "mean_settle_time_physical_s": float(np.mean(phys.t_settle_s[both])) if both.any() else nan,
-        "median_settle_time_ratio": float(np.median(phys.t_settle_s[both] / seed.t_settle_s[both])) if both.any() else nan,
-        "mean_contact_changes_seed": float(np.mean(seed.n_changes[both])) if both.any() else nan,
-        "mean_contact_changes_physical": float(np.mean(phys.n_changes[both])) if both.any() else nan,
-        "mean_first_contact_s": _mean(seed.t_first_contact_s[np.isfinite(seed.t_first_contact_s)]),
-    }
 
 
 def _mean(x) -> float:

@@ -11,43 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis.cells import block_fraction_stderr, cell_stats
 from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table
 
 NAME = "cells"
 WINDOWS = ("home", "zoom-out", "more-out", "most-out")
-
-
-def block_fraction_stderr(grid: np.ndarray, label: int, n_blocks: int = 4) -> float:
-    """Stderr of a basin fraction from its spread over n_blocks² sub-grids."""
-    nx, ny = grid.shape
-    ex = np.linspace(0, nx, n_blocks + 1).astype(int)
-    ey = np.linspace(0, ny, n_blocks + 1).astype(int)
-    vals = [np.mean(grid[ex[a]:ex[a + 1], ey[b]:ey[b + 1]] == label) for a in range(n_blocks) for b in range(n_blocks)]
-    return float(np.std(vals, ddof=1) / np.sqrt(len(vals)))
-
-
-def cell_stats(grid: np.ndarray) -> dict:
-    from dicetrace.analysis import cells_table
-
-    t = cells_table(grid, connectivity="face")
-    sizes = t["size"].to_numpy()
-    n = grid.size
-    return {
-        "n_cells": int(len(t)),
-        "n_nodes": int(n),
-        "cells_per_1000_nodes": 1000.0 * len(t) / n,
-        "n_singletons": int((sizes == 1).sum()),
-        "frac_nodes_in_singletons": float(sizes[sizes == 1].sum() / n),
-        "n_cells_ge_10": int((sizes >= 10).sum()),
-        "n_cells_ge_100": int((sizes >= 100).sum()),
-        "largest_cell_frac": float(sizes.max() / n),
-        "largest_cell_label": int(t.loc[t["size"].idxmax(), "label"]),
-        "median_size": float(np.median(sizes)),
-        "mean_size": float(sizes.mean()),
-        "frac_nodes_in_edge_cells": float(sizes[t["touches_edge"].to_numpy()].sum() / n),
-        "sizes": sizes,
-    }
 
 
 def compute(ctx: Context) -> Computed:

@@ -28,9 +28,11 @@ counts against the discrete ones), boundary fraction, α by boxes, by grid
 resolution and by random-pair perturbation, the boundary's dimension, the
 basin entropies Sb and Sbb, the Wada merge test, settle-time statistics and
 the escape rate κ, and the repetition measures (outcome autocorrelation,
-texture period vectors) — with the functions the other studies use
-(:func:`dicetrace.studies.study_fractal.measures`,
-:func:`dicetrace.studies.study_cells.cell_stats`, the repetition helpers).
+texture period vectors) — with the measures the other studies use
+(:func:`dicetrace.analysis.sweep.map_measures`,
+:func:`dicetrace.analysis.cells.cell_stats`,
+:func:`dicetrace.analysis.repetition.repetition_stats`,
+:func:`dicetrace.analysis.settle.settle_stats`, :func:`dicetrace.analysis.agreement.face_stats`).
 
 Which measures change between models is judged in
 :mod:`dicetrace.studies.study_converged_changes`; the tables, answers and figures
@@ -87,35 +89,11 @@ def model_config(opts: dict):
     return make_config(kw.pop("preset"), **kw)
 
 
-def settle_stats(s) -> dict:
-    """Settle-time statistics of a map: quantiles, border against interior, and the escape rate κ."""
-    from dicetrace.analysis import boundary_mask, escape_rate
-
-    t, g = s.t_settle_s, s.labels
-    ok = g > 0
-    tt = t[ok]
-    border = boundary_mask(g) & ok
-    inner = ~boundary_mask(g) & ok
-    out = {
-        "n_settled": int(ok.sum()), "n_unsettled": int((g == -1).sum()),
-        "mean": float(tt.mean()), "mean_stderr": float(tt.std(ddof=1) / math.sqrt(len(tt))) if len(tt) > 1 else None,
-        "median": float(np.median(tt)), "q90": float(np.quantile(tt, 0.9)), "max": float(tt.max()),
-        "border_mean": float(t[border].mean()) if border.any() else None,
-        "interior_mean": float(t[inner].mean()) if inner.any() else None,
-    }
-    try:
-        k = escape_rate(tt, min_tail=10, censored_at=float(np.max(t)) if (g == -1).any() else None)
-        out.update(kappa=k.kappa, kappa_stderr=k.stderr, kappa_t0=k.t0, kappa_t1=k.t1)
-    except ValueError as e:
-        out.update(kappa=None, kappa_stderr=None, kappa_error=str(e))
-    return out
-
-
 def settle_divergence(ctx: Context, s, cfg) -> dict:
     """Section g's settle-time divergence T ≈ T0 − ln(d)/λ at borders of this map: λ over all fitted sides
     (mean ± se, median ± bootstrap se) and over the clean fits (r < −0.995)."""
+    from dicetrace.analysis.settle import border_pairs, divergence_lambdas, fit_border
     from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
-    from dicetrace.studies.study_settle import border_pairs, fit_border, summarise
 
     classify, settle = classify_on_slice("seed", config=cfg), settle_on_slice("seed", config=cfg)
     dists = np.logspace(-11, -4, ctx.pick(22, 8))
@@ -124,62 +102,18 @@ def settle_divergence(ctx: Context, s, cfg) -> dict:
         f, _ = fit_border(classify, settle, np.array(pa), np.array(pb), dists)
         fits.append(f)
     ctx.n_throws += classify.n_evals + settle.n_evals
-    out = summarise(fits)
-    lam = np.asarray(out.pop("all"), dtype=float)
-    out.pop("r")
-    out["n_borders"] = len(fits)
-    out["lambdas"] = lam
-    if len(lam):
-        out["mean"] = float(lam.mean())
-        out["mean_stderr"] = float(lam.std(ddof=1) / math.sqrt(len(lam))) if len(lam) > 1 else None
-    return out
-
-
-def repetition_stats(s) -> dict:
-    """The repetition measures of section c on one map: outcome autocorrelation and texture periods."""
-    from dicetrace.analysis import find_periods, label_autocorrelation
-    from dicetrace.studies.study_repetition import off_centre_max, periods_rows, stripe_spacing, texture_labels
-
-    g, h = s.labels, s.spacing
-    res = g.shape[0]
-    tex = texture_labels(g, max(1.0, 0.015 * (res - 1)))
-    rows_tex = periods_rows(find_periods(tex, spacing=h, min_strength=0.1), "", "texture")
-    rows_out = periods_rows(find_periods(g, spacing=h, min_strength=0.3), "", "outcome")
-    return {
-        "outcome_offcentre_max_corr": off_centre_max(label_autocorrelation(g), int(0.05 * res)),
-        "n_outcome_periods": len(rows_out),
-        "outcome_periods": [{k: r[k] for k in ("dx", "dy", "length", "strength")} for r in rows_out],
-        "texture_offcentre_max_corr": off_centre_max(label_autocorrelation(tex), int(0.05 * res)),
-        "texture_periods": [{k: r[k] for k in ("dx", "dy", "length", "strength")} for r in rows_tex],
-        "texture_stripe_spacing": stripe_spacing(rows_tex),
-    }
-
-
-def face_stats(g: np.ndarray, ref: np.ndarray | None) -> dict:
-    """Face fractions with block errors (as section a), and a χ² test of the face counts against ``ref``'s."""
-    from scipy.stats import chi2_contingency
-
-    from dicetrace.analysis import basins_fractions_table
-    from dicetrace.studies.study_cells import block_fraction_stderr
-
-    fr = {str(int(r.label)): {"fraction": float(r.fraction), "count": int(r.count),
-                         "block_stderr": block_fraction_stderr(g, int(r.label))}
-          for r in basins_fractions_table(g).itertuples() if r.label > 0}
-    out = {"fractions": fr}
-    if ref is not None:
-        counts = np.array([[int((x == k).sum()) for k in range(1, 7)] for x in (g, ref)])
-        counts = counts[:, counts.sum(axis=0) > 0]
-        chi2, p, dof, _ = chi2_contingency(counts)
-        out.update(chi2_vs_discrete=float(chi2), chi2_dof=int(dof), chi2_p_vs_discrete=float(p))
-    return out
+    return divergence_lambdas(fits)
 
 
 def measure_map(ctx: Context, window: str, model: str, opts: dict, res: int, ref=None) -> tuple[dict, object]:
     """Every map measure of one window and model, and its certificate: (numbers, the sample)."""
     from dicetrace.analysis import agreement
+    from dicetrace.analysis.agreement import face_stats
+    from dicetrace.analysis.cells import cell_stats
+    from dicetrace.analysis.repetition import repetition_stats
+    from dicetrace.analysis.settle import settle_stats
     from dicetrace.analysis.simulator import classify_on_slice
-    from dicetrace.analysis.transient import certify_map
-    from dicetrace.studies.study_cells import cell_stats
+    from dicetrace.analysis.transient import certify_map, converged_verdict
     from dicetrace.studies.study_fractal import measures
 
     cfg = model_config(opts)
@@ -208,14 +142,6 @@ def measure_map(ctx: Context, window: str, model: str, opts: dict, res: int, ref
             f"{verdict_text(row)}), {cs['n_cells']} cells, "
             f"α pert {row.get('alpha_pert', math.nan):.3f}, Sbb {row['Sbb']:.3f}")
     return row, s
-
-
-def converged_verdict(cert) -> bool:
-    """Converged: the certificate is not below the chaos floor (:func:`certify_map`'s rule) and its agreement
-    beats chance (Cohen's κ more than 3 standard errors above 0; where the floor itself is at chance, a map at
-    chance would otherwise pass)."""
-    t = cert.tightened
-    return bool(cert.converged and t.kappa - 3 * t.kappa_stderr > 0)
 
 
 def _agreement_dict(a) -> dict:
@@ -292,6 +218,7 @@ def rerender(out, options: Options = Options()) -> Path:
     """
     import json
 
+    from dicetrace.analysis.repetition import repetition_stats
     from dicetrace.studies.context import write_json
 
     out = Path(out)

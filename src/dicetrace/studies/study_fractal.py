@@ -31,61 +31,12 @@ EXTRA = ("red-sea-3", "red-sea-4", "party-2", "party-3")
 
 
 def measures(ctx: Context, w, s, classify, *, perturb: bool, wada_grid: bool = True) -> dict:
-    """The measures of one window's map (section b's table); ``perturb``: also those that call ``classify``
-    (α by perturbation and, with ``wada_grid``, the Wada refinement)."""
-    from dicetrace.analysis import (
-        boundary_dimension,
-        chaos_measures,
-        uncertainty_exponent_perturbation,
-        uncertainty_exponent_resolution,
-        wada_grid_test,
-        wada_merge_test,
-    )
+    """:func:`~dicetrace.analysis.sweep.map_measures` of one window's map at this run's sizes."""
+    from dicetrace.analysis.sweep import map_measures
 
-    g = s.labels
-    h = s.spacing[0]
-    W = s.window[0][1] - s.window[0][0]
-    row: dict = {"window": w, "ranges": s.window, "res": g.shape[0], "spacing": h}
-    row.update(chaos_measures(g, spacing=h, n_blocks=4, n_boot=200, rng=ctx.rng))
-    bd = boundary_dimension(g, method="mask")
-    row["dim_mask"], row["dim_mask_stderr"] = bd.dimension, bd.stderr
-    if (g.shape[0] - 1) % 4 == 0 and g.shape[0] >= 41:
-        ur = uncertainty_exponent_resolution([g, g[::2, ::2], g[::4, ::4]], [h, 2 * h, 4 * h])
-        row["alpha_res"], row["alpha_res_f"] = ur.alpha, ur.f
-    labs = sorted(set(np.unique(g).tolist()) - {-1, 0})
-    row["n_outcomes"] = len(labs)
-    if len(labs) >= 3:
-        wm = wada_merge_test(g, r_max=5, tol=0.01, exclude=(-1, 0))
-        row["wada_merge_r"] = wm.r_wada
-        row["wada_merge_far_r5"] = float(wm.far_fraction[-1])
-        row["wada_merge_far_r1"] = float(wm.far_fraction[min(1, len(wm.far_fraction) - 1)])
-        if perturb and wada_grid:
-            wg = wada_grid_test(classify, g, s.extent, max_level=ctx.pick(12, 4), max_segments=ctx.pick(300, 20),
-                                exclude=(-1, 0), rng=ctx.rng)
-            row["wada_grid_G"] = float(wg.wada_fraction[-1])
-            row["wada_grid_G_curve"] = wg.wada_fraction
-            row["wada_grid_segments"] = wg.n_segments
-            row["wada_grid_levels"] = int(wg.levels[-1])
-            row["wada_grid_evals"] = wg.n_evals
-            row["wada_grid_wada"] = wg.wada
-    if perturb:
-        npts = ctx.pick(4000, 200)
-        rel = np.logspace(-8, -2, 7) if not ctx.quick else np.logspace(-4, -1, 4)
-        eps = W * rel
-        lo = np.array([r[0] for r in s.window])
-        hi = np.array([r[1] for r in s.window])
-        pts = lo + ctx.rng.random((npts, 2)) * (hi - lo)
-        try:
-            up = uncertainty_exponent_perturbation(classify, pts, eps, ctx.rng)
-            row["alpha_pert"], row["alpha_pert_stderr"] = up.alpha, up.alpha_stderr
-            row["pert_f"] = up.f
-        except ValueError as e:  # fewer than two eps with a nonzero fraction
-            ctx.log(f"{w}: no perturbation fit ({e})")
-            row["alpha_pert"], row["alpha_pert_stderr"] = math.nan, math.nan
-            row["pert_f"] = np.full(len(eps), math.nan)
-        row["pert_eps"], row["pert_n"] = eps, npts
-        row["pert_eps_rel"] = rel
-    return row
+    return map_measures(w, s, classify, ctx.rng, perturb=perturb, wada_grid=wada_grid,
+                        wada_levels=ctx.pick(12, 4), wada_segments=ctx.pick(300, 20), n_points=ctx.pick(4000, 200),
+                        eps_rel=np.logspace(-8, -2, 7) if not ctx.quick else np.logspace(-4, -1, 4), log=ctx.log)
 
 
 def compute(ctx: Context) -> Computed:

@@ -78,35 +78,23 @@ def _uniform(ctx: Context, window, n: int) -> np.ndarray:
 # --------------------------------------------------------------------------- 1. vertices
 
 
-def _junction_row(name: str, grid, **extra) -> dict:
-    from dicetrace.analysis.junctions import junction_box_counts, junction_dimension
-
-    c = junction_box_counts(grid)
-    dm = junction_dimension(c.box_sizes, c.meet3)
-    da = junction_dimension(c.box_sizes, c.any3)
-    return {"map": name, **extra, "res": int(grid.shape[0]), "box_sizes": c.box_sizes, "any3": c.any3,
-            "meet3": c.meet3, "dim_meet3": dm.dimension, "dim_meet3_stderr": dm.stderr, "clamped": dm.clamped,
-            "scales_used": dm.n_scales, "dim_any3": da.dimension, "dim_any3_stderr": da.stderr,
-            "n_vertex_boxes_smallest": int(len(c.centres_meet3))}
-
-
 def vertices(ctx: Context) -> tuple[dict, dict]:
-    from dicetrace.analysis.junctions import strip_map, three_sector_map
+    from dicetrace.analysis.junctions import junction_row, strip_map, three_sector_map
 
     res_c = ctx.pick(513, 129)
-    controls = [_junction_row("three sectors (one triple point)", three_sector_map(res_c)),
-                _junction_row("strip (three outcomes, no vertex)", strip_map(res_c))]
+    controls = [junction_row("three sectors (one triple point)", three_sector_map(res_c)),
+                junction_row("strip (three outcomes, no vertex)", strip_map(res_c))]
     rows, maps = [], {}
     res = ctx.res(513, 65)
     for w in CHAIN:
         s = ctx.sample(w, res)
-        rows.append(_junction_row(w, s.labels, model="discrete"))
+        rows.append(junction_row(w, s.labels, model="discrete"))
         maps[("discrete", w)] = s
     res_conv = ctx.pick(257, 33)
     cfg = config("converged")
     for w in CHAIN_CONVERGED:
         s = ctx.sample(w, res_conv, integrator=cfg.numerics.integrator, tol=cfg.numerics.tol)
-        rows.append(_junction_row(w, s.labels, model="converged"))
+        rows.append(junction_row(w, s.labels, model="converged"))
         maps[("converged", w)] = s
     ctx.log("vertices: " + ", ".join(f"{r['model']} {r['map']} D={r['dim_meet3']:.2f}" for r in rows))
     return {"controls": controls, "rows": rows, "res": res, "res_converged": res_conv}, maps
@@ -232,25 +220,12 @@ def alpha_small_scale_note(alpha: dict) -> str:
 # --------------------------------------------------------------------------- 4. lambda
 
 
-def _refit_halves(prof, lab_by_side) -> tuple[list, list]:
-    from dicetrace.analysis import fit_settle_divergence
-
-    near, far = [], []
-    split = math.sqrt(prof.d.min() * prof.d.max())
-    for side, lab in lab_by_side.items():
-        p = prof[(prof.side == side) & (prof.label == lab)]
-        for sel, acc in ((p.d <= split, near), (p.d > split, far)):
-            q = p[sel]
-            if len(q) >= 4:
-                acc.append(fit_settle_divergence(q.d, q.t_settle_s).lambda_per_s)
-    return near, far
-
-
 def edge_rates(ctx: Context) -> dict:
     from dicetrace.analysis import edge_balance_rate
     from dicetrace.analysis.edge import edge_jacobian_rate, edge_release_rate, pooled_rate
     from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
-    from dicetrace.studies.study_settle import borders, fit_border, free_pivot_rate
+    from dicetrace.analysis.settle import fit_border, free_pivot_rate, refit_halves
+    from dicetrace.studies.study_settle import borders
 
     out: dict = {"analytic_fixed_pivot": edge_balance_rate(), "analytic_free_pivot": free_pivot_rate()}
     releases = []
@@ -293,7 +268,7 @@ def edge_rates(ctx: Context) -> dict:
                     lam.append(f[side]["lambda"])
                 else:
                     failed += 1
-            a, b = _refit_halves(prof, {"lo": f["label_lo"], "hi": f["label_hi"]})
+            a, b = refit_halves(prof, {"lo": f["label_lo"], "hi": f["label_hi"]})
             near += a
             far += b
         row = {"n_borders": len(pairs), "n_sides_unfit": failed, "all": lam}
@@ -316,7 +291,8 @@ def one_cell(ctx: Context) -> dict:
     from dicetrace.analysis import find_periods
     from dicetrace.analysis.onecell import join_fraction, resolution_verdict, shift_overlap_test
     from dicetrace.analysis.cells import slice_cell_components
-    from dicetrace.studies.study_repetition import STACK_DEPTH, texture_labels
+    from dicetrace.analysis.repetition import texture_labels
+    from dicetrace.studies.study_repetition import STACK_DEPTH
 
     res = ctx.res(401, 61)
     s = ctx.sample("zoom-out", res)

@@ -17,10 +17,10 @@ cell. Here:
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
+from dicetrace.analysis.repetition import off_centre_max, period_overlaps, periods_rows, stripe_spacing, texture_labels
 from dicetrace.studies.context import Computed, Context, Output, window_ranges
 from dicetrace.studies.text import md_table
 
@@ -30,99 +30,18 @@ WINDOWS = ("zoom-out", "more-out")
 STACK_DEPTH = {"zoom-out": 0.25, "red-sea": 0.3}
 
 
-def texture_labels(grid: np.ndarray, sigma_nodes: float) -> np.ndarray:
-    """1 where the smoothed density of cell borders is above its median, else 0."""
-    from scipy import ndimage
-
-    from dicetrace.analysis import boundary_mask
-
-    dens = ndimage.gaussian_filter(boundary_mask(grid).astype(float), sigma_nodes)
-    return (dens > np.median(dens)).astype(np.int64)
-
-
-def off_centre_max(corr: np.ndarray, exclude_radius: int) -> float:
-    """Largest autocorrelation away from the centre (beyond ``exclude_radius``, within half the lags)."""
-    n0, n1 = (corr.shape[0] - 1) // 2, (corr.shape[1] - 1) // 2
-    i, j = np.indices(corr.shape)
-    far = (i - n0) ** 2 + (j - n1) ** 2 > exclude_radius**2
-    inner = (np.abs(i - n0) <= n0 // 2) & (np.abs(j - n1) <= n1 // 2)
-    return float(corr[far & inner].max())
-
-
-def periods_rows(df, window: str, kind: str) -> list[dict]:
-    return [{"window": window, "field": kind, "di": int(r.di), "dj": int(r.dj), "dx": float(r.dx), "dy": float(r.dy),
-             "length": float(r.length), "strength": float(r.strength)} for r in df.itertuples()]
-
-
-def stripe_spacing(rows: list[dict]) -> float | None:
-    """Distance between stripes: |v1 × v2| / |v1| for a 2-vector basis (v1 the shorter)."""
-    if len(rows) < 2:
-        return None
-    v1 = np.array([rows[0]["dx"], rows[0]["dy"]])
-    v2 = np.array([rows[1]["dx"], rows[1]["dy"]])
-    return float(abs(v1[0] * v2[1] - v1[1] * v2[0]) / np.linalg.norm(v1))
-
-
-def _periodic(g, h, win, period_xy, min_period_cell) -> list[dict]:
-    from dicetrace.analysis import cells_table, periodic_cells_connected
-
-    sizes = cells_table(g[:, :, 0]).set_index("cell_id")["size"]
-    width = min(w[1] - w[0] for w in win[:2])
-    res_p = []
-    for v in period_xy:
-        di, dj = int(round(v[0] / h[0])), int(round(v[1] / h[1]))
-        if math.hypot(v[0], v[1]) < 0.05 * width or abs(di) >= g.shape[0] or abs(dj) >= g.shape[1]:
-            continue  # the along-stripe vector of a stripe texture (a few nodes): not a repetition
-        pc = periodic_cells_connected(g, (di, dj), k=0)
-        pc["size"] = sizes.reindex(pc["cell_id"]).to_numpy()
-        big_any = pc["size"] >= min_period_cell
-        big = pc[big_any & (pc["overlap"] > 0.5)]
-        res_p.append({
-            "period": (float(v[0]), float(v[1])), "period_nodes": (di, dj),
-            "n_cells_tested": int(len(pc)),
-            "n_big_matched": int(len(big)),
-            "min_cell_nodes": min_period_cell,
-            "median_overlap_big": float(pc[big_any]["overlap"].median()) if big_any.any() else None,
-            "frac_connected_big": float(big["connected"].mean()) if len(big) else None,
-            "frac_connected_all": float(pc["connected"].mean()) if len(pc) else None,
-        })
-    return res_p
-
-
 def stack_study(ctx: Context, name, res_xy, period_xy=None, min_cell=5, min_period_cell=20):
     """One 3-D stack over window ``name``: its numbers, and its label grid."""
-    from dicetrace.analysis import slice_cell_components
+    from dicetrace.analysis.cells import slice_joins
 
     depth = STACK_DEPTH[name]
     win = tuple(window_ranges(name)) + ((0.0, depth),)
     s = ctx.sample(win, (res_xy, res_xy, int(round(depth * (res_xy - 1))) + 1), slice_spec="seed3")
     g, h = s.labels, s.spacing
     out = {"window": win, "res": g.shape, "spacing": h, "n_throws": int(g.size)}
-    # how many 2-D cells of slice z=0 share a 3-D component with another 2-D cell of that slice
-    t = slice_cell_components(g, 0)
-    big = t[t["size"] >= min_cell]
-    joined = big[big["n_cells_in_component"] > 1]
-    z0 = {
-        "n_cells_2d": int(len(t)), f"n_cells_2d_ge{min_cell}": int(len(big)),
-        "n_components_3d_of_those": int(big["component_3d"].nunique()),
-        "frac_cells_joined": float(len(joined) / max(len(big), 1)),
-        "frac_area_joined": float(joined["size"].sum() / max(big["size"].sum(), 1)),
-        "per_label": [{"label": int(lab), "cells_2d": int(len(grp)), "components_3d": int(grp["component_3d"].nunique())}
-                      for lab, grp in big.groupby("label")],
-    }
-    # the same at half the resolution in all three axes (is the answer resolution-dependent?)
-    if min(g.shape) >= 9:
-        g2 = g[::2, ::2, ::2]
-        t2 = slice_cell_components(g2, 0)
-        b2 = t2[t2["size"] >= max(2, min_cell // 4)]
-        z0["half_res"] = {
-            "res": g2.shape, "n_cells_2d_big": int(len(b2)),
-            "n_components_3d_of_those": int(b2["component_3d"].nunique()),
-            "frac_cells_joined": float((b2["n_cells_in_component"] > 1).sum() / max(len(b2), 1)),
-        }
-    out["z0"] = z0
+    out["z0"] = slice_joins(g, min_cell)
     if period_xy is not None:
-        out["periodic"] = _periodic(g, h, win, period_xy, min_period_cell)
+        out["periodic"] = period_overlaps(g, h, win, period_xy, min_period_cell)
     ctx.log(f"stack {name}: {g.shape}, z0 cells {out['z0']}")
     return out, g
 

@@ -19,11 +19,11 @@ import math
 
 import numpy as np
 
+from dicetrace.analysis.settle import border_pairs, divergence_summary, fit_border, free_pivot_rate
 from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table, pm
 
 NAME = "settle"
-G = 980.0
 #: (key, preset, integrator, borders in the full run, in the quick run, description)
 RUNS = (
     ("seed", "seed", None, 40, 3, "the program: seed preset, semi-implicit Euler, dt = 1 ms"),
@@ -36,16 +36,6 @@ BORDER_WINDOW = "red-sea-2"
 MAP_WINDOWS = ("red-sea", "home")
 
 
-def free_pivot_rate(half_side_cm: float = 1.0, g: float = G) -> float:
-    """Edge-balance rate with a frictionless floor: only the CM height couples, I_cm = m s²/6.
-
-    At small tilt φ the CM moves vertically only (no horizontal force), so the kinetic energy is
-    ½ I_cm φ'² (+ O(φ²)), and λ² = m g r / I_cm with r = s/√2.
-    """
-    s = 2.0 * half_side_cm
-    return math.sqrt(g * (s / math.sqrt(2.0)) / (s * s / 6.0))
-
-
 def borders(ctx: Context, preset: str, integrator, n_borders: int, res):
     """Random face-neighbour pairs of a grid of the border window whose outcomes differ (both settled)."""
     kw = {}
@@ -54,64 +44,6 @@ def borders(ctx: Context, preset: str, integrator, n_borders: int, res):
     if integrator is not None:
         kw["integrator"] = integrator
     return border_pairs(ctx.sample(BORDER_WINDOW, res, **kw), n_borders, ctx.rng)
-
-
-def border_pairs(s, n_borders: int, rng: np.random.Generator) -> list:
-    """Up to ``n_borders`` random face-neighbour pairs of the map ``s`` (a WindowSample) whose outcomes differ,
-    both settled: ((x, y), (x', y')) each."""
-    g = s.labels
-    ax, ay = s.axes
-    pairs = []
-    for off in ((1, 0), (0, 1)):
-        a = g[: g.shape[0] - off[0], : g.shape[1] - off[1]]
-        b = g[off[0]:, off[1]:]
-        ii, jj = np.nonzero((a != b) & (a > 0) & (b > 0))
-        for i, j in zip(ii, jj):
-            pairs.append(((ax[i], ay[j]), (ax[i + off[0]], ay[j + off[1]])))
-    pick = rng.choice(len(pairs), size=min(n_borders, len(pairs)), replace=False)
-    return [pairs[q] for q in pick]
-
-
-def fit_border(classify, settle, pa, pb, dists) -> tuple[dict, object]:
-    """Bisect one border, fit both sides: (numbers, the settle-time profile)."""
-    from dicetrace.analysis import bisect_boundary, fit_settle_divergence, settle_profile
-
-    br = bisect_boundary(classify, pa, pb, tol=1e-12)
-    prof = settle_profile(settle, br, dists)
-    out = {"p_lo": br.p_lo, "p_hi": br.p_hi, "width": br.width, "label_lo": br.label_lo, "label_hi": br.label_hi,
-           "n_evals": br.n_evals}
-    for side, lab in (("lo", br.label_lo), ("hi", br.label_hi)):
-        p = prof[prof.side == side]
-        ok = (p.label == lab).to_numpy()
-        out[f"{side}_n_ok"] = int(ok.sum())
-        if ok.sum() >= 6:
-            f = fit_settle_divergence(p.d[ok], p.t_settle_s[ok])
-            out[side] = {"lambda": f.lambda_per_s, "lambda_stderr": f.lambda_stderr, "t0": f.t0_s, "r": f.rvalue}
-        else:
-            out[side] = None
-    out["t_range_s"] = [float(prof.t_settle_s.min()), float(prof.t_settle_s.max())]
-    return out, prof
-
-
-def summarise(fits: list[dict]) -> dict:
-    lam = np.array([f[side]["lambda"] for f in fits for side in ("lo", "hi") if f.get(side)])
-    r = np.array([f[side]["r"] for f in fits for side in ("lo", "hi") if f.get(side)])
-    clean = lam[r < -0.995]
-    out = {"n_fits": int(len(lam)), "n_clean": int(len(clean))}
-    if len(lam):
-        out.update(median=float(np.median(lam)), q25=float(np.quantile(lam, 0.25)),
-                   q75=float(np.quantile(lam, 0.75)))
-        # bootstrap stderr of the median
-        rng = np.random.default_rng(0)
-        bs = [np.median(lam[rng.integers(0, len(lam), len(lam))]) for _ in range(500)]
-        out["median_stderr"] = float(np.std(bs, ddof=1)) if len(lam) > 1 else None
-    if len(clean):
-        out.update(clean_mean=float(clean.mean()),
-                   clean_stderr=float(clean.std(ddof=1) / math.sqrt(len(clean))) if len(clean) > 1 else None,
-                   clean_min=float(clean.min()), clean_max=float(clean.max()))
-    out["all"] = lam
-    out["r"] = r
-    return out
 
 
 def compute(ctx: Context) -> Computed:
@@ -139,7 +71,7 @@ def compute(ctx: Context) -> Computed:
             f, prof = fit_border(classify, settle, np.array(pa), np.array(pb), dists)
             fits.append(f)
             profiles[key].append(prof)
-        summ = summarise(fits)
+        summ = divergence_summary(fits)
         runs[key] = {"fits": fits, "summary": summ, "description": desc}
         ctx.log(f"{key}: λ median {summ.get('median', float('nan')):.2f} /s over {summ['n_fits']} fits, "
                 f"clean mean {summ.get('clean_mean', float('nan')):.2f} ({summ['n_clean']})")

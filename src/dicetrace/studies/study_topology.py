@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from dicetrace.ics import TOPOLOGY_POINTS
+from dicetrace.analysis.prefixes import fast_components, prefix_codes, simpson
 from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table
 
@@ -27,58 +28,6 @@ PROGRAM_THROWS = {
 }
 #: Contact sets shown in the tree of the cell's sequences.
 TREE_DEPTH = 8
-
-
-def simpson(counts: np.ndarray) -> float:
-    """Probability that two throws drawn (without replacement) share the label."""
-    n = counts.sum()
-    return float((counts * (counts - 1)).sum() / (n * (n - 1))) if n > 1 else float("nan")
-
-
-def prefix_codes(seqs: np.ndarray, kmax: int) -> list[np.ndarray]:
-    """Integer class of every throw's first k contact sets, k = 1..kmax (equal code = equal prefix).
-
-    Sequences shorter than k keep their whole sequence as the prefix (a sentinel pads them).
-    """
-    parts = [str(q).split("-") for q in seqs.ravel()]
-    n = len(parts)
-    width = max(len(p) for p in parts)
-    mat = np.full((n, max(width, kmax)), -1, dtype=np.int64)  # -1: the sequence has ended
-    for i, p in enumerate(parts):
-        mat[i, : len(p)] = [int(x) for x in p]  # a set's text (ascending node digits) read as a number
-    codes, cur = [], np.zeros(n, dtype=np.int64)
-    for k in range(kmax):
-        _, cur = np.unique(cur * 1_000_000_000 + mat[:, k], return_inverse=True)
-        cur = cur.astype(np.int64).ravel()
-        codes.append(cur.reshape(seqs.shape))
-    return codes
-
-
-def fast_components(codes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, int]:
-    """Connected regions of equal code (face neighbours) among the nodes in ``mask``; 0 outside.
-
-    Same result as ``label_cells`` restricted to ``mask``, in one pass over the edges (label_cells
-    loops over the labels, which is slow for tens of thousands of contact sequences).
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    idx = np.arange(codes.size).reshape(codes.shape)
-    rows, cols = [], []
-    for off in ((1, 0), (0, 1)):
-        a = (slice(0, codes.shape[0] - off[0]), slice(0, codes.shape[1] - off[1]))
-        b = (slice(off[0], None), slice(off[1], None))
-        same = (codes[a] == codes[b]) & mask[a] & mask[b]
-        rows.append(idx[a][same])
-        cols.append(idx[b][same])
-    r, c = np.concatenate(rows), np.concatenate(cols)
-    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(codes.size, codes.size))
-    _, lab = connected_components(graph, directed=False)
-    lab = lab.reshape(codes.shape)
-    out = np.zeros(codes.shape, dtype=np.int64)
-    _, inv = np.unique(lab[mask], return_inverse=True)
-    out[mask] = inv.ravel() + 1
-    return out, int(inv.max() + 1) if mask.any() else 0
 
 
 def three_throws() -> tuple[list[dict], list[dict]]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis.vertices import guarded_find_vertices, triple_boxes
 from dicetrace.studies.context import Computed, Context, Output, window_ranges
 from dicetrace.studies.text import md_table, pm
 
@@ -28,49 +29,6 @@ CHAIN = ["home", "green-island", "green-island-2", "green-island-3", "green-isla
 #: (window, start grid, quick start grid, max squares) of each hunt.
 HUNTS = (("party", 41, 21, 256), ("green-island", 41, 21, 256), ("home", 41, 21, 256),
          ("green-island-5", 21, 11, 256), ("green-island-5", 21, 11, 1024))
-
-
-class _GuardedNumpy:
-    """numpy, except that ``zeros`` refuses arrays above ``limit`` elements (raises MemoryError).
-
-    ``find_vertices`` draws the squares of each root on a dense boolean image spanning their bounding
-    box at the current level; when a root's squares are spread out at a deep level that image needs
-    terabytes. This guard turns that into a reported failure instead of exhausting memory.
-    """
-
-    def __init__(self, limit: int):
-        self._limit = int(limit)
-
-    def __getattr__(self, name):
-        return getattr(np, name)
-
-    def zeros(self, shape, *a, **k):
-        if int(np.prod(shape, dtype=np.float64)) > self._limit:
-            raise MemoryError(f"find_vertices asked for a {shape} image")
-        return np.zeros(shape, *a, **k)
-
-
-def guarded_find_vertices(*a, limit: int = 50_000_000, **k):
-    from dicetrace.analysis import vertices as V
-
-    saved = V.np
-    V.np = _GuardedNumpy(limit)
-    try:
-        return V.find_vertices(*a, **k)
-    finally:
-        V.np = saved
-
-
-def triple_boxes(g: np.ndarray, b: int) -> int:
-    """Number of closed b×b-interval squares of the grid holding ≥ 3 outcomes (1..6)."""
-    count = np.zeros(((g.shape[0] - 1) // b, (g.shape[1] - 1) // b), dtype=np.int64)
-    for lab in range(1, 7):
-        ind = g == lab
-        if not ind.any():
-            continue
-        win = np.lib.stride_tricks.sliding_window_view(ind, (b + 1, b + 1))[::b, ::b]
-        count += win[: count.shape[0], : count.shape[1]].any(axis=(2, 3))
-    return int((count >= 3).sum())
 
 
 def hunt(ctx: Context, classify, window, res_full, res_quick, max_squares) -> dict:
