@@ -14,9 +14,8 @@ Vocabulary follows Attractors.jl (``group_features``, ``basins_fractions``,
 from types import ModuleType as _ModuleType
 
 from .boundaries import (
-    BasinEntropy, BoxCountingDimension, PowerLawFit, UncertaintyExponent, basin_entropy,
-    boundary_box_fraction, boundary_dimension, boundary_fraction, boundary_mask, box_counting_dimension,
-    fit_power_law, uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution,
+    BasinEntropy, BoxCountingDimension, PowerLawFit, basin_entropy, boundary_box_fraction, boundary_dimension,
+    boundary_fraction, boundary_mask, box_counting_dimension, fit_power_law,
 )
 from .agreement import Agreement, agreement
 from .cells import cells_table, label_cells, same_cell, slice_cell_components
@@ -33,6 +32,9 @@ from .settle import (
     BoundaryBracket, SettleFit, bisect_boundary, edge_balance_rate, fit_settle_divergence, settle_profile,
 )
 from .sweep import chaos_measures, chaos_sweep
+from .uncertainty import (
+    UncertaintyExponent, uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution,
+)
 from .vertices import find_vertices
 from .wada import WadaGridResult, WadaMergeResult, wada_grid_test, wada_merge_test
 from .wedge import (

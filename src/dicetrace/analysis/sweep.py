@@ -16,14 +16,8 @@ import numpy as np
 import pandas as pd
 
 from ._grid import as_label_grid
-from .boundaries import (
-    basin_entropy,
-    boundary_dimension,
-    boundary_mask,
-    uncertainty_exponent,
-    uncertainty_exponent_perturbation,
-    uncertainty_exponent_resolution,
-)
+from .boundaries import basin_entropy, boundary_dimension, boundary_mask
+from .uncertainty import uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution
 
 __all__ = ["chaos_measures", "chaos_sweep", "map_measures"]
 
@@ -56,7 +50,7 @@ def chaos_measures(
         Label grid.
     box_sizes : sequence of int, optional
         Scales for the uncertainty exponent (see
-        :func:`~dicetrace.analysis.boundaries.uncertainty_exponent`).
+        :func:`~dicetrace.analysis.uncertainty.uncertainty_exponent`).
     entropy_box_size : int, optional
         Box side for the basin entropy, grid nodes (default 5).
     n_blocks : int, optional
@@ -149,7 +143,7 @@ def chaos_sweep(
     classifiers : mapping, optional
         Parameter value -> ``classify(points) -> labels``. With ``points``
         and ``eps_list`` adds ``alpha_perturbation`` and its stderr from
-        :func:`~dicetrace.analysis.boundaries.uncertainty_exponent_perturbation`.
+        :func:`~dicetrace.analysis.uncertainty.uncertainty_exponent_perturbation`.
     points : numpy.ndarray (n, d), optional
         Base points for the perturbation exponent, slice units.
     eps_list : sequence of float, optional
