@@ -13,7 +13,8 @@ import numpy as np
 
 import numba
 
-from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
+from dicetrace.core.kernels import run_batch, run_roll
+from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.memory import available_memory
 from dicetrace.status import Status
 

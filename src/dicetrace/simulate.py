@@ -14,7 +14,8 @@ import numpy as np
 
 from dicetrace.batch_chunks import CAP_GROWTH, DEFAULT_CAP, MAX_CAP, batch_chunk, check_batch_memory, join_parts, run_chunk
 from dicetrace.core.contacts import contact_sets_from_heights
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_roll
+from dicetrace.core.kernels import run_roll
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
 from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
 from dicetrace.memory import available_memory
