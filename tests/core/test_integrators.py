@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 from dicetrace.core._jit import _core_digest, jit, jit_fused
 from dicetrace.core.forces import eval_forces
 from dicetrace.core.model import energy_dynamic, init_offsets
-from dicetrace.core.schemes import scheme_module
+from dicetrace.core.schemes import scheme_module, step_of
 from dicetrace.core.state import new_states
 from dicetrace.params import INTEGRATORS, Config, Numerics, Preset, make_config
 

@@ -119,7 +119,7 @@ def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
 
 
 def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = None,
-              use_summary: bool | None = None, name: str | None = None):
+              use_summary: bool | None = None, name: str | None = None, cache: bool = True):
     """The run loop of a throw on the step of the scheme module ``scheme`` (``core.schemes``), compiled.
 
     ``trace``: the tracing loop (it writes the trace arrays that have rows)
@@ -131,7 +131,9 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     scheme that has one).  These are closed over, and numba compiles closure
     values in as constants: the loop calls its step directly and a summary
     loop has no trace code.  The closure holds a module and booleans only,
-    which numba's disk cache keys on by name.
+    which numba's disk cache keys on by name; a module made at run time (a
+    benchmark's variant of a scheme) is keyed by its contents, which change
+    from one process to the next: build those with ``cache=False``.
 
     The loop, ``roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)``:
 
@@ -270,7 +272,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     short = scheme.__name__.rsplit(".", 1)[-1]
     roll.__name__ = roll.__qualname__ = name or f"roll_{short}_{'trace' if trace else 'summary'}"
     roll.__doc__ = f"The {'tracing' if trace else 'summary'} run loop on ``{scheme.__name__}.step`` (``loop.make_roll``)."
-    return jit(roll)
+    return jit(roll, cache=cache)
 
 
 def make_batch(scheme: ModuleType, *, name: str | None = None):

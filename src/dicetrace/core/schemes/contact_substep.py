@@ -217,8 +217,10 @@ def friction_rate(z, uk, P, kp):
     return lam
 
 
-def make_drive(method: ModuleType, name: str):
+def make_drive(method: ModuleType, name: str, *, cache: bool = True):
     """The contact-aware step (the contract of ``core.schemes``) on the sub-step method ``method``, compiled as ``name``.
+
+    ``cache=False`` for a method module made at run time (see ``loop.make_roll``).
 
     ``method`` is a module that defines the sub-step method: ``substep(st,
     kp, h, f0, f1, f2, t0, t1, t2)`` (one explicit step from the sub-step
@@ -460,7 +462,7 @@ def make_drive(method: ModuleType, name: str):
 
     drive.__name__ = drive.__qualname__ = name
     drive.__doc__ = f"One contact-aware step on the sub-step method of ``{method.__name__}`` (``make_drive``)."
-    return jit_fused(drive)
+    return jit_fused(drive, cache=cache)
 
 
 #: The sub-step method of contact-substep and contact-adaptive (the contract of
