@@ -63,13 +63,13 @@ def _phase2(task: str) -> str:
     """Integrator ``task``'s summary loop and batch kernel."""
     import numpy as np
 
-    from dicetrace.core import loop
+    from dicetrace.core import kernels
     from dicetrace.params import make_config
     from dicetrace.core.loop import BATCH_BLOCK
     from dicetrace.simulate import simulate_batch
 
     cfg = make_config("seed", integrator=task, t_max_s=0.05)
-    loop.run_summary(cfg.kernel_inputs(_ic()).ics, cfg.initial_offsets(), cfg.kernel_params(),
+    kernels.run_summary(cfg.kernel_inputs(_ic()).ics, cfg.initial_offsets(), cfg.kernel_params(),
                      cfg.numerics.integrator_id, np.zeros(64, np.uint8), np.zeros(64, np.int32))
     simulate_batch(np.tile(_ic(), (BATCH_BLOCK + 1, 1)), config=cfg, threads=1)
     return task

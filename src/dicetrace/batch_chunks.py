@@ -13,7 +13,8 @@ import numpy as np
 
 import numba
 
-from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll
+from dicetrace.core.kernels import run_batch, run_roll
+from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.memory import available_memory
 from dicetrace.status import Status
 
@@ -39,16 +40,17 @@ class _Threads:
         numba.set_num_threads(self.old)
 
 
-def _run_batch(kin, cap: int, threads):
-    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC.
+def _run_batch(kin, cap: int, threads, device: str = "cpu"):
+    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC, on ``device`` ("cpu" or "cuda").
 
-    Up to ``BATCH_BLOCK`` ICs (one work item of the batch kernel, so one
-    thread either way) run one by one through the single-throw loop instead:
-    the same results bit for bit, without compiling the batch kernel for
-    them (a first ``dicetrace simulate --ic`` compiles a third as much).
+    On the CPU, up to ``BATCH_BLOCK`` ICs (one work item of the batch
+    kernel, so one thread either way) run one by one through the
+    single-throw loop instead: the same results bit for bit, without
+    compiling the batch kernel for them (a first ``dicetrace simulate --ic``
+    compiles a third as much).
     """
     m = len(kin.ics)
-    if m <= BATCH_BLOCK:
+    if m <= BATCH_BLOCK and device == "cpu":
         return _run_serial(kin, cap)
     out = (
         np.zeros(m, dtype=np.int8),
@@ -58,7 +60,11 @@ def _run_batch(kin, cap: int, threads):
         np.zeros(m * cap, dtype=np.uint8),
         np.zeros(m * cap, dtype=np.int32),
     )
-    if m:
+    if m and device == "cuda":
+        from dicetrace.core.gpu import run_batch_cuda  # numba-cuda: optional, imported only for a GPU run
+
+        run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, *out)
+    elif m:
         status, steps, outcome, nsets, sets, set_steps = out
         with _Threads(threads), numba.parallel_chunksize(1):
             run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, status, steps, outcome, nsets, sets, set_steps)
@@ -99,6 +105,22 @@ def batch_chunk(cap: int = DEFAULT_CAP) -> int:
     return max(BATCH_BLOCK, n // BATCH_BLOCK * BATCH_BLOCK)
 
 
+#: Most ICs per chunk on a GPU (2²⁰: several times the threads an H200 keeps resident).
+GPU_CHUNK_MAX = 2**20
+#: Share of the GPU's free memory one chunk may take.
+GPU_MEMORY_SHARE = 0.4
+
+
+def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP) -> int:
+    """ICs per chunk on the GPU by default: at most ``GPU_CHUNK_MAX``, ``GPU_MEMORY_SHARE`` of its free
+    memory, and 16 times the CPU's chunk of host buffers."""
+    from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
+
+    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0)
+    n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * gpu.free_memory()) // per, 16 * batch_chunk(cap))
+    return max(BATCH_BLOCK, n)
+
+
 def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, what: str = "simulate_batch") -> None:
     """Refuse (ValueError naming ``what``, the size and the limit) a batch that cannot fit in the available memory.
 
@@ -121,20 +143,20 @@ def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, 
         )
 
 
-def run_chunk(kin, cap: int, threads):
+def run_chunk(kin, cap: int, threads, device: str = "cpu"):
     """Summaries of the ICs of ``kin``: (status, steps, outcome, nsets, sets, set_steps), sets compacted.
 
     Throws that fill their ``cap`` sets are re-run, all together, with
-    ``CAP_GROWTH`` times more until they fit.
+    ``CAP_GROWTH`` times more until they fit, on the same ``device``.
     """
     m = len(kin.ics)
-    status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads)
+    status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads, device)
     extra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     todo = np.nonzero(status == Status.BUFFER_FULL)[0]
     big = cap
     while todo.size:
         big *= CAP_GROWTH
-        st, sp, oc, ns, ss, sst = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads)
+        st, sp, oc, ns, ss, sst = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads, device)
         done = st != Status.BUFFER_FULL
         for r in np.nonzero(done)[0]:
             i = todo[r]

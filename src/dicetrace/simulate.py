@@ -12,10 +12,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from dicetrace.batch_chunks import CAP_GROWTH, DEFAULT_CAP, MAX_CAP, batch_chunk, check_batch_memory, join_parts, run_chunk
+from dicetrace.batch_chunks import (
+    CAP_GROWTH,
+    DEFAULT_CAP,
+    MAX_CAP,
+    batch_chunk,
+    check_batch_memory,
+    gpu_batch_chunk,
+    join_parts,
+    run_chunk,
+)
 from dicetrace.core.contacts import contact_sets_from_heights
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_roll
+from dicetrace.core.kernels import run_roll
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
+from dicetrace.devices import check_device, device_label, resolve_device
 from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
 from dicetrace.memory import available_memory
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
@@ -385,6 +396,7 @@ class BatchResult:
     coordinates x, y, z (NaN where none) when the ICs came with them (a
     :class:`~dicetrace.ics.SliceICs`, e.g. from :func:`~dicetrace.ics.seed_slice`),
     else None; the tables fill their ``x, y, z`` columns from them.
+    ``device``: where the throws ran (``dicetrace.devices.device_label``).
     """
 
     ics: np.ndarray  # (m, 6) float64
@@ -397,6 +409,7 @@ class BatchResult:
     set_steps: np.ndarray  # int32
     config: Config
     coords: np.ndarray | None = None  # (m, 3) float64 slice coordinates, NaN where none
+    device: str = "cpu"  # where the throws ran: "cpu" or "cuda: <GPU name>" (also in the tables' metadata)
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -436,9 +449,10 @@ def simulate_batch(
     threads: int | None = None,
     cap: int = DEFAULT_CAP,
     chunk: int | None = None,
+    device: str = "cpu",
     **options,
 ) -> BatchResult:
-    """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads).
+    """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads, or a GPU).
 
     The one door onto the batch kernel (scans and studies call it).  Summary
     path only; bit-identical to calling :func:`simulate` row by row, whatever
@@ -469,6 +483,15 @@ def simulate_batch(
         result is the same, bit for bit, whatever the chunk.  A batch whose
         result and chunk cannot fit in the memory available is refused before
         anything runs (a ValueError naming the sizes; see :func:`~dicetrace.batch_chunks.check_batch_memory`).
+        On a GPU the default chunk is sized to its free memory (up to 2²⁰ ICs).
+    device
+        ``"cpu"`` (default), ``"cuda"`` (a GPU through numba-cuda, ``pip
+        install 'dicetrace[cuda]'``; a :class:`~dicetrace.devices.DeviceError`
+        where there is none) or ``"auto"`` (the GPU where there is one; one
+        line on standard error says which).  The GPU runs the same kernels
+        compiled for the device: `seed` throws as on the CPU up to the last
+        ulp of the device's sin and cos, the contact schemes' to rounding
+        (docs/gpu.md).  The result records it (``BatchResult.device``).
 
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are
@@ -478,6 +501,7 @@ def simulate_batch(
     cap = _integer(cap, "cap", 1, MAX_CAP)
     threads = _integer(threads, "threads", 1, none_ok=True)
     chunk = _integer(chunk, "chunk", 1, none_ok=True)
+    check_device(device)
     conv = cfg.preset.l_convention if l_convention is None else l_convention
     coords = ics.coords if isinstance(ics, SliceICs) else None
     ics = validate_ics(ics)
@@ -485,7 +509,9 @@ def simulate_batch(
     if coords is not None:
         coords = np.array(coords, dtype=np.float64).reshape(m, 3)
     cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
-    chunk = batch_chunk(cap) if chunk is None else chunk
+    device = resolve_device(device)
+    if chunk is None:
+        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap) if device == "cuda" else batch_chunk(cap)
     check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention)
     status, outcome = np.zeros(m, dtype=np.int8), np.zeros(m, dtype=np.int8)
     steps, nsets = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
@@ -494,7 +520,7 @@ def simulate_batch(
     for a in range(0, m, chunk):  # chunk by chunk: the buffers of one chunk in memory, its sets compacted
         b = min(m, a + chunk)
         kin = cfg.kernel_inputs(ics[a:b], l_convention=conv)
-        status[a:b], steps[a:b], outcome[a:b], nsets[a:b], sets, set_steps = run_chunk(kin, cap, threads)
+        status[a:b], steps[a:b], outcome[a:b], nsets[a:b], sets, set_steps = run_chunk(kin, cap, threads, device)
         set_parts.append(sets)
         step_parts.append(set_steps)
         del kin, sets, set_steps
@@ -515,4 +541,5 @@ def simulate_batch(
         set_steps=flat_steps,
         config=cfg,
         coords=coords,
+        device=device_label(device),
     )

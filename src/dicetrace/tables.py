@@ -380,7 +380,9 @@ def rolls_table(source, *, coords=None, ic_ids=None, index=None, metadata: Mappi
         cols.update({name: pa.array(np.ascontiguousarray(idx[:, j])) for j, name in enumerate("ijk")})
         schema = GRID_ROLLS_SCHEMA
     table = pa.Table.from_arrays([cols[f.name] for f in schema], schema=schema)
-    return _with_metadata(table, metadata_json(cfg, s.ics, extra=metadata))
+    device = getattr(source, "device", None)  # where a batch ran (BatchResult.device)
+    extra = {"device": device, **dict(metadata or {})} if device is not None else metadata
+    return _with_metadata(table, metadata_json(cfg, s.ics, extra=extra))
 
 
 def contacts_table(source, *, ic_ids=None, metadata: Mapping | None = None) -> pa.Table:

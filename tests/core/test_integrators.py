@@ -21,10 +21,10 @@ import pytest
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
-from dicetrace.core._jit import _core_digest, jit, jit_fused, specialise
+from dicetrace.core._jit import _core_digest, jit, jit_fused
 from dicetrace.core.forces import eval_forces
 from dicetrace.core.model import energy_dynamic, init_offsets
-from dicetrace.core.schemes import step_of
+from dicetrace.core.schemes import scheme_module, step_of
 from dicetrace.core.state import new_states
 from dicetrace.params import INTEGRATORS, Config, Numerics, Preset, make_config
 
@@ -35,38 +35,42 @@ BY_DT = tuple(name for name, spec in INTEGRATORS.items() if not spec.adaptive)
 ADAPTIVE = tuple(name for name, spec in INTEGRATORS.items() if spec.adaptive)
 
 
-def _drive(kp, h, nstep, S, zmin, zmax):
-    """Step ``nstep`` times from the state S[0] in place with the scheme's ``STEP``; track each node's height range.
-
-    Compiled per scheme by :func:`driver` (``STEP`` a compile-time constant).
-    """
-    st = S[0]
-    below, mask = eval_forces(st, kp)
-    # through an array, as the run loop does: the step then compiles for a plain bool only, not
-    # also for the literal False that type inference sees first (a second compile of every step)
-    flag = np.empty(1, np.bool_)
-    flag[0] = below
-    contact = flag[0]
-    for _ in range(nstep):
-        contact, mask = STEP(st, kp, h, contact)
-        for k in range(8):
-            zmin[k] = min(zmin[k], st.z[k])
-            zmax[k] = max(zmax[k], st.z[k])
-    return True
-
-
 #: Named by the digest of dicetrace.core (what ``_jit`` stamps core's own cached kernels with), so a
 #: change to a scheme compiles a new driver instead of loading one that has the old step linked in.
 _CORE = _core_digest()[:16]
 _DRIVERS: dict = {}
 
 
+def _make_drive(scheme):
+    def drive(kp, h, nstep, S, zmin, zmax):
+        """Step ``nstep`` times from the state S[0] in place with ``scheme.step``; track each node's height range.
+
+        Compiled per scheme by :func:`driver` (the scheme module closed over).
+        """
+        st = S[0]
+        below, mask = eval_forces(st, kp)
+        # through an array, as the run loop does: the step then compiles for a plain bool only, not
+        # also for the literal False that type inference sees first (a second compile of every step)
+        flag = np.empty(1, np.bool_)
+        flag[0] = below
+        contact = flag[0]
+        for _ in range(nstep):
+            contact, mask = scheme.step(st, kp, h, contact)
+            for k in range(8):
+                zmin[k] = min(zmin[k], st.z[k])
+                zmax[k] = max(zmax[k], st.z[k])
+        return True
+
+    drive.__name__ = drive.__qualname__ = f"drive_{scheme.__name__.rsplit('.', 1)[-1]}_{_CORE}"
+    return jit(drive)
+
+
 def driver(integ):
-    """``_drive`` compiled for the scheme of ``integ`` (cached on disk like the kernels, built on first use)."""
+    """A driver of the scheme of ``integ`` (cached on disk like the kernels, built on first use): steps
+    ``nstep`` times from S[0] in place and tracks each node's height range."""
     scheme = INTEGRATORS[integ].scheme
     if scheme not in _DRIVERS:
-        fn = specialise(_drive, f"drive_{scheme}_{_CORE}", STEP=step_of(INTEGRATORS[integ]))
-        _DRIVERS[scheme] = jit(fn)
+        _DRIVERS[scheme] = _make_drive(scheme_module(INTEGRATORS[integ]))
     return _DRIVERS[scheme]
 
 
@@ -317,7 +321,7 @@ def test_contact_substep_fast_path_identical(preset, integ_name):
     its summaries: the run loop compiled without trace code) equals the tracing loop
     ``run_roll`` bit for bit: status, steps, outcome and the whole
     contact-set sequence, on tilted and flat starts."""
-    from dicetrace.core import loop
+    from dicetrace.core import kernels, loop
     from dicetrace.core.state import new_states
     from dicetrace.ics import seed_slice
     from dicetrace.params import make_config
@@ -341,8 +345,8 @@ def test_contact_substep_fast_path_identical(preset, integ_name):
             ic = np.asarray(ic, float)
             a = (np.zeros(256, np.uint8), np.zeros(256, np.int32))
             b = (np.zeros(256, np.uint8), np.zeros(256, np.int32))
-            ra = loop.roll_kernel(integ, False)(ic, off0, kp, new_states(1), *a, e0, e1, e2)
-            rb = loop.run_roll(ic, off0, kp, integ, *b, e0, e1, e2)
+            ra = kernels.roll_kernel(integ, False)(ic, off0, kp, new_states(1), *a, e0, e1, e2)
+            rb = kernels.run_roll(ic, off0, kp, integ, *b, e0, e1, e2)
             assert ra == rb
             n = ra[3]
             assert np.array_equal(a[0][:n], b[0][:n]) and np.array_equal(a[1][:n], b[1][:n])
@@ -815,9 +819,13 @@ def _eval_into(S, kp):
     return eval_forces(S[0], kp)
 
 
+def _eval_into_fused(S, kp):
+    return eval_forces(S[0], kp)
+
+
 #: ``eval_forces`` compiled with strict arithmetic and as the fused schemes' kernels are (``_jit.jit_fused``).
 _STRICT_EVAL = jit(_eval_into)
-_FUSED_EVAL = jit_fused(specialise(_eval_into, "_eval_into_fused"))
+_FUSED_EVAL = jit_fused(_eval_into_fused)
 
 
 @pytest.mark.parametrize("integ", ["contact-dop853", "contact-tsit5"])

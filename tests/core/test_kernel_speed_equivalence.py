@@ -20,7 +20,8 @@ import pandas as pd
 import pytest
 
 from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll, run_summary
+from dicetrace.core.kernels import run_batch, run_roll, run_summary
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 from dicetrace.simulate import Record, simulate, simulate_batch

@@ -16,10 +16,10 @@ import math
 import numpy as np
 import pytest
 
-from dicetrace.core import loop
+from dicetrace.core import kernels, loop
 from dicetrace.core._jit import _core_digest, jit
 from dicetrace.core.free_flight import flight_steps, free_flight_safe
-from dicetrace.core.schemes import step_of
+from dicetrace.core.schemes import scheme_module
 from dicetrace.core.state import age_tolerance, new_states
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import convert_l, make_config
@@ -56,8 +56,8 @@ _STEPPED: dict = {}
 def stepped_loop(spec):
     """The summary loop of ``spec``'s scheme with every free flight stepped step by step (cached on disk)."""
     if spec.scheme not in _STEPPED:
-        fn = loop.summary_loop(step_of(spec), f"roll_stepped_{spec.scheme}_{_CORE}", exact_flight=False)
-        _STEPPED[spec.scheme] = jit(fn)
+        _STEPPED[spec.scheme] = loop.make_roll(scheme_module(spec), trace=False, exact_flight=False,
+                                               name=f"roll_stepped_{spec.scheme}_{_CORE}")
     return _STEPPED[spec.scheme]
 
 
@@ -66,7 +66,7 @@ def _roll(kernel, ic, kin, states=None):
     sets = np.zeros(cap, np.uint8)
     set_steps = np.zeros(cap, np.int32)
     S = new_states(1) if states is None else states
-    status, steps, outcome, nsets = kernel(ic, kin.off0, kin.params, S, sets, set_steps, *loop._NO_ROWS)
+    status, steps, outcome, nsets = kernel(ic, kin.off0, kin.params, S, sets, set_steps, *kernels._NO_ROWS)
     return (int(status), int(steps), int(outcome)), sets[:nsets].copy(), set_steps[:nsets].copy(), S
 
 
@@ -107,7 +107,7 @@ def test_crossing_flights_changes_no_outcome_and_the_trajectory_only_by_rounding
     cfg = make_config("physical", t_max_s=T_MAX_S)
     ics = convert_l(sample_ics("zoom-out", 24), "program", "physical")
     kin = cfg.kernel_inputs(ics)
-    crossing = loop.roll_kernel(TSIT5.kernel_id, False)
+    crossing = kernels.roll_kernel(TSIT5.kernel_id, False)
     stepping = stepped_loop(TSIT5)
     for ic in kin.ics:
         a = _roll(crossing, ic, kin)
@@ -139,8 +139,8 @@ def test_a_recording_inside_a_crossed_flight_is_the_exact_flight_and_steers_noth
     tr_energy = np.zeros((n + 1, loop.ENERGY_COLS))
     cap = 1 << 14
     sets, set_steps = np.zeros(cap, np.uint8), np.zeros(cap, np.int32)
-    traced = loop.run_roll(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, sets, set_steps, tr_state, tr_force, tr_energy)
-    summary = loop.run_summary(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, np.zeros(cap, np.uint8),
+    traced = kernels.run_roll(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, sets, set_steps, tr_state, tr_force, tr_energy)
+    summary = kernels.run_summary(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, np.zeros(cap, np.uint8),
                                np.zeros(cap, np.int32))
     assert tuple(traced) == tuple(summary)
     first = int(set_steps[1])  # the step of the first contact

@@ -3,16 +3,17 @@
 The golden file freezes the summary results of the simulator kernel as it was
 before the performance work of issue 3: 2000 ICs on the seed slice with x, y
 uniform in [0, 20] drawn by ``np.random.default_rng(1)``, computed one IC at a
-time by the original loop (then ``run_roll``, today ``run_roll_general``).
+time by the original loop (then and today ``run_roll``, the tracing loop).
 Its point is to catch a change of the kernel, so re-running this script with a
-changed kernel defeats it; this script now calls ``run_roll_general``.
+changed kernel defeats it.
 """
 
 from pathlib import Path
 
 import numpy as np
 
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_roll_general
+from dicetrace.core.kernels import run_roll
+from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 
@@ -38,7 +39,7 @@ def main():
     sets, set_steps = [], []
     buf, buf_steps = np.zeros(4096, np.uint8), np.zeros(4096, np.int32)
     for i in range(N):
-        st, n, o, ns = run_roll_general(ics[i], off0, kp, 0, buf, buf_steps, *empty)
+        st, n, o, ns = run_roll(ics[i], off0, kp, 0, buf, buf_steps, *empty)
         status[i], steps[i], outcome[i] = st, n, o
         sets.append(buf[:ns].copy())
         set_steps.append(buf_steps[:ns].copy())

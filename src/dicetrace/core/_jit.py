@@ -27,11 +27,13 @@ cannot be written, the cache falls back to ``__pycache__`` beside the
 sources (keyed by the digest and the files' times), and where nothing can
 be written, kernels compile without a disk cache (one line says so).
 
-:func:`specialise` makes compile-time variants of one Python source: a copy
-of a function whose named globals are replaced.  numba freezes globals as
-compile-time constants, so each copy compiles to its own kernel (a step
-function called directly, a dead branch removed) and is cached under its
-own name.
+Compile-time variants of one source (a run loop per scheme, a sub-step per
+Runge–Kutta tableau) are closures made by a factory (``loop.make_roll``,
+``contact_substep.make_drive``, ``erk.erk_substep``): numba compiles closure
+values in as constants.  They close over modules, booleans, numbers and
+arrays only, which numba's cache keys on by value (a compiled function in a
+closure would be keyed by an identity that changes from one process to the
+next, and the cache would never hit).
 """
 
 from __future__ import annotations
@@ -41,7 +43,6 @@ import hashlib
 import os
 import shutil
 import sys
-import types
 from pathlib import Path
 
 import numba
@@ -242,24 +243,3 @@ def jit_fused(fn=None, **extra):
 def jit_parallel(fn):
     """``jit`` with ``parallel=True`` for ``prange`` batch kernels."""
     return _njit(fn, {**_OPTIONS, "parallel": True})
-
-
-def specialise(template, name: str, doc: str | None = None, **constants):
-    """A copy of the plain function ``template`` named ``name``, with the given globals replaced.
-
-    The copy keeps the template's code and module (so its cache files sit
-    beside the template's, under ``name``); only the globals named in
-    ``constants`` differ, and numba compiles them in as constants.  Wrap the
-    result in :func:`jit` or :func:`jit_parallel`.
-    """
-    missing = [k for k in constants if k not in template.__code__.co_names]
-    if missing:
-        raise ValueError(f"{template.__name__} reads no global named {', '.join(missing)}")
-    env = dict(template.__globals__)
-    env.update(constants)
-    code = template.__code__.replace(co_name=name, co_qualname=name)
-    fn = types.FunctionType(code, env, name, template.__defaults__)
-    fn.__qualname__ = name
-    fn.__module__ = template.__module__
-    fn.__doc__ = template.__doc__ if doc is None else doc
-    return fn

@@ -139,3 +139,12 @@ def top4_mask(z):
 def face_up(z):
     """Face value (1..6) of the four highest nodes, 0 when they are no face (docs/model.md §3)."""
     return np.int64(FACE_OF_TOP4[top4_mask(z)])
+
+
+@jit(inline="always")
+def program_kick_drift(U0, U1, U2, X0, X1, X2, s0, s1, s2, kp, h):
+    """The program's velocity and position update: U += (ΣF + (0, 0, 8g))/8·h, then X += U·h."""
+    U0 = U0 + (s0 + 0.0) / 8.0 * h
+    U1 = U1 + (s1 + 0.0) / 8.0 * h
+    U2 = U2 + (s2 + kp.g * 8.0) / 8.0 * h
+    return U0, U1, U2, X0 + U0 * h, X1 + U1 * h, X2 + U2 * h

@@ -18,10 +18,14 @@ its scheme module here (``IntegratorSpec.scheme``); the module defines
     exact rotation, ``core.free_flight``): the run loop then crosses a free
     flight of several whole steps in one piece (``core.loop``);
 
-A scheme may also have a specialised summary kernel, bit-identical to the
-run loop's summary where it applies (``core.fast`` for this one's
-``semi_implicit_euler``); ``core.loop`` holds the table of them
-(``_FAST_SUMMARIES``) and compiles one run loop per scheme.
+``summary(ic, off0, kp, sets, set_steps)``, ``summary_applies(kp, off0)`` (optional)
+    a specialised summary kernel, bit-identical to the run loop's summary
+    wherever ``summary_applies`` (``core.fast`` for ``semi_implicit_euler``);
+
+``roll_trace, roll_summary, batch``
+    its kernels, bound by the module's last line,
+    ``roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])``
+    (``core.loop``; nothing compiles before a kernel's first call).
 
 Adding an integrator: one module here, one row in the table, its tests.
 """

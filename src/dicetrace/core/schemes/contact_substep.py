@@ -29,8 +29,11 @@ The proposed sub-step is carried from one step to the next in ``st.h_next``.
 from __future__ import annotations
 
 import math
+import sys
+from types import ModuleType
 
-from dicetrace.core._jit import jit, jit_fused, specialise
+from dicetrace.core import loop
+from dicetrace.core._jit import jit, jit_fused
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
 from dicetrace.core.model import node_heights
 from dicetrace.core.free_flight import (
@@ -85,21 +88,15 @@ DENSE_CAP = 2.0
 
 
 @jit(inline="always")
-def _no_dense_keep(st, h):
-    pass
+def no_dense_keep(st, h):
+    """``dense_keep`` of a sub-step method without a continuous extension: nothing to keep."""
 
 
 @jit(inline="always")
-def _no_dense_state(st, kp, theta):
-    pass
+def no_dense_state(st, kp, theta):
+    """``dense_state`` of a sub-step method without a continuous extension: never called."""
 
 
-#: What ``drive`` is specialised on for dense output (``contact_tsit5``): whether the
-#: last sub-step of a step may run past its end, how the sub-step is kept, and the
-#: state at a fraction θ of it.  Off by default.
-DENSE = False
-DENSE_KEEP = _no_dense_keep
-DENSE_STATE = _no_dense_state
 #: Free flight is exact (the parabola and the exact rotation): the run loop
 #: may cross a flight of several steps in one piece (``core.schemes``).  Every
 #: scheme built on :func:`drive` re-exports it.
@@ -220,17 +217,20 @@ def friction_rate(z, uk, P, kp):
     return lam
 
 
-def drive(st, kp, h, contact):
-    """One contact-aware step of ``st`` (the contract of ``core.schemes``), a template.
+def make_drive(method: ModuleType, name: str, *, cache: bool = True):
+    """The contact-aware step (the contract of ``core.schemes``) on the sub-step method ``method``, compiled as ``name``.
 
-    Specialised (``_jit.specialise``) on its sub-step method: ``SUBSTEP(st,
+    ``cache=False`` for a method module made at run time (see ``loop.make_roll``).
+
+    ``method`` is a module that defines the sub-step method: ``substep(st,
     kp, h, f0, f1, f2, t0, t1, t2)`` (one explicit step from the sub-step
-    start ``st.sub_*`` to ``st.new_*``), ``ERROR(st, kp, h, g0, g1, g2, q0,
+    start ``st.sub_*`` to ``st.new_*``), ``error(st, kp, h, g0, g1, g2, q0,
     q1, q2)`` (its local error estimate over ``kp.tol``, given the force sum
     and torque at the new state), ``ERR_EXP`` (the step-size exponent,
-    1 / (estimator order + 1)), ``THETA`` (the largest λ_f·h of the friction
-    law), ``H0`` (an impact's first sub-step as ω·h) and, for a pair with a
-    continuous extension, ``DENSE`` with ``DENSE_KEEP`` and ``DENSE_STATE``:
+    1 / (estimator order + 1)), ``FRICTION_THETA`` (the largest λ_f·h of the
+    friction law), ``H0`` (an impact's first sub-step as ω·h) and ``DENSE``
+    with ``dense_keep`` and ``dense_state``; with ``DENSE``, a pair with a
+    continuous extension:
     the last error-controlled sub-step of the step is not shortened to end
     at h but runs past it; the state at h is interpolated in it and the
     integration front stays in ``st.sub_*`` (``st.ahead`` beyond the state)
@@ -254,216 +254,233 @@ def drive(st, kp, h, contact):
     ``kp.tol > 0``.  Every sub-step is counted in ``st.substeps`` by what
     ended it (``state.SUBSTEP_CAUSES``).
     """
-    W = st.W
-    # the weight of this step's error estimates (the tolerance loosened by tol_growth)
-    grade = age_tolerance(st, kp, h, 1)
-    if DENSE and st.ahead > 0.0:
-        if st.ahead > h:
-            # the step ends inside the sub-step the front came from: interpolate
-            st.ahead -= h
-            DENSE_STATE(st, kp, 1.0 - st.ahead / st.dn_h)
-            return dense_end(st, kp)
-    elif not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
-        free_flight(st, kp, h)
-        return eval_forces(st, kp)
-    I = kp.inertia
-    hmax = h / max(kp.substeps, 1.0)
-    adaptive = kp.tol > 0.0
-    hcap = hmax
-    if DENSE and adaptive:
-        hcap = DENSE_CAP * h  # the step's end is interpolated: a sub-step may span several steps
-    h0 = H0 / math.sqrt(kp.k)
-    # the state lives in the sub-step start during the step (see rk4.cf4); a
-    # front left by the last step (DENSE) is there already
-    resume = DENSE and st.ahead > 0.0
-    if not resume:
-        begin_substeps(st)
-    Xn = st.new_X
-    Un = st.new_U
-    Ln = st.new_L
-    offn = st.new_off
-    Xw = st.sub_X
-    Uw = st.sub_U
-    Lw = st.sub_L
-    offw = st.sub_off
-    F = st.F
-    uk = st.uk
-    z = st.z
-    P = st.P
-    st.rot_h = -1.0  # ω changes: the cached free-flight rotation is stale
-    t = 0.0
-    nsub = 0
-    entering = False
-    ahead = False  # the last accepted sub-step ran past the end of the step (DENSE)
-    # In contact, the forces at the step's start are those the last step ended
-    # with (``eval_forces``, or the last sub-step's own evaluation): their sums
-    # are the first sub-step's first stage, bit for bit (nodes without a force
-    # hold exact zeros, which leave a sum from +0.0 unchanged).
-    cached = contact
-    c5 = contact
-    if resume:
-        # the sub-steps go on from the front, with the forces kept there
-        t = st.ahead
-        st.ahead = 0.0
-        for j in range(3):
-            W[j] = Lw[j] / I
-        cached = t < h  # at t = h the loop ends at once: the forces at the front are evaluated afresh
-        c5 = st.fr_below
-        w = st.fr_wrench
-        g0, g1, g2, q0, q1, q2 = w[0], w[1], w[2], w[3], w[4], w[5]
-    else:
-        g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
-    while t < h and nsub < MAX_SUBSTEPS:
-        nsub += 1
-        rest = h - t
-        if cached:
-            # the accepted sub-step's last force evaluation is this one's first
-            cached = False
-            below = c5
-            f0 = g0
-            f1 = g1
-            f2 = g2
-            t0 = q0
-            t1 = q1
-            t2 = q2
+    def drive(st, kp, h, contact):
+        W = st.W
+        # the weight of this step's error estimates (the tolerance loosened by tol_growth)
+        grade = age_tolerance(st, kp, h, 1)
+        if method.DENSE and st.ahead > 0.0:
+            if st.ahead > h:
+                # the step ends inside the sub-step the front came from: interpolate
+                st.ahead -= h
+                method.dense_state(st, kp, 1.0 - st.ahead / st.dn_h)
+                return dense_end(st, kp)
+        elif not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
+            free_flight(st, kp, h)
+            return eval_forces(st, kp)
+        I = kp.inertia
+        hmax = h / max(kp.substeps, 1.0)
+        adaptive = kp.tol > 0.0
+        hcap = hmax
+        if method.DENSE and adaptive:
+            hcap = DENSE_CAP * h  # the step's end is interpolated: a sub-step may span several steps
+        h0 = method.H0 / math.sqrt(kp.k)
+        # the state lives in the sub-step start during the step (see rk4.cf4); a
+        # front left by the last step (dense output) is there already
+        resume = method.DENSE and st.ahead > 0.0
+        if not resume:
+            begin_substeps(st)
+        Xn = st.new_X
+        Un = st.new_U
+        Ln = st.new_L
+        offn = st.new_off
+        Xw = st.sub_X
+        Uw = st.sub_U
+        Lw = st.sub_L
+        offw = st.sub_off
+        F = st.F
+        uk = st.uk
+        z = st.z
+        P = st.P
+        st.rot_h = -1.0  # ω changes: the cached free-flight rotation is stale
+        t = 0.0
+        nsub = 0
+        entering = False
+        ahead = False  # the last accepted sub-step ran past the end of the step (dense output)
+        # In contact, the forces at the step's start are those the last step ended
+        # with (``eval_forces``, or the last sub-step's own evaluation): their sums
+        # are the first sub-step's first stage, bit for bit (nodes without a force
+        # hold exact zeros, which leave a sum from +0.0 unchanged).
+        cached = contact
+        c5 = contact
+        if resume:
+            # the sub-steps go on from the front, with the forces kept there
+            t = st.ahead
+            st.ahead = 0.0
+            for j in range(3):
+                W[j] = Lw[j] / I
+            cached = t < h  # at t = h the loop ends at once: the forces at the front are evaluated afresh
+            c5 = st.fr_below
+            w = st.fr_wrench
+            g0, g1, g2, q0, q1, q2 = w[0], w[1], w[2], w[3], w[4], w[5]
         else:
-            below, f0, f1, f2, t0, t1, t2 = wrench_at(Xw[2], Uw[0], Uw[1], Uw[2], W[0], W[1], W[2], offw, kp, F, uk, z, P)
-        if not below and not entering:
-            # free flight, exact, until the end of the step or the next entry
-            if free_flight_safe(Xw, Uw, W, offw, kp, rest):
-                free_advance(Xw, Uw, W, offw, kp, rest)
-                t = h
-                break
-            hs = hmax
+            g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
+        while t < h and nsub < MAX_SUBSTEPS:
+            nsub += 1
+            rest = h - t
+            if cached:
+                # the accepted sub-step's last force evaluation is this one's first
+                cached = False
+                below = c5
+                f0 = g0
+                f1 = g1
+                f2 = g2
+                t0 = q0
+                t1 = q1
+                t2 = q2
+            else:
+                below, f0, f1, f2, t0, t1, t2 = wrench_at(Xw[2], Uw[0], Uw[1], Uw[2], W[0], W[1], W[2], offw, kp, F, uk, z, P)
+            if not below and not entering:
+                # free flight, exact, until the end of the step or the next entry
+                if free_flight_safe(Xw, Uw, W, offw, kp, rest):
+                    free_advance(Xw, Uw, W, offw, kp, rest)
+                    t = h
+                    break
+                hs = hmax
+                last = False
+                if hs >= rest * (1.0 - 1e-12):
+                    hs = rest
+                    last = True
+                m1 = free_min_height(Xw, Uw, W, offw, kp, hs)
+                if m1 >= 0.0:
+                    free_advance(Xw, Uw, W, offw, kp, hs)
+                    t = h if last else t + hs
+                    continue
+                tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)
+                free_advance(Xw, Uw, W, offw, kp, tau)
+                t = t + tau
+                entering = True
+                if adaptive and (st.h_next <= 0.0 or st.h_next > h0):
+                    st.h_next = h0  # an impact starts: the step the controller starts from
+                continue
+            entering = False
+            hs = hcap
+            cause = CAUSE_CAP
+            if adaptive:
+                if st.h_next <= 0.0:
+                    st.h_next = h0
+                if st.h_next < hs:
+                    hs = st.h_next
+                    cause = CAUSE_ERROR
+            limited = hs < st.h_next
+            if resume and nsub == 1:
+                # the first pass of a resumed step starts at the front, whose λ_f
+                # was kept there (the scratch holds the state's forces now)
+                lam = st.fr_lam
+            else:
+                lam = friction_rate(z, uk, P, kp)
+            if lam * hs > method.FRICTION_THETA:
+                hs = method.FRICTION_THETA / lam
+                limited = True
+                cause = CAUSE_FRICTION
             last = False
-            if hs >= rest * (1.0 - 1e-12):
+            if hs >= rest * (1.0 - 1e-12) and not (method.DENSE and adaptive and hs > rest * (1.0 + DENSE_SNAP)):
                 hs = rest
                 last = True
-            m1 = free_min_height(Xw, Uw, W, offw, kp, hs)
-            if m1 >= 0.0:
-                free_advance(Xw, Uw, W, offw, kp, hs)
-                t = h if last else t + hs
-                continue
-            tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)
-            free_advance(Xw, Uw, W, offw, kp, tau)
-            t = t + tau
-            entering = True
-            if adaptive and (st.h_next <= 0.0 or st.h_next > h0):
-                st.h_next = h0  # an impact starts: the step the controller starts from
-            continue
-        entering = False
-        hs = hcap
-        cause = CAUSE_CAP
-        if adaptive:
-            if st.h_next <= 0.0:
-                st.h_next = h0
-            if st.h_next < hs:
-                hs = st.h_next
-                cause = CAUSE_ERROR
-        limited = hs < st.h_next
-        if resume and nsub == 1:
-            # the first pass of a resumed step starts at the front, whose λ_f
-            # was kept there (the scratch holds the state's forces now)
-            lam = st.fr_lam
-        else:
-            lam = friction_rate(z, uk, P, kp)
-        if lam * hs > THETA:
-            hs = THETA / lam
-            limited = True
-            cause = CAUSE_FRICTION
-        last = False
-        if hs >= rest * (1.0 - 1e-12) and not (DENSE and adaptive and hs > rest * (1.0 + DENSE_SNAP)):
-            hs = rest
-            last = True
-            limited = True
-            cause = CAUSE_END
-        SUBSTEP(st, kp, hs, f0, f1, f2, t0, t1, t2)
-        # nodes that changed side within the sub-step: cut at the first crossing.
-        # A crossing within MIN_CUT of the start (a node left on the ground to
-        # rounding by the previous cut) is no crossing: it is left out of the
-        # minimum, not allowed to veto the cut of another node's real crossing
-        # later in the sub-step (that veto hung on the sign of a 1e-16 height
-        # and was contact-substep's 1e-12 outcome floor; tests/core).
-        cut = 2.0
-        cmin = MIN_CUT * hmax / hs
-        for k in range(8):
-            zs = Xw[2] + offw[k, 2]
-            ze = Xn[2] + offn[k, 2]
-            if (zs < 0.0) != (ze < 0.0) and zs != 0.0:
-                # u_z = U_z + (x × ω)_z at both ends
-                vs = Uw[2] + (offw[k, 0] * (Lw[1] / I) - offw[k, 1] * (Lw[0] / I))
-                ve = Un[2] + (offn[k, 0] * (Ln[1] / I) - offn[k, 1] * (Ln[0] / I))
-                th = hermite_root(zs, vs, ze, ve, hs)
-                if th < 0.0:
-                    th = zs / (zs - ze)
-                if cmin < th < cut:
-                    cut = th
-        if cut < 1.0:
-            hs = cut * hs
-            last = False
-            limited = True
-            cause = CAUSE_CUT
-            st.substeps[CAUSE_REDONE] += 1
-            SUBSTEP(st, kp, hs, f0, f1, f2, t0, t1, t2)
-        if adaptive:
-            # embedded order-3 estimate (FSAL): y4 - y3 = h/6·(k4 - k5), k5 the
-            # derivative at the new state; scaled by the die's size and speed
-            c5, g0, g1, g2, q0, q1, q2 = wrench_at(
-                Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P
-            )
-            err = ERROR(st, kp, hs, g0, g1, g2, q0, q1, q2) * grade
-            if err == 0.0:
-                fac = ADAPT_FAC_MAX
-            elif ERR_EXP == 0.25:  # 0.9·err^(-1/4) by two square roots (libm's pow cost 3 % of a throw)
-                fac = ADAPT_SAFETY / math.sqrt(math.sqrt(err))
-            else:
-                fac = ADAPT_SAFETY * err ** (-ERR_EXP)
-            if err > 1.0 and hs > ADAPT_HMIN * h:
-                st.h_next = hs * max(ADAPT_FAC_MIN, fac)
-                st.substeps[CAUSE_REJECTED] += 1
-                nsub += 1
-                # the scratch now holds the rejected candidate's forces: redo the start
-                continue
-            hn = hs * min(ADAPT_FAC_MAX, fac)
-            if limited and hn < st.h_next:
-                hn = st.h_next
-            st.h_next = hn
-            cached = True
-        if DENSE and adaptive and not last and hs > rest:
-            # past the end of the step: keep this sub-step for the step ends inside it
-            DENSE_KEEP(st, hs)
-            ahead = True
-        accept_substep(st, kp)
-        st.substeps[cause] += 1
+                limited = True
+                cause = CAUSE_END
+            method.substep(st, kp, hs, f0, f1, f2, t0, t1, t2)
+            # nodes that changed side within the sub-step: cut at the first crossing.
+            # A crossing within MIN_CUT of the start (a node left on the ground to
+            # rounding by the previous cut) is no crossing: it is left out of the
+            # minimum, not allowed to veto the cut of another node's real crossing
+            # later in the sub-step (that veto hung on the sign of a 1e-16 height
+            # and was contact-substep's 1e-12 outcome floor; tests/core).
+            cut = 2.0
+            cmin = MIN_CUT * hmax / hs
+            for k in range(8):
+                zs = Xw[2] + offw[k, 2]
+                ze = Xn[2] + offn[k, 2]
+                if (zs < 0.0) != (ze < 0.0) and zs != 0.0:
+                    # u_z = U_z + (x × ω)_z at both ends
+                    vs = Uw[2] + (offw[k, 0] * (Lw[1] / I) - offw[k, 1] * (Lw[0] / I))
+                    ve = Un[2] + (offn[k, 0] * (Ln[1] / I) - offn[k, 1] * (Ln[0] / I))
+                    th = hermite_root(zs, vs, ze, ve, hs)
+                    if th < 0.0:
+                        th = zs / (zs - ze)
+                    if cmin < th < cut:
+                        cut = th
+            if cut < 1.0:
+                hs = cut * hs
+                last = False
+                limited = True
+                cause = CAUSE_CUT
+                st.substeps[CAUSE_REDONE] += 1
+                method.substep(st, kp, hs, f0, f1, f2, t0, t1, t2)
+            if adaptive:
+                # embedded order-3 estimate (FSAL): y4 - y3 = h/6·(k4 - k5), k5 the
+                # derivative at the new state; scaled by the die's size and speed
+                c5, g0, g1, g2, q0, q1, q2 = wrench_at(
+                    Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P
+                )
+                err = method.error(st, kp, hs, g0, g1, g2, q0, q1, q2) * grade
+                if err == 0.0:
+                    fac = ADAPT_FAC_MAX
+                elif method.ERR_EXP == 0.25:  # 0.9·err^(-1/4) by two square roots (libm's pow cost 3 % of a throw)
+                    fac = ADAPT_SAFETY / math.sqrt(math.sqrt(err))
+                else:
+                    fac = ADAPT_SAFETY * err ** (-method.ERR_EXP)
+                if err > 1.0 and hs > ADAPT_HMIN * h:
+                    st.h_next = hs * max(ADAPT_FAC_MIN, fac)
+                    st.substeps[CAUSE_REJECTED] += 1
+                    nsub += 1
+                    # the scratch now holds the rejected candidate's forces: redo the start
+                    continue
+                hn = hs * min(ADAPT_FAC_MAX, fac)
+                if limited and hn < st.h_next:
+                    hn = st.h_next
+                st.h_next = hn
+                cached = True
+            if method.DENSE and adaptive and not last and hs > rest:
+                # past the end of the step: keep this sub-step for the step ends inside it
+                method.dense_keep(st, hs)
+                ahead = True
+            accept_substep(st, kp)
+            st.substeps[cause] += 1
+            if ahead:
+                break
+            t = h if last else t + hs
         if ahead:
-            break
-        t = h if last else t + hs
-    if ahead:
-        # the front stays in the sub-step start, with what its next sub-step
-        # starts from; the state at the end of the step is interpolated in
-        # the last sub-step
-        st.ahead = t + hs - h
-        front_keep(st, c5, g0, g1, g2, q0, q1, q2, friction_rate(z, uk, P, kp))
-        DENSE_STATE(st, kp, rest / hs)
-        return dense_end(st, kp)
-    if t < h:
-        # the sub-step budget ran out before the end of the step: never return a
-        # silently shorter step; the loop reports the NaN as "non_finite"
-        Xw[2] = math.nan
-        cached = False
-    end_substeps(st, kp)
-    if cached:
-        # the step ended on an accepted sub-step, whose forces at the new state
-        # (the error estimate's evaluation) are in the scratch: what
-        # eval_forces would compute again, from the same X, U, ω = L/I and offsets
-        return ended_forces(st, c5)
-    return eval_forces(st, kp)
+            # the front stays in the sub-step start, with what its next sub-step
+            # starts from; the state at the end of the step is interpolated in
+            # the last sub-step
+            st.ahead = t + hs - h
+            front_keep(st, c5, g0, g1, g2, q0, q1, q2, friction_rate(z, uk, P, kp))
+            method.dense_state(st, kp, rest / hs)
+            return dense_end(st, kp)
+        if t < h:
+            # the sub-step budget ran out before the end of the step: never return a
+            # silently shorter step; the loop reports the NaN as "non_finite"
+            Xw[2] = math.nan
+            cached = False
+        end_substeps(st, kp)
+        if cached:
+            # the step ended on an accepted sub-step, whose forces at the new state
+            # (the error estimate's evaluation) are in the scratch: what
+            # eval_forces would compute again, from the same X, U, ω = L/I and offsets
+            return ended_forces(st, c5)
+        return eval_forces(st, kp)
+
+    drive.__name__ = drive.__qualname__ = name
+    drive.__doc__ = f"One contact-aware step on the sub-step method of ``{method.__name__}`` (``make_drive``)."
+    return jit_fused(drive, cache=cache)
 
 
-#: contact-substep / contact-adaptive: the driver on commutator-free RK4 sub-steps.
-step = jit_fused(
-    specialise(
-        drive, "step_rk4", "contact-substep and contact-adaptive: :func:`drive` on RK4 sub-steps (``rk4.cf4``).",
-        SUBSTEP=cf4, ERROR=cf4_error, ERR_EXP=0.25, THETA=FRICTION_THETA, H0=ADAPT_H0,
-    )
-)
+#: The sub-step method of contact-substep and contact-adaptive (the contract of
+#: :func:`make_drive`): commutator-free RK4 (``rk4.cf4``) with its embedded
+#: order-3 estimate; RK4 is stable to λ_f·h = 2.78 on the friction law
+#: (``FRICTION_THETA`` 1 keeps a margin), an impact starts from ω·h = 0.1
+#: (``ADAPT_H0``); no continuous extension.
+substep = cf4
+error = cf4_error
+ERR_EXP = 0.25
+H0 = ADAPT_H0
+DENSE = False
+dense_keep = no_dense_keep
+dense_state = no_dense_state
+
+#: contact-substep / contact-adaptive: the driver on this module's RK4 sub-step method.
+step = make_drive(sys.modules[__name__], "step_rk4")
+
+
+#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
+roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

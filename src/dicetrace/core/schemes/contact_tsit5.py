@@ -11,14 +11,23 @@ that decides a throw's outcome it needs less work.  With dense output
 (``DENSE``): the last sub-step of a step runs its full length past the
 step's end, the state at the end is Tsit5's continuous extension there
 (``erk.dense_state``), and the next step goes on from the front.
+
+This module is the driver's sub-step method (``contact_substep.make_drive``):
+the names below are what the driver reads.
 """
 
 from __future__ import annotations
 
-from dicetrace.core._jit import jit_fused, specialise
-from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, drive  # noqa: F401 (the driver's free flight)
-from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsit5_substep
+import sys
 
+from dicetrace.core import loop
+from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, make_drive  # noqa: F401 (the driver's free flight)
+from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsit5_substep  # noqa: F401
+
+substep = tsit5_substep
+error = tsit5_error
+#: The step-size exponent, 1 / (the estimate's order + 1).
+ERR_EXP = 1.0 / 5.0
 #: Largest λ_f·h of the friction law (Tsit5's interval on the negative real
 #: axis reaches −3.51; a margin for the law's non-linearity and for λ_f, a
 #: per-node bound, being no bound on the die's whole friction Jacobian: at 3.3
@@ -26,16 +35,11 @@ from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsi
 FRICTION_THETA = 3.0
 #: An impact's first sub-step, as ω·h with ω = √k.
 H0 = 0.4
+#: The last sub-step of a step runs past its end; the end is interpolated (``dense_keep``, ``dense_state``).
+DENSE = True
 
-#: What ``drive`` is specialised on for this scheme (also what a benchmark's variants of it start from).
-DRIVE_CONSTANTS = dict(
-    SUBSTEP=tsit5_substep, ERROR=tsit5_error, ERR_EXP=1.0 / 5.0, THETA=FRICTION_THETA, H0=H0,
-    DENSE=True, DENSE_KEEP=dense_keep, DENSE_STATE=dense_state,
-)
+step = make_drive(sys.modules[__name__], "step_tsit5")
 
-step = jit_fused(
-    specialise(
-        drive, "step_tsit5", "contact-tsit5: ``contact_substep.drive`` on Tsit5 sub-steps (``erk``).",
-        **DRIVE_CONSTANTS,
-    )
-)
+
+#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
+roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

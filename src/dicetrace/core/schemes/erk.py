@@ -12,16 +12,17 @@ The quaternion's flow keeps |q| = 1 exactly, so any Runge–Kutta tableau
 integrates it at its full order; the stages read R(q/|q|), and the accepted
 step normalises q (a projection, which keeps the order) and sets the
 offsets to R(q)·x_k(0): the die stays rigid to rounding whatever the error
-of the step.  :func:`erk_template` is specialised (``_jit.specialise``) on
-a tableau: ``NS`` stages, ``A``, ``B`` (the system is autonomous: no nodes
-``C``); the error estimates on its error weights (NS + 1 entries: the last
-weighs the derivative at the new state, which the driver evaluates anyway
-as the next sub-step's first stage).  Error norm ``rk4.error_norm``, as
+of the step.  :func:`erk_substep` builds the sub-step of a
+tableau: ns stages, a, b (the system is autonomous: no nodes c), closed
+over so that they compile in as constants; :func:`erk_error1` and
+:func:`erk_error2` the error estimates on its error weights (ns + 1
+entries: the last weighs the derivative at the new state, which the driver
+evaluates anyway as the next sub-step's first stage).  Error norm ``rk4.error_norm``, as
 contact-adaptive's (position over the half side, velocity over
 ``error_speed``), with the rotation's error counted as the node
-displacement it causes: :func:`erk_error1_template` for a pair with one
-estimate ``E`` = b − b̂ (Tsit5), :func:`erk_error_template` for DOP853's two
-(``E5``, ``E3``), combined as DOP853 does (Hairer, Nørsett & Wanner,
+displacement it causes: :func:`erk_error1` for a pair with one
+estimate e = b − b̂ (Tsit5), :func:`erk_error2` for DOP853's two
+(e5, e3), combined as DOP853 does (Hairer, Nørsett & Wanner,
 *Solving ODEs I*, II.10): err = e₅² / √(e₅² + 0.01·e₃²).
 """
 
@@ -31,7 +32,7 @@ import math
 
 import numpy as np
 
-from dicetrace.core._jit import jit, jit_fused, specialise
+from dicetrace.core._jit import jit, jit_fused
 from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
 from dicetrace.core.model import offset_cross_omega
 from dicetrace.core.schemes.rk4 import error_norm, error_speed
@@ -287,74 +288,95 @@ def state_error_norm(e, vs, kp):
     return error_norm(math.sqrt(sx), math.sqrt(sq), math.sqrt(su), math.sqrt(sl) / kp.inertia, vs, kp)
 
 
-def erk_template(st, kp, h, f0, f1, f2, t0, t1, t2):
-    """One step of the tableau (NS, A, B) from the sub-step start ``st.sub_*`` to ``st.new_*``.
+def _named(fn, name: str, doc: str):
+    fn.__name__ = fn.__qualname__ = name
+    fn.__doc__ = doc
+    return jit_fused(fn)
 
-    ``f*``, ``t*``: contact force sum and torque at the start.  Leaves the
-    stage derivatives in ``st.rk_k`` (rows 0..NS−1) and the new state y in
-    ``st.rk_y`` (q normalised) for the error estimate (which overwrites
-    ``st.rk_y0`` and ``st.rk_acc``).
+
+def erk_substep(name: str, ns: int, a: np.ndarray, b: np.ndarray):
+    """The sub-step of the tableau (``ns`` stages, ``a``, ``b``), compiled as ``name``.
+
+    ``substep(st, kp, h, f0, f1, f2, t0, t1, t2)``: one step from the
+    sub-step start ``st.sub_*`` to ``st.new_*``; ``f*``, ``t*`` the contact
+    force sum and torque at the start.  Leaves the stage derivatives in
+    ``st.rk_k`` (rows 0..ns−1) and the new state y in ``st.rk_y`` (q
+    normalised) for the error estimate (which overwrites ``st.rk_y0`` and
+    ``st.rk_acc``).  The tableau is closed over, so numba compiles it in as
+    constants.
     """
-    K = st.rk_k
-    y = st.rk_y
-    y0 = st.rk_y0
-    off = st.sub_off
-    offs = st.stage_off
-    substep_start(st, y0)
-    derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
-    for i in range(1, NS):
-        combine(A[i], i, K, y0, h, y)
-        g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
-        derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
-    combine(B, NS, K, y0, h, y)
-    substep_end(st, y)
+
+    def substep(st, kp, h, f0, f1, f2, t0, t1, t2):
+        K = st.rk_k
+        y = st.rk_y
+        y0 = st.rk_y0
+        off = st.sub_off
+        offs = st.stage_off
+        substep_start(st, y0)
+        derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
+        for i in range(1, ns):
+            combine(a[i], i, K, y0, h, y)
+            g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
+            derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
+        combine(b, ns, K, y0, h, y)
+        substep_end(st, y)
+
+    return _named(substep, name, erk_substep.__doc__)
 
 
-def erk_error_template(st, kp, h, g0, g1, g2, q0, q1, q2):
-    """Local error of the last step of the tableau (E5, E3) over ``kp.tol``; g, q: force sum and torque at the new state."""
-    K = st.rk_k
-    y = st.rk_y
-    derivative_row(K, NS, y, g0, g1, g2, q0, q1, q2, kp)
-    e5 = st.rk_acc
-    e3 = st.rk_y0  # the sub-step start is no longer needed
-    combine(E5, NS + 1, K, ZERO, 1.0, e5)
-    combine(E3, NS + 1, K, ZERO, 1.0, e3)
-    vs = error_speed(st.new_U, st.new_L, kp)
-    k5 = state_error_norm(e5, vs, kp)
-    k3 = state_error_norm(e3, vs, kp)
-    r5 = abs(h) * k5
-    r3 = abs(h) * k3
-    if r5 == 0.0:
-        return 0.0
-    return r5 * r5 / math.sqrt(r5 * r5 + 0.01 * r3 * r3) / kp.tol
+def erk_error2(name: str, ns: int, e5: np.ndarray, e3: np.ndarray):
+    """The error estimate of a pair with two embedded estimates (DOP853's ``e5``, ``e3``), compiled as ``name``.
+
+    ``error(st, kp, h, g0, g1, g2, q0, q1, q2)``: the local error of the last
+    sub-step over ``kp.tol``; g, q the force sum and torque at the new state.
+    """
+
+    def error(st, kp, h, g0, g1, g2, q0, q1, q2):
+        K = st.rk_k
+        y = st.rk_y
+        derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, kp)
+        err5 = st.rk_acc
+        err3 = st.rk_y0  # the sub-step start is no longer needed
+        combine(e5, ns + 1, K, ZERO, 1.0, err5)
+        combine(e3, ns + 1, K, ZERO, 1.0, err3)
+        vs = error_speed(st.new_U, st.new_L, kp)
+        k5 = state_error_norm(err5, vs, kp)
+        k3 = state_error_norm(err3, vs, kp)
+        r5 = abs(h) * k5
+        r3 = abs(h) * k3
+        if r5 == 0.0:
+            return 0.0
+        return r5 * r5 / math.sqrt(r5 * r5 + 0.01 * r3 * r3) / kp.tol
+
+    return _named(error, name, erk_error2.__doc__)
 
 
-def erk_error1_template(st, kp, h, g0, g1, g2, q0, q1, q2):
-    """Local error of the last step of a pair with one embedded estimate, E = b − b̂ (NS + 1 entries), over ``kp.tol``."""
-    K = st.rk_k
-    y = st.rk_y
-    derivative_row(K, NS, y, g0, g1, g2, q0, q1, q2, kp)
-    e = st.rk_acc
-    combine(E, NS + 1, K, ZERO, 1.0, e)
-    vs = error_speed(st.new_U, st.new_L, kp)
-    return abs(h) * state_error_norm(e, vs, kp) / kp.tol
+def erk_error1(name: str, ns: int, e: np.ndarray):
+    """The error estimate of a pair with one embedded estimate, e = b − b̂ (ns + 1 entries), compiled as ``name``.
+
+    ``error(st, kp, h, g0, g1, g2, q0, q1, q2)``: the local error of the last
+    sub-step over ``kp.tol``.
+    """
+
+    def error(st, kp, h, g0, g1, g2, q0, q1, q2):
+        K = st.rk_k
+        y = st.rk_y
+        derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, kp)
+        err = st.rk_acc
+        combine(e, ns + 1, K, ZERO, 1.0, err)
+        vs = error_speed(st.new_U, st.new_L, kp)
+        return abs(h) * state_error_norm(err, vs, kp) / kp.tol
+
+    return _named(error, name, erk_error1.__doc__)
 
 
 #: DOP853's sub-step and its error estimate (order 8; the estimate's exponent 1/8).
-dop853_substep = jit_fused(
-    specialise(erk_template, "dop853_substep", NS=DOP853_STAGES, A=DOP853_A, B=DOP853_B)
-)
-dop853_error = jit_fused(
-    specialise(erk_error_template, "dop853_error", NS=DOP853_STAGES, E5=DOP853_E5, E3=DOP853_E3)
-)
+dop853_substep = erk_substep("dop853_substep", DOP853_STAGES, DOP853_A, DOP853_B)
+dop853_error = erk_error2("dop853_error", DOP853_STAGES, DOP853_E5, DOP853_E3)
 
 #: Tsit5's sub-step and its error estimate (order 5, estimate of order 4: the exponent 1/5).
-tsit5_substep = jit_fused(
-    specialise(erk_template, "tsit5_substep", NS=TSIT5_STAGES, A=TSIT5_A, B=TSIT5_B)
-)
-tsit5_error = jit_fused(
-    specialise(erk_error1_template, "tsit5_error", NS=TSIT5_STAGES, E=TSIT5_E)
-)
+tsit5_substep = erk_substep("tsit5_substep", TSIT5_STAGES, TSIT5_A, TSIT5_B)
+tsit5_error = erk_error1("tsit5_error", TSIT5_STAGES, TSIT5_E)
 
 
 @jit(inline="always")

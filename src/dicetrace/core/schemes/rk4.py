@@ -22,8 +22,11 @@ sub-steps.
 
 from __future__ import annotations
 
+import sys
+
 import math
 
+from dicetrace.core import loop
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, eval_forces, step_wrench, wrench_at
 from dicetrace.core.free_flight import CIRCUM, free_flight, free_flight_safe
@@ -216,3 +219,7 @@ def step(st, kp, h, contact):
     accept_substep(st, kp)
     end_substeps(st, kp)
     return eval_forces(st, kp)
+
+
+#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
+roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

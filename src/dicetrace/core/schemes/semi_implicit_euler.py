@@ -9,19 +9,14 @@ Its summaries run the specialised kernel ``core.fast`` where that applies.
 
 from __future__ import annotations
 
+import sys
+
+from dicetrace.core import fast, loop
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import eval_forces, step_wrench
+from dicetrace.core.model import program_kick_drift
 from dicetrace.core.rotation import turn_by_omega
 from dicetrace.core.state import set_angular_momentum
-
-
-@jit(inline="always")
-def program_kick_drift(U0, U1, U2, X0, X1, X2, s0, s1, s2, kp, h):
-    """The program's velocity and position update: U += (ΣF + (0, 0, 8g))/8·h, then X += U·h."""
-    U0 = U0 + (s0 + 0.0) / 8.0 * h
-    U1 = U1 + (s1 + 0.0) / 8.0 * h
-    U2 = U2 + (s2 + kp.g * 8.0) / 8.0 * h
-    return U0, U1, U2, X0 + U0 * h, X1 + U1 * h, X2 + U2 * h
 
 
 @jit
@@ -36,3 +31,12 @@ def step(st, kp, h, contact):
         set_angular_momentum(st, L[0] + t0 * h, L[1] + t1 * h, L[2] + t2 * h, kp)
     turn_by_omega(st, h)
     return eval_forces(st, kp)
+
+
+#: The specialised summary kernel (``core.fast``), bit-identical to the summary loop where it applies.
+summary = fast.roll_summary_sie
+summary_applies = fast.applies
+
+
+#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
+roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

@@ -12,6 +12,9 @@ A step in which no node can touch the ground is the exact free flight.
 
 from __future__ import annotations
 
+import sys
+
+from dicetrace.core import loop
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, eval_forces, step_wrench, wrench_at
 from dicetrace.core.free_flight import free_flight, free_flight_safe
@@ -56,3 +59,7 @@ def step(st, kp, h, contact):
     U[2] = U[2] + hh * a2
     set_angular_momentum(st, L[0] + hh * t0, L[1] + hh * t1, L[2] + hh * t2, kp)
     return eval_forces(st, kp)
+
+
+#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
+roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

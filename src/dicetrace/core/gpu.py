@@ -1,0 +1,213 @@
+"""The GPU backend: the CPU's kernels, compiled by numba-cuda for an NVIDIA GPU, one thread per throw.
+
+There is no second copy of the physics here.  numba-cuda compiles a
+function that numba's CPU ``jit`` made (``core._jit``) as a device function
+when device code calls it, so the force law, the steps, the sub-step
+drivers and the run loop are the very functions the CPU runs.  This module
+only adds the two kernels that give each thread its throw:
+
+``seed kernel``
+    the `seed` preset's specialised summary kernel
+    (``fast.roll_summary_sie_in``) in per-thread local arrays, wherever it
+    applies on the CPU (``fast.applies``);
+``general kernel``
+    a scheme's summary run loop (``loop.make_roll`` without the hand-off
+    to a specialised kernel, which allocates), in a per-thread state record
+    in device memory.
+
+Arithmetic.  The seed path's kernels are compiled as on the CPU, without
+contraction into fused multiply-adds (NVVM contracts by default; its
+``-fma=0`` option is set for those kernels): only libdevice's sin, cos, exp
+and sqrt can then differ from the host's, in the last ulp.  The contact
+schemes, which the CPU compiles with contraction (``_jit.jit_fused``), are
+compiled with NVVM's default contraction: the same model, rounded
+differently, so their throws agree with the CPU's to rounding and, through
+the chaos, in outcome wherever a throw is not within rounding of a border.
+
+Memory.  Each thread owns ``cap`` contact sets in device memory and, on
+the general kernel, one state record (``core.state.STATE``, 3.8 kB).
+``run_batch_cuda`` runs one chunk; ``dicetrace.batch_chunks`` sizes chunks
+to the device's free memory and retries the throws that fill their buffer,
+as on the CPU.
+
+numba-cuda is optional (``pip install 'dicetrace[cuda]'``) and this module
+imports it: import this module only where a GPU is asked for
+(``dicetrace.devices`` says whether one can be used).  Under numba-cuda's
+simulator (``NUMBA_ENABLE_CUDASIM=1``) the kernels run on the CPU, in
+Python, calling the CPU's compiled functions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+
+import numpy as np
+
+if not hasattr(np, "row_stack"):  # numpy 2.5 removed it; numba-cuda 0.30 still names it
+    np.row_stack = np.vstack
+
+from numba import cuda, float64, typeof  # noqa: E402 (after the alias above)
+
+from dicetrace.core import fast, loop  # noqa: E402
+from dicetrace.core.kernels import scheme_of  # noqa: E402
+from dicetrace.core.state import new_states  # noqa: E402
+
+#: Threads per block: the kernels hold ~180 registers a thread, so blocks of 128 keep several resident.
+THREADS_PER_BLOCK = 128
+
+
+def simulated() -> bool:
+    """Whether numba-cuda's simulator stands in for a GPU (``NUMBA_ENABLE_CUDASIM=1``)."""
+    return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
+
+
+def device_name() -> str:
+    """The device the kernels run on, in words (e.g. 'NVIDIA H200', or the simulator)."""
+    if simulated():
+        return "numba-cuda simulator"
+    dev = cuda.get_current_device()
+    name = dev.name.decode() if isinstance(dev.name, bytes) else str(dev.name)
+    return name
+
+
+def free_memory() -> int:
+    """Free device memory in bytes (the simulator: 2 GiB, a size for tests)."""
+    if simulated():
+        return 2 << 30
+    free, _total = cuda.current_context().get_memory_info()
+    return int(free)
+
+
+@contextlib.contextmanager
+def _nvvm_without_fma():
+    """NVVM compiles with ``-fma=0`` inside: no contraction of a·b + c, as the CPU compiles the seed path.
+
+    numba-cuda passes its code library's options to ``nvvm.compile_ir``
+    when it makes PTX; it has no public switch for this one, so the option
+    is added there for the kernels compiled in this context.
+    """
+    from numba.cuda.cudadrv import nvvm
+
+    compile_ir = nvvm.compile_ir
+
+    def strict(llvmir, **options):
+        options["fma"] = False
+        return compile_ir(llvmir, **options)
+
+    nvvm.compile_ir = strict
+    try:
+        yield
+    finally:
+        nvvm.compile_ir = compile_ir
+
+
+def _seed_kernel(ics, off0, kp, cap, status, steps, outcome, nsets, sets, set_steps):
+    i = cuda.grid(1)
+    if i < ics.shape[0]:
+        off = cuda.local.array((8, 3), float64)
+        F = cuda.local.array((8, 3), float64)
+        uk = cuda.local.array((8, 3), float64)
+        z = cuda.local.array(8, float64)
+        P = cuda.local.array(8, float64)
+        lo = i * cap
+        s, n, o, ns = fast.roll_summary_sie_in(ics[i], off0, kp, sets[lo : lo + cap], set_steps[lo : lo + cap],
+                                               off, F, uk, z, P)
+        status[i] = s
+        steps[i] = n
+        outcome[i] = o
+        nsets[i] = ns
+
+
+def _make_general_kernel(roll):
+    """The one-thread-per-throw kernel around the summary loop ``roll`` (``loop.make_roll``)."""
+
+    def general_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2):
+        i = cuda.grid(1)
+        if i < ics.shape[0]:
+            lo = i * cap
+            s, n, o, ns = roll(ics[i], off0, kp, states[i : i + 1], sets[lo : lo + cap], set_steps[lo : lo + cap],
+                               e0, e1, e2)
+            status[i] = s
+            steps[i] = n
+            outcome[i] = o
+            nsets[i] = ns
+
+    return general_kernel
+
+
+def _fused(scheme) -> bool:
+    """Whether the CPU compiles this scheme's step with contraction (``_jit.jit_fused``)."""
+    return bool(getattr(scheme.step, "targetoptions", {}).get("fastmath"))
+
+
+_KERNELS: dict = {}
+
+
+def _kernel(integ: int, seed_path: bool):
+    """The CUDA dispatcher for integrator ``integ`` (kernel id), the seed kernel or the general one, and whether strict."""
+    scheme = scheme_of(integ)
+    key = "seed" if seed_path else scheme.__name__
+    if key not in _KERNELS:
+        if seed_path:
+            fn, strict = _seed_kernel, True
+        else:
+            roll = loop.make_roll(scheme, trace=False, use_summary=False,
+                                  name=f"roll_{scheme.__name__.rsplit('.', 1)[-1]}_device")
+            fn, strict = _make_general_kernel(roll), not _fused(scheme)
+        _KERNELS[key] = (cuda.jit(fn), strict)
+    return _KERNELS[key]
+
+
+def _launch(kernel, strict: bool, m: int, args) -> None:
+    """Launch ``kernel`` over m threads; compile it first (``-fma=0`` where ``strict``)."""
+    blocks = (m + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
+    if simulated() or not strict:
+        kernel[blocks, THREADS_PER_BLOCK](*args)
+        return
+    with _nvvm_without_fma():
+        specialised = kernel.specialize(*args)
+        specialised.compile(specialised.signatures[0] if specialised.signatures else _signature(args))
+    specialised[blocks, THREADS_PER_BLOCK](*args)
+
+
+def _signature(args):
+    return tuple(typeof(a) for a in args)
+
+
+def uses_seed_kernel(kp, off0, integ: int) -> bool:
+    """Whether throws of this configuration run the seed kernel (the CPU's specialised kernel applies)."""
+    scheme = scheme_of(integ)
+    return hasattr(scheme, "summary") and scheme.summary is fast.roll_summary_sie and bool(fast.applies(kp, off0))
+
+
+def bytes_per_throw(integ: int, cap: int, kp=None, off0=None) -> int:
+    """Device memory one throw of a chunk takes: IC, summaries, ``cap`` contact sets and (general kernel) its state."""
+    state = 0 if (kp is not None and uses_seed_kernel(kp, off0, integ)) else new_states(1).itemsize
+    return 6 * 8 + 1 + 8 + 1 + 8 + 5 * cap + state
+
+
+def run_batch_cuda(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps) -> None:
+    """``core.kernels.run_batch`` on the GPU: the same arguments, the outputs written in place.
+
+    One chunk: the caller sizes it to the device's memory
+    (:func:`bytes_per_throw`, :func:`free_memory`).
+    """
+    m = len(ics)
+    if m == 0:
+        return
+    seed_path = uses_seed_kernel(kp, off0, integ)
+    kernel, strict = _kernel(integ, seed_path)
+    d_ics = cuda.to_device(np.ascontiguousarray(ics, dtype=np.float64))
+    d_off0 = cuda.to_device(np.ascontiguousarray(off0, dtype=np.float64))
+    outs = [cuda.device_array(a.shape, a.dtype) for a in (status, steps, outcome, nsets, sets, set_steps)]
+    if seed_path:
+        args = (d_ics, d_off0, kp, cap, *outs)
+    else:
+        states = cuda.to_device(new_states(m))
+        empty = (cuda.device_array((0, loop.STATE_COLS)), cuda.device_array((0, loop.FORCE_COLS)),
+                 cuda.device_array((0, loop.ENERGY_COLS)))
+        args = (d_ics, d_off0, kp, cap, states, *outs, *empty)
+    _launch(kernel, strict, m, args)
+    for host, dev in zip((status, steps, outcome, nsets, sets, set_steps), outs):
+        dev.copy_to_host(host)

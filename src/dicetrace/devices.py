@@ -1,0 +1,95 @@
+"""Where batches of throws run: the CPU (numba threads) or a CUDA GPU (numba-cuda), and how to choose.
+
+``device`` is one of :data:`DEVICES`: ``"cpu"`` (the default everywhere),
+``"cuda"`` (a GPU; refused with :class:`DeviceError` where there is none) or
+``"auto"`` (a GPU where numba-cuda finds one, else the CPU; one line on
+standard error says which, once per process).  The GPU runs the CPU's own
+kernels, compiled for the device (``dicetrace.core.gpu``): the `seed`
+preset's throws as on the CPU up to the last-ulp rounding of the device's
+sin and cos, the contact schemes' to rounding (they are compiled with fused
+multiply-adds on both, placed by different compilers).
+
+numba-cuda is an optional dependency (``pip install 'dicetrace[cuda]'``);
+nothing here imports it unless a GPU is asked for.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+
+#: The values of ``device``.
+DEVICES = ("cpu", "cuda", "auto")
+
+
+class DeviceError(ValueError):
+    """A device that cannot be used (``device="cuda"`` without a GPU, or a name not in :data:`DEVICES`)."""
+
+
+def _simulated() -> bool:
+    return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
+
+
+@functools.cache
+def gpu_unavailable_reason() -> str | None:
+    """None where the GPU backend can run (a CUDA GPU, or numba-cuda's simulator); else why not, in a few words."""
+    try:
+        from dicetrace.core import gpu  # numba-cuda: optional and heavy, imported only when a GPU is asked for
+    except ImportError as exc:
+        if "numba" in str(exc) or "cuda" in str(exc):
+            return "numba-cuda is not installed (pip install 'dicetrace[cuda]')"
+        raise
+    try:
+        if gpu.cuda.is_available():
+            return None
+    except Exception as exc:  # the CUDA driver's own failure, whatever its type: reported, never raised
+        return f"numba-cuda found no usable CUDA GPU ({type(exc).__name__}: {exc})"
+    return "numba-cuda found no CUDA GPU (no driver or no device)"
+
+
+_SAID: set = set()
+
+
+def _say_once(line: str) -> None:
+    if line not in _SAID:
+        _SAID.add(line)
+        sys.stderr.write(f"dicetrace: {line}\n")
+
+
+def check_device(device) -> str:
+    """``device`` if it is one of :data:`DEVICES`; else a :class:`DeviceError` naming them."""
+    if not isinstance(device, str) or device not in DEVICES:
+        raise DeviceError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
+    return device
+
+
+def resolve_device(device: str) -> str:
+    """``"cpu"`` or ``"cuda"``: where ``device`` runs here.
+
+    ``"cuda"`` without a usable GPU is a :class:`DeviceError` (one line, the
+    reason); ``"auto"`` takes the GPU where there is one and says which
+    device it chose on standard error, once per process.
+    """
+    device = check_device(device)
+    if device == "cpu":
+        return "cpu"
+    why = gpu_unavailable_reason()
+    if device == "cuda":
+        if why is not None:
+            raise DeviceError(f"device 'cuda': {why}")
+        return "cuda"
+    if why is not None:
+        _say_once(f"device auto: running on the CPU ({why})")
+        return "cpu"
+    _say_once(f"device auto: running on the GPU ({device_label('cuda')})")
+    return "cuda"
+
+
+def device_label(device: str) -> str:
+    """What a result records as its device: ``"cpu"``, or ``"cuda: <GPU name>"``."""
+    if device != "cuda":
+        return "cpu"
+    from dicetrace.core import gpu
+
+    return f"cuda: {gpu.device_name()}"

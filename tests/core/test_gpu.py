@@ -1,0 +1,233 @@
+"""The GPU backend (``dicetrace.core.gpu``) against the CPU's kernels, without a GPU and, where one is lent, on it.
+
+Without a GPU the kernels run under numba-cuda's simulator
+(``NUMBA_ENABLE_CUDASIM=1``) in a subprocess that also sets
+``NUMBA_DISABLE_JIT=1``: the kernel *and every physics function it calls*
+then run as plain Python with the host's math library, one thread per throw
+as on the device, through the same chunking, buffer retries and transfers.
+Plain Python rounds every operation as the CPU's strict build does, so the
+`seed` path must match the compiled CPU bit for bit, and any difference is a
+defect of the device path.  The contact schemes are compiled on the CPU
+with contraction into fused multiply-adds (``_jit.jit_fused``) and run
+without it here: their summaries are compared on fixed ICs, none of them
+near a border at the scale of rounding (checked: every one agrees).
+
+``test_kernels_compile_for_the_device`` compiles both kernels to PTX with
+NVIDIA's NVVM (no GPU needed; skipped where the NVVM library is missing, as
+in CI) and checks that the seed path is compiled without contraction.
+Tests marked ``gpu`` run on a real device and are skipped without one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from dicetrace.devices import DeviceError, resolve_device
+from dicetrace.ics import seed_slice
+from dicetrace.simulate import simulate_batch
+
+#: Runs ``simulate_batch`` in a fresh interpreter and prints its summaries as JSON.
+_RUN = textwrap.dedent(
+    """
+    import json, sys
+    import numpy as np
+    from dicetrace.ics import seed_slice
+    from dicetrace.simulate import simulate_batch
+    a = json.loads(sys.argv[1])
+    ics = seed_slice(np.array(a["xs"]), np.array(a["ys"]))
+    r = simulate_batch(ics, config=a["preset"], device=a["device"], cap=a["cap"], **a["options"])
+    print(json.dumps(dict(device=r.device, outcome=r.outcome.tolist(), steps=r.steps.tolist(),
+                          status=r.status_code.tolist(), offsets=r.set_offsets.tolist(), sets=r.sets.tolist(),
+                          set_steps=r.set_steps.tolist())))
+    """
+)
+
+
+def _summaries(r) -> dict:
+    return dict(outcome=r.outcome.tolist(), steps=r.steps.tolist(), status=r.status_code.tolist(),
+                offsets=r.set_offsets.tolist(), sets=r.sets.tolist(), set_steps=r.set_steps.tolist())
+
+
+def _run(device: str, preset: str, xs, ys, *, cap: int = 128, env: dict | None = None, **options):
+    arg = json.dumps(dict(xs=list(map(float, xs)), ys=list(map(float, ys)), preset=preset, device=device, cap=cap,
+                          options=options))
+    res = subprocess.run([sys.executable, "-c", _RUN, arg], capture_output=True, text=True, timeout=600,
+                         env={**os.environ, **(env or {})})
+    return res
+
+
+SIM = {"NUMBA_ENABLE_CUDASIM": "1", "NUMBA_DISABLE_JIT": "1"}
+RNG = np.random.default_rng(33)
+XS, YS = RNG.uniform(0.0, 20.0, 8), RNG.uniform(0.0, 20.0, 8)
+
+
+def _cpu(preset, xs, ys, **options):
+    return _summaries(simulate_batch(seed_slice(xs, ys), config=preset, **options))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cap", [128, 3])
+def test_seed_kernel_on_the_simulator_is_the_cpu_bit_for_bit(cap):
+    """8 `seed` throws through the seed kernel (per-thread local arrays) give the CPU's status, steps,
+    outcome and whole contact-set sequence; with 3 sets per throw every throw fills its buffer first and
+    is re-run with more on the device, as on the CPU."""
+    res = _run("cuda", "seed", XS, YS, cap=cap, env=SIM)
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    assert got.pop("device") == "cuda: numba-cuda simulator"
+    want = _cpu("seed", XS, YS, cap=cap)
+    assert got == want
+    assert set(got["status"]) == {0} and len(set(got["outcome"])) >= 3  # settled, several faces: not a degenerate case
+    if cap == 3:
+        assert min(np.diff(got["offsets"])) > cap  # every throw overflowed its first buffer
+
+
+@pytest.mark.slow
+def test_general_kernel_strict_scheme_on_the_simulator_is_the_cpu_bit_for_bit():
+    """The general kernel (a scheme's summary loop in a per-thread state record in device memory) on a
+    strictly compiled scheme: `seed` with velocity Verlet gives the CPU's summaries bit for bit."""
+    res = _run("cuda", "seed", XS[:4], YS[:4], env=SIM, integrator="verlet", dt_s=2e-4)
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    got.pop("device")
+    assert got == _cpu("seed", XS[:4], YS[:4], integrator="verlet", dt_s=2e-4)
+
+
+@pytest.mark.slow
+def test_physical_default_on_the_simulator_agrees_with_the_cpu():
+    """`physical` (contact-tsit5, dense output, error control) through the general kernel: the same status,
+    steps, outcome and contact-set sequence as the CPU on 3 throws (the CPU's build contracts into fused
+    multiply-adds, the simulator does not: agreement of the summaries, not of the last bit of the states)."""
+    res = _run("cuda", "physical", XS[:3], YS[:3], env=SIM)
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    got.pop("device")
+    want = _cpu("physical", XS[:3], YS[:3])
+    assert got == want
+    assert set(want["status"]) == {0}
+
+
+def test_auto_without_a_gpu_runs_on_the_cpu_and_says_so_once():
+    res = _run("auto", "seed", XS[:2], YS[:2], env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    assert got.pop("device") == "cpu"
+    assert got == _cpu("seed", XS[:2], YS[:2])
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("dicetrace: device auto: running on the CPU ("), res.stderr
+
+
+def test_cuda_without_a_gpu_is_one_error_line_and_runs_nothing():
+    res = _run("cuda", "seed", XS[:2], YS[:2], env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
+    assert res.returncode != 0 and res.stdout == ""
+    last = res.stderr.strip().splitlines()[-1]
+    assert last.startswith("dicetrace.devices.DeviceError: device 'cuda': "), res.stderr
+
+
+@pytest.mark.parametrize("bad", ["gpu", "CUDA", None, 1])
+def test_unknown_device_is_refused_naming_the_choices(bad):
+    with pytest.raises(DeviceError, match="device must be one of cpu, cuda, auto"):
+        simulate_batch(seed_slice([1.0], [1.0]), config="seed", device=bad)
+    with pytest.raises(DeviceError):
+        resolve_device(bad)
+
+
+def test_cpu_result_records_its_device_in_the_table_metadata():
+    r = simulate_batch(seed_slice([1.0, 2.0], [3.0, 4.0]), config="seed")
+    assert r.device == "cpu"
+    meta = json.loads(r.to_arrow().schema.metadata[b"dicetrace"])
+    assert meta["device"] == "cpu"
+
+
+def _nvvm_missing() -> str | None:
+    try:
+        from numba.cuda.cudadrv import nvvm
+
+        nvvm.NVVM()
+    except Exception as exc:  # no numba-cuda, or no NVVM library: the check cannot run here
+        return f"NVVM unavailable ({type(exc).__name__})"
+    return None
+
+
+@pytest.mark.slow
+def test_kernels_compile_for_the_device():
+    """Both kernels compile to PTX for an H200 (sm_90) with NVIDIA's compiler; the seed kernel without
+    contraction: its only fused multiply-adds are libdevice's own (sin, cos), so far fewer than NVVM's
+    default makes of the same kernel."""
+    why = _nvvm_missing()
+    if why:
+        pytest.skip(why)
+    code = textwrap.dedent(
+        """
+        import contextlib, json, types
+        import numba.cuda.dispatcher as d
+        import numba.cuda.cudadrv.devices as devs
+        fake = types.SimpleNamespace(compute_capability=(9, 0))
+        d.get_current_device = lambda: fake  # the compute capability is all it asks the device for
+        devs.get_context = lambda *a, **k: types.SimpleNamespace(device=fake)
+        import numpy as np
+        from numba import cuda, typeof
+        from dicetrace.core import gpu
+        from dicetrace.core.state import new_states
+        from dicetrace.params import make_config
+        out = {}
+        for preset in ("seed", "physical"):
+            kin = make_config(preset).kernel_inputs(np.zeros((2, 6)))
+            seed = gpu.uses_seed_kernel(kin.params, kin.off0, kin.integrator_id)
+            kernel, strict = gpu._kernel(kin.integrator_id, seed)
+            o = [np.zeros(2, np.int8), np.zeros(2, np.int64), np.zeros(2, np.int8), np.zeros(2, np.int64),
+                 np.zeros(16, np.uint8), np.zeros(16, np.int32)]
+            args = (kin.ics, kin.off0, kin.params, 8, *o) if seed else (
+                kin.ics, kin.off0, kin.params, 8, new_states(2), *o, np.zeros((0, 33)), np.zeros((0, 24)),
+                np.zeros((0, 6)))
+            sig = tuple(typeof(a) for a in args)
+            counts = []
+            for s in ((True, False) if strict else (False,)):
+                with gpu._nvvm_without_fma() if s else contextlib.nullcontext():
+                    ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
+                counts.append(ptx.count("fma.rn.f64"))
+            out[preset] = dict(seed_kernel=seed, strict=strict, fma=counts)
+        print(json.dumps(out))
+        """
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout)
+    assert out["seed"]["seed_kernel"] and out["seed"]["strict"]
+    strict_fma, default_fma = out["seed"]["fma"]
+    assert strict_fma < default_fma / 3, out
+    assert not out["physical"]["seed_kernel"] and not out["physical"]["strict"]
+
+
+def _gpu_missing() -> str | None:
+    if os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0"):
+        return "the simulator is on"
+    from dicetrace.devices import gpu_unavailable_reason
+
+    return gpu_unavailable_reason()
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("preset", ["seed", "physical"])
+def test_real_gpu_agrees_with_the_cpu(preset):
+    """On a real GPU, 2000 throws: `seed` outcomes equal to the CPU's on at least 99.9 % (the device's sin and
+    cos differ in the last ulp), `physical` on at least 99 % (rounding of fused multiply-adds, amplified by the
+    chaos near borders); no throw fails on the device that settles on the CPU."""
+    why = _gpu_missing()
+    if why:
+        pytest.skip(why)
+    rng = np.random.default_rng(7)
+    ics = seed_slice(rng.uniform(0, 20, 2000), rng.uniform(0, 20, 2000))
+    a = simulate_batch(ics, config=preset)
+    b = simulate_batch(ics, config=preset, device="cuda")
+    assert b.device.startswith("cuda: ")
+    same = np.mean(a.outcome == b.outcome)
+    assert same >= (0.999 if preset == "seed" else 0.99), same
+    assert not np.any((a.status_code == 0) & (b.status_code != 0))
