@@ -2,10 +2,13 @@
 
 Prints throws/s and ns per simulated step for
 
-* the general loop (``run_roll_general``: what every throw ran before the
-  specialised kernel; serial, one core),
-* the batch kernel (``run_batch``: ``fast.roll_summary_sie`` over a prange)
-  with 1 and 2 threads (or ``--threads``),
+* the run loop on the scheme's step (``kernels.run_roll``'s tracing loop,
+  ``semi_implicit_euler.roll_trace``, with no trace rows: every step through
+  ``semi_implicit_euler.step``, as every throw ran before the specialised
+  kernel; serial, one core),
+* the batch kernel (``kernels.run_batch``: the specialised kernel
+  ``fast.roll_summary_sie`` over a prange) with 1 and 2 threads (or
+  ``--threads``),
 * ``simulate_batch`` (the Python API around it) with all threads.
 
 Usage: ``python benchmarks/bench_simulate.py [--n 20000] [--threads 1,2]``.
@@ -22,21 +25,20 @@ import time
 import numba
 import numpy as np
 
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS, run_batch, run_roll_general
+from dicetrace.core.kernels import _NO_ROWS, roll_kernel, run_batch
+from dicetrace.core.state import new_states
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 from dicetrace.simulate import simulate_batch
 
 
-@numba.njit(cache=True)
-def _general_loop(ics, off0, kp, integ, steps):
-    e0 = np.zeros((0, STATE_COLS))
-    e1 = np.zeros((0, FORCE_COLS))
-    e2 = np.zeros((0, ENERGY_COLS))
+@numba.njit(cache=False)  # takes a compiled kernel as an argument: nothing to cache
+def _general_loop(roll, ics, off0, kp, S, steps, e0, e1, e2):
+    """``roll`` (the tracing loop, what ``kernels.run_roll`` calls) on every IC, with no trace rows."""
     sets = np.zeros(4096, np.uint8)
     set_steps = np.zeros(4096, np.int32)
     for i in range(ics.shape[0]):
-        s, n, o, ns = run_roll_general(ics[i], off0, kp, integ, sets, set_steps, e0, e1, e2)
+        s, n, o, ns = roll(ics[i], off0, kp, S, sets, set_steps, e0, e1, e2)
         steps[i] = n
 
 
@@ -61,7 +63,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=20000, help="ICs (default 20000)")
     ap.add_argument("--threads", default="1,2", help="thread counts for the batch kernel (default 1,2)")
-    ap.add_argument("--general", type=int, default=2000, help="ICs for the general-loop baseline (default 2000)")
+    ap.add_argument("--general", type=int, default=2000,
+                    help="ICs for the baseline, the run loop on the scheme's step (default 2000)")
     ap.add_argument("--repeat", type=int, default=3, help="best of this many runs (default 3)")
     args = ap.parse_args()
 
@@ -71,17 +74,19 @@ def main() -> None:
     cfg = make_config("seed")
     kp = cfg.kernel_params()
     off0 = cfg.initial_offsets()
+    integ = cfg.kernel_inputs(ics[:0]).integrator_id
     m = len(ics)
     cap = 128
     print(f"seed preset, {m:,} ICs on the seed slice, x, y uniform in [0, 20] (rng 1); "
           f"{os.cpu_count()} CPUs, numba {numba.__version__}, load average {os.getloadavg()[0]:.2f}")
 
-    # the general loop (the pre-optimisation kernel), serial
+    # the run loop on the scheme's step (kernels.run_roll's tracing loop, no trace rows), serial
     g = ics[: args.general]
     gsteps = np.zeros(len(g), np.int64)
-    _general_loop(g[:2], off0, kp, 0, gsteps[:2])
-    wall, cpu = _timed(lambda: _general_loop(g, off0, kp, 0, gsteps), 1)
-    _line(f"general loop (before), {len(g)} ICs", len(g), gsteps.sum(), wall, cpu, 1)
+    roll, S = roll_kernel(integ, True), new_states(1)
+    _general_loop(roll, g[:2], off0, kp, S, gsteps[:2], *_NO_ROWS)
+    wall, cpu = _timed(lambda: _general_loop(roll, g, off0, kp, S, gsteps, *_NO_ROWS), 1)
+    _line(f"run loop on the step, {len(g)} ICs", len(g), gsteps.sum(), wall, cpu, 1)
 
     out = dict(
         status=np.zeros(m, np.int8), steps=np.zeros(m, np.int64), outcome=np.zeros(m, np.int8),
@@ -90,22 +95,22 @@ def main() -> None:
 
     def batch():
         with numba.parallel_chunksize(1):
-            run_batch(ics, off0, kp, 0, cap, *out.values())
+            run_batch(ics, off0, kp, integ, cap, *out.values())
 
     numba.set_num_threads(1)
-    run_batch(ics[:16], off0, kp, 0, cap, *(a[: 16 * (cap if k in ("sets", "set_steps") else 1)] for k, a in out.items()))
+    run_batch(ics[:16], off0, kp, integ, cap, *(a[: 16 * (cap if k in ("sets", "set_steps") else 1)] for k, a in out.items()))
     rates = {}
     for t in [int(v) for v in args.threads.split(",")]:
         t = min(t, numba.config.NUMBA_NUM_THREADS)
         numba.set_num_threads(t)
         wall, cpu = _timed(batch, args.repeat)
         rates[t] = m / wall
-        _line(f"run_batch (after), {t} thread(s)", m, out["steps"].sum(), wall, cpu, t)
+        _line(f"run_batch, {t} thread(s)", m, out["steps"].sum(), wall, cpu, t)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     if len(rates) > 1:
         t0, t1 = min(rates), max(rates)
         print(f"scaling {t0}→{t1} threads: ×{rates[t1] / rates[t0]:.2f}")
-    assert np.array_equal(out["steps"][: len(g)], gsteps), "fast and general kernels disagree"
+    assert np.array_equal(out["steps"][: len(g)], gsteps), "the specialised kernel and the run loop disagree"
     wall, cpu = _timed(lambda: simulate_batch(ics), args.repeat)
     _line(f"simulate_batch, {numba.config.NUMBA_NUM_THREADS} threads", m, out["steps"].sum(), wall, cpu,
           numba.config.NUMBA_NUM_THREADS)
