@@ -98,8 +98,8 @@ def _not_taken(kind: str, name: str, given: dict) -> None:
     """Refuse (one line, exit 2) the first option given that a study of ``kind`` does not take."""
     for option, on in given.items():
         if on and option not in TAKES[kind]:
-            who = "the writeup studies take" if kind == "writeup" else f"study {name} takes"
-            fail(f"{option}: {who} no {option} (their options: {' '.join(TAKES[kind])})")
+            who, whose = ("the writeup studies take", "their") if kind == "writeup" else (f"study {name} takes", "its")
+            fail(f"{option}: {who} no {option} ({whose} options: {' '.join(TAKES[kind])})")
 
 
 def register(app: typer.Typer) -> None:
