@@ -45,14 +45,16 @@ import inspect
 import sys
 import textwrap
 import time
+import types
 from pathlib import Path
 
 import numba
 import numpy as np
 
 from dicetrace.core import loop
-from dicetrace.core._jit import jit, jit_fused, specialise
-from dicetrace.core.schemes import contact_substep, contact_tsit5, erk
+from dicetrace.core._jit import jit, jit_fused
+from dicetrace.core.schemes import contact_tsit5, erk
+from dicetrace.core.schemes.contact_substep import make_drive
 from dicetrace.core.state import new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.simulate import simulate
@@ -62,6 +64,8 @@ from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
 #: (``erk.dense_state`` sets all of ``dn_w`` first): where a repeated part's
 #: first result goes.
 SINK = "st.dn_w[6] += "
+#: How much deeper than the factory ``make_drive`` its inner ``drive`` is indented.
+DRIVE = "    "
 
 
 def _jit(fn):
@@ -74,9 +78,16 @@ def _jit_scheme(fn):
     return jit_fused(fn, cache=False)
 
 
-def _edited(fn, name: str, old: str, new: str, *more: str):
+def _named_uncached(fn, name: str, doc: str):
+    """``erk._named`` without the disk cache (a variant's factory is this run's only)."""
+    fn.__name__ = fn.__qualname__ = name
+    fn.__doc__ = doc
+    return _jit_scheme(fn)
+
+
+def _edited(fn, name: str, old: str, new: str, *more: str, env: dict | None = None):
     """``fn``'s source with ``old`` replaced once by ``new`` (and each further (old, new) pair of
-    ``more`` after it), compiled in ``fn``'s module as ``name``."""
+    ``more`` after it), executed in ``fn``'s module (its globals, updated by ``env``) as ``name``."""
     src = textwrap.dedent(inspect.getsource(fn))
     src = src.replace(f"def {fn.__name__}(", f"def {name}(", 1)
     pairs = (old, new, *more)
@@ -85,9 +96,9 @@ def _edited(fn, name: str, old: str, new: str, *more: str):
             sys.exit(f"{Path(sys.argv[0]).stem or 'benchmarks'}: {fn.__name__}'s source no longer contains "
                      f"{a.strip()!r}; update this script")
         src = src.replace(a, b, 1)
-    env = dict(fn.__globals__)
-    exec(compile(src, inspect.getsourcefile(fn), "exec"), env)
-    return env[name]
+    namespace = {**fn.__globals__, **(env or {})}
+    exec(compile(src, inspect.getsourcefile(fn), "exec"), namespace)
+    return namespace[name]
 
 
 def _twice(line: str, result: str) -> str:
@@ -97,12 +108,38 @@ def _twice(line: str, result: str) -> str:
 
 
 def _drive_twice(name: str, line: str, result: str):
-    """``contact_substep.drive`` with ``line`` (one or more lines) done twice, the first result sunk."""
-    return _edited(contact_substep.drive, name, line, _twice(line, result))
+    """``make_drive`` with ``line`` (one or more lines of its ``drive``) done twice, the first result sunk."""
+    return _edited(make_drive, name, line, _twice(line, result))
+
+
+def method_module(tag: str, **replaced):
+    """A copy of ``contact_tsit5`` (the driver's sub-step method) made at run time, ``replaced`` set in it."""
+    mod = types.ModuleType(f"bench_method_{tag}")
+    mod.__dict__.update({k: v for k, v in vars(contact_tsit5).items() if not k.startswith("__")})
+    mod.__dict__.update(replaced)
+    return mod
+
+
+def build_step(factory, tag: str, **replaced):
+    """The contact step that ``factory`` (``make_drive`` or an edited copy) makes on ``contact_tsit5``'s
+    method with ``replaced`` swapped in, compiled uncached as ``step_<tag>``."""
+    return factory(method_module(tag, **replaced), f"step_{tag}", cache=False)
+
+
+def summary_roll(step, tag: str):
+    """The summary run loop (``loop.make_roll``) on ``step``, uncached, without a specialised kernel."""
+    scheme = types.ModuleType(f"bench_scheme_{tag}")
+    scheme.step = step
+    scheme.EXACT_FLIGHT = contact_tsit5.EXACT_FLIGHT
+    return loop.make_roll(scheme, trace=False, use_summary=False, name=f"roll_{tag}", cache=False)
 
 
 def variants() -> dict:
-    """name -> (drive template, constants replaced in it) for the plain scheme and every part."""
+    """name -> (drive factory, the method's functions replaced) for the plain scheme and every part.
+
+    A factory is ``make_drive`` or an edited copy of it (the part done twice
+    in its ``drive``), called as ``make_drive`` is (:func:`build_step`).
+    """
     tsub = erk.tsit5_substep
     terr = erk.tsit5_error
 
@@ -117,35 +154,35 @@ def variants() -> dict:
         st.dn_w[6] += terr(st, kp, h, g0, g1, g2, q0, q1, q2)
         return terr(st, kp, h, g0, g1, g2, q0, q1, q2)
 
-    stage = "        g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)\n"
-    stages_tmpl = _edited(erk.erk_template, "erk_stages_twice", stage, _twice(stage, "g0 + q1"))
-    stages_twice = _jit_scheme(specialise(stages_tmpl, "tsit5_stages_twice", NS=erk.TSIT5_STAGES, A=erk.TSIT5_A,
-                                          B=erk.TSIT5_B))
+    stage = "            g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)\n"
+    stages_factory = _edited(erk.erk_substep, "erk_substep_stages_twice", stage, _twice(stage, "g0 + q1"),
+                             "return _named(", "return _named_uncached(", env={"_named_uncached": _named_uncached})
+    stages_twice = stages_factory("tsit5_stages_twice", erk.TSIT5_STAGES, erk.TSIT5_A, erk.TSIT5_B)
 
-    drive = contact_substep.drive
-    src = textwrap.dedent(inspect.getsource(drive))
-    end_forces = ("            c5, g0, g1, g2, q0, q1, q2 = wrench_at(\n"
-                  "                Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P\n"
-                  "            )\n")
-    i0 = src.find("        cut = 2.0\n")
-    i1 = src.find("        if cut < 1.0:\n")
-    cut_loop = src[i0:i1] if 0 <= i0 < i1 else "        cut = 2.0 (the cut loop)\n"
-    interp = "            DENSE_STATE(st, kp, 1.0 - st.ahead / st.dn_h)\n"
-    interp_forces = interp + "            return dense_end(st, kp)\n"
+    src = textwrap.dedent(inspect.getsource(make_drive))
+    end_forces = (DRIVE + "            c5, g0, g1, g2, q0, q1, q2 = wrench_at(\n"
+                  + DRIVE + "                Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P\n"
+                  + DRIVE + "            )\n")
+    i0 = src.find(DRIVE + "        cut = 2.0\n")
+    i1 = src.find(DRIVE + "        if cut < 1.0:\n")
+    cut_loop = src[i0:i1] if 0 <= i0 < i1 else DRIVE + "        cut = 2.0 (the cut loop)\n"
+    interp = DRIVE + "            method.dense_state(st, kp, 1.0 - st.ahead / st.dn_h)\n"
+    interp_forces = interp + DRIVE + "            return dense_end(st, kp)\n"
     return {
-        "plain": (drive, {}),
-        "substep": (drive, dict(SUBSTEP=substep_twice)),
-        "stages": (drive, dict(SUBSTEP=stages_twice)),
-        "error": (drive, dict(ERROR=error_twice)),
-        "end forces": (_drive_twice("drive_end_forces", end_forces, "g0"), {}),
-        "cut test": (_drive_twice("drive_cut", cut_loop, "cut"), {}),
-        "interpolation": (_drive_twice("drive_interp", interp, "st.X[2] + st.off[7, 2]"), {}),
-        "step-end forces": (_edited(drive, "drive_interp_forces", interp_forces,
-                                    interp + f"            dense_end(st, kp)\n            {SINK}st.z[0]\n"
-                                    "            return dense_end(st, kp)\n"), {}),
-        "flight piece": (_drive_twice("drive_piece", "            m1 = free_min_height(Xw, Uw, W, offw, kp, hs)\n", "m1"), {}),
-        "impact search": (_drive_twice("drive_search", "            tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)\n",
-                                       "tau"), {}),
+        "plain": (make_drive, {}),
+        "substep": (make_drive, dict(substep=substep_twice)),
+        "stages": (make_drive, dict(substep=stages_twice)),
+        "error": (make_drive, dict(error=error_twice)),
+        "end forces": (_drive_twice("make_drive_end_forces", end_forces, "g0"), {}),
+        "cut test": (_drive_twice("make_drive_cut", cut_loop, "cut"), {}),
+        "interpolation": (_drive_twice("make_drive_interp", interp, "st.X[2] + st.off[7, 2]"), {}),
+        "step-end forces": (_edited(make_drive, "make_drive_interp_forces", interp_forces,
+                                    interp + f"{DRIVE}            dense_end(st, kp)\n{DRIVE}            {SINK}st.z[0]\n"
+                                    f"{DRIVE}            return dense_end(st, kp)\n"), {}),
+        "flight piece": (_drive_twice("make_drive_piece",
+                                      DRIVE + "            m1 = free_min_height(Xw, Uw, W, offw, kp, hs)\n", "m1"), {}),
+        "impact search": (_drive_twice("make_drive_search",
+                                       DRIVE + "            tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)\n", "tau"), {}),
     }
 
 
@@ -187,14 +224,12 @@ def main() -> None:
     S = new_states(1)
     m = len(ics)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
-    constants = contact_tsit5.DRIVE_CONSTANTS
     kernels = {}
     t0 = time.perf_counter()
     for name in names:
-        template, over = table[name]
-        tag = name.replace(" ", "_").replace("-", "_")
-        step = _jit_scheme(specialise(template, f"step_split_{tag}", **{**constants, **over}))
-        kernels[name] = _jit(loop.summary_loop(step, f"roll_split_{tag}"))
+        factory, over = table[name]
+        tag = "split_" + name.replace(" ", "_").replace("-", "_")
+        kernels[name] = summary_roll(build_step(factory, tag, **over), tag)
     hashes = {}
     for name in names:  # compile (numba compiles on the first call) and check the trajectory
         _all(kernels[name], kin.ics, kin.off0, kin.params, S, *out)

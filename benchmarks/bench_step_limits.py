@@ -1,10 +1,10 @@
 """What limits ``contact-tsit5``'s sub-steps: the friction law's relaxation or the contact spring, and where attempts are rejected.
 
-The driver (``contact_substep.drive``) counts its sub-steps by what ended
-them (``Roll.substeps``).  That says an accepted sub-step was error-limited,
+The driver (``contact_substep.make_drive``) counts its sub-steps by what
+ended them (``Roll.substeps``).  That says an accepted sub-step was error-limited,
 not which part of the motion the error came from.  This script runs an
-instrumented copy of the driver (lines added to its source, as
-``bench_cost_split.py`` does; the trajectory is unchanged) on the accuracy
+instrumented copy of the driver (lines added to the source of ``make_drive``,
+as ``bench_cost_split.py`` does; the trajectory is unchanged) on the accuracy
 study's zoom-out ICs and prints:
 
 * the error- and friction-limited sub-steps by λ_f·h, with λ_f the friction
@@ -36,10 +36,8 @@ import numba
 import numpy as np
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from bench_cost_split import _all, _edited, _jit, _jit_scheme
-from dicetrace.core import loop
-from dicetrace.core._jit import specialise
-from dicetrace.core.schemes import contact_substep, contact_tsit5
+from bench_cost_split import DRIVE, _all, _edited, build_step, summary_roll
+from dicetrace.core.schemes.contact_substep import make_drive
 from dicetrace.core.state import STATE, SUBSTEP_CAUSES, new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
@@ -87,9 +85,13 @@ def _ranges(edges) -> list[str]:
     return [f"≤ {edges[0]:g}"] + [f"{a:g}–{b:g}" for a, b in zip(edges, edges[1:])] + [f"> {edges[-1]:g}"]
 
 
+def _indented(text: str) -> str:
+    """Lines of ``drive`` as they stand in ``make_drive``: each indented by ``DRIVE`` more."""
+    return "".join(DRIVE + line if line.strip() else line for line in text.splitlines(keepends=True))
+
+
 def instrumented_drive():
-    """``contact_substep.drive`` with the counters added (see the module docstring)."""
-    drive = contact_substep.drive
+    """``make_drive`` with the counters added to its ``drive`` (see the module docstring), named ``make_drive_limits``."""
     edits = [
         ("    t = 0.0\n", "    t = 0.0\n    ctx = 0\n    centry = False\n"),
         ("            entering = True\n", "            entering = True\n            ctx = 3\n"),
@@ -110,7 +112,7 @@ def instrumented_drive():
          "        if cause == CAUSE_CUT:\n            ctx = 1 if centry else 2\n"
          "        elif cause == CAUSE_FRICTION:\n            ctx = 5\n"),
     ]
-    return _edited(drive, "drive_limits", *(text for pair in edits for text in pair))
+    return _edited(make_drive, "make_drive_limits", *(_indented(text) for pair in edits for text in pair))
 
 
 def main() -> None:
@@ -132,9 +134,9 @@ def main() -> None:
     kin = cfg.kernel_inputs(ics)
     m = len(ics)
     kernels = {}
-    for name, template in (("plain", contact_substep.drive), ("counted", instrumented_drive())):
-        step = _jit_scheme(specialise(template, f"step_limits_{name}", **contact_tsit5.DRIVE_CONSTANTS))
-        kernels[name] = _jit(loop.summary_loop(step, f"roll_limits_{name}"))
+    for name, factory in (("plain", make_drive), ("counted", instrumented_drive())):
+        tag = f"limits_{name}"
+        kernels[name] = summary_roll(build_step(factory, tag), tag)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
     _all(kernels["plain"], kin.ics, kin.off0, kin.params, new_states(1), *out)
     plain = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()

@@ -34,17 +34,23 @@ def test_cost_split_variants_build():
     assert list(table)[0] == "plain"
     assert {"substep", "stages", "error", "end forces", "cut test", "interpolation", "step-end forces",
             "flight piece", "impact search"} <= set(table)
-    for name, (template, over) in table.items():
-        assert callable(template), name
+    for name, (factory, over) in table.items():
+        assert callable(factory), name
         if name in ("cut test", "interpolation", "step-end forces", "end forces", "flight piece", "impact search"):
-            # an edited copy of the driver, not the driver itself
-            assert template.__name__ != "drive", name
+            # an edited copy of the driver's factory, not the factory itself
+            assert factory.__name__.startswith("make_drive_"), name
+            assert not over, name
+        else:
+            assert factory.__name__ == "make_drive", name
+    # the method's functions swapped in are the ones the driver reads
+    assert set(table["substep"][1]) == set(table["stages"][1]) == {"substep"}
+    assert set(table["error"][1]) == {"error"}
 
 
 def test_step_limits_counters_build():
     mod = _load("bench_step_limits")
-    drive = mod.instrumented_drive()
-    assert drive.__name__ == "drive_limits"
+    factory = mod.instrumented_drive()
+    assert factory.__name__ == "make_drive_limits"
     # every counter the script writes lies inside the field it adds to the state record
     rows, cols = mod.COUNTED.fields["limits"][0].shape
     assert max(mod.ROW_LAM + 2, mod.ROW_OMEGA + 2, mod.ROW_REJECTED, mod.ROW_ACCEPTED) < rows
