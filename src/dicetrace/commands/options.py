@@ -1,6 +1,9 @@
 """The options several commands share: their help texts, and how their values reach the configuration.
 
-``simulate``, ``record``, ``scan`` and ``explore`` take the same model
+``scan`` and ``explore`` take the same ``--device`` (where the batches
+run: :mod:`dicetrace.devices`; its refusals, a
+:class:`~dicetrace.devices.DeviceError`, become one line naming
+``--device``, exit code 2).  ``simulate``, ``record``, ``scan`` and ``explore`` take the same model
 options (``--preset``, ``--integrator``, ``--dt``, ``--t-max``, ``--tol``,
 ``--tol-growth``) and ``simulate`` and ``record`` the same IC options
 (``--ic``, ``--slice``, ``--at``).  The option text goes as it is to the
@@ -20,6 +23,7 @@ import math
 import numpy as np
 
 from dicetrace.commands._common import fail, parse_floats
+from dicetrace.devices import DeviceError
 from dicetrace.params import INTEGRATORS, PRESETS, TOL_LOOSEST, TOL_MIN, ConfigError, Numerics
 
 IC_HELP = (
@@ -54,13 +58,19 @@ TOL_GROWTH_HELP = (
 DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k and the fastest first impact so that the integrator stays stable; 0.001 for the error-controlled schemes, whose error control keeps them stable (refused in one line when no step fits)."
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
 
+DEVICE_HELP = (
+    "Where the throws run: cpu (numba threads; the default), cuda (a CUDA GPU through numba-cuda, "
+    "pip install 'dicetrace[cuda]'; refused where there is none) or auto (the GPU where numba-cuda finds one, "
+    "else the CPU; one line on stderr says which)."
+)
+
 #: The option that sets each field the configuration layer names in a ConfigError (``dicetrace.params``,
 #: ``dicetrace.windows``, ``dicetrace.ics``, ``dicetrace.scan``).  A Preset field not here comes from the
 #: preset itself, or from ``--set`` where a command has it.
 FIELD_OPTIONS = {
     "preset": "--preset", "integrator": "--integrator", "dt_s": "--dt", "t_max_s": "--t-max", "tol": "--tol",
     "tol_growth": "--tol-growth", "window": "--window", "z": "--z", "res": "--res", "chunk": "--chunk",
-    "n": "--n", "seed": "--seed", "method": "--sample", "points": "--points",
+    "n": "--n", "seed": "--seed", "method": "--sample", "points": "--points", "device": "--device",
 }
 #: How an error naming several options shows one the user did not give.
 DEFAULT_TEXT = {"--dt": f"{Numerics.dt_s:g} (the default)", "--t-max": f"{Numerics.t_max_s:g} (the default)"}
@@ -91,11 +101,23 @@ def option_line(e: ConfigError, given: dict | None = None, *, fallback: str = "-
 
 @contextlib.contextmanager
 def config_errors(given: dict | None = None, *, fallback: str = "--preset", **renamed):
-    """Run the block; a ConfigError raised in it (however deep) becomes one line naming the option (exit 2)."""
+    """Run the block; a ConfigError raised in it (however deep) becomes one line naming the option (exit 2),
+    and so does a :class:`~dicetrace.devices.DeviceError` (``--device``: no GPU for cuda, a device name unknown)."""
     try:
         yield
     except ConfigError as e:
         fail(option_line(e, given, fallback=fallback, **renamed))
+    except DeviceError as e:
+        fail(f"{FIELD_OPTIONS['device']}: {e}")
+
+
+def device_or_fail(device: str) -> str:
+    """Where ``--device DEVICE`` runs here, as a result records it (``"cpu"`` or ``"cuda: <GPU name>"``), or a
+    one-line failure naming ``--device`` (``cuda`` without a GPU).  ``auto`` says which it took, in one line."""
+    from dicetrace.devices import device_label, resolve_device
+
+    with config_errors():
+        return device_label(resolve_device(device))
 
 
 def preset_or_fail(name: str):

@@ -9,16 +9,20 @@ Examples::
     dicetrace scan --points writeup_points.csv --out scans/named
     dicetrace scan ... --dask                      # a local Dask cluster
     dicetrace scan ... --scheduler tcp://host:8786 # an existing one
+    dicetrace scan ... --device cuda               # on a CUDA GPU (numba-cuda)
 
 The output folder holds the rolls table ``rolls/part-*.parquet``, written
 chunk by chunk, and the manifest ``_scan.parquet`` (no rows; the scan's
 definition and chunk log in its metadata): any Parquet reader reads ``OUT/``
 as it is (``OUT/rolls/`` too, even while a scan writes); re-running the same command
-resumes; a different definition against the folder is refused.  ``--png`` draws the outcome map,
+resumes; a different definition against the folder is refused, and so is
+resuming on another ``--device`` than the scan started on (the definition
+and every chunk's metadata record the device: ``cpu`` or ``cuda: <GPU name>``).  ``--png`` draws the outcome map,
 ``--rrd`` writes the interactive scan map for the Rerun viewer.
 
 Every option and output (``--out``, ``--png``, ``--rrd``) is checked before
-any work; a large run says its estimated time and disk first (the time from
+any work (``--device cuda`` without a GPU too: on a ``--scheduler`` cluster,
+by a worker); a large run says its estimated time and disk first (the time from
 the warm kernels' throughput on a probe, at the machine's present load: a
 first run's compile is not counted), refuses what the disk cannot hold, and
 asks for ``--yes`` beyond ``MAX_UNCONFIRMED_S`` (measured twice before it
@@ -42,12 +46,14 @@ import typer
 
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
 from dicetrace.commands.options import (
+    DEVICE_HELP,
     INTEGRATOR_HELP,
     PRESET_HELP,
     TOL_GROWTH_HELP,
     TOL_HELP,
     build_config,
     config_errors,
+    device_or_fail,
     fmt_num,
     preset_or_fail,
 )
@@ -257,6 +263,20 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
         print(f"dicetrace: scan: {est.describe()}", file=sys.stderr)
 
 
+def _check_out(out: Path, defn) -> None:
+    """Refuse (one line) a folder the scan ``defn`` cannot go into: another scan's, the same run on another
+    device (``--device``), or files that are not a scan."""
+    from dicetrace.scan import DeviceMismatchError, ScanMismatchError
+    from dicetrace.scan.folder import check_folder
+
+    try:
+        check_folder(out, defn)
+    except DeviceMismatchError as e:
+        fail(f"--device: {e}")
+    except (ScanMismatchError, FileExistsError) as e:
+        fail(f"--out: {e}")
+
+
 def register(app: typer.Typer) -> None:
     @app.command("scan")
     def scan_cmd(
@@ -283,6 +303,7 @@ def register(app: typer.Typer) -> None:
         ),
         chunk: Optional[int] = typer.Option(None, "--chunk", help="ICs per chunk file / Dask task (default 8192)."),
         threads: Optional[int] = typer.Option(None, "--threads", help="numba threads (default: all cores)."),
+        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP + " A scan resumes only on the device it started on."),
         dask: bool = typer.Option(False, "--dask", help="Run the chunks on a local Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the chunks on the Dask scheduler at ADDRESS."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes of the --dask cluster (default: cores)."),
@@ -300,10 +321,13 @@ def register(app: typer.Typer) -> None:
         import math
         import os
 
-        from dicetrace.scan import DEFAULT_CHUNK, ScanDefinition, ScanMismatchError, scan
-        from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address
+        from dataclasses import replace
+
+        from dicetrace.devices import DeviceError, check_device
+        from dicetrace.scan import DEFAULT_CHUNK, DeviceMismatchError, ScanDefinition, ScanMismatchError, scan
+        from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address, worker_device
         from dicetrace.scan.folder import ScanBusyError
-        from dicetrace.scan.folder import _check_space_finite, check_folder
+        from dicetrace.scan.folder import _check_space_finite
 
         sl = build_slice(slice_name, origin, dirs)
         space = build_space(sl, window, z, res, sample, n, box, seed, points)
@@ -331,6 +355,11 @@ def register(app: typer.Typer) -> None:
                 fail(f"--scheduler: {e}")
         if png is not None and (space.kind != "grid" or space.ndim < 2):
             fail("--png draws 2-D and 3-D grid scans only (use --rrd for samples, points and 1-D slices)")
+        if scheduler is None:  # here (and a local --dask cluster's workers): resolved now, before any work
+            label = device_or_fail(device)
+        else:  # the cluster's workers resolve it, once connected (below)
+            with config_errors():
+                label = "cpu" if check_device(device) == "cpu" else None
         # every output is checked before any work
         out_dir = output_dir(out, "--out")
         png_dest = output_file(png, "--png", suffix=".png") if png is not None else None
@@ -340,16 +369,14 @@ def register(app: typer.Typer) -> None:
         if chunk is None:  # resuming: keep the folder's chunk size
             chunk = _existing_chunk(out) or DEFAULT_CHUNK
         with config_errors():
-            defn = ScanDefinition(space, cfg, chunk)
+            defn = ScanDefinition(space, cfg, chunk, device=label or "cpu")
         try:
             _check_space_finite(defn)
         except ValueError as e:
             where = {"grid": "--window", "sample": "--box"}.get(space.kind, "--points")
             fail(f"{where}: {e}")
-        try:
-            check_folder(out_dir, defn)
-        except (ScanMismatchError, FileExistsError) as e:
-            fail(f"--out: {e}")
+        if label is not None:
+            _check_out(out_dir, defn)
         maps = [opt for opt, dest in (("--png", png_dest), ("--rrd", rrd_dest)) if dest is not None]
         local = (workers or os.cpu_count() or 1) if dask else None
         client, closers = None, []
@@ -359,6 +386,12 @@ def register(app: typer.Typer) -> None:
             except SchedulerError as e:
                 fail(f"--scheduler {scheduler}: {e}")
         try:
+            if label is None:  # --device cuda or auto on a --scheduler cluster: as a worker resolves it
+                with config_errors():
+                    defn = replace(defn, device=worker_device(client, device))
+                if device == "auto":
+                    print(f"dicetrace: device auto: the Dask workers run on {defn.device}", file=sys.stderr)
+                _check_out(out_dir, defn)
             _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None, maps=maps,
                             local_workers=local)
             report = scan(
@@ -366,8 +399,12 @@ def register(app: typer.Typer) -> None:
                 dask=client if client is not None else (True if dask else None), n_workers=workers,
                 max_chunks=max_chunks, wait=wait,
             )
-        except (ScanMismatchError, FileExistsError) as e:  # the folder changed since the check above
+        except DeviceMismatchError as e:  # the folder changed since the check above
+            fail(f"--device: {e}")
+        except (ScanMismatchError, FileExistsError) as e:
             fail(f"--out: {e}")
+        except DeviceError as e:  # a worker without the scan's GPU
+            fail(f"--device: {e}")
         except ScanBusyError as e:
             fail(str(e))
         except SchedulerError as e:

@@ -28,6 +28,7 @@ from dicetrace.scan.chunk_files import MANIFEST, ForeignFileError, rolls_dir
 from dicetrace.scan.estimate import ScanEstimate, estimate_scan
 from dicetrace.scan.folder import (
     CorruptChunkError,
+    DeviceMismatchError,
     ScanBusyError,
     ScanMismatchError,
     ScanWarning,
@@ -42,6 +43,7 @@ from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
 
 __all__ = [
     "CorruptChunkError",
+    "DeviceMismatchError",
     "ForeignFileError",
     "ScanBusyError",
     "ScanEstimate",

@@ -154,6 +154,27 @@ def _open_dask(dask, n_workers, timeout: float | None = None):
     return client, [client, cluster]
 
 
+def _device_task(device: str) -> str:
+    """A Dask task: where ``device`` runs on the worker that runs it (``dicetrace.devices.device_label``)."""
+    from dicetrace.devices import device_label, resolve_device
+
+    return device_label(resolve_device(device))
+
+
+def worker_device(client, device: str) -> str:
+    """The device ``device`` (cpu, cuda, auto) is on the cluster's workers, as one of them resolves it.
+
+    A :class:`~dicetrace.devices.DeviceError` where that worker has no GPU
+    for ``"cuda"``.  Every chunk task resolves the scan's device again on its
+    own worker and refuses a device other than the scan's.
+    """
+    fut = client.submit(_device_task, device, key=f"dicetrace-device-{uuid.uuid4().hex[:8]}", pure=False)
+    try:
+        return fut.result()
+    finally:
+        fut.release()
+
+
 def _iter_dask(defn: ScanDefinition, todo: Iterable[int], client, threads) -> Iterator[tuple[int, pa.Table]]:
     """Chunks on a Dask cluster as they complete, with a bounded number of tasks in flight."""
     from dask.distributed import as_completed

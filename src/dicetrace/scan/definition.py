@@ -1,6 +1,8 @@
-"""What a scan is: an IC space, a configuration and a chunk size.
+"""What a scan is: an IC space, a configuration, a chunk size and the device its throws run on.
 
-A :class:`ScanDefinition` fully determines a scan's rows.  It is stored
+A :class:`ScanDefinition` fully determines a scan's rows (the device to
+rounding: a GPU's throws of the contact schemes may differ from the CPU's in
+the last bits, so a scan runs on one device from start to end).  It is stored
 (as JSON) in the dataset's manifest and in every chunk file's metadata,
 compared on resume, and shipped to Dask workers as a plain dict.
 """
@@ -23,6 +25,15 @@ DEFAULT_CHUNK = 8192
 MAX_CHUNK = 1 << 24
 
 
+#: The device of a definition stored without one (every scan before GPUs ran on the CPU).
+DEFAULT_DEVICE = "cpu"
+
+
+def device_kind(label: str) -> str:
+    """``"cpu"`` or ``"cuda"``: what ``simulate_batch(device=...)`` asks for to run on the device ``label``."""
+    return "cpu" if label == "cpu" else "cuda"
+
+
 def config_from_dict(d: dict) -> Config:
     """Inverse of ``Config.as_dict()``: a configuration read back (a manifest, a Dask task) passes the same
     checks, :class:`~dicetrace.params.Preset`'s and :class:`~dicetrace.params.Numerics`', as one built anew."""
@@ -31,14 +42,18 @@ def config_from_dict(d: dict) -> Config:
 
 @dataclass(frozen=True)
 class ScanDefinition:
-    """An IC space scanned with one configuration, in chunks of ``chunk`` ICs.
+    """An IC space scanned with one configuration, in chunks of ``chunk`` ICs, on ``device``.
 
     Chunk c holds the ICs with ``ic_id`` in ``[c·chunk, min((c+1)·chunk, size))``.
+    ``device``: where the throws run, as :func:`dicetrace.devices.device_label`
+    says it: ``"cpu"`` or ``"cuda: <GPU name>"`` (a resolved device, never
+    ``"auto"``: :func:`~dicetrace.scan.scan` resolves its ``device`` argument).
     """
 
     space: IcSpace
     config: Config
     chunk: int = DEFAULT_CHUNK
+    device: str = DEFAULT_DEVICE
 
     def __post_init__(self) -> None:
         from dicetrace.ics import Grid, Points, Sample
@@ -54,6 +69,9 @@ class ScanDefinition:
         if int(c) > MAX_CHUNK:
             raise ConfigError("chunk", f"chunk must be at most {MAX_CHUNK:,} ICs (one chunk is held in memory), got {int(c):,}")
         object.__setattr__(self, "chunk", int(c))
+        d = self.device
+        if not isinstance(d, str) or not (d == "cpu" or (d.startswith("cuda: ") and d[6:].strip())):
+            raise ConfigError("device", f"device must be 'cpu' or 'cuda: <GPU name>' (a resolved device), got {_show(d)}")
         size = self.space.size
         what = {"grid": "res", "sample": "n"}.get(self.space.kind, "points")  # what sets the size
         if size > MAX_ICS:
@@ -81,17 +99,28 @@ class ScanDefinition:
         return c * self.chunk, min(self.size, (c + 1) * self.chunk)
 
     def to_dict(self) -> dict:
-        return {"format": FORMAT, "space": self.space.to_dict(), "config": self.config.as_dict(), "chunk": self.chunk}
+        return {"format": FORMAT, "space": self.space.to_dict(), "config": self.config.as_dict(), "chunk": self.chunk,
+                "device": self.device}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ScanDefinition":
+        """Inverse of :meth:`to_dict` (a definition stored before scans recorded their device ran on the CPU)."""
         if d.get("format") != FORMAT:
             raise ValueError(f"not a {FORMAT} scan definition (format {d.get('format')!r})")
-        return cls(space_from_dict(d["space"]), config_from_dict(d["config"]), d["chunk"])
+        return cls(space_from_dict(d["space"]), config_from_dict(d["config"]), d["chunk"],
+                   d.get("device", DEFAULT_DEVICE))
 
     def canonical(self) -> str:
         """Canonical JSON (what resuming compares)."""
         return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def with_device(d):
+    """A stored definition dict as this version writes it: one stored before scans recorded their device gets
+    ``"device": "cpu"`` (what compares on resume); anything else as it is."""
+    if isinstance(d, dict) and d.get("format") == FORMAT and "device" not in d:
+        return {**d, "device": DEFAULT_DEVICE}
+    return d
 
 
 def describe_differences(a: dict, b: dict, prefix: str = "") -> list[str]:

@@ -74,12 +74,17 @@ class ScanEstimate:
     #: The machine's load (threads running besides the probe) when it was calibrated, where it slows the scan down
     #: (else None).
     load: float | None = None
+    #: The device the scan runs on (its definition's); on a GPU the time is not estimated (``seconds`` None).
+    device: str = "cpu"
 
     def describe(self) -> str:
+        free = "" if self.free_bytes is None else f", {human_bytes(self.free_bytes)} free"
+        if self.device != "cpu":
+            return (f"{self.ics_todo:,} ICs in {self.chunks_todo:,} chunks to compute (of {self.n_ics:,}) on "
+                    f"{self.device} (time not estimated on a GPU), about {human_bytes(self.bytes)} on disk{free}")
         t = self.seconds if self.seconds is not None else self.seconds_bound
         when = f"{'at most ' if self.seconds is None or self.upper else 'about '}{human_seconds(t)}"
         busy = "" if self.load is None else f" at the machine's present load ({self.load:.1f})"
-        free = "" if self.free_bytes is None else f", {human_bytes(self.free_bytes)} free"
         return (f"{self.ics_todo:,} ICs in {self.chunks_todo:,} chunks to compute (of {self.n_ics:,}): "
                 f"{when} on {self.threads} thread(s){busy}, about {human_bytes(self.bytes)} on disk{free}")
 
@@ -108,7 +113,8 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     upper one).  Only warm throughput is timed: the probe runs once untimed
     first, which compiles (or loads) the kernels the scan needs -- on a
     fresh install or with ``DICETRACE_CACHE=0`` that first run takes the
-    compile's time, which the scan then does not spend again.
+    compile's time, which the scan then does not spend again.  A scan on a
+    GPU (``defn.device``) is not timed: the probe times the CPU's threads.
     """
     import numba
 
@@ -130,9 +136,9 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     est = ScanEstimate(
         n_ics=defn.size, n_chunks=defn.n_chunks, chunks_todo=chunks_todo, ics_todo=ics_todo,
         bytes=ics_todo * BYTES_PER_IC + chunks_todo * BYTES_PER_CHUNK, free_bytes=free, chunk_memory=min(defn.chunk, defn.size) * MEMORY_PER_IC,
-        threads=nthreads, seconds=None, seconds_bound=bound,
+        threads=nthreads, seconds=None, seconds_bound=bound, device=defn.device,
     )
-    if not calibrate or bound <= 30.0 or ics_todo == 0:
+    if not calibrate or bound <= 30.0 or ics_todo == 0 or defn.device != "cpu":
         return est
     n = min(CALIBRATION_ICS, defn.size)
     ids = sorted({int(round(v)) for v in np.linspace(0, defn.size - 1, n)})

@@ -75,7 +75,8 @@ from dicetrace.scan.chunk_files import (
     verify_unlogged,
 )
 from dicetrace.scan.chunk_files import ForeignFileError, rolls_dir  # noqa: F401 (re-exported: users import them from here)
-from dicetrace.scan.definition import ScanDefinition, describe_differences
+from dicetrace.devices import DeviceError
+from dicetrace.scan.definition import ScanDefinition, describe_differences, device_kind, with_device
 from dicetrace.simulate import simulate_batch
 from dicetrace.sinks._common import OutputError, make_folders, remove_quietly
 from dicetrace.tables import GRID_ROLLS_SCHEMA, rolls_table
@@ -95,6 +96,10 @@ DICTIONARY_COLUMNS = ["preset", "integrator", "status", "outcome", "dt_s", "k"]
 
 class ScanMismatchError(ValueError):
     """The folder holds a scan with a different definition."""
+
+
+class DeviceMismatchError(ScanMismatchError):
+    """The folder holds the same scan run on another device (a GPU's throws may differ from the CPU's by rounding)."""
 
 
 class ScanBusyError(RuntimeError):
@@ -149,17 +154,24 @@ def _check_space_finite(defn: ScanDefinition) -> None:
 
 
 def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, cap: int = DEFAULT_CAP) -> pa.Table:
-    """The rolls table of chunk ``c`` of a scan (no metadata).
+    """The rolls table of chunk ``c`` of a scan (its metadata: the batch's, with the device it ran on).
 
     ``threads``: numba threads for this chunk (None: numba's current setting).
     The rows do not depend on it, nor on the chunk size: every IC is the
-    serial kernel's result for that IC.
+    serial kernel's result for that IC.  The chunk runs on the definition's
+    device, resolved here (on a Dask worker: by the worker): a
+    :class:`~dicetrace.devices.DeviceError` where this machine has no GPU
+    for a GPU scan, or where its GPU is another than the scan's.
     """
     start, stop = defn.chunk_range(c)
     blk = defn.space.block(start, stop)
     batch = simulate_batch(
-        blk.ics, config=defn.config, l_convention=defn.space.slice.l_convention, threads=threads, cap=cap
+        blk.ics, config=defn.config, l_convention=defn.space.slice.l_convention, threads=threads, cap=cap,
+        device=device_kind(defn.device),
     )
+    if batch.device != defn.device:
+        raise DeviceError(f"chunk {c} ran on {batch.device}, the scan runs on {defn.device}: "
+                          "one scan runs on one device (its throws may differ by rounding from one to another)")
     return rolls_table(batch, coords=blk.coords, ic_ids=blk.ic_id, index=blk.index)
 
 
@@ -175,6 +187,7 @@ def chunk_metadata(defn: ScanDefinition, c: int) -> dict:
         "scan": defn.to_dict(),
         "config": defn.config.as_dict(),
         "l_convention": defn.config.preset.l_convention,
+        "device": defn.device,
         "chunk_index": c,
         "ic_range": [start, stop],
     }
@@ -308,11 +321,19 @@ def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
     if not has_manifest(folder):
         return False
     try:
-        have = read_manifest(folder)["definition"]
+        have = with_device(read_manifest(folder)["definition"])
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest ({e})") from None
     want = defn.to_dict()
     if json.dumps(have, sort_keys=True) != json.dumps(want, sort_keys=True):
+        if isinstance(have, dict) and have.get("device") != want["device"] and \
+                json.dumps({**have, "device": None}, sort_keys=True) == json.dumps({**want, "device": None}, sort_keys=True):
+            was = str(have.get("device"))
+            kind = "" if device_kind(was) == was else f" (device {device_kind(was)!r})"
+            raise DeviceMismatchError(
+                f"{str(folder)!r} holds this scan run on {was!r}, this run is on {want['device']!r}: one scan runs on "
+                f"one device (a GPU's throws may differ from the CPU's by rounding): resume it on {was!r}{kind}, "
+                "or use another --out folder")
         diffs = describe_differences(have, want)
         shown = "; ".join(diffs[:4]) + (f"; and {len(diffs) - 4} more" if len(diffs) > 4 else "")
         raise ScanMismatchError(

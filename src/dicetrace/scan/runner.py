@@ -15,16 +15,17 @@ import time
 from collections import deque
 from collections.abc import Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pyarrow as pa
 
+from dicetrace.devices import check_device, device_label, resolve_device
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.params import Config, resolve_config
-from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition
+from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, device_kind
 from dicetrace.sinks._common import output_folder
-from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask
+from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask, worker_device
 from dicetrace.scan.folder import (
     _check_int,
     _check_space_finite,
@@ -119,16 +120,33 @@ class ScanReport:
 _SPACES = (Grid, Sample, Points)
 
 
-def _definition(space, config, chunk, options) -> ScanDefinition:
+def _definition(space, config, chunk, options, device=None) -> ScanDefinition:
+    if device is not None:
+        check_device(device)
     if isinstance(space, ScanDefinition):
-        if config is not None or any(v is not None for v in options.values()):
-            raise ValueError("give a ScanDefinition or a space with its configuration, not both")
+        if config is not None or device is not None or any(v is not None for v in options.values()):
+            raise ValueError("give a ScanDefinition (its device included) or a space with its configuration, not both")
         return space
     if not isinstance(space, _SPACES):
         raise TypeError(
             f"space must be a Grid, Sample or Points (dicetrace.ics) or a ScanDefinition, not {type(space).__name__}"
         )
     return ScanDefinition(space, resolve_config(config, **options), chunk)
+
+
+def _on_device(defn: ScanDefinition, device: str | None, client=None) -> ScanDefinition:
+    """``defn`` on the device ``device`` (cpu, cuda, auto; None: the definition's own) as it resolves here, or on
+    a worker of the Dask ``client`` (a :class:`~dicetrace.devices.DeviceError` where there is no GPU for cuda)."""
+    want = device_kind(defn.device) if device is None else device
+    label = worker_device(client, want) if client is not None else device_label(resolve_device(want))
+    return defn if label == defn.device else replace(defn, device=label)
+
+
+def _chunks(defn: ScanDefinition, todo: Iterable[int], client, threads) -> Iterator[tuple[int, pa.Table]]:
+    """(chunk index, rolls table) of the chunks ``todo``: computed here in order, or on Dask as they complete."""
+    if client is not None:
+        return _iter_dask(defn, todo, client, threads)
+    return ((c, compute_chunk(defn, c, threads=threads)) for c in todo)
 
 
 def iter_scan(
@@ -140,6 +158,7 @@ def iter_scan(
     threads: int | None = None,
     dask=None,
     n_workers: int | None = None,
+    device: str | None = None,
     **options,
 ) -> Iterator[tuple[int, pa.Table]]:
     """Stream a scan: yields ``(chunk_index, rolls_table)`` as chunks finish.
@@ -148,21 +167,18 @@ def iter_scan(
     cluster, an address, or a ``Client``) as they complete.  ``chunks``
     restricts the run to those chunk indices.  Arguments as :func:`scan`.
     """
-    defn = _definition(space, config, chunk, options)
+    defn = _definition(space, config, chunk, options, device)
     _check_int(threads, "threads", 1)
     _check_int(n_workers, "n_workers", 1)
     _check_dask(dask)
     todo = range(defn.n_chunks) if chunks is None else chunks
-    if dask:
-        client, closers = _open_dask(dask, n_workers)
-        try:
-            yield from _iter_dask(defn, todo, client, threads)
-        finally:
-            for x in closers:
-                x.close()
-        return
-    for c in todo:
-        yield c, compute_chunk(defn, c, threads=threads)
+    client, closers = _open_dask(dask, n_workers) if dask else (None, [])
+    try:
+        defn = _on_device(defn, device, client)
+        yield from _chunks(defn, todo, client, threads)
+    finally:
+        for x in closers:
+            x.close()
 
 
 def _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask) -> None:
@@ -203,6 +219,7 @@ def scan(
     n_workers: int | None = None,
     max_chunks: int | None = None,
     wait: float = 0.0,
+    device: str | None = None,
     **options,
 ):
     """Throw the die from every IC of an IC space (summaries only).
@@ -239,6 +256,16 @@ def scan(
     wait
         Seconds to wait for another scan writing into ``out`` (it holds the
         folder's lock) before refusing with :class:`ScanBusyError`.
+    device
+        Where the throws run: ``"cpu"``, ``"cuda"`` or ``"auto"``, as in
+        :func:`~dicetrace.simulate.simulate_batch` (None: ``"cpu"``, or a
+        ScanDefinition's own device).  It resolves here, or on Dask on a
+        worker (and again by every chunk task on its worker), before anything
+        is written; the definition records the device it resolved to (its
+        label, ``"cpu"`` or ``"cuda: <GPU name>"``), as does each chunk's
+        metadata.  A folder holding the same scan run on another device is
+        refused (:class:`~dicetrace.scan.folder.DeviceMismatchError`): a
+        GPU's throws may differ from the CPU's by rounding.
 
     Returns
     -------
@@ -258,28 +285,36 @@ def scan(
         Another scan is writing into ``out``.
     SchedulerError
         The Dask scheduler cannot be reached or is not one.
+    dicetrace.devices.DeviceError
+        ``device="cuda"`` where there is no GPU (before anything is written).
     dicetrace.sinks._common.OutputError
         ``out`` cannot be created or written (the message names it); on a
         full disk the chunks finished so far are kept.
     """
-    defn = _definition(space, config, chunk, options)
+    defn = _definition(space, config, chunk, options, device)
     _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask)
     _check_space_finite(defn)
     t0 = time.perf_counter()
     if out is None:
         _check_table_memory(defn)
-        tables = [t for _, t in iter_scan(defn, threads=threads, dask=dask, n_workers=n_workers)]
-        table = pa.concat_tables(tables)
-        if dask:
-            table = table.sort_by("ic_id")
-        return _with_metadata(table, {"dicetrace_version": _version(), "scan": defn.to_dict(),
-                                      "config": defn.config.as_dict(), "l_convention": defn.config.preset.l_convention})
-    folder = output_folder(out, what="scan folder")
-    check_folder(folder, defn)  # refuse at once, without waiting for a lock (read only)
-    client, closers = (None, [])
-    if dask:
-        client, closers = _open_dask(dask, n_workers)
+    folder = None if out is None else output_folder(out, what="scan folder")
+    if not dask:
+        defn = _on_device(defn, device)
+        if folder is not None:
+            check_folder(folder, defn)  # refuse at once, without waiting for a lock (read only)
+    client, closers = _open_dask(dask, n_workers) if dask else (None, [])
     try:
+        if client is not None:
+            defn = _on_device(defn, device, client)
+            if folder is not None:
+                check_folder(folder, defn)
+        if folder is None:
+            table = pa.concat_tables([t for _, t in _chunks(defn, range(defn.n_chunks), client, threads)])
+            if dask:
+                table = table.sort_by("ic_id")
+            return _with_metadata(table, {"dicetrace_version": _version(), "scan": defn.to_dict(),
+                                          "config": defn.config.as_dict(), "device": defn.device,
+                                          "l_convention": defn.config.preset.l_convention})
         with _FolderLock(folder, float(wait)):  # made and locked at once: nothing touches it before
             return _run_into(folder, defn, t0, threads=threads, progress=progress, client=client,
                              max_chunks=max_chunks)
@@ -309,9 +344,7 @@ def _run_into(folder: Path, defn: ScanDefinition, t0: float, *, threads, progres
             ics_done += rows
             bar.advance(rows, int(ics_done))
 
-    chunks = _iter_dask(defn, todo, client, threads) if client is not None else (
-        (c, compute_chunk(defn, c, threads=threads)) for c in todo
-    )
+    chunks = _chunks(defn, todo, client, threads)
     try:
         # A writer thread encodes and writes chunk c while the kernel (which
         # releases the GIL) computes chunk c+1.  On an interrupt the chunks
