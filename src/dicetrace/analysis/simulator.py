@@ -1,7 +1,7 @@
 """Wiring of the analysis callables to the simulator.
 
 The measures of :mod:`dicetrace.analysis` that need new simulations
-(:func:`~dicetrace.analysis.boundaries.uncertainty_exponent_perturbation`,
+(:func:`~dicetrace.analysis.uncertainty.uncertainty_exponent_perturbation`,
 :func:`~dicetrace.analysis.wada.wada_grid_test`,
 :func:`~dicetrace.analysis.settle.bisect_boundary`,
 :func:`~dicetrace.analysis.settle.settle_profile`,

@@ -215,25 +215,20 @@ SEED_RANGE = (0, 2**64)
 
 def _checked_options(names, *, quick, res, seed, integrator, tol, no_cache):
     """The run's :class:`~dicetrace.studies.context.Options`, each option checked (one line naming it, exit 2)."""
-    import math
-
-    from dicetrace.params import INTEGRATORS, TOL_MIN
+    from dicetrace.commands.options import config_errors
     from dicetrace.studies.context import DEFAULT_SEED, Options
 
     if res is not None and res < 3:
         fail(f"--res must be at least 3, got {res}")
     if seed is not None and not SEED_RANGE[0] <= seed < SEED_RANGE[1]:
         fail(f"--seed must be an integer in [0, 2**64), got {seed}")
-    if integrator is not None and integrator not in INTEGRATORS:
-        fail(f"--integrator: unknown integrator {integrator!r} (choose from {', '.join(INTEGRATORS)})")
-    if tol is not None and not (math.isfinite(tol) and TOL_MIN <= tol < 1):
-        fail(f"--tol must be a number in [{TOL_MIN:g}, 1), got {tol}")
     if integrator is not None or tol is not None:
         from dicetrace.studies.study_converged import check_overrides
 
-        try:
-            check_overrides(integrator, tol)
-        except ValueError as e:
+        try:  # the configuration layer checks both (a ConfigError names its field, so its option)
+            with config_errors({"--integrator": integrator, "--tol": tol}):
+                check_overrides(integrator, tol)
+        except ValueError as e:  # what check_overrides refuses besides the configuration's checks
             given = " ".join(f"{k} {v}" for k, v in (("--integrator", integrator), ("--tol", tol)) if v is not None)
             fail(f"{given}: {e}")
     options = Options(quick=quick, res=res, seed=DEFAULT_SEED if seed is None else seed, no_cache=no_cache,
