@@ -56,6 +56,9 @@ HOME3 = ["--window", "home", "--res", "3"]
         ("scan", ["--slice", "seed3", "--window", "home", "--z", "0,1", "--res", "3,3"],
          "--res: resolution needs 3 numbers NX,NY,NZ"),
         ("explore", ["--res", "x", "--no-browser"], "--res: resolution must be whole numbers, N or NX,NY, got 'x'"),
+        # device: dicetrace.devices.check_device (a DeviceError, mapped as a ConfigError is)
+        ("scan", [*HOME3, "--device", "gpu"], "--device: device must be one of cpu, cuda, auto, got 'gpu'"),
+        ("explore", ["--device", "CUDA", "--no-browser"], "--device: device must be one of cpu, cuda, auto, got 'CUDA'"),
     ],
 )
 def test_a_value_refused_deep_in_the_configuration_is_one_line_naming_the_option(
@@ -67,6 +70,13 @@ def test_a_value_refused_deep_in_the_configuration_is_one_line_naming_the_option
     assert list(tmp_path.iterdir()) == []  # nothing written
 
 
+def _definition_on(device):
+    from dicetrace.ics import Grid
+    from dicetrace.scan import ScanDefinition
+
+    return ScanDefinition(Grid("seed", "home", 2), make_config("seed"), 4, device=device)
+
+
 @pytest.mark.parametrize(
     "make, line",
     [
@@ -75,6 +85,7 @@ def test_a_value_refused_deep_in_the_configuration_is_one_line_naming_the_option
         (lambda: make_config("moon"), "--preset: unknown preset 'moon'"),
         (lambda: make_config(dt_s="auto", integrator="forward-euler", t_max_s=1e9), "--dt auto: forward-euler needs"),
         (lambda: Numerics(dt_s=2.0, t_max_s=1.0), "--t-max 1 with --dt 2: time step dt (2.0 s) is longer"),
+        (lambda: _definition_on("auto"), "--device must be 'cpu' or 'cuda: <GPU name>' (a resolved device), got 'auto'"),
     ],
 )
 def test_the_option_is_found_by_the_errors_field_not_its_text(make, line):

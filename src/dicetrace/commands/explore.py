@@ -6,13 +6,17 @@ Examples::
     dicetrace explore --window 0.0197,0.0205,0.0177,0.0186 --res 256
     dicetrace explore --slice seed3 --window home --z 0.02 --out scans/  # "save this view as a scan" writes under scans/
     dicetrace explore --no-browser --port 8765          # print the URL only
+    dicetrace explore --device cuda                     # the maps on a CUDA GPU (numba-cuda)
 
 The view (window, resolution, preset, integrator, γ, dt, z) is in the page's
 URL, so a view can be shared and reopened.  Runs until interrupted (Ctrl-C
 stops it at once, even while a map computes).  Maps are shared fairly between
 browser tabs, a tab's newer view cancels its older one, and a map that would
 take more than --map-budget seconds of computing is refused with a message.
-Exit code 2 on bad input (a bad option, a port in use), nothing served.
+The maps (and saved scans) run on ``--device``, which the page and
+``/api/view`` name; a hover's and the viewer's single throws run on the CPU.
+Exit code 2 on bad input (a bad option, a port in use, ``--device cuda``
+without a GPU), nothing served.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail, output_dir
-from dicetrace.commands.options import INTEGRATOR_HELP, PRESET_HELP
+from dicetrace.commands.options import DEVICE_HELP, INTEGRATOR_HELP, PRESET_HELP, device_or_fail
 
 WINDOW_HELP = "Start window: a name (red-sea, home, party, green-island, ...) or x0,x1,y0,y1."
 
@@ -48,6 +52,7 @@ def register(app: typer.Typer) -> None:
             "without it saving is off)."
         ),
         threads: Optional[int] = typer.Option(None, "--threads", help="numba threads per map (default: all)."),
+        device: str = typer.Option("cpu", "--device", help=DEVICE_HELP.replace("the throws run", "the maps run")),
         map_budget: Optional[float] = typer.Option(
             None, "--map-budget", help="Seconds of computing one map may take (default 60); a map that would take "
             "longer is refused with a message (fewer pixels or a longer dt)."),
@@ -66,19 +71,21 @@ def register(app: typer.Typer) -> None:
                 check(value, name)
             except ValueError as e:
                 fail(str(e))
+        label = device_or_fail(device)  # before anything listens
         if out is not None:
             out = output_dir(out, "--out")
             out.mkdir(parents=True, exist_ok=True)
 
         def ready(url: str) -> None:
-            print(f"dicetrace explore: serving {url}  (Ctrl-C to stop)", flush=True)
+            print(f"dicetrace explore: serving {url}  (maps on {label}; Ctrl-C to stop)", flush=True)
             if not no_browser:
                 import webbrowser
 
                 webbrowser.open(url)
 
         try:
-            serve_forever(view, host=host, port=port, out=out, threads=threads, map_budget_s=map_budget, on_ready=ready)
+            serve_forever(view, host=host, port=port, out=out, threads=threads, map_budget_s=map_budget, on_ready=ready,
+                          device="cpu" if label == "cpu" else "cuda")
         except OSError as e:
             fail(f"--host {host} --port {port}: cannot listen there: {e.strerror or e}")
         except KeyboardInterrupt:

@@ -8,7 +8,7 @@ threads, so the event loop keeps answering while they compute.
 Endpoints::
 
     GET  /                      the page (its view in the URL query)
-    GET  /api/view              the normalised view: its query, axes, limits
+    GET  /api/view              the normalised view: its query, axes, limits, the device the maps run on
     GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: about 1/16, 1/4 resolution)
     GET  /api/map.json          the same map's outcome labels, [i][j] with i along x
     GET  /api/map.strips        the refined map as it is computed: NDJSON, a line per strip of image rows, then "done"
@@ -218,25 +218,28 @@ async def _throw_within(fut):
 
 
 def create_app(default: View | None = None, *, out: Path | None = None, threads: int | None = None,
-               worker: Worker | None = None, hosts=(), map_budget_s: float | None = None) -> Starlette:
+               worker: Worker | None = None, hosts=(), map_budget_s: float | None = None,
+               device: str = "cpu") -> Starlette:
     """The explorer app; ``default`` is the view of a bare URL, ``out`` the only folder it may write scans into.
 
     ``hosts``: the address(es) the server listens on, answered besides :data:`LOCAL_HOSTS`
     (:func:`allowed_hosts`); every other ``Host:`` gets a 400.  ``map_budget_s``: the
-    computing time one map may take (:class:`~dicetrace.explore.compute.Worker`'s ``budget_s``).
+    computing time one map may take (:class:`~dicetrace.explore.compute.Worker`'s ``budget_s``);
+    ``device``: where the maps run (the worker's ``device``: cpu, cuda, auto), shown on the page and in
+    ``/api/view`` and ``/api/health``.
     """
 
     default = default or View()
-    worker = worker or Worker(threads=threads, budget_s=map_budget_s)
+    worker = worker or Worker(threads=threads, budget_s=map_budget_s, device=device)
     out = None if out is None else Path(out).resolve()
 
     async def page(request: Request) -> Response:
-        return HTMLResponse(page_html(default, can_save=out is not None))
+        return HTMLResponse(page_html(default, can_save=out is not None, device=worker.device))
 
     async def view_info(request: Request) -> Response:
         v = _view(request, default)
         return JSONResponse({"query": v.to_query(), "window": v.window, "res": v.res, "ndim": v.ndim,
-                             "limits": {"res": [MIN_RES, MAX_RES]}})
+                             "limits": {"res": [MIN_RES, MAX_RES]}, "device": worker.device})
 
     async def _map(request: Request):
         v = _view(request, default)
@@ -325,7 +328,8 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
 
     async def health(request: Request) -> Response:
         return JSONResponse({"ok": True, "computed": worker.computed_count, "cancelled": worker.cancelled_count,
-                             "over_budget": worker.refused_count, "cache_bytes": worker.cache_nbytes})
+                             "over_budget": worker.refused_count, "cache_bytes": worker.cache_nbytes,
+                             "device": worker.device})
 
     def asset(name: str, media: str):
         async def ep(request: Request) -> Response:

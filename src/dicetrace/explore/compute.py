@@ -10,6 +10,9 @@ hold up another's; each map has a budget of computing time
 (:class:`OverBudget`).  Every map request carries a client id: a newer request
 from the same client supersedes the older one, which fails at once with
 :class:`Cancelled`.  Finished maps are cached by view, up to ``CACHE_BYTES``.
+The maps and saved scans run on the worker's device (the CPU, or a CUDA GPU:
+``Worker(device=...)``, one kernel call at a time); a hover's and the viewer's
+single throws run on the CPU.
 """
 
 from __future__ import annotations
@@ -210,10 +213,18 @@ class Worker:
     would take ``BUDGET_SLACK`` times that, fails with :class:`OverBudget`;
     more than ``MAX_JOBS`` maps in the making at once is :class:`Busy`.
     Finished maps are cached by view up to ``cache_bytes`` bytes in all (least
-    recently used out first); nothing else keeps a finished map.
+    recently used out first); nothing else keeps a finished map.  ``device``:
+    where the maps and saves run (cpu, cuda, auto: resolved here, a
+    :class:`~dicetrace.devices.DeviceError` for cuda without a GPU);
+    ``self.device`` is its label (``"cpu"`` or ``"cuda: <GPU name>"``).
     """
 
-    def __init__(self, threads: int | None = None, *, budget_s: float | None = None, cache_bytes: int | None = None):
+    def __init__(self, threads: int | None = None, *, budget_s: float | None = None, cache_bytes: int | None = None,
+                 device: str = "cpu"):
+        from dicetrace.devices import device_label, resolve_device
+
+        self._device = resolve_device(device)  # "cpu" or "cuda"
+        self.device = device_label(self._device)
         self.threads = threads
         self.budget_s = MAP_BUDGET_S if budget_s is None else float(budget_s)
         if not self.budget_s > 0:
@@ -383,7 +394,7 @@ class Worker:
     def _turn(self, job: _Job, known) -> bool:
         """One piece of ``job`` (on the worker's thread); True once its map is whole."""
         if job.build is None:
-            job.build = MapBuild(job.view, known, self.threads)
+            job.build = MapBuild(job.view, known, self.threads, device=self._device)
             if job.build.done:
                 return True
         b = job.build
@@ -423,11 +434,14 @@ class Worker:
 
     def _save(self, view: View, folder: Path, name: str) -> dict:
         with self._kernel_gate():
-            return save_scan(view, folder, name, self.threads)
+            return save_scan(view, folder, name, self.threads, device=self._device)
 
     def _kernel_gate(self):
         """Held around every parallel kernel call (map pieces, saves) unless numba's threading layer takes
-        calls from several threads at once: then nothing (see :func:`_concurrent_kernels_ok`)."""
+        calls from several threads at once: then nothing (see :func:`_concurrent_kernels_ok`); on a GPU always
+        (one kernel call on the device at a time)."""
+        if self._device == "cuda":
+            return self._serial
         return contextlib.nullcontext() if _concurrent_kernels_ok() else self._serial
 
     def cancel_all(self) -> None:
@@ -480,10 +494,11 @@ def scan_folder_for(out: Path, name: str) -> Path:
     return folder
 
 
-def save_scan(view: View, out: Path, name: str, threads: int | None = None) -> dict:
-    """Write ``view`` as the dataset ``dicetrace scan`` would write, into ``out/name``; returns a summary."""
-    from dicetrace.scan import scan
+def save_scan(view: View, out: Path, name: str, threads: int | None = None, *, device: str = "cpu") -> dict:
+    """Write ``view`` as the dataset ``dicetrace scan`` would write, into ``out/name``, on ``device``; returns a summary."""
+    from dicetrace.scan import read_manifest, scan
 
     folder = scan_folder_for(out, name)
-    report = scan(view.grid(), folder, config=view.config(), threads=threads)
-    return {"path": str(folder), "n_ics": report.n_ics, "chunks": report.n_chunks, "wall_s": report.wall_s}
+    report = scan(view.grid(), folder, config=view.config(), threads=threads, device=device)
+    return {"path": str(folder), "n_ics": report.n_ics, "chunks": report.n_chunks, "wall_s": report.wall_s,
+            "device": read_manifest(folder)["definition"]["device"]}

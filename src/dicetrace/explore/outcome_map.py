@@ -88,9 +88,9 @@ class MapBuild:
     any split into steps gives the same map, bit for bit.
     """
 
-    def __init__(self, view: View, known=(), threads: int | None = None, on_strip=None):
+    def __init__(self, view: View, known=(), threads: int | None = None, on_strip=None, device: str = "cpu"):
         self.t0 = time.perf_counter()
-        self.view, self.threads, self.on_strip = view, threads, on_strip
+        self.view, self.threads, self.on_strip, self.device = view, threads, on_strip, device
         self.grid = view.grid()
         self.cfg = view.config()
         nx, ny = view.res
@@ -140,7 +140,7 @@ class MapBuild:
         if n > 0:
             sel = slice(self._pos, self._pos + n)
             res = simulate_batch(self._ics(ii[sel], jj[sel]), config=self.cfg, l_convention=self.grid.slice.l_convention,
-                                 threads=self.threads)
+                                 threads=self.threads, device=self.device)
             m = self.map
             m.outcome[ii[sel], jj[sel]], m.steps[ii[sel], jj[sel]], m.status[ii[sel], jj[sel]] = (
                 res.outcome, res.steps, res.status_code)
@@ -157,13 +157,14 @@ class MapBuild:
 
 
 def compute_map(view: View, cancelled: threading.Event | None = None, threads: int | None = None, *,
-                known=(), on_strip=None) -> OutcomeMap:
+                known=(), on_strip=None, device: str = "cpu") -> OutcomeMap:
     """The outcome map of ``view`` (raises :class:`Cancelled` once ``cancelled`` is set), a strip a kernel call.
 
     It is computed in strips of whole image rows from the top, ``on_strip(map)``
-    called after each; ``known`` as :class:`MapBuild`'s.
+    called after each; ``known`` as :class:`MapBuild`'s; ``device`` as
+    :func:`~dicetrace.simulate.simulate_batch`'s (cpu, cuda, auto).
     """
-    b = MapBuild(view, known, threads, on_strip)
+    b = MapBuild(view, known, threads, on_strip, device)
     while not b.done:
         if cancelled is not None and cancelled.is_set():
             raise Cancelled()

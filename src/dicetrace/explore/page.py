@@ -29,8 +29,8 @@ def _options(names, selected) -> str:
     )
 
 
-def page_html(default: View, *, can_save: bool) -> str:
-    """The page; ``default`` is the view of a URL without parameters."""
+def page_html(default: View, *, can_save: bool, device: str = "cpu") -> str:
+    """The page; ``default`` is the view of a URL without parameters; ``device``: where its maps run (a label)."""
     legend = "".join(
         f'<span class="key"><span class="sw" style="background:rgb{OUTCOME_RGB[o]}"></span>{html.escape(OUTCOME_NAMES[o])}</span>'
         for o in (1, 2, 3, 4, 5, 6, 0, -1)
@@ -42,6 +42,7 @@ def page_html(default: View, *, can_save: bool) -> str:
         .replace("%SLICES%", _options(SLICES, default.slice))
         .replace("%PRESETS%", _options(PRESETS, default.preset))
         .replace("%INTEGRATORS%", '<option value="">(preset\'s)</option>' + _options(INTEGRATORS, default.integrator))
+        .replace("%DEVICE%", html.escape(device))
         .replace("%CONFIG%", json.dumps(cfg))
     )
 
@@ -87,7 +88,7 @@ _TEMPLATE = r"""<!doctype html>
  <span id="status"></span>
 </div>
 <div id="error" role="alert"></div>
-<div>%LEGEND% <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to compare more throws with it</span></div>
+<div>%LEGEND% <span class="ax" id="device">maps on %DEVICE%;</span> <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to compare more throws with it</span></div>
 <div id="main">
  <div>
   <div id="plot"><div id="yaxis" class="ax" aria-label="y axis"></div>

@@ -127,16 +127,20 @@ class Explorer:
     folder "save this view as a scan" may write into; None: saving off),
     ``host``/``port`` (default 127.0.0.1, a free port), ``threads`` (numba
     threads per map), ``map_budget_s`` (the computing time one map may take,
-    default ``compute.MAP_BUDGET_S``), ``start`` (start now) and ``height`` (of
-    the IFrame, px).
+    default ``compute.MAP_BUDGET_S``), ``device`` (where the maps run: cpu,
+    cuda, auto; resolved here: a :class:`~dicetrace.devices.DeviceError` for
+    cuda without a GPU), ``start`` (start now) and ``height`` (of the IFrame, px).
     """
 
     def __init__(self, slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
                  gamma=None, dt=None, z=None, out=None, host: str = DEFAULT_HOST, port: int = 0,
                  threads: int | None = None, map_budget_s: float | None = None, start: bool = True,
-                 height: int = 900):
+                 height: int = 900, device: str = "cpu"):
+        from dicetrace.devices import resolve_device
+
         host, port = check_host(host), check_port(port)  # before anything starts (ValueError naming the parameter)
         threads, map_budget_s = check_threads(threads), check_budget(map_budget_s)
+        self.device = resolve_device(device)  # "cpu" or "cuda"
         if isinstance(height, bool) or not isinstance(height, (int, np.integer)) or height < 1:
             raise ValueError(f"height must be a whole number of pixels >= 1, got {height!r}")
         self.view = make_view(slice, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
@@ -166,7 +170,7 @@ class Explorer:
         self._sock = bind_socket(self.host, self.port)
         self.port = self._sock.getsockname()[1]
         self.app = create_app(self.view, out=self.out, threads=self.threads, hosts=[self.host],
-                              map_budget_s=self.map_budget_s)
+                              map_budget_s=self.map_budget_s, device=self.device)
         self._server = make_server(self.app, self._sock)
         self._thread = threading.Thread(target=self._server.run, kwargs={"sockets": [self._sock]},
                                         name="dicetrace-explore-server", daemon=True)
@@ -220,15 +224,21 @@ class Explorer:
 
 
 def serve_forever(view: View, *, host: str = DEFAULT_HOST, port: int = 0, out=None, threads=None,
-                  map_budget_s=None, on_ready=None) -> None:
-    """Serve the explorer in the foreground until interrupted; ``on_ready(url)`` is called once it listens."""
+                  map_budget_s=None, on_ready=None, device: str = "cpu") -> None:
+    """Serve the explorer in the foreground until interrupted; ``on_ready(url)`` is called once it listens.
+
+    ``device``: where the maps run (cpu, cuda, auto), resolved before anything listens.
+    """
+    from dicetrace.devices import resolve_device
     from dicetrace.explore.app import create_app
 
     host, port, threads = check_host(host), check_port(port), check_threads(threads)
     map_budget_s = check_budget(map_budget_s)
+    device = resolve_device(device)
     sock = bind_socket(host, port)
     port = sock.getsockname()[1]
-    server = make_server(create_app(view, out=out, threads=threads, hosts=[host], map_budget_s=map_budget_s), sock)
+    app = create_app(view, out=out, threads=threads, hosts=[host], map_budget_s=map_budget_s, device=device)
+    server = make_server(app, sock)
     url = f"http://{host}:{port}/?{view.query_string()}"
     if on_ready is not None:
         def watch():
