@@ -59,8 +59,8 @@ DT_HELP = "Time step, s (default 0.001), or 'auto': chosen from the stiffness k 
 T_MAX_HELP = "Time cap, s of simulated time (default 60): a throw still moving then is 'time_cap', outcome -1."
 
 DEVICE_HELP = (
-    "Where the throws run: cpu (numba threads; the default), cuda (a CUDA GPU through numba-cuda, "
-    "pip install 'dicetrace[cuda]'; refused where there is none) or auto (the GPU where numba-cuda finds one, "
+    "Where the throws run: cpu (numba threads; the default), cuda (a CUDA GPU through numba-cuda, the "
+    "package's cuda extra; refused where there is none) or auto (the GPU where numba-cuda finds one, "
     "else the CPU; one line on stderr says which)."
 )
 
