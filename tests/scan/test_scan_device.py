@@ -170,3 +170,31 @@ def test_a_gpu_scan_is_not_timed_on_the_cpu():
     est = estimate_scan(defn)
     assert est.seconds is None and est.device == "cuda: NVIDIA H200"
     assert "on cuda: NVIDIA H200 (time not estimated on a GPU)" in est.describe()
+
+
+@pytest.mark.slow
+def test_on_dask_a_worker_resolves_the_device(tmp_path, dicetrace_cli):
+    """The chunk tasks run on the device as a worker resolves it: recorded in the definition and every chunk;
+    --device cuda on a --scheduler cluster whose workers have no GPU is one line naming --device, nothing written."""
+    pytest.importorskip("dask.distributed")
+    from dask.distributed import Client, LocalCluster
+
+    from dicetrace.devices import DeviceError, gpu_unavailable_reason
+    from dicetrace.scan.dask import worker_device
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster:
+        with Client(cluster) as client:
+            report = scan(Grid("seed", "home", 3), tmp_path / "d", chunk=4, dask=client, device="cpu")
+            assert report.complete
+            assert read_manifest(tmp_path / "d")["definition"]["device"] == "cpu"
+            assert chunk_devices(tmp_path / "d") == {"cpu"}
+            if gpu_unavailable_reason() is not None:  # the workers, started from here, see what this process sees
+                with pytest.raises(DeviceError, match="device 'cuda': "):
+                    worker_device(client, "cuda")
+        if gpu_unavailable_reason() is not None:
+            res = dicetrace_cli("scan", *HOME, "--res", "3", "--out", "new", "--scheduler", cluster.scheduler_address,
+                                "--device", "cuda", cwd=tmp_path)
+            assert res.returncode == 2 and res.stdout == ""
+            assert res.stderr.strip().splitlines() == [res.stderr.strip()]
+            assert res.stderr.startswith("dicetrace: error: --device: device 'cuda': "), res.stderr
+            assert not (tmp_path / "new").exists()
