@@ -1,20 +1,30 @@
-"""The benchmark scripts that edit the kernels' source still find what they edit.
+"""The benchmark scripts that edit the kernels' source still find what they edit, and the GPU benchmark runs.
 
 ``benchmarks/bench_cost_split.py`` measures each part of ``contact-tsit5`` by a
 variant of the driver with that part done twice, and
 ``benchmarks/bench_step_limits.py`` counts what limits its sub-steps with
-lines added to the driver; both edit the driver's source.  When the driver
-changes, an edited line can vanish and the script stops with a message:
-building the variants (no compiling) is enough to catch that here.
+lines added to the driver; both edit the source of the driver's factory
+(``contact_substep.make_drive``).  When the driver changes, an edited line
+can vanish and the script stops with a message: building the variants (no
+compiling) is enough to catch that here.
+
+``benchmarks/bench_gpu.py`` runs under numba-cuda's simulator at its
+``--quick`` sizes (its figures meaningless there, its agreement lines real:
+the simulator's seed path is the CPU's bit for bit), and without a GPU it
+says why in one line and exits 2.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import os
+import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
@@ -63,3 +73,94 @@ def test_step_limits_counters_build():
         assert np.array_equal(S[0][name], base[0][name]), name
     assert not S[0]["limits"].any()
     assert mod._ranges((0.1, 0.3)) == ["≤ 0.1", "0.1–0.3", "> 0.3"]
+
+
+# -- bench_gpu.py --------------------------------------------------------------------------------------
+
+
+def _bench_gpu(*args: str, env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(BENCHMARKS / "bench_gpu.py"), *args], capture_output=True, text=True,
+                          timeout=1200, env={**os.environ, **env})
+
+
+AGREEMENT_LINES = ("outcomes equal", "steps equal", "contact sequences equal", "status equal")
+
+
+@pytest.mark.slow
+def test_gpu_bench_runs_on_the_simulator_and_prints_the_agreement():
+    res = _bench_gpu("--quick", "--skip-scan", env={"NUMBA_ENABLE_CUDASIM": "1", "NUMBA_DISABLE_JIT": "1"})
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = res.stdout
+    assert "GPU cuda: numba-cuda simulator" in out and "meaningless" in out
+    blocks = out.split("\n== ")[1:]
+    assert [b.split(" ==")[0] for b in blocks] == ["seed", "physical"]
+    for block in blocks:
+        preset = block.split(" ==")[0]
+        lines = block.splitlines()
+        assert any("throws/s" in ln and ln.strip().startswith("GPU") for ln in lines), block
+        assert any("throws/s" in ln and ln.strip().startswith("CPU") for ln in lines), block
+        got = {}
+        for name in AGREEMENT_LINES:
+            line = next(ln for ln in lines if ln.strip().startswith(name))
+            got[name] = line.split("(")[1].rstrip(")")  # "k of n"
+        assert all(v.endswith(" of 8") for v in got.values()), got
+        if preset == "seed":  # the simulator's seed path is the CPU's, bit for bit
+            assert set(got.values()) == {"8 of 8"}, got
+        assert any("chaos floor, CPU vs CPU from the ICs nudged by 1e-15" in ln for ln in lines), block
+        assert any(ln.strip().startswith(f"{preset} within its chaos floor") or
+                   ln.strip().startswith(f"{preset} ABOVE its chaos floor") for ln in lines), block
+    assert "scan: skipped (--skip-scan)" in out
+
+
+def test_gpu_bench_without_a_gpu_says_why_in_one_line_and_exits_2():
+    res = _bench_gpu("--quick", env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
+    assert res.returncode == 2, (res.stdout, res.stderr)
+    assert res.stdout == ""
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("bench_gpu: no GPU to benchmark: "), res.stderr
+
+
+@pytest.mark.parametrize("args, names", [
+    (("--presets", "seed,nope"), ("--presets", "nope")),
+    (("--n", "0"), ("--n",)),
+    (("--rate-n", "many"), ("--rate-n",)),
+])
+def test_gpu_bench_bad_options_are_one_line_exit_2(args, names):
+    res = _bench_gpu(*args, env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
+    assert res.returncode == 2 and res.stdout == ""
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("bench_gpu: error: "), res.stderr
+    assert all(n in lines[0] for n in names), lines[0]
+
+
+def _result(outcome, steps, status, sequences):
+    offsets = np.concatenate([[0], np.cumsum([len(q) for q in sequences])])
+    sets = np.array([s for q in sequences for s in q], dtype=np.uint8)
+    return SimpleNamespace(outcome=np.array(outcome), steps=np.array(steps), status_code=np.array(status),
+                           set_offsets=offsets, sets=sets)
+
+
+def test_gpu_bench_agreement_counts_each_kind_of_difference():
+    mod = _load("bench_gpu")
+    a = _result([1, 2, 3, 4, 5], [10, 20, 30, 40, 50], [0, 0, 0, 0, 0], [[0, 1], [0, 2, 3], [0], [0, 4], [0, 5]])
+    b = _result([1, 2, 6, 4, 5], [10, 21, 30, 40, 50], [0, 0, 0, 0, 1], [[0, 1], [0, 2, 3], [0], [0, 4, 4], [0, 6]])
+    got = {k: v.tolist() for k, v in mod.agreement(a, b, 5).items()}
+    assert got == {
+        "outcomes equal": [True, True, False, True, True],
+        "steps equal": [True, False, True, True, True],
+        "contact sequences equal": [True, True, True, False, False],  # a longer sequence, then another set
+        "status equal": [True, True, True, True, False],
+    }
+    # the first n throws only (the GPU's run may hold more ICs than the agreement's)
+    assert mod.agreement(a, b, 2)["contact sequences equal"].tolist() == [True, True]
+
+
+def test_gpu_bench_nudge_is_a_few_ulps_and_the_floor_verdict():
+    mod = _load("bench_gpu")
+    ics = np.array(mod.slice_ics(50, 3))
+    moved = mod.nudged(ics, 4)
+    rel = np.abs(moved - ics) / np.abs(ics)
+    assert np.all(rel <= 1.5e-15) and np.mean(rel > 0.5e-15) > 0.9  # every component moved, by about 1e-15
+    assert np.array_equal(moved, mod.nudged(ics, 4))
+    assert mod.within_floor(0, 0) and mod.within_floor(12, 10) and mod.within_floor(3, 10)
+    assert not mod.within_floor(40, 10)

@@ -1,0 +1,345 @@
+"""The GPU backend against the CPU, in one run: throughput, agreement, the chaos floor and a scan's wall time.
+
+For each preset (``--presets``, default ``seed,physical``: the seed kernel
+and ``physical``'s default, contact-tsit5 through the general kernel) it
+prints
+
+* the first call's time on each device (``simulate_batch`` on a few ICs:
+  on the GPU it compiles the kernel, which numba-cuda keeps in no disk
+  cache; on the CPU it loads the kernels from numba's cache, or compiles
+  them where the cache is cold);
+* throws/s through ``simulate_batch(ics, config=preset, device="cuda")`` on
+  ``--rate-n`` ICs, and through ``device="cpu"`` on all numba threads on
+  the ``--n`` agreement ICs, both after that first call (the whole call:
+  the kernels, the transfers and the compaction of the contact sets);
+* the GPU/CPU agreement on the ``--n`` ICs (the GPU's first ``--n`` throws):
+  the fractions, with counts, of throws with the same outcome, the same
+  step count, the same contact-set sequence and the same status;
+* the chaos floor: the CPU against itself from the same ICs nudged by
+  1e-15 relative (every component times 1 ± 1e-15, random signs), the
+  outcome agreement a change of a few ulps of the ICs gives.  The GPU
+  rounds differently from the CPU (the device's sin and cos on the seed
+  path, fused multiply-adds placed by another compiler on the contact
+  schemes), and the chaos amplifies that near the basins' borders as it
+  amplifies the nudge: the GPU's differences are within the floor when
+  they are no more frequent than the nudge's (the line says which, with a
+  2-σ allowance for the counts).
+
+The ICs are the seed slice (``dicetrace.ics.seed_slice``), x, y uniform in
+[0, 20]² (rng ``--seed``).  Then, unless ``--skip-scan``, the wall time of
+``dicetrace scan --window 0,20,0,20 --res 1000`` (the seed preset, the same
+window; the whole command in a new process, numba-cuda compiling its kernel
+there and the Parquet written to a temporary folder) with ``--device cpu``
+and ``--device cuda``, where the CLI has ``--device``.
+
+Without a GPU it prints one line saying why and exits 2.  Under numba-cuda's
+simulator (``NUMBA_ENABLE_CUDASIM=1``) it runs with ``--quick`` sizes only:
+the "GPU" is Python on the CPU (with ``NUMBA_DISABLE_JIT=1``, which the
+script sets there unless given: the physics then runs as plain Python on
+both devices), and its figures mean nothing (a check that the script and
+the device path run).
+
+Usage: ``python benchmarks/bench_gpu.py [--n 100000] [--rate-n 1000000]
+[--presets seed,physical] [--skip-scan] [--quick]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata
+import math
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+if os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0"):
+    # the simulator runs the kernels as Python, which calls the physics: as plain Python too (before numba loads)
+    os.environ.setdefault("NUMBA_DISABLE_JIT", "1")
+
+PROG = "bench_gpu"
+#: Relative size of the nudge that measures the chaos floor.
+NUDGE = 1e-15
+#: ICs of the first (compiling) call on each device.
+WARM_N = 64
+#: ``--quick``: agreement ICs, throughput ICs, first-call ICs and the scan's grid points per axis.
+QUICK = dict(n=8, rate_n=8, warm_n=2, scan_res=8)
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2 (argparse's own prints the usage too)
+        sys.stderr.write(f"{PROG}: error: {message}\n")
+        sys.exit(2)
+
+
+def _fail(message: str) -> None:
+    sys.stderr.write(f"{PROG}: error: {message}\n")
+    sys.exit(2)
+
+
+def _simulated() -> bool:
+    return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
+
+
+def _jit_disabled() -> bool:
+    return os.environ.get("NUMBA_DISABLE_JIT", "0") not in ("", "0")
+
+
+#: What a CPU worker hands back (``--cpu-worker``): the fields the agreement reads.
+_FIELDS = ("outcome", "steps", "status_code", "set_offsets", "sets")
+
+
+def cpu_batch(ics, preset: str):
+    """``simulate_batch(ics, config=preset, device="cpu")`` on all numba threads.
+
+    With ``NUMBA_DISABLE_JIT=1`` (the simulator's setting) the CPU's kernels
+    cannot run as plain Python (their state records are numpy structs):
+    they run compiled in a child process without the simulator, whose
+    result comes back through a temporary file.
+    """
+    if not _jit_disabled():
+        from dicetrace.simulate import simulate_batch
+
+        return simulate_batch(ics, config=preset, device="cpu")
+    with tempfile.TemporaryDirectory(prefix="bench_gpu_cpu_") as d:
+        np.save(Path(d) / "ics.npy", np.asarray(ics, dtype=np.float64))
+        env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "NUMBA_DISABLE_JIT": "0"}
+        r = subprocess.run([sys.executable, __file__, "--cpu-worker", d, "--presets", preset], env=env,
+                           capture_output=True, text=True)
+        if r.returncode != 0:
+            sys.stderr.write(r.stderr)
+            raise RuntimeError(f"the CPU worker failed (exit {r.returncode})")
+        with np.load(Path(d) / "out.npz") as z:
+            return SimpleNamespace(device="cpu", **{k: z[k] for k in _FIELDS})
+
+
+def _cpu_worker(folder: str, preset: str) -> int:
+    from dicetrace.simulate import simulate_batch
+
+    r = simulate_batch(np.load(Path(folder) / "ics.npy"), config=preset, device="cpu")
+    np.savez(Path(folder) / "out.npz", **{k: getattr(r, k) for k in _FIELDS})
+    return 0
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown CPU"
+
+
+def _version(dist: str) -> str:
+    try:
+        return importlib.metadata.version(dist)
+    except importlib.metadata.PackageNotFoundError:
+        return "not installed"
+
+
+def slice_ics(n: int, seed: int):
+    """n ICs of the seed slice, x, y uniform in [0, 20]² (rng ``seed``)."""
+    from dicetrace.ics import seed_slice
+
+    rng = np.random.default_rng(seed)
+    return seed_slice(rng.uniform(0.0, 20.0, n), rng.uniform(0.0, 20.0, n))
+
+
+def nudged(ics, seed: int) -> np.ndarray:
+    """``ics`` with every component times 1 ± ``NUDGE`` (random signs, rng ``seed``)."""
+    rng = np.random.default_rng(seed)
+    ics = np.asarray(ics, dtype=np.float64)
+    return ics * (1.0 + NUDGE * rng.choice((-1.0, 1.0), size=ics.shape))
+
+
+def same_sequences(a, b, n: int) -> np.ndarray:
+    """Per throw of the first n: whether results a and b have the same contact-set sequence."""
+    oa, ob = a.set_offsets, b.set_offsets
+    la, lb = np.diff(oa[: n + 1]), np.diff(ob[: n + 1])
+    out = la == lb
+    for i in np.flatnonzero(out):
+        out[i] = np.array_equal(a.sets[oa[i] : oa[i + 1]], b.sets[ob[i] : ob[i + 1]])
+    return out
+
+
+def agreement(a, b, n: int) -> dict:
+    """name -> per-throw bool array over the first n throws of results a and b."""
+    return {
+        "outcomes equal": a.outcome[:n] == b.outcome[:n],
+        "steps equal": a.steps[:n] == b.steps[:n],
+        "contact sequences equal": same_sequences(a, b, n),
+        "status equal": a.status_code[:n] == b.status_code[:n],
+    }
+
+
+def _frac(mask: np.ndarray) -> str:
+    k, n = int(mask.sum()), len(mask)
+    return f"{100.0 * k / max(n, 1):9.4f} % ({k:,} of {n:,})"
+
+
+def within_floor(d_gpu: int, d_floor: int) -> bool:
+    """Whether d_gpu differing outcomes are no more than the floor's d_floor, within 2 σ of the two counts."""
+    return d_gpu <= d_floor + 2.0 * math.sqrt(d_gpu + d_floor)
+
+
+def _timed(fn):
+    t = time.perf_counter()
+    out = fn()
+    return out, time.perf_counter() - t
+
+
+def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int) -> None:
+    import numba
+
+    from dicetrace.simulate import simulate_batch
+
+    rate_n = max(rate_n, n)
+    ics = slice_ics(rate_n, seed)
+    agree_ics = ics[:n]
+    threads = numba.get_num_threads()
+    print(f"\n== {preset} ==", flush=True)
+    _, t_gpu0 = _timed(lambda: simulate_batch(ics[:warm_n], config=preset, device="cuda"))
+    _, t_cpu0 = _timed(lambda: cpu_batch(ics[:warm_n], preset))
+    print(f"  first call ({warm_n} ICs): GPU {t_gpu0:.2f} s (compiles the kernel); "
+          f"CPU {t_cpu0:.2f} s (loads the kernels from numba's cache, or compiles them)", flush=True)
+    gpu, t_gpu = _timed(lambda: simulate_batch(ics, config=preset, device="cuda"))
+    print(f"  GPU  {gpu.device:<32} {rate_n / t_gpu:>12,.0f} throws/s  ({rate_n:,} ICs in {t_gpu:.2f} s, "
+          f"{gpu.steps.mean():.0f} steps per throw)", flush=True)
+    cpu, t_cpu = _timed(lambda: cpu_batch(agree_ics, preset))
+    print(f"  CPU  {f'{threads} numba threads':<32} {n / t_cpu:>12,.0f} throws/s  ({n:,} ICs in {t_cpu:.2f} s, "
+          f"{cpu.steps.mean():.0f} steps per throw)", flush=True)
+    print(f"  GPU/CPU throughput ×{(rate_n / t_gpu) / (n / t_cpu):.1f}", flush=True)
+    print(f"  GPU vs CPU, {n:,} ICs of the seed slice, x, y uniform in [0, 20]² (rng {seed}):")
+    for name, mask in agreement(gpu, cpu, n).items():
+        print(f"    {name:<26} {_frac(mask)}")
+    floor = cpu_batch(nudged(agree_ics, seed + 1), preset)
+    floor_mask = agreement(floor, cpu, n)["outcomes equal"]
+    print(f"  chaos floor, CPU vs CPU from the ICs nudged by {NUDGE:g} relative:")
+    print(f"    {'outcomes equal':<26} {_frac(floor_mask)}", flush=True)
+    d_gpu = int(n - (gpu.outcome[:n] == cpu.outcome[:n]).sum())
+    d_floor = int(n - floor_mask.sum())
+    verdict = "within" if within_floor(d_gpu, d_floor) else "ABOVE"
+    print(f"  {preset} {verdict} its chaos floor at a {NUDGE:g} nudge: {d_gpu:,} outcomes differ GPU vs CPU, "
+          f"{d_floor:,} CPU vs the nudged CPU (of {n:,})")
+    failed = int(((cpu.status_code == 0) & (gpu.status_code[:n] != 0)).sum())
+    if failed:
+        print(f"  {failed:,} throws settle on the CPU but not on the GPU")
+
+
+def _cli() -> list[str]:
+    return [sys.executable, "-m", "dicetrace.cli"]
+
+
+def _last_line(text: str) -> str:
+    lines = [ln.strip() for ln in text.strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else "no output"
+
+
+def bench_scan(res: int, window: str) -> None:
+    env = {**os.environ, "COLUMNS": "250", "TERM": "dumb", "NO_COLOR": "1"}
+    print(f"\n== dicetrace scan --window {window} --res {res} (seed preset) ==", flush=True)
+    try:
+        helped = subprocess.run([*_cli(), "scan", "--help"], capture_output=True, text=True, timeout=300, env=env)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        print(f"  scan: not available ({type(exc).__name__}: {exc})")
+        return
+    if helped.returncode != 0:
+        print(f"  scan: not available (the CLI does not start: {_last_line(helped.stderr)})")
+        return
+    if "--device" not in helped.stdout:
+        print("  scan --device: not available (this CLI's scan has no --device)")
+        return
+    tmp = Path(tempfile.mkdtemp(prefix="bench_gpu_scan_"))
+    try:
+        for device in ("cpu", "cuda"):
+            out = tmp / device
+            cmd = [*_cli(), "scan", "--window", window, "--res", str(res), "--out", str(out), "--device", device, "--yes"]
+            t = time.perf_counter()
+            try:
+                r = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=env)
+            except subprocess.TimeoutExpired:
+                print(f"  {device:<5} timed out after 1800 s")
+                continue
+            wall = time.perf_counter() - t
+            if r.returncode != 0:
+                print(f"  {device:<5} failed (exit {r.returncode}): {_last_line(r.stderr)}")
+            else:
+                print(f"  {device:<5} {wall:8.2f} s wall, {res * res:,} ICs (the whole command: start-up, "
+                      + ("compiling the GPU kernel, " if device == "cuda" else "loading the kernels, ")
+                      + "throws, Parquet)", flush=True)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def main(argv=None) -> int:
+    ap = _Parser(prog=PROG, description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=100000, help="ICs for the agreement and the CPU's rate (default 100000)")
+    ap.add_argument("--rate-n", type=int, default=1000000, help="ICs for the GPU's rate (default 1000000)")
+    ap.add_argument("--presets", default="seed,physical", help="comma-separated presets (default seed,physical)")
+    ap.add_argument("--scan-res", type=int, default=1000, help="grid points per axis of the timed scan (default 1000)")
+    ap.add_argument("--scan-window", default="0,20,0,20",
+                    help="window of the timed scan, as dicetrace scan --window takes it (default 0,20,0,20)")
+    ap.add_argument("--skip-scan", action="store_true", help="do not time dicetrace scan")
+    ap.add_argument("--seed", type=int, default=7, help="rng seed of the ICs (default 7)")
+    ap.add_argument("--quick", action="store_true", help="tiny sizes, to check that the script runs (for tests)")
+    ap.add_argument("--cpu-worker", metavar="DIR", help=argparse.SUPPRESS)  # see cpu_batch
+    args = ap.parse_args(argv)
+    if args.cpu_worker:
+        return _cpu_worker(args.cpu_worker, args.presets)
+
+    from dicetrace.params import PRESETS
+
+    presets = [p.strip() for p in args.presets.split(",") if p.strip()]
+    unknown = [p for p in presets if p not in PRESETS]
+    if unknown or not presets:
+        _fail(f"--presets: unknown preset(s) {', '.join(unknown) or '(none given)'} (choose from {', '.join(PRESETS)})")
+    for name, v, lo in (("--n", args.n, 1), ("--rate-n", args.rate_n, 1), ("--scan-res", args.scan_res, 2)):
+        if v < lo:
+            _fail(f"{name} must be at least {lo}, got {v}")
+
+    sim = _simulated()
+    from dicetrace.devices import device_label, gpu_unavailable_reason
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        why = gpu_unavailable_reason()
+    if why is not None:
+        sys.stderr.write(f"{PROG}: no GPU to benchmark: {why}\n")
+        return 2
+    n, rate_n, warm_n, scan_res = args.n, args.rate_n, WARM_N, args.scan_res
+    if args.quick or sim:
+        n, rate_n, warm_n, scan_res = QUICK["n"], QUICK["rate_n"], QUICK["warm_n"], QUICK["scan_res"]
+
+    import numba
+
+    print(f"machine: {_cpu_model()}, {os.cpu_count()} CPUs, {numba.get_num_threads()} numba threads; "
+          f"GPU {device_label('cuda')}")
+    print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
+          f"numba-cuda {_version('numba-cuda')}; load average {os.getloadavg()[0]:.2f}")
+    if sim:
+        print("numba-cuda's simulator (NUMBA_ENABLE_CUDASIM=1): the 'GPU' runs as Python on the CPU, at --quick "
+              f"sizes (NUMBA_DISABLE_JIT={os.environ.get('NUMBA_DISABLE_JIT')}; the CPU side compiled, in a child "
+              "process where the JIT is off); every figure below is meaningless, the run only checks the script "
+              "and the device path")
+    elif args.quick:
+        print("--quick sizes: the figures below mean little")
+    for preset in presets:
+        bench_preset(preset, n, rate_n, warm_n, args.seed)
+    if args.skip_scan:
+        print("\nscan: skipped (--skip-scan)")
+    else:
+        bench_scan(scan_res, args.scan_window)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
