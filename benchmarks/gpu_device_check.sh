@@ -47,7 +47,7 @@ else
     say "### tests marked gpu: not run (pytest is not installed)"
 fi
 # seed first, with the scan (quick); then physical, the long one
-part 120 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000
+part 120 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
 part 240 "bench_gpu: physical" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 --rate-n 1000000 --skip-scan
 say ""
 say "### done after ${SECONDS} s"
