@@ -20,7 +20,8 @@ The counters live in a field this script adds to a copy of the state record
 (``COUNTED``: ``STATE``'s fields at their offsets, then ``limits``), which the
 instrumented driver runs in; the plain driver runs in ``STATE``.  numba takes
 such a record as a subtype of ``STATE``, so the core kernels compiled for
-``STATE`` serve it too.  Compiles one variant (about a minute, nothing cached).
+``STATE`` serve it too.  Compiles two variants, the plain driver and the
+counted one (about a minute each, nothing cached).
 
 Usage: ``python benchmarks/bench_step_limits.py [--n 300] [--preset physical] [--tol 1e-7]``
 (default: the preset's tolerance schedule).
