@@ -11,9 +11,13 @@ only adds the two kernels that give each thread its throw:
     (``fast.roll_summary_sie_in``) in per-thread local arrays, wherever it
     applies on the CPU (``fast.applies``);
 ``general kernel``
-    a scheme's summary run loop (``loop.make_roll`` without the hand-off
-    to a specialised kernel, which allocates), in a per-thread state record
-    in device memory.
+    a scheme's summary run loop (``scheme.roll_summary``, ``loop.make_roll``),
+    in a per-thread state record in device memory.
+
+Both are cached on disk by numba-cuda (beside this file, or in the user's
+cache where that cannot be written), keyed on the kernel digest of
+``core/**`` as the CPU's kernels are: a first run compiles them (tens of
+seconds for a contact scheme), later ones load them.
 
 Arithmetic.  The seed path's kernels are compiled as on the CPU, without
 contraction into fused multiply-adds (NVVM contracts by default; its
@@ -50,6 +54,7 @@ if not hasattr(np, "row_stack"):  # numpy 2.5 removed it; numba-cuda 0.30 still 
 from numba import cuda, float64, typeof  # noqa: E402 (after the alias above)
 
 from dicetrace.core import fast, loop  # noqa: E402
+from dicetrace.core._jit import CACHE, kernel_digest  # noqa: E402
 from dicetrace.core.kernels import scheme_of  # noqa: E402
 from dicetrace.core.state import new_states  # noqa: E402
 
@@ -102,32 +107,43 @@ def _nvvm_without_fma():
         nvvm.compile_ir = compile_ir
 
 
-def _seed_kernel(ics, off0, kp, cap, status, steps, outcome, nsets, sets, set_steps):
-    i = cuda.grid(1)
-    if i < ics.shape[0]:
-        off = cuda.local.array((8, 3), float64)
-        F = cuda.local.array((8, 3), float64)
-        uk = cuda.local.array((8, 3), float64)
-        z = cuda.local.array(8, float64)
-        P = cuda.local.array(8, float64)
-        lo = i * cap
-        s, n, o, ns = fast.roll_summary_sie_in(ics[i], off0, kp, sets[lo : lo + cap], set_steps[lo : lo + cap],
-                                               off, F, uk, z, P)
-        status[i] = s
-        steps[i] = n
-        outcome[i] = o
-        nsets[i] = ns
+def _make_seed_kernel(tag: int):
+    """The one-thread-per-throw kernel around the seed path's summary kernel (``fast.roll_summary_sie_in``).
+
+    ``tag``: 60 bits of the kernel digest (``_jit.kernel_digest``), closed
+    over so that numba-cuda's disk cache, which keys a kernel on its own
+    code and its closure, never loads a kernel compiled from other core
+    sources.
+    """
+
+    def seed_kernel(ics, off0, kp, cap, status, steps, outcome, nsets, sets, set_steps):
+        i = cuda.grid(1)
+        if i < ics.shape[0] and tag >= 0:
+            off = cuda.local.array((8, 3), float64)
+            F = cuda.local.array((8, 3), float64)
+            uk = cuda.local.array((8, 3), float64)
+            z = cuda.local.array(8, float64)
+            P = cuda.local.array(8, float64)
+            lo = i * cap
+            s, n, o, ns = fast.roll_summary_sie_in(ics[i], off0, kp, sets[lo : lo + cap], set_steps[lo : lo + cap],
+                                                   off, F, uk, z, P)
+            status[i] = s
+            steps[i] = n
+            outcome[i] = o
+            nsets[i] = ns
+
+    return seed_kernel
 
 
-def _make_general_kernel(roll):
-    """The one-thread-per-throw kernel around the summary loop ``roll`` (``loop.make_roll``)."""
+def _make_general_kernel(scheme, tag: int):
+    """The one-thread-per-throw kernel around ``scheme.roll_summary`` (``loop.make_roll``); ``tag`` as above."""
 
     def general_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2):
         i = cuda.grid(1)
-        if i < ics.shape[0]:
+        if i < ics.shape[0] and tag >= 0:
             lo = i * cap
-            s, n, o, ns = roll(ics[i], off0, kp, states[i : i + 1], sets[lo : lo + cap], set_steps[lo : lo + cap],
-                               e0, e1, e2)
+            s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, states[i : i + 1], sets[lo : lo + cap],
+                                              set_steps[lo : lo + cap], e0, e1, e2)
             status[i] = s
             steps[i] = n
             outcome[i] = o
@@ -149,30 +165,25 @@ def _kernel(integ: int, seed_path: bool):
     scheme = scheme_of(integ)
     key = "seed" if seed_path else scheme.__name__
     if key not in _KERNELS:
+        tag = int(kernel_digest()[:15], 16)
         if seed_path:
-            fn, strict = _seed_kernel, True
+            fn, strict = _make_seed_kernel(tag), True
         else:
-            roll = loop.make_roll(scheme, trace=False, use_summary=False,
-                                  name=f"roll_{scheme.__name__.rsplit('.', 1)[-1]}_device")
-            fn, strict = _make_general_kernel(roll), not _fused(scheme)
-        _KERNELS[key] = (cuda.jit(fn), strict)
+            fn, strict = _make_general_kernel(scheme, tag), not _fused(scheme)
+        fn.__qualname__ = fn.__name__ = f"{fn.__name__}_{key.rsplit('.', 1)[-1]}"
+        _KERNELS[key] = (cuda.jit(fn, cache=CACHE), strict)
     return _KERNELS[key]
 
 
 def _launch(kernel, strict: bool, m: int, args) -> None:
-    """Launch ``kernel`` over m threads; compile it first (``-fma=0`` where ``strict``)."""
+    """Launch ``kernel`` over m threads; compile it first, with ``-fma=0`` where ``strict`` (or load it from the cache)."""
     blocks = (m + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-    if simulated() or not strict:
-        kernel[blocks, THREADS_PER_BLOCK](*args)
-        return
-    with _nvvm_without_fma():
-        specialised = kernel.specialize(*args)
-        specialised.compile(specialised.signatures[0] if specialised.signatures else _signature(args))
-    specialised[blocks, THREADS_PER_BLOCK](*args)
-
-
-def _signature(args):
-    return tuple(typeof(a) for a in args)
+    if strict and not simulated():
+        sig = tuple(typeof(a) for a in args)
+        if sig not in kernel.overloads:
+            with _nvvm_without_fma():
+                kernel.compile(sig)
+    kernel[blocks, THREADS_PER_BLOCK](*args)
 
 
 def uses_seed_kernel(kp, off0, integ: int) -> bool:

@@ -10,8 +10,8 @@ share a scheme share its kernels.
     summary loop's speed, and the tracing loop is the cheaper compile: a
     single throw (``simulate``, ``dicetrace record``) compiles that loop only.
 ``run_summary``
-    one throw through the summary loop, which hands configurations with a
-    specialised kernel (``core.fast`` for the program's scheme) to it: what
+    one throw through the specialised summary kernel where one applies
+    (``core.fast`` for the program's scheme), else the summary loop: what
     ``run_batch`` runs per IC (tests and benchmarks call it one by one).
 ``run_batch``
     many throws in parallel (``prange``), summaries only.
@@ -72,8 +72,14 @@ def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy
 
 
 def run_summary(ic, off0, kp, integ, sets, set_steps):
-    """One throw through integrator ``integ``'s summary loop (and its specialised kernel)."""
-    return roll_kernel(integ, False)(ic, off0, kp, new_states(1), sets, set_steps, *_NO_ROWS)
+    """One throw through integrator ``integ``'s specialised summary kernel where it applies, else its summary loop.
+
+    The choice the batch kernel makes (``core.loop.make_batch``).
+    """
+    mod = scheme_of(integ)
+    if hasattr(mod, "summary") and mod.summary_applies(kp, off0):
+        return mod.summary(ic, off0, kp, sets, set_steps)
+    return mod.roll_summary(ic, off0, kp, new_states(1), sets, set_steps, *_NO_ROWS)
 
 
 def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):

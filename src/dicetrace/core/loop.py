@@ -119,16 +119,18 @@ def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
 
 
 def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = None,
-              use_summary: bool | None = None, name: str | None = None, cache: bool = True):
+              use_summary: bool = False, name: str | None = None, cache: bool = True):
     """The run loop of a throw on the step of the scheme module ``scheme`` (``core.schemes``), compiled.
 
     ``trace``: the tracing loop (it writes the trace arrays that have rows)
     or the summary loop (it never touches them).  ``exact_flight``: whether
     a free flight of several whole steps is crossed in one piece (default:
-    the scheme's ``EXACT_FLIGHT``).  ``use_summary``: whether the loop hands
-    the throw to the scheme's specialised summary kernel ``scheme.summary``
-    where ``scheme.summary_applies(kp, off0)`` (default: a summary loop of a
-    scheme that has one).  These are closed over, and numba compiles closure
+    the scheme's ``EXACT_FLIGHT``).  ``use_summary``: whether a summary loop
+    hands the throw to the scheme's specialised summary kernel
+    ``scheme.summary`` where ``scheme.summary_applies(kp, off0)`` (off by
+    default: the batch kernels and ``kernels.run_summary`` make that choice
+    once per call, and a GPU cannot run a kernel that allocates).  These are
+    closed over, and numba compiles closure
     values in as constants: the loop calls its step directly and a summary
     loop has no trace code.  The closure holds a module and booleans only,
     which numba's disk cache keys on by name; a module made at run time (a
@@ -161,9 +163,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     """
     trace = bool(trace)
     flight = bool(getattr(scheme, "EXACT_FLIGHT", False) if exact_flight is None else exact_flight)
-    if use_summary is None:
-        use_summary = not trace and hasattr(scheme, "summary")
-    use_summary = bool(use_summary)
+    use_summary = bool(use_summary) and not trace and hasattr(scheme, "summary")
 
     def roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
         st = S[0]
