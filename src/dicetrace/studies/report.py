@@ -6,8 +6,11 @@ Placeholders in the template (``dicetrace/studies/REPORT.template.md``):
     A number (or text) from ``results/STUDY.json``; the path walks dict keys
     and list indices; ``FMT`` is a Python format spec (``.3f``, ``d``, ``.2e``),
     or ``%`` for a percentage with one decimal.
-``{{t:STUDY.NAME}}``
-    The markdown table ``tables[NAME]`` of that study.
+``{{t:STUDY.NAME}}``, ``{{t:STUDY.NAME|drop=TEXT;TEXT}}``
+    The markdown table ``tables[NAME]`` of that study; with ``drop=``, without
+    the columns whose header is one of the TEXTs and the rows whose first cell
+    is one (a verdict or a withdrawn statistic the study's own table still
+    carries; the report states those in its own words).
 ``{{f:STUDY.KEY}}``
     The figure ``figures[KEY]``: an image link relative to the report, and
     its caption in italics.
@@ -63,6 +66,33 @@ def _fmt(v, spec: str | None) -> str:
     return str(v)
 
 
+def _cells(line: str) -> list[str]:
+    return [c.strip() for c in line.strip().strip("|").split("|")]
+
+
+def drop_from_table(table: str, spec: str | None) -> str:
+    """``table`` (Markdown) without the columns headed by, and the rows starting with, a text of ``spec``
+    (``drop=A;B``); the table itself when ``spec`` names nothing to drop."""
+    if not spec or not spec.startswith("drop="):
+        return table
+    names = {t.strip() for t in spec[len("drop="):].split(";") if t.strip()}
+    lines = table.splitlines()
+    if len(lines) < 2 or not lines[0].lstrip().startswith("|"):
+        return table
+    keep = [i for i, h in enumerate(_cells(lines[0])) if h not in names]
+    out = []
+    for n, line in enumerate(lines):
+        if not line.lstrip().startswith("|"):
+            out.append(line)
+            continue
+        cells = _cells(line)
+        if n >= 2 and cells and cells[0] in names:
+            continue
+        out.append("| " + " | ".join(cells[i] for i in keep if i < len(cells)) + " |" if n != 1
+                   else "|" + "|".join("---" for _ in keep) + "|")
+    return "\n".join(out)
+
+
 def render(template: str, results: dict[str, dict]) -> tuple[str, list[str]]:
     """The template with its placeholders filled from ``results`` (study -> JSON), and the missing ones."""
     missing: list[str] = []
@@ -77,7 +107,7 @@ def render(template: str, results: dict[str, dict]) -> tuple[str, list[str]]:
             if kind == "v":
                 return _fmt(_walk(res, rest.split(".")), spec)
             if kind == "t":
-                return res["tables"][rest]
+                return drop_from_table(res["tables"][rest], spec)
             fig = res["figures"][rest]
             return f"![{rest}]({fig['path']})\n\n*{fig.get('caption', '')}*"
         except (KeyError, IndexError, ValueError, TypeError):
