@@ -1,6 +1,8 @@
 """Where batches of throws run: the CPU (numba threads) or a CUDA GPU (numba-cuda), and how to choose.
 
-``device`` is one of :data:`DEVICES`: ``"cpu"`` (the default everywhere),
+``device`` is one of :data:`DEVICES`: ``"cpu"`` (the default everywhere;
+:func:`use_device` changes it for a block, as ``dicetrace analyze --device``
+does for every batch its studies run),
 ``"cuda"`` (a GPU; refused with :class:`DeviceError` where there is none) or
 ``"auto"`` (a GPU where numba-cuda finds one, else the CPU; one line on
 standard error says which, once per process).  The GPU runs the CPU's own
@@ -15,6 +17,8 @@ nothing here imports it unless a GPU is asked for.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import functools
 import os
 import sys
@@ -46,6 +50,24 @@ def gpu_unavailable_reason() -> str | None:
     except Exception as exc:  # the CUDA driver's own failure, whatever its type: reported, never raised
         return f"numba-cuda found no usable CUDA GPU ({type(exc).__name__}: {exc})"
     return "numba-cuda found no CUDA GPU (no driver or no device)"
+
+
+_DEFAULT = contextvars.ContextVar("dicetrace_device", default="cpu")
+
+
+def default_device() -> str:
+    """The device a batch runs on when none is given: ``"cpu"``, unless a :func:`use_device` block says otherwise."""
+    return _DEFAULT.get()
+
+
+@contextlib.contextmanager
+def use_device(device: str):
+    """Within the block, batches given no device run on ``device`` (checked now: :func:`check_device`)."""
+    token = _DEFAULT.set(check_device(device))
+    try:
+        yield
+    finally:
+        _DEFAULT.reset(token)
 
 
 _SAID: set = set()

@@ -26,7 +26,7 @@ from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.kernels import run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
-from dicetrace.devices import check_device, device_label, resolve_device
+from dicetrace.devices import check_device, default_device, device_label, resolve_device
 from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
 from dicetrace.memory import available_memory
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
@@ -449,7 +449,7 @@ def simulate_batch(
     threads: int | None = None,
     cap: int = DEFAULT_CAP,
     chunk: int | None = None,
-    device: str = "cpu",
+    device: str | None = None,
     **options,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads, or a GPU).
@@ -485,13 +485,15 @@ def simulate_batch(
         anything runs (a ValueError naming the sizes; see :func:`~dicetrace.batch_chunks.check_batch_memory`).
         On a GPU the default chunk is sized to its free memory (up to 2²⁰ ICs).
     device
-        ``"cpu"`` (default), ``"cuda"`` (a GPU through numba-cuda, ``pip
+        ``"cpu"``, ``"cuda"`` (a GPU through numba-cuda, ``pip
         install 'dicetrace[cuda]'``; a :class:`~dicetrace.devices.DeviceError`
         where there is none) or ``"auto"`` (the GPU where there is one; one
         line on standard error says which).  The GPU runs the same kernels
         compiled for the device: `seed` throws as on the CPU up to the last
         ulp of the device's sin and cos, the contact schemes' to rounding
         (docs/gpu.md).  The result records it (``BatchResult.device``).
+        None (default): :func:`~dicetrace.devices.default_device`, the CPU
+        unless a :func:`~dicetrace.devices.use_device` block says otherwise.
 
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are
@@ -501,7 +503,7 @@ def simulate_batch(
     cap = _integer(cap, "cap", 1, MAX_CAP)
     threads = _integer(threads, "threads", 1, none_ok=True)
     chunk = _integer(chunk, "chunk", 1, none_ok=True)
-    check_device(device)
+    device = check_device(default_device() if device is None else device)
     conv = cfg.preset.l_convention if l_convention is None else l_convention
     coords = ics.coords if isinstance(ics, SliceICs) else None
     ics = validate_ics(ics)

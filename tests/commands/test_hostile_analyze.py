@@ -131,6 +131,8 @@ BAD = [
     case(["analyze", "accuracy", "cells"], "accuracy", "alone"),
     case(["analyze", "cells", "friction"], "friction", "alone"),
     case(["analyze", "--report-only", "--window", "home"], "--window", "--report-only"),
+    case(["analyze", "cells", "--quick", "--device", "gpu"], "--device", "gpu"),
+    case(["analyze", "accuracy", "--device", "cpu"], "--device", "accuracy"),
 ]
 
 
@@ -186,6 +188,8 @@ def test_a_size_that_does_not_fit_the_memory_available_is_refused(work, no_work,
     (["analyze", "stability", "--quick", "--k", "5e5,5e6", "--presets", "physical"], "stability"),
     (["analyze", "friction", "--quick"], "friction"),
     (["analyze", "Friction", "--quick", "--quiet"], "friction"),
+    (["analyze", "cells", "--quick", "--device", "cpu"], "analyze"),
+    (["analyze", "cells", "--quick", "--device", "auto"], "analyze"),
 ])
 def test_good_options_pass_the_checks(work, no_work, dicetrace_cli, args, started):
     """Valid options reach the study (the sentinel): the checks refuse only what is bad."""
@@ -216,3 +220,15 @@ def test_a_reduced_integrator_study_into_committed_results_is_refused(work, snap
     res = dicetrace_cli("analyze", study, "--quick", "--out", "analysis/accuracy", cwd=work)
     assert_one_line_error(res, "--out", "--quick")
     assert no_work == [] and snapshot(work) == before
+
+
+def test_a_gpu_asked_for_where_there_is_none_is_one_line_before_any_work(work, snapshot, no_work, dicetrace_cli,
+                                                                          assert_one_line_error):
+    from dicetrace.devices import gpu_unavailable_reason
+
+    if gpu_unavailable_reason() is None:
+        pytest.skip("this machine has a GPU (or the simulator is on)")
+    before = snapshot(work)
+    assert_one_line_error(dicetrace_cli("analyze", "cells", "--quick", "--device", "cuda", "--out", OUT, cwd=work),
+                          "--device", "cuda")
+    assert no_work == [] and not (work / OUT).exists() and snapshot(work) == before

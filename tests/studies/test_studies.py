@@ -34,6 +34,7 @@ def test_every_study_wrote_results_and_figures(quick_run):
         assert name in results, f"no results/{name}.json"
         r = results[name]
         assert r["quick"] is True and r["study"] == name
+        assert r["device"] == "cpu"  # where its batches ran (dicetrace analyze --device)
         assert r["figures"], f"{name} drew no figure"
         for fig in r["figures"].values():
             p = out / fig["path"]

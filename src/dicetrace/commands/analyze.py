@@ -55,7 +55,7 @@ INTEGRATOR_HELP = "\n".join(f"     {name:<11} {INTEGRATOR_TITLES[name]}" for nam
 
 #: The options each kind of study takes ("writeup": every writeup study; the others by name).
 TAKES = {
-    "writeup": ("--quick", "--out", "--res", "--seed", "--integrator", "--tol", "--no-cache", "--no-report"),
+    "writeup": ("--quick", "--out", "--res", "--seed", "--integrator", "--tol", "--device", "--no-cache", "--no-report"),
     "accuracy": ("--quick", "--out", "--window", "--n", "--seed", "--presets", "--integrator", "--threads", "--quiet"),
     "stability": ("--quick", "--out", "--presets", "--integrator", "--k", "--quiet"),
     "friction": ("--quick", "--out", "--quiet"),
@@ -136,6 +136,9 @@ def register(app: typer.Typer) -> None:
                                                "(1/s²; default 5e5 … 5e7)."),
         threads: Optional[int] = typer.Option(None, "--threads", help="accuracy: numba threads for the untimed "
                                               "reference runs (default 2; timed runs use one)."),
+        device: Optional[str] = typer.Option(None, "--device", help="Writeup studies: where their batches run, cpu, "
+                                             "cuda (a GPU: pip install 'dicetrace[cuda]') or auto (the GPU where "
+                                             "there is one); default cpu. Recorded in each study's results."),
         no_cache: bool = typer.Option(False, "--no-cache", help="Writeup studies: re-simulate grids cached in OUT/cache."),
         no_report: bool = typer.Option(False, "--no-report", help="Writeup studies: do not rebuild REPORT.md."),
         report_only: bool = typer.Option(False, "--report-only", help="Only re-assemble OUT/REPORT.md from "
@@ -148,8 +151,8 @@ def register(app: typer.Typer) -> None:
         given = {"--quick": quick, "--out": out is not None, "--res": res is not None, "--seed": seed is not None,
                  "--integrator": integrator is not None, "--tol": tol is not None, "--window": window is not None,
                  "--n": n is not None, "--presets": presets is not None, "--k": k_values is not None,
-                 "--threads": threads is not None, "--no-cache": no_cache, "--no-report": no_report,
-                 "--quiet": quiet}
+                 "--threads": threads is not None, "--device": device is not None, "--no-cache": no_cache,
+                 "--no-report": no_report, "--quiet": quiet}
         target = Path(out) if out is not None else default_out("analyze")
         if report_only:
             if study:
@@ -180,7 +183,7 @@ def register(app: typer.Typer) -> None:
             fail(f"{e}; or one of {', '.join(INTEGRATOR_STUDIES)}, alone")
         _not_taken("writeup", "", given)
         options = _checked_options(names, quick=quick, res=res, seed=seed, integrator=integrator, tol=tol,
-                                   no_cache=no_cache)
+                                   device=device, no_cache=no_cache)
         why = ", ".join(w for w, on in (("--quick", quick), ("--res", res is not None),
                                         ("--seed", options.seed != DEFAULT_SEED), ("--integrator", integrator is not None),
                                         ("--tol", tol is not None)) if on)
@@ -213,7 +216,7 @@ def _integrator_study(name: str, *, window, n, seed, quick, presets, integrators
 SEED_RANGE = (0, 2**64)
 
 
-def _checked_options(names, *, quick, res, seed, integrator, tol, no_cache):
+def _checked_options(names, *, quick, res, seed, integrator, tol, device, no_cache):
     """The run's :class:`~dicetrace.studies.context.Options`, each option checked (one line naming it, exit 2)."""
     from dicetrace.commands.options import config_errors
     from dicetrace.studies.context import DEFAULT_SEED, Options
@@ -231,8 +234,14 @@ def _checked_options(names, *, quick, res, seed, integrator, tol, no_cache):
         except ValueError as e:  # what check_overrides refuses besides the configuration's checks
             given = " ".join(f"{k} {v}" for k, v in (("--integrator", integrator), ("--tol", tol)) if v is not None)
             fail(f"{given}: {e}")
+    where = "cpu"
+    if device is not None:
+        from dicetrace.devices import resolve_device
+
+        with config_errors():  # a DeviceError: one line naming --device (cuda without a GPU)
+            where = resolve_device(device)
     options = Options(quick=quick, res=res, seed=DEFAULT_SEED if seed is None else seed, no_cache=no_cache,
-                      integrator=integrator, tol=tol)
+                      integrator=integrator, tol=tol, device=where)
     from dicetrace.studies.runner import check_memory
 
     try:

@@ -16,6 +16,7 @@ import platform
 import time
 from pathlib import Path
 
+from dicetrace.devices import device_label, use_device
 from dicetrace.studies import WRITEUP_STUDIES, resolve, study_module
 from dicetrace.studies.context import Context, Options, Output, write_json
 
@@ -55,13 +56,15 @@ def run_study(name: str, options: Options, out: Path) -> dict:
     """Compute and render one writeup study into ``out``; returns what its JSON holds."""
     mod = study_module(name)
     ctx = Context(name, options, Path(out) / "cache")
-    computed = mod.compute(ctx)
+    with use_device(options.device):  # every batch of the study, however deep, runs there
+        computed = mod.compute(ctx)
     output = Output(out)
     mod.render(computed, output)
     results = {"study": name, "quick": options.quick, "seed": options.seed, "figures": output.figures,
                "tables": output.tables, **computed.results}
     results["wall_s"] = time.perf_counter() - ctx.t0
     results["n_throws_simulated"] = int(ctx.n_throws)
+    results["device"] = device_label(options.device)
     path = write_json(output.res_dir / f"{name}.json", results)
     ctx.log(f"wrote {path} ({results['wall_s']:.1f} s)")
     return results
