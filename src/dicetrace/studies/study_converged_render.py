@@ -12,14 +12,16 @@ import numpy as np
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.studies.context import Computed, Output
 from dicetrace.studies.study_converged_changes import CHANGE_SIGMA, MEASURES
-from dicetrace.studies.text import fmt, md_table, pm, tol_text
+from dicetrace.studies.text import CONVERGED_MIN, fmt, md_table, pm, tol_text, verdict_word
 
 MODEL_TITLES = {"discrete": "discrete (seed, dt = 1 ms)", "converged": "converged seed", "physical": "physical"}
 
 
 def verdict_text(r: dict) -> str:
+    """"yes" for a certified map whose certificate is at least :data:`CONVERGED_MIN`, "statistics only" for a
+    certified one below it, else "**NO**" and why."""
     if r["converged"]:
-        return "yes"
+        return "yes" if r["certificate"]["fraction"] >= CONVERGED_MIN else f"statistics only (certificate < {CONVERGED_MIN:g})"
     return "**NO** (below the floor)" if not r["above_floor"] else "**NO** (agreement at chance)"
 
 
@@ -194,8 +196,9 @@ def render(c: Computed, out: Output) -> None:
         for j, m in enumerate(models):
             ax, r, s = axes[i, j], by[w][m], c.plot[(w, m)]
             ok = r["converged"]
+            word = verdict_word(ok, r["certificate"]["fraction"]).replace("not converged", "NOT CONVERGED")
             title = (f"{w}, {MODEL_TITLES[m]}\ncertificate {r['certificate']['fraction']:.3f} vs floor "
-                     f"{r['floor']['fraction']:.3f}: {'converged' if ok else 'NOT CONVERGED'}")
+                     f"{r['floor']['fraction']:.3f}: {word}")
             plot_outcome_map(s.labels, extent=s.extent, ax=ax, legend=False, title=title)
             ax.title.set_fontsize(8)
             if not ok:
@@ -207,7 +210,8 @@ def render(c: Computed, out: Output) -> None:
     out.save_fig(fig, "l_maps", caption=f"The four windows ({res}² each) in the discrete model (left), the program's "
                  "force law integrated to convergence (middle) and the physical preset (right). Each title gives the "
                  "map's convergence certificate against its chaos floor; a map below its floor, or whose agreement with "
-                 "the 10× tighter map is at chance, is framed in red and marked NOT CONVERGED.")
+                 "the 10× tighter map is at chance, is framed in red and marked NOT CONVERGED; one above its floor but with a "
+                 f"certificate below {CONVERGED_MIN:g} is marked statistics only.")
 
     fig, axes = plt.subplots(1, len(windows), figsize=(4.2 * len(windows), 3.8), sharey=True)
     for ax, w in zip(axes, windows):

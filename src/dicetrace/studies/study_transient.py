@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from dicetrace.studies.context import Computed, Context, Output, window_ranges
-from dicetrace.studies.text import md_table, pm
+from dicetrace.studies.text import md_table, pm, verdict_word
 
 NAME = "transient"
 WINDOWS = ("home", "red-sea")
@@ -164,7 +164,8 @@ def render(c: Computed, out: Output) -> None:
     out.tables["transient"] = md_table([{
         "w": r["window"], "m": r["model"],
         "cert": f"{r['certificate']:.3f} (κ {r['certificate_kappa']:.2f})", "floor": f"{r['floor']:.3f}",
-        "conv": "yes" if r["converged"] else "**no**",
+        "conv": {"converged": "yes", "statistics only": "statistics only"}.get(
+            verdict_word(r["converged"], r["certificate"]), "**no**"),
         "lam": pm(r["lambda_mean"], r["lambda_stderr"], ".1f"), "kap": pm(r["kappa"], r["kappa_stderr"], ".1f"),
         "a": pm(r["alpha_perturbation"], r["alpha_perturbation_stderr"], ".2f"),
         "ab": pm(r["alpha_box"], r["alpha_box_stderr"], ".2f"),

@@ -4,6 +4,18 @@ from __future__ import annotations
 
 import math
 
+#: The least convergence certificate (agreement with the map integrated 10x tighter) for which the report calls
+#: a map converged; a map above its chaos floor but below this gives statistics only.
+CONVERGED_MIN = 0.99
+
+
+def verdict_word(converged: bool, certificate: float) -> str:
+    """"converged", "statistics only" (certified against its floor, certificate below :data:`CONVERGED_MIN`) or
+    "not converged"."""
+    if not converged:
+        return "not converged"
+    return "converged" if certificate >= CONVERGED_MIN else "statistics only"
+
 
 def fmt(v, spec: str = "", missing: str = "–") -> str:
     """``format(v, spec)``; ``missing`` for None or a non-finite float; ``str(v)`` where the spec does not apply."""
