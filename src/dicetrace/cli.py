@@ -10,6 +10,10 @@ stay.
 
 from __future__ import annotations
 
+import importlib
+import platform
+from importlib import metadata
+
 import typer
 from typer.core import TyperGroup
 
@@ -53,10 +57,7 @@ app = typer.Typer(
 
 
 def _versions() -> str:
-    import platform
-    from importlib import metadata
-
-    import dicetrace
+    import dicetrace  # the package's own __init__, which imports this module's neighbours
 
     def v(dist: str) -> str:
         try:
@@ -87,8 +88,6 @@ _COMMANDS = ("record", "simulate", "scan", "accuracy", "analyze", "explore")
 
 
 def _register() -> None:
-    import importlib
-
     for name in _COMMANDS:
         try:
             mod = importlib.import_module(f"dicetrace.commands.{name}")

@@ -37,6 +37,7 @@ one chunk of ICs.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -380,9 +381,7 @@ class Sample:
         start, stop = _check_range(start, stop, self.n)
         d = self.ndim
         if self.method == "sobol":
-            import warnings
-
-            from scipy.stats import qmc
+            from scipy.stats import qmc  # scipy.stats takes seconds to import: only for a Sobol sample
 
             eng = qmc.Sobol(d, scramble=True, seed=self.seed)
             if start:

@@ -14,7 +14,8 @@ ICs into everything a kernel needs).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+import warnings
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -475,8 +476,6 @@ class Config:
 
     def as_dict(self) -> dict:
         """Plain dict of every parameter (stored in file metadata)."""
-        from dataclasses import asdict
-
         return {"preset": asdict(self.preset), "numerics": asdict(self.numerics)}
 
 
@@ -551,8 +550,6 @@ def make_config(
                    f"has no effect on {kw['integrator']}, whose steps are fixed")
             if strict:
                 raise ConfigError(name, msg)
-            import warnings
-
             warnings.warn(msg, UserWarning, stacklevel=2)
     return Config(preset=p, numerics=numerics)
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from dicetrace.integrators import get_integrator
 
 
@@ -32,8 +34,6 @@ def impact_speed_cm_s(ics, preset) -> float:
     and the fall to the ground adds √(2·|g|·(z0 − half))·... (bounded by
     adding the drop speed).  ω = |L| / I (either sign convention).
     """
-    import numpy as np
-
     a = np.atleast_2d(np.asarray(ics, dtype=float))
     u = np.linalg.norm(a[:, :3], axis=1)
     w = np.linalg.norm(a[:, 3:6], axis=1) / preset.inertia

@@ -52,6 +52,7 @@ if not hasattr(np, "row_stack"):  # numpy 2.5 removed it; numba-cuda 0.30 still 
     np.row_stack = np.vstack
 
 from numba import cuda, float64, typeof  # noqa: E402 (after the alias above)
+from numba.cuda.cudadrv import nvvm  # noqa: E402
 
 from dicetrace.core import fast, loop  # noqa: E402
 from dicetrace.core._jit import CACHE, kernel_digest  # noqa: E402
@@ -92,8 +93,6 @@ def _nvvm_without_fma():
     when it makes PTX; it has no public switch for this one, so the option
     is added there for the kernels compiled in this context.
     """
-    from numba.cuda.cudadrv import nvvm
-
     compile_ir = nvvm.compile_ir
 
     def strict(llvmir, **options):
