@@ -14,6 +14,7 @@ numba's cache checks only the source file of the cached function, so a
 kernel in ``loop.py`` would keep running old code after ``fast.py`` or
 ``model.py`` changed.  The kernels of ``dicetrace.core`` (subpackages
 included) are therefore cached under a digest of all of ``core/**/*.py``
+but ``gpu.py`` (which compiles them for a GPU and holds no CPU kernel)
 and of the constants of the bottom layers that kernels compile in (the
 integrator table, the status codes, the mode constants and the field order
 of ``KernelParams``): any change there recompiles them.  The digest is the
@@ -72,9 +73,14 @@ def _baked_constants() -> bytes:
     return repr((rows, statuses, modes)).encode()
 
 
+#: Modules of ``core`` that hold no CPU kernel: a change there recompiles nothing on the CPU (``gpu.py``'s own
+#: kernels are keyed by numba-cuda on that file and, through their closure, on this digest).
+_NOT_KERNELS = frozenset({"gpu.py"})
+
+
 def _core_digest() -> str:
     h = hashlib.sha256()
-    for path in sorted(_CORE_DIR.rglob("*.py")):
+    for path in sorted(p for p in _CORE_DIR.rglob("*.py") if p.relative_to(_CORE_DIR).as_posix() not in _NOT_KERNELS):
         h.update(path.relative_to(_CORE_DIR).as_posix().encode())
         h.update(path.read_bytes())
     h.update(_baked_constants())
@@ -83,7 +89,7 @@ def _core_digest() -> str:
 
 @functools.cache
 def kernel_digest() -> str:
-    """The digest that stamps the cached kernels (all of ``core/**/*.py`` and the baked constants), once per process.
+    """The digest that stamps the cached kernels (``core/**/*.py`` but gpu.py, and the baked constants), once per process.
 
     What a cache of simulation *results* keys on too: when it changes, the
     kernels may compute something else.
