@@ -59,6 +59,7 @@ from dicetrace.core.state import new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.simulate import simulate
 from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
+from dicetrace.studies.text import tol_text
 
 #: A scratch cell of the state that the step never reads before writing it
 #: (``erk.dense_state`` sets all of ``dn_w`` first): where a repeated part's
@@ -252,8 +253,8 @@ def main() -> None:
     attempts /= m
     macro /= m
     base = best["plain"]
-    tol = cfg.numerics.tol
-    print(f"contact-tsit5 on {args.preset}, tol {tol:g}, {m} zoom-out ICs, 1 thread, CPU ms per throw "
+    tol = tol_text({"tol": cfg.numerics.tol, "tol_growth": cfg.numerics.tol_growth})
+    print(f"contact-tsit5 on {args.preset}, tol {tol}, {m} zoom-out ICs, 1 thread, CPU ms per throw "
           f"(best of {args.repeat}, interleaved); {attempts:.0f} sub-step attempts and {macro:.0f} steps per throw")
     noise = abs(best["plain again"] - base)
     print(f"  {'plain':<16} {base:7.3f} ms/throw; run again {best['plain again']:.3f} (noise floor {noise:.3f} ms/throw)")
