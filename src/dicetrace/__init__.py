@@ -9,6 +9,8 @@ stays cheap (no numba).
 
 __version__ = "0.1.0"
 
+import importlib  # noqa: E402
+
 from dicetrace.status import Status  # noqa: E402  (bottom layer, no numba)
 
 _LAZY = {
@@ -26,7 +28,5 @@ __all__ = ["Status", *_LAZY]
 
 def __getattr__(name: str):
     if name in _LAZY:
-        import importlib
-
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'dicetrace' has no attribute {name!r}")

@@ -17,6 +17,9 @@ from importlib import metadata
 import typer
 from typer.core import TyperGroup
 
+import dicetrace
+from dicetrace.commands._common import run_app
+
 #: typer's default type labels that add nothing to an option's help (a flag's ``<bool>``, text, paths).
 NOISE_TYPES = frozenset({"<bool>", "<str>", "<path>", "<list[str]>", "<list[path]>"})
 
@@ -57,8 +60,6 @@ app = typer.Typer(
 
 
 def _versions() -> str:
-    import dicetrace  # the package's own __init__, which imports this module's neighbours
-
     def v(dist: str) -> str:
         try:
             return metadata.version(dist)
@@ -102,8 +103,6 @@ _register()
 
 
 def main() -> None:
-    from dicetrace.commands._common import run_app
-
     run_app(app)
 
 

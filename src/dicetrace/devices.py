@@ -112,6 +112,6 @@ def device_label(device: str) -> str:
     """What a result records as its device: ``"cpu"``, or ``"cuda: <GPU name>"``."""
     if device != "cuda":
         return "cpu"
-    from dicetrace.core import gpu
+    from dicetrace.core import gpu  # numba-cuda: optional and heavy, imported only for a GPU
 
     return f"cuda: {gpu.device_name()}"

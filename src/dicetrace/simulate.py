@@ -123,7 +123,7 @@ class Trace:
         q = np.full((len(rot), 4), np.nan)
         ok = np.isfinite(rot).all(axis=(1, 2)) & self.written
         if ok.any():
-            from scipy.spatial.transform import Rotation
+            from scipy.spatial.transform import Rotation  # slow to import (scipy.spatial): only when asked for
 
             q[ok] = Rotation.from_matrix(rot[ok]).as_quat()
         return q
@@ -177,7 +177,7 @@ class Roll:
 
     def contact_events(self):
         """Per-node events as a DataFrame: step, t_s, node (1..8), kind ("enter"/"leave")."""
-        import pandas as pd
+        import pandas as pd  # heavy optional library: imported only when used
 
         steps, nodes, kinds = contact_events(self.contact_sets, self.contact_steps)
         return pd.DataFrame(
@@ -432,7 +432,7 @@ class BatchResult:
         :func:`~dicetrace.tables.rolls_table`); default: the batch's own
         (``self.coords``, from ICs that carried them), else null.
         """
-        from dicetrace.tables import rolls_table
+        from dicetrace.tables import rolls_table  # lazy: pyarrow (through dicetrace.tables) only for this export
 
         return rolls_table(self, ic_ids=ic_ids, coords=coords, metadata=metadata)
 

@@ -41,6 +41,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+import dicetrace
 from dicetrace.core._jit import jit
 from dicetrace.status import LABELS
 
@@ -180,8 +181,6 @@ def sequences_array(sets: np.ndarray, offsets: np.ndarray) -> pa.StringArray:
 
 def metadata_json(config, ics, *, extra: Mapping | None = None) -> dict:
     """The metadata object stored under ``b"dicetrace"`` in every table's schema."""
-    import dicetrace
-
     ics = np.asarray(ics, dtype=np.float64).reshape(-1, 6)
     meta = {
         "dicetrace_version": dicetrace.__version__,
