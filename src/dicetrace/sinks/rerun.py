@@ -188,7 +188,7 @@ def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, t
 
 
 def _rr():
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     return rr
 
@@ -237,7 +237,7 @@ def metadata_values(roll, ic_label: str | None = None) -> dict:
 
 def read_rrd_metadata(path) -> dict:
     """The ``dicetrace`` recording property of a file written by :func:`write_rrd` (config parsed from JSON)."""
-    from rerun.chunk import RrdReader
+    from rerun.chunk import RrdReader  # rerun is slow to import: only when used
 
     for ch in RrdReader(str(path)).stream():
         if ch.entity_path == "/__properties/dicetrace":
@@ -295,7 +295,7 @@ def event_texts(steps, nodes, entered) -> list[str]:
 def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None = None, channels=frozenset(),
              scales=None) -> None:
     """Log one throw into an open recording stream (see the module docstring)."""
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     tr = roll.trace
     cfg = roll.config
@@ -420,7 +420,7 @@ def log_ground(rec, xy: np.ndarray, half: float, anchor: np.ndarray) -> None:
     """The ground sized to what happens on it: a thin box whose top face is z = 0 under every point of ``xy``
     (and the origin) with 3 half sides to spare, and on it ``world/ground/grid``, a line every die side,
     one of them through ``anchor`` (the resting place) each way: the die's scale, across the whole ground."""
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     lo = np.minimum(xy.min(axis=0), -3 * half)
     hi = np.maximum(xy.max(axis=0), 3 * half)
@@ -459,7 +459,7 @@ def log_faces(rec, entity: str, half: float, index, cm, quat) -> None:
     Static in the body frame, carried by the die's pose: one transform per step (centre ``cm``,
     quaternion ``quat``, xyzw) on the ``index`` timelines.  The pips are the child ``entity/pips``.
     """
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     plate_t = 0.02 * half
     plate_half = np.where(FACE_NORMALS != 0, plate_t, 0.62 * half)
@@ -531,7 +531,7 @@ def read_rrd(path, *, static: bool = False) -> dict:
         columns are named ``Archetype:field`` (``"Points3D:positions"``) and
         hold one list of instances per row.
     """
-    import pyarrow as pa
+    import pyarrow as pa  # rerun (and its pyarrow) are slow to import: only when used
     from rerun.chunk import RrdReader
 
     parts: dict[str, list] = {}

@@ -70,7 +70,7 @@ def arrow_scales(roll, channels) -> dict:
 
 def log_channels(rec, roll, channels, rows, index, scales) -> None:
     """Log the asked-for channels for the trace ``rows`` (the same rows as the main recording)."""
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     tr = roll.trace
     nodes = (tr.cm_pos[:, None, :] + tr.node_offsets)[rows]
@@ -111,7 +111,7 @@ def log_channels(rec, roll, channels, rows, index, scales) -> None:
 
 def channel_views(channels) -> list:
     """Plot views of the asked-for scalar channels (for the default blueprint)."""
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # rerun is slow to import: only when used
 
     views = []
     if "penetration" in channels:

@@ -163,7 +163,7 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
     its body (the rim around the face plates), nodes and path in the throw's colour; ``layout``:
     :data:`LAYOUTS`.  The divergence is always that of the real states, whatever the layout.
     """
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     half = float(rolls[0].config.preset.half_side_cm)
     steps, t_s, divs = compare_series(rolls)
@@ -222,7 +222,7 @@ def compare_blueprint(rolls=None, layout: str = "overlay"):
     With ``rolls``, the 3-D camera frames every die's resting place and path from its first bounce (as
     ``layout`` places them; :func:`dicetrace.sinks.rerun_view.framing_eye`), orbiting at their mean resting place.
     """
-    import rerun.blueprint as rrb
+    import rerun.blueprint as rrb  # rerun is slow to import: only when used
 
     eye = None
     if rolls:
@@ -246,7 +246,7 @@ def compare_blueprint(rolls=None, layout: str = "overlay"):
 
 def compare_logger(rolls, labels, *, name: str = "dicetrace compare", layout: str = "overlay"):
     """``log(rec)`` of the compare recording (the file and the streaming sinks share it)."""
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     if layout not in LAYOUTS:
         raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")

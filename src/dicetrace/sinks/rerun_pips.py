@@ -59,7 +59,7 @@ def log_pips(rec, entity: str, normals, half: float, lift: float) -> None:
     ``lift`` from the die's centre: it stands out of its plate by about its thickness, not more,
     so it does not show past the die's edge while its face is turned away.
     """
-    import rerun as rr
+    import rerun as rr  # rerun is slow to import: only when used
 
     pos, face = pip_offsets(normals, half, lift)
     normal = np.abs(np.asarray(normals, dtype=np.float64))[face - 1]
