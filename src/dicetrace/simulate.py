@@ -177,7 +177,7 @@ class Roll:
 
     def contact_events(self):
         """Per-node events as a DataFrame: step, t_s, node (1..8), kind ("enter"/"leave")."""
-        import pandas as pd  # heavy optional library: imported only when used
+        import pandas as pd  # pandas is slow to import: only when used
 
         steps, nodes, kinds = contact_events(self.contact_sets, self.contact_steps)
         return pd.DataFrame(
