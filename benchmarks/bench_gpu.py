@@ -5,9 +5,9 @@ and ``physical``'s default, contact-tsit5 through the general kernel) it
 prints
 
 * the first call's time on each device (``simulate_batch`` on a few ICs:
-  on the GPU it compiles the kernel, which numba-cuda keeps in no disk
-  cache; on the CPU it loads the kernels from numba's cache, or compiles
-  them where the cache is cold);
+  on the GPU it compiles the kernel, or loads it from numba-cuda's disk
+  cache after a first run of the same kernel sources; on the CPU it loads
+  the kernels from numba's cache, or compiles them where the cache is cold);
 * throws/s through ``simulate_batch(ics, config=preset, device="cuda")`` on
   ``--rate-n`` ICs, and through ``device="cpu"`` on all numba threads on
   the ``--n`` agreement ICs, both after that first call (the whole call:
@@ -29,8 +29,9 @@ prints
 The ICs are the seed slice (``dicetrace.ics.seed_slice``), x, y uniform in
 [0, 20]² (rng ``--seed``).  Then, unless ``--skip-scan``, the wall time of
 ``dicetrace scan --window 0,20,0,20 --res 1000`` (the seed preset, the same
-window; the whole command in a new process, numba-cuda compiling its kernel
-there and the Parquet written to a temporary folder) with ``--device cpu``
+window; the whole command in a new process, numba-cuda loading its kernel
+from its cache there (or compiling it) and the Parquet written to a
+temporary folder) with ``--device cpu``
 and ``--device cuda``, where the CLI has ``--device``.
 
 Without a GPU it prints one line saying why and exits 2.  Under numba-cuda's
@@ -214,7 +215,7 @@ def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int, repea
     print(f"\n== {preset} ==", flush=True)
     _, t_gpu0 = _timed(lambda: simulate_batch(ics[:warm_n], config=preset, device="cuda"))
     _, t_cpu0 = _timed(lambda: cpu_batch(ics[:warm_n], preset))
-    print(f"  first call ({warm_n} ICs): GPU {t_gpu0:.2f} s (compiles the kernel); "
+    print(f"  first call ({warm_n} ICs): GPU {t_gpu0:.2f} s (compiles the kernel, or loads it from the cache); "
           f"CPU {t_cpu0:.2f} s (loads the kernels from numba's cache, or compiles them)", flush=True)
     gpu, t_gpu = _timed(lambda: simulate_batch(ics, config=preset, device="cuda"), repeat)
     print(f"  GPU  {gpu.device:<32} {rate_n / t_gpu:>12,.0f} throws/s  ({rate_n:,} ICs in {t_gpu:.2f} s, "
