@@ -1,0 +1,91 @@
+"""What the README's test command costs on a fresh clone: the whole run, the kernels' cold compile, pytest.
+
+Clones this repository (its committed HEAD) into a temporary folder and runs
+``bash .ci/run`` there with an empty kernel cache (``DICETRACE_CACHE_DIR``
+pointing into the temporary folder), as CI does on a new clone; pip's and
+Debian's package downloads are whatever this machine already has.  Prints the
+wall time of the whole run, of the kernel compile (``tests/compile_kernels.py``'s
+last line) and of pytest (its summary line), with the pytest summary and the
+machine.  ``--write FILE`` also writes them as JSON: the committed figures the
+README quotes are ``benchmarks/results/first_run.json``, rewritten only by
+``python benchmarks/bench_first_run.py --write benchmarks/results/first_run.json``.
+
+Usage: ``python benchmarks/bench_first_run.py [--write FILE] [--keep]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--write", type=Path, default=None, help="also write the figures to this JSON file")
+    ap.add_argument("--keep", action="store_true", help="keep the clone (its path is printed)")
+    args = ap.parse_args()
+    head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
+    if head.returncode != 0:
+        print("bench_first_run: not a git checkout: nothing to clone", file=sys.stderr)
+        return 2
+    tmp = Path(tempfile.mkdtemp(prefix="dicetrace-first-run-"))
+    clone = tmp / "dicetrace"
+    try:
+        subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
+        env = {**os.environ, "CI": "true", "DICETRACE_CACHE_DIR": str(tmp / "kernels")}
+        env.pop("VIRTUAL_ENV", None)
+        t0 = time.perf_counter()
+        res = subprocess.run(["bash", ".ci/run"], cwd=clone, env=env, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        out = res.stdout + res.stderr
+        kernels = re.findall(r"every kernel compiled or loaded in (\d+(?:\.\d+)?) s", out)
+        summary = re.findall(r"^=+ (.*) in ([\d.]+)s(?: \([\d:]+\))? =+$", out, flags=re.M)
+        figures = {
+            "commit": head.stdout.strip(),
+            "exit_code": res.returncode,
+            "wall_s": round(wall, 1),
+            "kernels_cold_s": float(kernels[-1]) if kernels else None,
+            "pytest_s": float(summary[-1][1]) if summary else None,
+            "pytest_summary": summary[-1][0] if summary else None,
+            "machine": {"cpu": _cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
+                        "system": platform.platform()},
+            "measured": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        }
+        print(json.dumps(figures, indent=1))
+        if res.returncode != 0:
+            print(out[-4000:], file=sys.stderr)
+        if args.write is not None:
+            args.write.parent.mkdir(parents=True, exist_ok=True)
+            args.write.write_text(json.dumps(figures, indent=1) + "\n")
+            print(f"wrote {args.write}")
+        return 0 if res.returncode == 0 else 1
+    finally:
+        if args.keep:
+            print(f"kept {clone}")
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
