@@ -1,0 +1,247 @@
+"""Study n (doubly_transient): doubly transient chaos measured as such: f(ε) local slopes and ε_c, settling hazards, λ₁ on survivors.
+
+Replaces the κ/λ test that section j withdraws.  For the ``physical`` preset at its γ and k,
+at two other γ and two other k, and for the ``seed`` force law integrated to convergence,
+random ICs of the zoom-out window of the seed slice (L in the program's convention) are
+thrown with ``contact-tsit5`` at a uniform tolerance of 1e-10 (no loosening over the throw):
+
+* each base IC and its neighbours at ``ε · |ic| · ξ`` (ξ a random unit 6-vector, one per
+  scale, ε = 1e-10 … 1e-3) give ``f(ε)``, its local slopes with bootstrap errors and the
+  crossover ε_c (:func:`~dicetrace.analysis.doubly_transient.crossover_fit`);
+* the numerical floor: the first pairs rerun at tol 1e-11; a scale counts only where the
+  fraction of pairs whose verdict changes is (95 % upper bound) below a third of ``f(ε)`` and
+  at least ten pairs changed;
+* the settling hazard against time (settle time and commit time, the last contact off the
+  final face), against bounce number and against energy;
+* λ₁ on throws that outlive the median settle time (pairs nudged by 1e-10), beside all throws;
+* the edge-release rate of each model, and the two hypotheses with their z-scores: the final
+  saddle is the edge balance (the late commit hazard tends to the edge rate, α at fine
+  scales to 1) against the chaotic-saddle relation α = κ/λ₁.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from dicetrace.studies.context import Computed, Context, Output, window_ranges
+
+NAME = "doubly_transient"
+WINDOW = "zoom-out"
+#: The uniform tolerance of every throw here, and the floor test's (10× tighter).
+TOL, TOL_FLOOR = 1e-10, 1e-11
+#: Nudge of the λ₁ pairs (relative to |ic|) and the distance (cm) where their fit stops.
+LAMBDA_DELTA, LAMBDA_SATURATION = 1e-10, 1e-2
+_HALF_DECADES, _DECADES = 10.0 ** np.arange(-10, -3.9, 0.5), 10.0 ** np.arange(-10.0, -2.0)
+#: key -> (preset, make_config overrides, ε scales of the full run: relative 6-D IC perturbations).  The two models
+#: of the answers table get half decades, the γ and k variations whole decades.
+CONDITIONS = {
+    "physical": ("physical", {}, _HALF_DECADES),
+    "physical γ 0.0025": ("physical", {"gamma": 0.0025}, _DECADES),
+    "physical γ 0.01": ("physical", {"gamma": 0.01}, _DECADES),
+    "physical k 2e5": ("physical", {"k": 2e5}, _DECADES),
+    "physical k 5e6": ("physical", {"k": 5e6}, _DECADES),
+    "seed": ("seed", {"integrator": "contact-tsit5"}, 10.0 ** np.arange(-9, -2.9, 0.5)),
+}
+QUICK_CONDITIONS = ("physical", "physical γ 0.01", "seed")
+#: ε scales of the quick run.
+EPS_QUICK = 10.0 ** np.arange(-8, -1, 2)
+#: A scale counts where the floor's 95 % upper bound is below this fraction of f(ε) and at least MIN_CHANGED pairs changed.
+FLOOR_SHARE, MIN_CHANGED = 1.0 / 3.0, 10
+#: The crossover fit uses counted scales with f below this fraction of f_sat (saturation bends the curve).
+SAT_SHARE = 0.25
+
+
+def _config(cond: str, tol: float):
+    from dicetrace.params import make_config
+
+    preset, over, _ = CONDITIONS[cond]
+    return make_config(preset, tol=tol, tol_growth=0.0, **over)
+
+
+def _edge_config(cfg):
+    """The edge release's numerics: the model's, but ``seed`` (whose signed ground and degree-0 friction stop an
+    error-controlled release at its first step) with ``contact-substep`` at dt 0.1 ms, as section k4 releases it."""
+    from dataclasses import replace
+
+    if cfg.preset.name != "seed":
+        return cfg
+    return replace(cfg, numerics=replace(cfg.numerics, integrator="contact-substep", dt_s=1e-4))
+
+
+def _numerics(cfg) -> dict:
+    p, n = cfg.preset, cfg.numerics
+    return {"preset": p.name, "gamma": p.gamma, "k": p.k, "integrator": n.integrator, "tol": n.tol,
+            "tol_growth": n.tol_growth, "dt_s": n.dt_s}
+
+
+def _pair_outcomes(ics, moved, cfg):
+    from dicetrace.simulate import simulate_batch
+
+    b = simulate_batch(np.concatenate([ics, *moved]), config=cfg)
+    return b, b.outcome.reshape(len(moved) + 1, len(ics)).astype(np.int64)
+
+
+def _verdicts(out):
+    return (out[1:] != out[0]).T, ((out[1:] >= 1) & (out[0] >= 1)).T
+
+
+def _hazards(t_settle, t_commit, landings, t_cap) -> dict:
+    from dicetrace.analysis.doubly_transient import compare, discrete_hazard, hazard_curve, hazard_windows
+
+    res = {}
+    for key, t in (("settle", t_settle), ("commit", t_commit)):
+        cen = t >= t_cap
+        edges = np.linspace(0.0, float(np.quantile(t, 0.995)), 25)
+        hc, hw = hazard_curve(t, edges, censored=cen), hazard_windows(t, censored=cen)
+        mid = hazard_curve(t, np.quantile(t, [0.5, 0.9]), censored=cen)
+        rising = compare(float(hw.h[-1]), float(hw.stderr[-1]), float(hw.h[0]), float(hw.stderr[0])) if len(hw.h) > 1 \
+            else compare(math.nan, math.nan, math.nan, math.nan)
+        res[key] = {"median_s": float(np.median(t)), "curve": _hz(hc), "windows": _hz(hw),
+                    "kappa_mid": float(mid.h[0]), "kappa_mid_stderr": float(mid.stderr[0]),
+                    "kappa_mid_range_s": [float(mid.t0[0]), float(mid.t1[0])],
+                    "kappa_late": float(hw.h[-1]) if len(hw.h) else math.nan,
+                    "kappa_late_stderr": float(hw.stderr[-1]) if len(hw.h) else math.nan,
+                    "kappa_late_from_s": float(hw.t0[-1]) if len(hw.h) else math.nan,
+                    "late_minus_first": rising}
+    bh = discrete_hazard(landings)
+    res["bounce"] = {k: v.tolist() for k, v in bh.items()}
+    return res
+
+
+def _hz(h) -> dict:
+    return {"t0": h.t0.tolist(), "t1": h.t1.tolist(), "h": h.h.tolist(), "stderr": h.stderr.tolist(),
+            "events": h.events.tolist(), "at_risk": h.at_risk.tolist()}
+
+
+def _traced(ctx: Context, cfg, ics, t_settle, rng, n_surv: int, n_rand: int) -> dict:
+    """λ₁ on throws that outlive the median settle time and on random throws; the energy hazard (random throws)."""
+    from dicetrace.analysis.doubly_transient import commit_steps, covariate_hazard, pair_divergence
+    from dicetrace.analysis.lyapunov import finite_time_lyapunov
+
+    settled = np.flatnonzero(np.isfinite(t_settle))
+    med = float(np.median(t_settle[settled]))
+    surv = settled[t_settle[settled] > med]
+    picks = {"survivors": rng.choice(surv, min(n_surv, len(surv)), replace=False),
+             "all": rng.choice(settled, min(n_rand, len(settled)), replace=False)}
+    out: dict = {"median_settle_s": med}
+    e_series, e_events = ([], []), []
+    for key, idx in picks.items():
+        lam = []
+        for i in idx:
+            t, d, energy, tc, roll = pair_divergence(ics[i], cfg, delta=LAMBDA_DELTA, rng=int(rng.integers(2**31)))
+            ctx.n_throws += 2
+            try:
+                lam.append(finite_time_lyapunov(t, d, saturation=LAMBDA_SATURATION, t_min=tc).exponent)
+            except ValueError:
+                pass
+            if key == "all" and roll.outcome >= 1:
+                c, _ = commit_steps(roll.contact_sets, roll.contact_steps, [0, len(roll.contact_sets)],
+                                    [roll.outcome], [roll.steps])
+                e_series[0].append(roll.trace.t_s)
+                e_series[1].append(energy if len(energy) == len(roll.trace.t_s) else roll.trace.t_s * np.nan)
+                e_events.append(c[0] * roll.dt_s)
+        lam = np.asarray(lam)
+        out[key] = {"n": int(len(lam)), "mean": float(lam.mean()) if len(lam) else math.nan,
+                    "stderr": float(lam.std(ddof=1) / math.sqrt(len(lam))) if len(lam) > 1 else math.nan,
+                    "median": float(np.median(lam)) if len(lam) else math.nan,
+                    "q25": float(np.quantile(lam, 0.25)) if len(lam) else math.nan,
+                    "q75": float(np.quantile(lam, 0.75)) if len(lam) else math.nan, "values": lam.tolist()}
+    edges = np.geomspace(0.7, 50.0, 15)
+    out["energy_hazard"] = _hz(covariate_hazard(e_series[0], e_series[1], e_events, edges))
+    return out
+
+
+def _measure(ctx: Context, cond: str, index: int) -> dict:
+    from dicetrace.analysis.doubly_transient import commit_steps, compare, crossover_fit, floor_test, local_slopes, perturbed
+    from dicetrace.analysis.edge import edge_release_rate
+    from dicetrace.analysis.settle import edge_balance_rate
+    from dicetrace.ics import seed_slice
+
+    cfg, tight = _config(cond, TOL), _config(cond, TOL_FLOOR)
+    eps = EPS_QUICK if ctx.quick else CONDITIONS[cond][2]
+    n, n_floor = ctx.pick(10_000, 300), ctx.pick(1000, 100)
+    rng = np.random.default_rng([ctx.options.seed, index])
+    (x0, x1), (y0, y1) = window_ranges(WINDOW)
+    ics = cfg.to_preset_convention(np.asarray(seed_slice(rng.uniform(x0, x1, n), rng.uniform(y0, y1, n))), "program")
+    moved = [perturbed(ics, e, rng) for e in eps]
+    b, out = _pair_outcomes(ics, moved, cfg)
+    ctx.n_throws += out.size
+    changed, valid = _verdicts(out)
+    _, out_t = _pair_outcomes(ics[:n_floor], [m[:n_floor] for m in moved], tight)
+    ctx.n_throws += out_t.size
+    changed_t, valid_t = _verdicts(out_t)
+    floor = floor_test(changed[:n_floor], changed_t, valid=valid[:n_floor] & valid_t)
+    single_flips = int((out_t[0] != out[0, :n_floor]).sum())
+    ls = local_slopes(changed, eps, valid=valid, n_boot=ctx.pick(400, 50), rng=rng)
+    p = np.bincount(out[0][out[0] >= 1], minlength=7)[1:] / max((out[0] >= 1).sum(), 1)
+    f_sat = float(1 - (p**2).sum())
+    counted = (floor["hi"] <= FLOOR_SHARE * ls.f) & (ls.changed >= MIN_CHANGED)
+    used = counted & (ls.f <= SAT_SHARE * f_sat)
+    cx = crossover_fit(changed, eps, used=used, valid=valid, n_boot=ctx.pick(200, 20), rng=rng)
+    both = counted[:-1] & counted[1:] & np.isfinite(ls.slope_stderr)
+    fine = int(np.flatnonzero(both)[0]) if both.any() else -1
+    alpha_fine = (float(ls.slope[fine]), float(ls.slope_stderr[fine])) if fine >= 0 else (math.nan, math.nan)
+
+    base = out[0] >= 1
+    dt, t_cap = cfg.numerics.dt_s, cfg.numerics.t_max_s
+    sl = slice(0, n)
+    commit, landings = commit_steps(b.sets, b.set_steps, b.set_offsets[: n + 1], b.outcome[sl], b.steps[sl])
+    t_settle = np.where(base, b.t_settle_s[sl], np.nan)
+    hz = _hazards(t_settle[base], commit[base] * dt, landings[base], t_cap)
+    n_s, n_r = ctx.pick(150, 6), ctx.pick(300 if cond == "physical" else 120, 8)
+    tr = _traced(ctx, cfg, ics, t_settle, rng, n_s, n_r)
+    try:
+        er = edge_release_rate(config=_edge_config(cfg), tilt0=1e-6)
+        edge = {"rate": er.rate, "stderr": er.stderr, "fit_range": list(er.fit_range),
+                "numerics": _numerics(_edge_config(cfg))}
+    except ValueError as e:
+        edge = {"rate": math.nan, "stderr": math.nan, "error": str(e)}
+    ctx.n_throws += 1
+    lam1, lam1_se = tr["survivors"]["mean"], tr["survivors"]["stderr"]
+    k_mid, k_mid_se = hz["commit"]["kappa_mid"], hz["commit"]["kappa_mid_stderr"]
+    ratio = k_mid / lam1 if lam1 else math.nan
+    ratio_se = ratio * math.hypot(k_mid_se / k_mid, lam1_se / lam1) if lam1 and k_mid else math.nan
+    tests = {
+        "edge_late_hazard": compare(hz["commit"]["kappa_late"], hz["commit"]["kappa_late_stderr"], edge["rate"],
+                                    edge["stderr"]),
+        "edge_alpha_fine": compare(alpha_fine[0], alpha_fine[1], 1.0, 0.0),
+        "saddle_beta": compare(cx.beta, cx.beta_stderr, ratio, ratio_se),
+        "saddle_alpha_fine": compare(alpha_fine[0], alpha_fine[1], ratio, ratio_se),
+    }
+    row = {
+        "condition": cond, **_numerics(cfg), "floor_tol": TOL_FLOOR, "window": WINDOW, "n_pairs": n,
+        "n_floor_pairs": n_floor, "unsettled": int((~base).sum()), "f_sat": f_sat,
+        "eps": eps.tolist(), "f": ls.f.tolist(), "f_stderr": ls.f_stderr.tolist(), "changed": ls.changed.tolist(),
+        "pairs": ls.n.tolist(), "eps_mid": ls.eps_mid.tolist(), "slope": ls.slope.tolist(),
+        "slope_stderr": ls.slope_stderr.tolist(), "floor_fraction": floor["fraction"].tolist(),
+        "floor_hi": floor["hi"].tolist(), "floor_flips": floor["flips"].tolist(), "counted": counted.tolist(),
+        "used_in_fit": cx.used.tolist(), "single_throw_flips": single_flips,
+        "eps_smallest_counted": float(eps[counted][0]) if counted.any() else math.nan,
+        "alpha_fine": alpha_fine[0], "alpha_fine_stderr": alpha_fine[1],
+        "alpha_fine_eps": float(ls.eps_mid[fine]) if fine >= 0 else math.nan,
+        "eps_c": cx.eps_c, "log10_eps_c_stderr": cx.log10_eps_c_stderr, "eps_c_status": cx.status,
+        "beta": cx.beta, "beta_stderr": cx.beta_stderr, "crossover_boot": cx.n_boot,
+        "hazard": hz, "lambda": tr, "edge_rate": edge, "edge_rate_analytic": edge_balance_rate(),
+        "kappa_over_lambda1": ratio, "kappa_over_lambda1_stderr": ratio_se, "tests": tests,
+    }
+    ctx.log(f"{cond}: α_fine {alpha_fine[0]:.2f} ± {alpha_fine[1]:.2f} at ε {row['alpha_fine_eps']:.1e}, "
+            f"ε_c {cx.eps_c:.2g} ({cx.status}), β {cx.beta:.2f}, κ_mid {k_mid:.2f}, κ_late "
+            f"{hz['commit']['kappa_late']:.2f} /s, λ₁ {lam1:.2f} ± {lam1_se:.2f} /s, edge {edge['rate']:.2f} /s")
+    return row
+
+
+def compute(ctx: Context) -> Computed:
+    conds = QUICK_CONDITIONS if ctx.quick else tuple(CONDITIONS)
+    rows = [_measure(ctx, c, i) for i, c in enumerate(conds)]
+    by = {r["condition"]: r for r in rows}
+    return Computed({"rows": rows, "by": by, "window": WINDOW, "tol": TOL, "floor_tol": TOL_FLOOR,
+                     "lambda_delta": LAMBDA_DELTA, "lambda_saturation_cm": LAMBDA_SATURATION,
+                     "floor_share": FLOOR_SHARE, "min_changed": MIN_CHANGED, "sat_share": SAT_SHARE})
+
+
+def render(c: Computed, out: Output) -> None:
+    from dicetrace.studies.study_doubly_transient_render import render as _render
+
+    _render(c, out)

@@ -1,0 +1,188 @@
+"""The measures of doubly transient chaos (dicetrace.analysis.doubly_transient) on synthetic data with known answers."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from dicetrace.analysis import doubly_transient as dt
+
+
+def _crossover_f(eps, a, eps_c, beta):
+    return a * eps / (1 + (eps / eps_c) ** (1 - beta))
+
+
+def _pairs(f_true, n, rng):
+    """Changed flags (n, scales) with P(changed at scale s) = f_true[s]; nested (a pair changed at s stays changed
+    at every larger scale), as neighbours farther apart differ more often."""
+    u = rng.uniform(size=(n, 1))
+    return u < np.asarray(f_true)[None]
+
+
+def _local_slope(eps, a, eps_c, beta):
+    x = (eps / eps_c) ** (1 - beta)
+    return 1 - (1 - beta) * x / (1 + x)
+
+
+def test_local_slopes_of_a_power_law_with_a_crossover():
+    rng = np.random.default_rng(1)
+    eps = 10.0 ** np.arange(-9, -5.9, 0.5)
+    f_true = _crossover_f(eps, 1e6, 1e-8, 0.4)
+    ls = dt.local_slopes(_pairs(f_true, 100_000, rng), eps, n_boot=100, rng=2)
+    np.testing.assert_allclose(ls.f, f_true, rtol=0.25)
+    exact = np.diff(np.log(f_true)) / np.diff(np.log(eps))  # the secant slopes the estimator measures
+    ok = np.isfinite(ls.slope_stderr)
+    assert ok.sum() == 6
+    z = (ls.slope[ok] - exact[ok]) / ls.slope_stderr[ok]
+    assert np.all(np.abs(z) < 4), z
+    # the bootstrap error is the binomial one: var(ln f_{i+1} - ln f_i) for nested pairs ~ 1/k_i - 1/k_{i+1}
+    k = ls.changed
+    se = np.sqrt(np.abs(1 / k[:-1] - 1 / k[1:])) / np.diff(np.log(eps))
+    np.testing.assert_allclose(ls.slope_stderr[ok], se[ok], rtol=0.35)
+    # slope 1 at the fine end, near beta at the coarse end
+    assert exact[0] > 0.8 and ls.slope[0] > 0.65 and abs(ls.slope[-1] - 0.45) < 0.1
+    assert np.allclose(ls.eps_mid, np.sqrt(eps[:-1] * eps[1:]))
+
+
+def test_local_slopes_leave_out_scales_without_changes_and_invalid_pairs():
+    c = np.zeros((100, 3), dtype=bool)
+    c[:10, 1:] = True
+    c[:40, 2] = True
+    ls = dt.local_slopes(c, [1e-3, 1e-2, 1e-1], n_boot=50)
+    assert np.isnan(ls.slope[0]) and np.isnan(ls.slope_stderr[0])
+    assert ls.slope[1] == pytest.approx(math.log(4) / math.log(10))
+    valid = np.ones_like(c)
+    valid[:5, 2] = False  # five of the changed pairs at the last scale do not count
+    assert dt.local_slopes(c, [1e-3, 1e-2, 1e-1], valid=valid, n_boot=20).f[2] == pytest.approx(35 / 95)
+    with pytest.raises(ValueError, match="increasing"):
+        dt.local_slopes(c, [1e-2, 1e-3, 1e-1])
+
+
+def test_crossover_fit_recovers_eps_c_and_beta():
+    rng = np.random.default_rng(3)
+    eps = 10.0 ** np.arange(-9.5, -5.9, 0.5)
+    f_true = _crossover_f(eps, 1e6, 1e-8, 0.4)
+    c = _pairs(f_true, 100_000, rng)
+    cx = dt.crossover_fit(c, eps, used=np.ones(len(eps), bool), n_boot=60, rng=4)
+    assert cx.status == "fitted"
+    assert abs(math.log10(cx.eps_c) - (-8)) < max(4 * cx.log10_eps_c_stderr, 0.05)
+    assert abs(cx.beta - 0.4) < max(4 * cx.beta_stderr, 0.02)
+    assert 0 < cx.log10_eps_c_stderr < 0.5 and 0 < cx.beta_stderr < 0.15
+
+
+def test_crossover_fit_status_outside_the_scales():
+    rng = np.random.default_rng(5)
+    eps = 10.0 ** np.arange(-8, -4.9, 0.5)
+    smooth = dt.crossover_fit(_pairs(1e3 * eps, 100_000, rng), eps, used=np.ones(len(eps), bool), n_boot=20)
+    assert smooth.status == "above"  # slope 1 throughout: the crossover lies above the scales
+    fractal = dt.crossover_fit(_pairs(0.5 * (eps / 1e-5) ** 0.5, 100_000, rng), eps, used=np.ones(len(eps), bool),
+                               n_boot=20)
+    assert fractal.status == "below" and abs(fractal.beta - 0.5) < 0.05
+    few = dt.crossover_fit(_pairs(1e3 * eps, 1000, rng), eps, used=np.arange(len(eps)) < 3)
+    assert few.status == "too few scales" and math.isnan(few.eps_c)
+
+
+def test_hazard_of_exponential_lifetimes_is_constant():
+    rng = np.random.default_rng(6)
+    t = rng.exponential(1 / 4.0, 50_000)
+    hz = dt.hazard_curve(t, np.linspace(0, 1.0, 11))
+    assert np.all(np.abs(hz.h - 4.0) < 4 * hz.stderr)
+    w = dt.hazard_windows(t)
+    assert len(w.h) == 4 and np.all(np.abs(w.h - 4.0) < 4 * w.stderr)
+    assert dt.compare(w.h[-1], w.stderr[-1], w.h[0], w.stderr[0])["verdict"] != "inconsistent"
+
+
+def test_hazard_of_censored_exponential_lifetimes_is_unbiased():
+    rng = np.random.default_rng(7)
+    t = rng.exponential(1 / 2.0, 40_000)
+    cap = 0.6
+    cen = t >= cap
+    hz = dt.hazard_curve(np.minimum(t, cap), [0.0, 0.3, 0.6 + 1e-12], censored=cen)
+    assert np.all(np.abs(hz.h - 2.0) < 4 * hz.stderr)
+    assert hz.events.sum() == (~cen).sum()
+
+
+def test_hazard_of_weibull_lifetimes_rises_as_2t():
+    rng = np.random.default_rng(8)
+    t = rng.weibull(2.0, 80_000)  # P(T > t) = exp(-t^2): h(t) = 2 t
+    edges = np.linspace(0, 2.0, 9)
+    hz = dt.hazard_curve(t, edges)
+    # the bin's maximum-likelihood rate is the cumulative hazard over the exposure-weighted bin: (b^2 - a^2) / (b - a)
+    # for survivors spread as exp(-t^2); a*b close: ~ a + b
+    expect = np.array([(math.exp(-a * a) - math.exp(-b * b)) / (math.sqrt(math.pi) / 2 * (math.erf(b) - math.erf(a)))
+                       for a, b in zip(edges[:-1], edges[1:])])
+    assert np.all(np.abs(hz.h - expect) < 4 * hz.stderr)
+    w = dt.hazard_windows(t)
+    assert dt.compare(w.h[-1], w.stderr[-1], w.h[0], w.stderr[0])["z"] > 3  # rising: no steady escape rate
+
+
+def test_discrete_hazard_of_geometric_counts():
+    rng = np.random.default_rng(9)
+    n = rng.geometric(0.3, 20_000) - 1  # P(N = n) = 0.3 · 0.7^n
+    h = dt.discrete_hazard(n)
+    assert np.all(np.abs(h["h"] - 0.3) < 4 * h["stderr"])
+    assert h["at_risk"][0] == 20_000 and np.all(h["at_risk"] >= 20)
+    with pytest.raises(ValueError):
+        dt.discrete_hazard([-1, 2])
+
+
+def test_covariate_hazard_with_time_as_covariate_is_the_hazard_curve():
+    rng = np.random.default_rng(10)
+    t = rng.weibull(2.0, 3000)
+    grid = np.linspace(0, 4, 4001)
+    edges = np.linspace(0, 2.0, 5)
+    ch = dt.covariate_hazard([grid] * len(t), [grid] * len(t), t, edges)
+    hz = dt.hazard_curve(t, edges)
+    np.testing.assert_allclose(ch.exposure, hz.exposure, rtol=2e-3)
+    assert np.array_equal(ch.events, hz.events)
+    # censored throws add time, never an event
+    ch2 = dt.covariate_hazard([grid] * len(t), [grid] * len(t), t, edges, events=np.zeros(len(t), bool))
+    assert ch2.events.sum() == 0 and np.allclose(ch2.exposure, ch.exposure)
+
+
+def test_commit_steps_from_contact_sets():
+    m3, m6 = dt.FACE_NODE_MASK[4], dt.FACE_NODE_MASK[1]  # outcome 3 rests on face 4; outcome 6 on face 1
+    node = {k: 1 << (k - 1) for k in range(1, 9)}
+    seqs = [
+        # lands on node 1 (off face 4), leaves it (commits: in the air, one landing so far), lands on 2 (face 4),
+        # then 2+4, 2+4+6+8
+        ([0, node[1], 0, node[2], node[2] | node[4], m3], [0, 10, 20, 30, 40, 50], 3, 60),
+        # never touches another face: commits at its first contact
+        ([0, node[1], node[1] | node[2]], [0, 5, 9], 6, 12),
+        # its last set is off its face: commits when it ends
+        ([0, node[8]], [0, 7], 6, 15),
+        # no outcome
+        ([0, node[1]], [0, 3], -1, 9),
+    ]
+    sets = np.concatenate([s for s, *_ in seqs])
+    steps = np.concatenate([st for _, st, *_ in seqs])
+    off = np.concatenate([[0], np.cumsum([len(s) for s, *_ in seqs])])
+    commit, landings = dt.commit_steps(sets, steps, off, [o for *_, o, _ in seqs], [e for *_, e in seqs])
+    assert commit.tolist() == [20, 5, 15, -1]
+    assert landings.tolist() == [1, 1, 1, -1]
+    assert m6 == 0b1111
+
+
+def test_perturbed_moves_each_ic_by_eps_times_its_norm():
+    ics = np.array([[1.0, 2, 3, 4, 5, 6], [10.0, 0, 0, 0, 0, 0]])
+    moved = dt.perturbed(ics, 1e-3, 0)
+    np.testing.assert_allclose(np.linalg.norm(moved - ics, axis=1), 1e-3 * np.linalg.norm(ics, axis=1))
+
+
+def test_floor_test_counts_changed_verdicts():
+    a = np.zeros((200, 2), dtype=bool)
+    b = a.copy()
+    b[:4, 1] = True
+    fl = dt.floor_test(a, b)
+    assert fl["flips"].tolist() == [0, 4] and fl["fraction"][1] == pytest.approx(0.02)
+    assert fl["hi"][0] == pytest.approx(3.84 / 203.84, rel=1e-3)  # Wilson bound of 0 of 200
+    assert fl["lo"][1] < 0.02 < fl["hi"][1]
+
+
+def test_compare_verdicts():
+    assert dt.compare(1.0, 0.1, 1.1, 0.1)["verdict"] == "consistent"
+    assert dt.compare(1.0, 0.1, 2.0, 0.1)["verdict"] == "inconsistent"
+    assert dt.compare(1.0, 0.1, 1.35, 0.1)["verdict"] == "undetermined"
+    assert dt.compare(1.0, math.nan, 1.0, 0.1)["verdict"] == "undetermined"
