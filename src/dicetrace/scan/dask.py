@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import itertools
 import os
+import socket
+import threading
 import time
 import uuid
 from collections.abc import Iterable, Iterator
 
 import pyarrow as pa
 
+from dicetrace.devices import device_label, resolve_device
 from dicetrace.scan.definition import ScanDefinition
 
 from dicetrace.scan.folder import _chunk_task
@@ -28,7 +31,7 @@ def _check_dask(dask) -> None:
             check_scheduler_address(dask)
         return
     try:
-        from dask.distributed import Client
+        from dask.distributed import Client  # dask.distributed is slow to import: only for a Dask run
     except ImportError:  # pragma: no cover
         Client = ()
     if not isinstance(dask, Client):
@@ -67,9 +70,7 @@ def check_scheduler_address(address: str) -> tuple[str, str, int | None]:
 
 def _connect(address: str, timeout: float):
     """A Client of the scheduler at ``address``, within ``timeout`` seconds, or :class:`SchedulerError`."""
-    import socket
-
-    from dask.distributed import Client
+    from dask.distributed import Client  # dask.distributed is slow to import: only for a Dask run
 
     scheme, host, port = check_scheduler_address(address)
     deadline = time.monotonic() + timeout
@@ -113,8 +114,6 @@ def _connect(address: str, timeout: float):
 def _client_within(Client, address: str, left: float, timeout: float):
     """``Client(address)``, given at most ``left`` seconds: distributed's own timeout does not cover a
     server that accepts the connection and then says nothing, so the handshake runs in a thread."""
-    import threading
-
     box: dict = {}
 
     def make() -> None:
@@ -137,7 +136,7 @@ def _client_within(Client, address: str, left: float, timeout: float):
 def _open_dask(dask, n_workers, timeout: float | None = None):
     """(client, closers) for ``dask``: True (a LocalCluster), an address (within ``timeout``, default
     ``DASK_CONNECT_TIMEOUT_S``), or a Client."""
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client, LocalCluster  # dask.distributed is slow to import: only for a Dask run
 
     if isinstance(dask, Client):
         return dask, []
@@ -156,8 +155,6 @@ def _open_dask(dask, n_workers, timeout: float | None = None):
 
 def _device_task(device: str) -> str:
     """A Dask task: where ``device`` runs on the worker that runs it (``dicetrace.devices.device_label``)."""
-    from dicetrace.devices import device_label, resolve_device
-
     return device_label(resolve_device(device))
 
 
@@ -177,7 +174,7 @@ def worker_device(client, device: str) -> str:
 
 def _iter_dask(defn: ScanDefinition, todo: Iterable[int], client, threads) -> Iterator[tuple[int, pa.Table]]:
     """Chunks on a Dask cluster as they complete, with a bounded number of tasks in flight."""
-    from dask.distributed import as_completed
+    from dask.distributed import as_completed  # dask.distributed is slow to import: only for a Dask run
 
     d = defn.to_dict()
     run = uuid.uuid4().hex[:8]

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dicetrace.ics import MAX_AXIS_POINTS, MAX_ICS, IcSpace, space_from_dict
+from dicetrace.ics import MAX_AXIS_POINTS, MAX_ICS, Grid, IcSpace, Points, Sample, space_from_dict
 from dicetrace.params import Config, ConfigError, Numerics, Preset, _show
 
 FORMAT = "dicetrace-scan/1"
@@ -56,8 +56,6 @@ class ScanDefinition:
     device: str = DEFAULT_DEVICE
 
     def __post_init__(self) -> None:
-        from dicetrace.ics import Grid, Points, Sample
-
         if not isinstance(self.space, (Grid, Sample, Points)):
             raise TypeError(f"space must be a Grid, Sample or Points (dicetrace.ics), not {type(self.space).__name__}")
         if not isinstance(self.config, Config):

@@ -7,6 +7,7 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from dicetrace.scan.definition import ScanDefinition
@@ -116,8 +117,6 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     compile's time, which the scan then does not spend again.  A scan on a
     GPU (``defn.device``) is not timed: the probe times the CPU's threads.
     """
-    import numba
-
     if not isinstance(defn, ScanDefinition):
         raise TypeError(f"defn must be a ScanDefinition, not {type(defn).__name__}")
     _check_int(threads, "threads", 1)

@@ -57,7 +57,9 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+from filelock import FileLock, Timeout
 
+import dicetrace
 from dicetrace.batch_chunks import DEFAULT_CAP
 from dicetrace.ics import Grid, Sample
 from dicetrace.scan.chunk_files import (
@@ -115,8 +117,6 @@ class ScanWarning(UserWarning):
 
 
 def _version() -> str:
-    import dicetrace
-
     return dicetrace.__version__
 
 
@@ -518,8 +518,6 @@ class _FolderLock:
         self.lock = None
 
     def __enter__(self):
-        from filelock import FileLock, Timeout
-
         deadline = time.monotonic() + self.wait
         for attempt in range(self.RETRIES + 1):
             try:

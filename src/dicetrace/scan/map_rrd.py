@@ -28,13 +28,17 @@ label per point).
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from dicetrace.ics import Grid
 from dicetrace.scan.colours import OUTCOME_NAMES, OUTCOME_RGB
+from dicetrace.scan.read import label_grid, read_scan, scan_definition
 from dicetrace.sinks._common import destination, write_bytes
+from dicetrace.sinks.rerun import encode_rrd
 
 #: Class id of each outcome: faces 1..6 keep their number; 0 is cells not computed yet (transparent).
 CLASS_IDS = {1: 1, 2: 2, 3: 3, 4: 4, 5: 5, 6: 6, 0: 7, -1: 8}
@@ -145,10 +149,7 @@ def _log_legend(rec, rr, present, xlim, ylim) -> None:
 
 def log_scan_map(rec, folder) -> None:
     """Log a scan folder's map into ``rec`` (see the module docstring)."""
-    import rerun as rr
-
-    from dicetrace.ics import Grid
-    from dicetrace.scan.read import label_grid, read_scan, scan_definition
+    import rerun as rr  # rerun is slow to import: only when a map is written
 
     defn = scan_definition(folder)
     space = defn.space
@@ -205,17 +206,14 @@ def log_scan_map(rec, folder) -> None:
 def write_scan_rrd(folder, path, *, staging=None) -> Path:
     """Write a scan folder's map (see the module docstring) to ``path``: a ``.rrd`` file (atomically), a device
     or FIFO, or ``"-"``; checked before any work.  ``staging``: put it in place with the other outputs."""
-    import rerun.blueprint as rrb
-
-    from dicetrace.scan.read import scan_definition
-    from dicetrace.sinks.rerun import encode_rrd
+    import rerun.blueprint as rrb  # rerun is slow to import: only when a map is written
 
     dest = destination(path, what="scan map", suffix=".rrd")
     defn = scan_definition(folder)
     stem = Path(dest.given).stem or "scan"
 
     def log(rec) -> None:
-        import rerun as rr
+        import rerun as rr  # rerun is slow to import: only when a map is written
 
         rec.send_recording_name(f"scan {stem}")
         log_scan_map(rec, folder)
@@ -238,6 +236,4 @@ def write_scan_rrd(folder, path, *, staging=None) -> Path:
 
 
 def _definition_markdown(defn) -> str:
-    import json
-
     return "# dicetrace scan\n\n```json\n" + json.dumps(defn.to_dict(), indent=1) + "\n```\n"

@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from dicetrace.scan.colours import OUTCOME_NAMES, OUTCOME_RGB
+from dicetrace.scan.read import grid_axes, label_grid, scan_definition
 from dicetrace.sinks._common import destination, staged
+from dicetrace.windows import WINDOWS
 
 
 def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int = 150, staging=None) -> Path:
@@ -24,14 +26,12 @@ def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int 
     file in (put in place by its ``commit``, with the other outputs).
     """
     dest = destination(path, what="outcome map", suffix=".png")
-    import matplotlib
+    import matplotlib  # heavy: imported only when a map is drawn
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
-
-    from dicetrace.scan.read import grid_axes, label_grid, scan_definition
 
     defn = scan_definition(folder)
     grid = label_grid(folder)
@@ -51,8 +51,6 @@ def outcome_png(folder, path, *, k: int = 0, title: str | None = None, dpi: int 
               extent=(xs[0] - hx / 2, xs[-1] + hx / 2, ys[0] - hy / 2, ys[-1] + hy / 2))
     ax.set_xlabel("x")
     ax.set_ylabel("y")
-    from dicetrace.windows import WINDOWS
-
     sl = defn.space.slice.name
     names = [n for n, w in WINDOWS.items() if tuple(w) == tuple(defn.space.window[:2])]
     where = f"the {names[0]} window of the {sl} slice" if names else f"the {sl} slice"

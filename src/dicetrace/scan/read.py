@@ -21,6 +21,7 @@ from dicetrace.ics import Grid
 from dicetrace.scan.chunk_files import METADATA_KEY, chunk_files, verify_chunk
 from dicetrace.scan.definition import ScanDefinition
 from dicetrace.scan.folder import CorruptChunkError, has_chunk_log, read_chunk_log, read_manifest
+from dicetrace.tables import GRID_ROLLS_SCHEMA
 
 #: Fill value of label_grid cells that the (partial) scan has not computed yet.
 MISSING = -2
@@ -77,8 +78,6 @@ def verified_chunk_files(folder, manifest: dict | None = None) -> list[str]:
 
 
 def _check_columns(columns) -> None:
-    from dicetrace.tables import GRID_ROLLS_SCHEMA
-
     if columns is None:
         return
     if isinstance(columns, str) or not all(isinstance(c, str) for c in columns):
@@ -116,9 +115,7 @@ def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
     files = verified_chunk_files(folder, manifest)
     cols = None if columns is None else list(dict.fromkeys(["ic_id", *columns]))
     if not files:
-        from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
-
-        table = ROLLS_SCHEMA.empty_table()
+        table = GRID_ROLLS_SCHEMA.empty_table()
         if cols is not None:
             table = table.select(cols)
     else:

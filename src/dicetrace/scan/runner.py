@@ -19,12 +19,24 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pyarrow as pa
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskProgressColumn,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
 
 from dicetrace.devices import check_device, device_label, resolve_device
 from dicetrace.ics import Grid, Points, Sample
+from dicetrace.memory import available_memory
 from dicetrace.params import Config, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, device_kind
-from dicetrace.sinks._common import output_folder
+from dicetrace.sinks._common import human_bytes, output_folder
+from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC
 from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask, worker_device
 from dicetrace.scan.folder import (
     _check_int,
@@ -52,17 +64,6 @@ class _Progress:
         self.base = done
         if not enabled:
             return
-        from rich.console import Console
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            TaskProgressColumn,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
-
         self.bar = Progress(
             TextColumn("[bold]{task.description}"),
             BarColumn(),
@@ -196,10 +197,6 @@ def _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask) 
 
 def _check_table_memory(defn: ScanDefinition) -> None:
     """Refuse (ValueError) a scan whose whole rolls table, held in memory, would not fit: a folder streams it."""
-    from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC
-    from dicetrace.memory import available_memory
-    from dicetrace.sinks._common import human_bytes
-
     need = defn.size * TABLE_MEMORY_PER_IC
     avail = available_memory()
     if avail is not None and need > avail:
