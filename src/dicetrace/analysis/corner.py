@@ -148,7 +148,7 @@ _R0 = _balance_rotation()
 
 
 def corner_orientation(tilt: float = 0.0, phi: float = 0.0) -> np.ndarray:
-    """The orientation of the die on node 1, tilted by ``tilt`` (rad) so that its centre moves toward azimuth ``phi``."""
+    """The die on node 1, tilted by ``tilt`` (rad), its centre moved toward azimuth ``phi``: a rotation matrix."""
     return _axis_angle([-math.sin(phi), math.cos(phi), 0.0], float(tilt)) @ _R0
 
 

@@ -33,13 +33,14 @@ import numpy as np
 __all__ = ["clean_junctions", "refine_triple", "circle_sectors", "corner_distance", "arcs"]
 
 
-def clean_junctions(labels: np.ndarray, *, radius: int = 2, exclude=(-1, 0)) -> np.ndarray:
+def clean_junctions(labels: np.ndarray, *, radius: int = 2, min_share: float = 0.0, exclude=(-1, 0)) -> np.ndarray:
     """Grid indices (n, 2) of the boxes (lower-left node) where exactly three outcomes meet, clean around.
 
     A box of one grid interval is kept when its four nodes hold three
     outcomes, the ``(2·radius + 2)²`` nodes about it hold exactly those three,
-    none of them in ``exclude``, and every two of the three are grid
-    neighbours there.
+    none of them in ``exclude``, every two of the three are grid neighbours
+    there, and each holds at least ``min_share`` of those nodes (a sliver of
+    a third face along a border is not a junction of three sectors).
     """
     g = np.asarray(labels)
     nx, ny = g.shape
@@ -50,8 +51,8 @@ def clean_junctions(labels: np.ndarray, *, radius: int = 2, exclude=(-1, 0)) -> 
             if len(np.unique(box)) < 3:
                 continue
             nb = g[i - radius: i + radius + 2, j - radius: j + radius + 2]
-            labs = np.unique(nb)
-            if len(labs) != 3 or any(v in exclude for v in labs.tolist()):
+            labs, counts = np.unique(nb, return_counts=True)
+            if len(labs) != 3 or any(v in exclude for v in labs.tolist()) or counts.min() < min_share * nb.size:
                 continue
             pairs = set()
             for a, b in ((nb[:-1], nb[1:]), (nb[:, :-1], nb[:, 1:])):
@@ -92,7 +93,7 @@ def refine_triple(classify, centre, half_width: float, *, tol: float, res: int =
 
 
 def arcs(labels) -> list[tuple]:
-    """Cyclic runs of equal labels on a ring: (label, first index, last index), the first run starting after a change."""
+    """Cyclic runs of equal labels on a ring: (label, first index, last index), the first starting after a change."""
     lab = list(labels)
     n = len(lab)
     change = [i for i in range(n) if lab[i] != lab[i - 1]]
