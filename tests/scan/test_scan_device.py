@@ -198,3 +198,14 @@ def test_on_dask_a_worker_resolves_the_device(tmp_path, dicetrace_cli):
             assert res.stderr.strip().splitlines() == [res.stderr.strip()]
             assert res.stderr.startswith("dicetrace: error: --device: device 'cuda': "), res.stderr
             assert not (tmp_path / "new").exists()
+
+
+@pytest.mark.slow
+def test_a_new_gpu_scan_takes_chunks_that_fill_a_gpu_and_a_cpu_scan_the_cpus(tmp_path):
+    """Without --chunk, a new scan on a GPU runs 2¹⁸ ICs a chunk (one launch each), a CPU scan 8192."""
+    from dicetrace.scan import DEFAULT_CHUNK, GPU_DEFAULT_CHUNK
+
+    assert cli("scan", *HOME, "--res", "3", "--out", "g", "--device", "cuda", "-q", cwd=tmp_path, env=SIM).returncode == 0
+    assert read_manifest(tmp_path / "g")["definition"]["chunk"] == GPU_DEFAULT_CHUNK == 2**18
+    assert cli("scan", *HOME, "--res", "3", "--out", "c", "-q", cwd=tmp_path, env={}).returncode == 0
+    assert read_manifest(tmp_path / "c")["definition"]["chunk"] == DEFAULT_CHUNK

@@ -37,7 +37,10 @@ scan, or being written by one); 130 interrupted (re-run to resume).
 from __future__ import annotations
 
 import csv
+import math
+import os
 import sys
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import List, Optional
 
@@ -57,6 +60,12 @@ from dicetrace.commands.options import (
     fmt_num,
     preset_or_fail,
 )
+from dicetrace.devices import DeviceError, check_device
+from dicetrace.ics import SLICES, Grid, Points, Sample, Slice
+from dicetrace.memory import available_memory
+from dicetrace.sinks._common import Staging, human_bytes
+from dicetrace.status import Status
+from dicetrace.windows import get_res, get_window
 
 SLICE_HELP = "Slice of IC space: seed (the writeup's 2-D), seed3 (3-D), seed-ortho, seed3-ortho (Gram–Schmidt)."
 WINDOW_HELP = (
@@ -91,8 +100,6 @@ def _read_points(path: Path, ndim: int) -> np.ndarray:
 
 def build_slice(slice_name: str, origin: Optional[str], dirs: Optional[List[str]]):
     """A named slice, or a custom one from --origin and --dir (1 to 3)."""
-    from dicetrace.ics import SLICES, Slice
-
     if origin is not None or dirs:
         if origin is None or not dirs:
             fail("a custom slice needs --origin VX,VY,VZ,LX,LY,LZ and 1 to 3 --dir (6 numbers each)")
@@ -116,9 +123,6 @@ def build_space(sl, window, z, res, sample, n, box, seed, points):
     parser of each (:func:`dicetrace.windows.get_window`, ``get_res``); the
     spaces check the rest; what they refuse names its option (``config_errors``).
     """
-    from dicetrace.ics import Grid, Points, Sample
-    from dicetrace.windows import get_res, get_window
-
     given = [name for name, v in (("--window/--res", window or res), ("--sample", sample), ("--points", points)) if v]
     if len(given) > 1:
         fail(f"give one IC space: {' or '.join(given)}, not several")
@@ -153,8 +157,6 @@ def build_space(sl, window, z, res, sample, n, box, seed, points):
 
 def parse_overrides(preset, items: List[str]) -> dict:
     """``--set NAME=VALUE`` items as overrides of the Preset ``preset``'s fields (numbers, booleans or words)."""
-    from dataclasses import fields
-
     if not items:
         return {}
     names = {f.name: f for f in fields(preset) if f.name != "name"}
@@ -181,7 +183,7 @@ def parse_overrides(preset, items: List[str]) -> dict:
 
 
 def _existing_chunk(out: Path) -> int | None:
-    from dicetrace.scan import read_manifest
+    from dicetrace.scan import read_manifest  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     try:
         return int(read_manifest(out)["definition"]["chunk"])
@@ -191,8 +193,7 @@ def _existing_chunk(out: Path) -> int | None:
 
 def _status_summary(out: Path, quiet: bool) -> bool:
     """Print the outcome and status counts of a finished scan (the failure line even when quiet); True if any IC failed."""
-    from dicetrace.scan.read import outcome_counts, status_counts
-    from dicetrace.status import Status
+    from dicetrace.scan.read import outcome_counts, status_counts  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     statuses = status_counts(out)
     total = sum(statuses.values())
@@ -222,15 +223,13 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
     ``maps``: the map options given (``--png``, ``--rrd``: drawn from the whole scan in memory);
     ``local_workers``: the processes of a local ``--dask`` cluster (None: no local cluster).
     """
-    from dicetrace.scan.estimate import (
+    from dicetrace.scan.estimate import (  # lazy: keeps `dicetrace --help` fast (imports numba)
         DASK_WORKER_MEMORY,
         MAP_MEMORY_PER_IC,
         MAP_MEMORY_BASE,
         estimate_scan,
         human_seconds,
     )
-    from dicetrace.memory import available_memory
-    from dicetrace.sinks._common import human_bytes
 
     quick = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks, calibrate=False)
     avail = available_memory()
@@ -266,6 +265,7 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
 def _check_out(out: Path, defn) -> None:
     """Refuse (one line) a folder the scan ``defn`` cannot go into: another scan's, the same run on another
     device (``--device``), or files that are not a scan."""
+    # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.scan import DeviceMismatchError, ScanMismatchError
     from dicetrace.scan.folder import check_folder
 
@@ -301,7 +301,8 @@ def register(app: typer.Typer) -> None:
         sets: Optional[List[str]] = typer.Option(
             None, "--set", help="Override a preset parameter, NAME=VALUE (e.g. gamma=0.01, mu=0.6, k=1e6); repeatable."
         ),
-        chunk: Optional[int] = typer.Option(None, "--chunk", help="ICs per chunk file / Dask task (default 8192)."),
+        chunk: Optional[int] = typer.Option(None, "--chunk", help="ICs per chunk file / Dask task (default 8192; "
+                                            "262144 on a GPU, whose launches want that many throws)."),
         threads: Optional[int] = typer.Option(None, "--threads", help="numba threads (default: all cores)."),
         device: str = typer.Option("cpu", "--device", help=DEVICE_HELP + " A scan resumes only on the device it started on."),
         dask: bool = typer.Option(False, "--dask", help="Run the chunks on a local Dask cluster."),
@@ -318,13 +319,8 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
     ) -> None:
         """Scan a slice (grid), a sample or a list of points of IC space; one row per IC."""
-        import math
-        import os
-
-        from dataclasses import replace
-
-        from dicetrace.devices import DeviceError, check_device
-        from dicetrace.scan import DEFAULT_CHUNK, DeviceMismatchError, ScanDefinition, ScanMismatchError, scan
+        # lazy: keeps `dicetrace --help` fast (imports numba)
+        from dicetrace.scan import DEFAULT_CHUNK, GPU_DEFAULT_CHUNK, DeviceMismatchError, ScanDefinition, ScanMismatchError, scan
         from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address, worker_device
         from dicetrace.scan.folder import ScanBusyError
         from dicetrace.scan.folder import _check_space_finite
@@ -366,8 +362,9 @@ def register(app: typer.Typer) -> None:
         rrd_dest = output_file(rrd, "--rrd", suffix=".rrd") if rrd is not None else None
         if png_dest is not None and rrd_dest is not None and png_dest.kind == rrd_dest.kind == "stdout":
             fail("--png - and --rrd -: only one output can go to standard output")
-        if chunk is None:  # resuming: keep the folder's chunk size
-            chunk = _existing_chunk(out) or DEFAULT_CHUNK
+        if chunk is None:  # resuming: keep the folder's chunk size; a new scan on a GPU: chunks that fill it
+            on_gpu = (label or "").startswith("cuda") or (label is None and device == "cuda")
+            chunk = _existing_chunk(out) or (GPU_DEFAULT_CHUNK if on_gpu else DEFAULT_CHUNK)
         with config_errors():
             defn = ScanDefinition(space, cfg, chunk, device=label or "cpu")
         try:
@@ -426,9 +423,8 @@ def register(app: typer.Typer) -> None:
                 print(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish", file=sys.stderr)
         failed = _status_summary(out_dir, quiet)
         if png_dest is not None or rrd_dest is not None:
-            from dicetrace.scan.map_rrd import write_scan_rrd
+            from dicetrace.scan.map_rrd import write_scan_rrd  # lazy: keeps `dicetrace --help` fast (imports numba)
             from dicetrace.scan.maps import outcome_png
-            from dicetrace.sinks._common import Staging
 
             with Staging() as staging:  # both maps, or neither
                 if png_dest is not None:

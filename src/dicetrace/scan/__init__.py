@@ -13,7 +13,7 @@ point any Parquet reader at the folder as it is:
 a Parquet file of the same columns and no rows).
 """
 
-from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, config_from_dict
+from dicetrace.scan.definition import DEFAULT_CHUNK, GPU_DEFAULT_CHUNK, ScanDefinition, config_from_dict
 from dicetrace.scan.read import (
     MISSING,
     grid_axes,
@@ -50,6 +50,7 @@ __all__ = [
     "ScanWarning",
     "estimate_scan",
     "DEFAULT_CHUNK",
+    "GPU_DEFAULT_CHUNK",
     "MANIFEST",
     "MISSING",
     "ROLLS_SCHEMA",

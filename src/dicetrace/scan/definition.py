@@ -21,6 +21,9 @@ from dicetrace.params import Config, ConfigError, Numerics, Preset, _show
 FORMAT = "dicetrace-scan/1"
 #: ICs per chunk (one Parquet file, one Dask task): ~0.3 s of work on one core.
 DEFAULT_CHUNK = 8192
+#: ICs per chunk of a new scan on a GPU: one kernel launch each, enough threads to fill a large GPU (an H200
+#: keeps ~270,000 resident) and ~170 MB of contact-set buffers.
+GPU_DEFAULT_CHUNK = 2**18
 #: Largest chunk: one chunk's buffers are held in memory (about 1 KiB per IC: 16 GiB).
 MAX_CHUNK = 1 << 24
 
