@@ -11,6 +11,7 @@ and :class:`Explorer` (served from a background thread).
 
 from dicetrace.explore.compute import Worker, throw_info, throw_rrd
 from dicetrace.explore.outcome_map import Cancelled, OutcomeMap, compute_map
+from dicetrace.explore.server import Explorer, make_view
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
 
 __all__ = [
@@ -34,15 +35,11 @@ __all__ = [
 
 def __getattr__(name):  # the server stack (starlette, uvicorn) is imported only when asked for
     if name == "create_app":
-        from dicetrace.explore.app import create_app
+        from dicetrace.explore.app import create_app  # starlette, and numba through dicetrace.scan
 
         return create_app
     if name == "ExplorerWidget":  # anywidget and ipywidgets too
         from dicetrace.explore.widget import ExplorerWidget
 
         return ExplorerWidget
-    if name in ("Explorer", "make_view"):
-        from dicetrace.explore import server
-
-        return getattr(server, name)
     raise AttributeError(f"module 'dicetrace.explore' has no attribute {name!r}")

@@ -28,13 +28,16 @@ and no response carries CORS headers, so no other site's page can read one.
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
 import io
+import ipaddress
 import json
 from pathlib import Path
 
 import numpy as np
 from starlette.applications import Starlette
+from starlette.datastructures import Headers
 from starlette.middleware import Middleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
 from starlette.requests import Request
@@ -45,7 +48,7 @@ from dicetrace.explore.compare import compare_endpoint
 from dicetrace.explore.compute import Busy, OverBudget, Worker, scan_folder_for, throw_info, throw_rrd
 from dicetrace.explore.outcome_map import Cancelled, strip_rows
 from dicetrace.explore.page import page_html
-from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, view_from_query
+from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, _num, view_from_query
 from dicetrace.scan.colours import outcome_rgb_table
 from dicetrace.sinks.rerun_web import rerun_notebook_static
 
@@ -66,8 +69,6 @@ SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 def allowed_hosts(hosts=()) -> list[str]:
     """The Host names the app answers: :data:`LOCAL_HOSTS` and ``hosts`` (the listening address);
     ``["*"]`` (any) when that address is a wildcard (0.0.0.0, ::), which serves every interface by choice."""
-    import ipaddress
-
     names = list(LOCAL_HOSTS)
     for h in hosts:
         h = str(h).strip().lower()
@@ -111,8 +112,6 @@ class SameOriginWrites:
     @staticmethod
     def refusal(scope) -> str | None:
         """Why this request is not the explorer's own page's (None: it is, or it is not a browser's)."""
-        from starlette.datastructures import Headers
-
         h = Headers(scope=scope)
         site = h.get("sec-fetch-site")
         if site is not None and site.lower() not in ("same-origin", "none"):
@@ -128,7 +127,7 @@ class SameOriginWrites:
 
 def map_png(outcome: np.ndarray) -> bytes:
     """A PNG of an outcome grid [i, j] (i along x): one pixel per point, x to the right, y up."""
-    from PIL import Image
+    from PIL import Image  # PIL: imported only when a map is drawn
 
     img = outcome_rgb_table()[np.asarray(outcome, dtype=np.int64).T[::-1] + 1]
     buf = io.BytesIO()
@@ -151,8 +150,6 @@ def strip_line(m, row0: int, row1: int) -> bytes:
     ``outcome`` is base64 of one byte per pixel, row by row, left to right: the
     outcome + 1 (0 undefined-grey ... 7 face 6), the row of :func:`outcome_rgb_table`.
     """
-    import base64
-
     img = (np.asarray(m.strip(row0, row1), dtype=np.int16).T[::-1] + 1).astype(np.uint8)
     return (json.dumps({"row0": row0, "row1": row1, "outcome": base64.b64encode(img.tobytes()).decode()}) + "\n").encode()
 
@@ -177,8 +174,6 @@ def _point(request: Request, view: View) -> tuple[int, int]:
         if not (0 <= i < nx and 0 <= j < ny):
             raise ViewError("i,j", f"pixel ({i}, {j}) outside the {nx}×{ny} map")
         return i, j
-    from dicetrace.explore.view import _num
-
     if "x" not in q or "y" not in q:
         raise ViewError("x,y", "give the point's slice coordinates x and y (or pixel indices i and j)")
     x, y = _num("x", q["x"]), _num("y", q["y"])

@@ -18,6 +18,9 @@ import numpy as np
 
 from dicetrace.explore.compute import point_ic, throw_name
 from dicetrace.explore.view import View, ViewError, view_from_query
+from dicetrace.simulate import Record, simulate
+from dicetrace.sinks.rerun import encode_rrd
+from dicetrace.sinks.rerun_compare import compare_blueprint, compare_logger
 
 #: Most throws in one comparison (the compare recording's colours, :data:`dicetrace.sinks.rerun_compare.THROW_COLORS`).
 MAX_THROWS = 6
@@ -27,7 +30,7 @@ COMPARE_TIMEOUT_S = 240.0
 
 def parse_throws(values, default: View) -> list[tuple[View, int, int]]:
     """The (view, i, j) of each ``t`` parameter; :class:`ViewError` (param ``t``) naming what is wrong."""
-    from starlette.datastructures import QueryParams
+    from starlette.datastructures import QueryParams  # starlette: the server stack, imported only when serving
 
     if not 2 <= len(values) <= MAX_THROWS:
         raise ViewError("t", f"give 2 to {MAX_THROWS} throws to compare (t=...), got {len(values)}")
@@ -54,10 +57,6 @@ def parse_throws(values, default: View) -> list[tuple[View, int, int]]:
 
 def compare_rrd(throws: list[tuple[View, int, int]], activate: bool = False) -> tuple[str, bytes, dict]:
     """The compare recording of ``throws`` ((view, i, j) each, one configuration): (name, bytes, summary)."""
-    from dicetrace.simulate import Record, simulate
-    from dicetrace.sinks.rerun import encode_rrd
-    from dicetrace.sinks.rerun_compare import compare_blueprint, compare_logger
-
     cfg = throws[0][0].config()
     rolls, labels, ics, names = [], [], [], []
     for v, i, j in throws:
@@ -75,7 +74,7 @@ def compare_rrd(throws: list[tuple[View, int, int]], activate: bool = False) -> 
 async def compare_endpoint(request):
     """``GET /api/compare.rrd``: the app's worker (``app.state.worker``) computes it; a 400 names a bad ``t``,
     a 504 a comparison past :data:`COMPARE_TIMEOUT_S`."""
-    from starlette.responses import JSONResponse, Response
+    from starlette.responses import JSONResponse, Response  # starlette: the server stack, imported only when serving
 
     try:
         throws = parse_throws(request.query_params.getlist("t"), request.app.state.default)

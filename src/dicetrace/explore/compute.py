@@ -18,6 +18,7 @@ single throws run on the CPU.
 from __future__ import annotations
 
 import contextlib
+import queue
 import re
 import threading
 import time
@@ -28,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dicetrace.devices import device_label, resolve_device
 from dicetrace.explore.outcome_map import Cancelled, MapBuild, OutcomeMap
 from dicetrace.explore.view import View, ViewError
 
@@ -69,7 +71,7 @@ def point_ic(view: View, i: int, j: int) -> tuple[tuple[float, ...], np.ndarray]
 
 def throw_info(view: View, i: int, j: int) -> dict:
     """Hover info of grid point (i, j): slice coordinates, the 6-D IC, outcome, steps, settle time, contact sequence."""
-    from dicetrace.simulate import simulate
+    from dicetrace.simulate import simulate  # lazy: imports numba; `import dicetrace.explore` does not
 
     coords, ic = point_ic(view, i, j)
     cfg = view.config()
@@ -105,7 +107,7 @@ def throw_rrd(view: View, i: int, j: int, activate: bool = False) -> tuple[str, 
     ``activate``: record's blueprint is also made the active one, for Rerun's web viewer
     (:func:`dicetrace.sinks.rerun.encode_rrd`).
     """
-    from dicetrace.simulate import Record, simulate
+    from dicetrace.simulate import Record, simulate  # lazy: imports numba; `import dicetrace.explore` does not
     from dicetrace.sinks.rerun import encode_rrd_of
 
     coords, ic = point_ic(view, i, j)
@@ -134,8 +136,6 @@ class _DaemonPool:
     them when the interpreter exits, so a throw or a save in progress does not keep a stopped server alive."""
 
     def __init__(self, n: int, name: str, max_waiting: int | None = None):
-        import queue
-
         self._q: "queue.SimpleQueue" = queue.SimpleQueue()
         self._stopped = False
         self._max_waiting = max_waiting
@@ -221,8 +221,6 @@ class Worker:
 
     def __init__(self, threads: int | None = None, *, budget_s: float | None = None, cache_bytes: int | None = None,
                  device: str = "cpu"):
-        from dicetrace.devices import device_label, resolve_device
-
         self._device = resolve_device(device)  # "cpu" or "cuda"
         self.device = device_label(self._device)
         self.threads = threads
@@ -469,7 +467,7 @@ def _concurrent_kernels_ok() -> bool:
     workqueue: no, it aborts the process); False until the first parallel kernel has chosen the layer."""
     global _CONCURRENT_OK
     if _CONCURRENT_OK is None:
-        import numba
+        import numba  # lazy: imports numba; `import dicetrace.explore` does not
 
         try:
             _CONCURRENT_OK = numba.threading_layer() in ("tbb", "omp")
@@ -479,7 +477,7 @@ def _concurrent_kernels_ok() -> bool:
 
 
 def _numba_threads() -> int:
-    import numba
+    import numba  # lazy: imports numba; `import dicetrace.explore` does not
 
     return int(numba.get_num_threads())
 
@@ -496,7 +494,7 @@ def scan_folder_for(out: Path, name: str) -> Path:
 
 def save_scan(view: View, out: Path, name: str, threads: int | None = None, *, device: str = "cpu") -> dict:
     """Write ``view`` as the dataset ``dicetrace scan`` would write, into ``out/name``, on ``device``; returns a summary."""
-    from dicetrace.scan import read_manifest, scan
+    from dicetrace.scan import read_manifest, scan  # lazy: imports numba; `import dicetrace.explore` does not
 
     folder = scan_folder_for(out, name)
     report = scan(view.grid(), folder, config=view.config(), threads=threads, device=device)

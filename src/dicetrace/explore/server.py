@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import html
 import ipaddress
+import math
 import socket
 import threading
 import time
@@ -19,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dicetrace.devices import resolve_device
 from dicetrace.explore.view import View, view_from_query
 
 #: The address the explorer listens on unless told otherwise.
@@ -63,8 +65,6 @@ def check_threads(threads, name: str = "threads"):
 
 def check_budget(budget, name: str = "map_budget_s"):
     """``budget`` as None or a finite number of seconds > 0, or ValueError naming ``name``."""
-    import math
-
     if budget is None:
         return None
     if isinstance(budget, bool) or not isinstance(budget, (int, float, np.integer, np.floating)) \
@@ -95,7 +95,7 @@ GRACEFUL_S = 1.0
 def make_server(app, sock: socket.socket):
     """A uvicorn server of ``app`` that, told to stop (Ctrl-C, ``should_exit``), first cancels every map in the making,
     so the requests waiting for them answer at once, and cancels what is still running after ``GRACEFUL_S``."""
-    import uvicorn
+    import uvicorn  # the server stack: imported only when serving
 
     class Server(uvicorn.Server):
         async def shutdown(self, sockets=None):
@@ -136,8 +136,6 @@ class Explorer:
                  gamma=None, dt=None, z=None, out=None, host: str = DEFAULT_HOST, port: int = 0,
                  threads: int | None = None, map_budget_s: float | None = None, start: bool = True,
                  height: int = 900, device: str = "cpu"):
-        from dicetrace.devices import resolve_device
-
         host, port = check_host(host), check_port(port)  # before anything starts (ValueError naming the parameter)
         threads, map_budget_s = check_threads(threads), check_budget(map_budget_s)
         self.device = resolve_device(device)  # "cpu" or "cuda"
@@ -165,7 +163,7 @@ class Explorer:
     def start(self) -> "Explorer":
         if self.running:
             return self
-        from dicetrace.explore.app import create_app
+        from dicetrace.explore.app import create_app  # starlette, and numba through dicetrace.scan: only when serving
 
         self._sock = bind_socket(self.host, self.port)
         self.port = self._sock.getsockname()[1]
@@ -205,7 +203,7 @@ class Explorer:
         ``on_pick(info)`` is called with the hover info of each throw picked on the page:
         :class:`~dicetrace.explore.widget.ExplorerWidget`.
         """
-        from dicetrace.explore.widget import ExplorerWidget
+        from dicetrace.explore.widget import ExplorerWidget  # anywidget: imported only for a widget
 
         w = ExplorerWidget(url=self.start().url, height=self.height)
         if on_pick is not None:
@@ -229,8 +227,7 @@ def serve_forever(view: View, *, host: str = DEFAULT_HOST, port: int = 0, out=No
 
     ``device``: where the maps run (cpu, cuda, auto), resolved before anything listens.
     """
-    from dicetrace.devices import resolve_device
-    from dicetrace.explore.app import create_app
+    from dicetrace.explore.app import create_app  # starlette, and numba through dicetrace.scan: only when serving
 
     host, port, threads = check_host(host), check_port(port), check_threads(threads)
     map_budget_s = check_budget(map_budget_s)

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 from urllib.parse import urlencode
 
 from dicetrace.ics import SLICES, Grid, get_slice
+from dicetrace import params
 from dicetrace.params import ConfigError
 from dicetrace.windows import WINDOWS, get_res, get_window
 
@@ -208,11 +209,9 @@ CONFIG_PARAMS = {"preset": "preset", "integrator": "integrator", "dt_s": "dt", "
 def _make_config(v: View):
     """The view's Config, by :func:`dicetrace.params.make_config` (the one validator); its ConfigError as a ViewError
     naming the query parameter."""
-    from dicetrace.params import make_config
-
     overrides = {} if v.gamma is None else {"gamma": v.gamma}
     try:
-        return make_config(v.preset, integrator=v.integrator, dt_s=v.dt, **overrides)
+        return params.make_config(v.preset, integrator=v.integrator, dt_s=v.dt, **overrides)
     except ConfigError as e:
         raise ViewError(CONFIG_PARAMS.get(e.field, "preset"), e.message) from None
 
