@@ -9,6 +9,9 @@ contact sets per IC; throws that fill their buffer are re-run with
 
 from __future__ import annotations
 
+import collections
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 import numba
@@ -174,6 +177,38 @@ def run_chunk(kin, cap: int, threads, device: str = "cpu"):
         a, b = ends[i] - nsets[i], ends[i]
         flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets2[i, : nsets[i]], steps2[i, : nsets[i]])
     return status, steps, outcome, nsets, flat_sets, flat_steps
+
+
+def chunk_results(bounds, run, device: str = "cpu"):
+    """``run(a, b)`` for each ``(a, b)`` of ``bounds``, yielded in order.
+
+    On a machine with several GPUs (``device == "cuda"``) the chunks go
+    round-robin to one thread per GPU, each with that GPU as its current
+    device, at most two chunks ahead per GPU; every chunk runs the same
+    kernels from its own ICs, so the results are those of one GPU, chunk for
+    chunk.  Otherwise the chunks run one after the other here.
+    """
+    ndev = 1
+    if device == "cuda":
+        from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
+
+        ndev = gpu.device_count()
+    if ndev <= 1:
+        for a, b in bounds:
+            yield run(a, b)
+        return
+    pools = [ThreadPoolExecutor(1, initializer=gpu.select_device, initargs=(k,)) for k in range(ndev)]
+    try:
+        pending: collections.deque = collections.deque()
+        for i, (a, b) in enumerate(bounds):
+            pending.append(pools[i % ndev].submit(run, a, b))
+            if len(pending) >= 2 * ndev:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
+    finally:
+        for pool in pools:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def join_parts(parts: list, dtype, total: int) -> np.ndarray:

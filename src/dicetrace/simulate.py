@@ -18,6 +18,7 @@ from dicetrace.batch_chunks import (
     MAX_CAP,
     batch_chunk,
     check_batch_memory,
+    chunk_results,
     gpu_batch_chunk,
     join_parts,
     run_chunk,
@@ -519,13 +520,17 @@ def simulate_batch(
     steps, nsets = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
     set_parts: list[np.ndarray] = []
     step_parts: list[np.ndarray] = []
-    for a in range(0, m, chunk):  # chunk by chunk: the buffers of one chunk in memory, its sets compacted
-        b = min(m, a + chunk)
-        kin = cfg.kernel_inputs(ics[a:b], l_convention=conv)
-        status[a:b], steps[a:b], outcome[a:b], nsets[a:b], sets, set_steps = run_chunk(kin, cap, threads, device)
+    bounds = [(a, min(m, a + chunk)) for a in range(0, m, chunk)]
+
+    def one_chunk(a: int, b: int):
+        return run_chunk(cfg.kernel_inputs(ics[a:b], l_convention=conv), cap, threads, device)
+
+    # chunk by chunk (on several GPUs, a few at a time): one chunk's buffers in memory, its sets compacted
+    for (a, b), (st, sp, oc, ns, sets, set_steps) in zip(bounds, chunk_results(bounds, one_chunk, device)):
+        status[a:b], steps[a:b], outcome[a:b], nsets[a:b] = st, sp, oc, ns
         set_parts.append(sets)
         step_parts.append(set_steps)
-        del kin, sets, set_steps
+        del sets, set_steps
     offsets = np.zeros(m + 1, dtype=np.int64)
     np.cumsum(nsets, out=offsets[1:])
     del nsets

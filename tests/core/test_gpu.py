@@ -231,3 +231,33 @@ def test_real_gpu_agrees_with_the_cpu(preset):
     same = np.mean(a.outcome == b.outcome)
     assert same >= (0.999 if preset == "seed" else 0.99), same
     assert not np.any((a.status_code == 0) & (b.status_code != 0))
+
+
+@pytest.mark.slow
+def test_several_gpus_share_the_chunks_and_give_one_gpus_results():
+    """With several GPUs the chunks go round-robin to one thread per GPU: here three stand-in devices (the
+    simulator has one) on 8 `seed` throws in chunks of 3, the CPU's summaries bit for bit, in order."""
+    code = textwrap.dedent(
+        """
+        import json, threading
+        import numpy as np
+        import dicetrace.core.gpu as gpu
+        from dicetrace.ics import seed_slice
+        from dicetrace.simulate import simulate_batch
+        chosen = []
+        gpu.device_count = lambda: 3
+        gpu.select_device = lambda k: chosen.append((k, threading.get_ident()))
+        a = json.loads(__import__("sys").argv[1])
+        r = simulate_batch(seed_slice(np.array(a["xs"]), np.array(a["ys"])), config="seed", device="cuda", chunk=3)
+        print(json.dumps(dict(outcome=r.outcome.tolist(), steps=r.steps.tolist(), status=r.status_code.tolist(),
+                              offsets=r.set_offsets.tolist(), sets=r.sets.tolist(), set_steps=r.set_steps.tolist(),
+                              devices=sorted(k for k, _ in chosen), threads=len({t for _, t in chosen}))))
+        """
+    )
+    arg = json.dumps(dict(xs=list(map(float, XS)), ys=list(map(float, YS))))
+    res = subprocess.run([sys.executable, "-c", code, arg], capture_output=True, text=True, timeout=600,
+                         env={**os.environ, **SIM})
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    assert got.pop("devices") == [0, 1, 2] and got.pop("threads") == 3  # one thread per device, each selected once
+    assert got == _cpu("seed", XS, YS)

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import threading
 
 import numpy as np
 
@@ -66,6 +67,17 @@ THREADS_PER_BLOCK = 128
 def simulated() -> bool:
     """Whether numba-cuda's simulator stands in for a GPU (``NUMBA_ENABLE_CUDASIM=1``)."""
     return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
+
+
+def device_count() -> int:
+    """How many CUDA devices this process sees (1 under the simulator)."""
+    return 1 if simulated() else len(cuda.gpus)
+
+
+def select_device(k: int) -> None:
+    """Make device ``k`` this thread's current device (nothing under the simulator)."""
+    if not simulated():
+        cuda.select_device(k)
 
 
 def device_name() -> str:
@@ -174,14 +186,20 @@ def _kernel(integ: int, seed_path: bool):
     return _KERNELS[key]
 
 
+#: Held while a strict kernel compiles: its ``-fma=0`` option is set module-wide (``_nvvm_without_fma``), and a
+#: thread running another GPU must neither restore it too early nor compile under it.
+_COMPILE_LOCK = threading.Lock()
+
+
 def _launch(kernel, strict: bool, m: int, args) -> None:
     """Launch ``kernel`` over m threads; compile it first, with ``-fma=0`` where ``strict`` (or load it from the cache)."""
     blocks = (m + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
-    if strict and not simulated():
-        sig = tuple(typeof(a) for a in args)
-        if sig not in kernel.overloads:
-            with _nvvm_without_fma():
-                kernel.compile(sig)
+    sig = tuple(typeof(a) for a in args)
+    if not simulated() and sig not in kernel.overloads:
+        with _COMPILE_LOCK:
+            if sig not in kernel.overloads:
+                with _nvvm_without_fma() if strict else contextlib.nullcontext():
+                    kernel.compile(sig)
     kernel[blocks, THREADS_PER_BLOCK](*args)
 
 
@@ -201,8 +219,18 @@ def run_batch_cuda(ics, off0, kp, integ, cap, status, steps, outcome, nsets, set
     """``core.kernels.run_batch`` on the GPU: the same arguments, the outputs written in place.
 
     One chunk: the caller sizes it to the device's memory
-    (:func:`bytes_per_throw`, :func:`free_memory`).
+    (:func:`bytes_per_throw`, :func:`free_memory`).  Threads may run chunks
+    on several GPUs at once; under the simulator, which swaps this module's
+    ``cuda`` for a stand-in while a kernel runs, one at a time.
     """
+    with _SIMULATOR_LOCK if simulated() else contextlib.nullcontext():
+        _run_batch_cuda(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps)
+
+
+_SIMULATOR_LOCK = threading.Lock()
+
+
+def _run_batch_cuda(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps) -> None:
     m = len(ics)
     if m == 0:
         return
