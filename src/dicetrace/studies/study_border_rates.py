@@ -1,0 +1,417 @@
+"""Study o (border_rates): border λ fitted near the border with a uniform tight tolerance, against each preset's edge saddle.
+
+The settle-time divergence T ≈ T0 − ln(d)/λ at cell borders, measured with numerics chosen for it.
+
+For each preset (``seed``, the 2019 force law; ``physical``) the die is
+integrated with ``contact-tsit5`` at a **uniform** tolerance of 1e-13
+(``tol_growth`` 0: no loosening over the throw, unlike ``physical``'s
+default, which loosens tenfold every 0.23 s and suits outcome maps only).
+In each of two windows of the seed slice (home, zoom-out) lines are sampled
+and the neighbouring points of different outcomes kept; a random choice of
+them is bisected (all in lock-step) until the bracket is shorter than
+1e-11, and the settle time is sampled at d = 1e-11 … 1e-3 (four per decade)
+on both sides of each border, along its line.
+
+Numerics at the bisection scale: the bracket ends and every profile point
+are integrated again at a tenth of the tolerance (1e-14, the smallest the
+integrators take); the fraction of verdicts that change is reported, and the
+fit starts at the smallest distance from which on no verdict changes and the
+median |ΔT| is at most the settle time's resolution (one output step,
+1 ms).
+
+Fit range: the local slope dT/d(−ln d) of every side, by least squares over
+a sliding decade (five distances), pooled (median over sides); the
+near-border range runs from that smallest stable distance to the last
+window whose pooled slope is within 2 % of the slope of the first four
+windows.  λ is fitted on every side over that range and over the whole
+range from the same smallest distance to 1e-3 (for comparison), and the
+median over sides gets a bootstrap error over borders (both sides of a
+border resampled together) and a systematic error (the larger shift of the
+median when the profile is integrated at tol/10 or the range is cut a decade
+shorter).  The rates are compared with the analytic edge saddle of each
+preset (:func:`dicetrace.analysis.border_rates.edge_saddle`) and the corner
+balance's (:func:`dicetrace.analysis.corner.corner_balance`).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from dicetrace.studies.context import Computed, Context, Output
+from dicetrace.studies.text import md_table, pm
+
+NAME = "border_rates"
+#: The raw measurements (``results/<RAW_CSV>.csv``): every border, side and distance.
+RAW_CSV = "border_rates_profiles"
+#: The models: make_config options of each preset at the uniform tight tolerance.
+TOL = 1e-13
+CHECK_TOL = 1e-14
+MODELS = {"seed": {"preset": "seed", "integrator": "contact-tsit5", "tol": TOL, "tol_growth": 0.0},
+          "physical": {"preset": "physical", "integrator": "contact-tsit5", "tol": TOL, "tol_growth": 0.0}}
+WINDOWS = ("home", "zoom-out")
+#: Bracket length at which the bisection stops, slice units.
+BISECT_WIDTH = 1e-11
+#: Distances of the settle-time profile, slice units (four per decade).
+DISTS = np.logspace(-11, -3, 33)
+#: Local slope: least squares over this many neighbouring distances (one decade).
+SLOPE_WINDOW = 5
+#: The near-border range ends where the pooled local slope departs from its reference by more than this.
+FLAT_REL = 0.02
+#: Borders per window, lines per window and points per line (full run, quick run).
+N_BORDERS = (32, 2)
+N_LINES = (16, 2)
+LINE_POINTS = (64, 24)
+
+
+def _config(opts: dict, tol: float | None = None):
+    from dicetrace.params import make_config
+
+    kw = dict(opts)
+    if tol is not None:
+        kw["tol"] = tol
+    return make_config(kw.pop("preset"), **kw)
+
+
+def _lines(ranges, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` chords of the window: half from the left to the right edge, half from the bottom to the top, at
+    random heights (positions) at both ends."""
+    (x0, x1), (y0, y1) = ranges
+    starts, ends = [], []
+    for i in range(n):
+        u, v = rng.uniform(0, 1, 2)
+        if i % 2 == 0:
+            starts.append((x0, y0 + u * (y1 - y0)))
+            ends.append((x1, y0 + v * (y1 - y0)))
+        else:
+            starts.append((x0 + u * (x1 - x0), y0))
+            ends.append((x0 + v * (x1 - x0), y1))
+    return np.array(starts), np.array(ends)
+
+
+def _borders(ctx: Context, cfg, window: str):
+    """Located borders of one window: (brackets, crossings found)."""
+    from dicetrace.analysis.border_rates import bisect_many, line_crossings
+    from dicetrace.analysis.simulator import classify_on_slice
+    from dicetrace.studies.context import window_ranges
+
+    classify = classify_on_slice("seed", config=cfg)
+    starts, ends = _lines(window_ranges(window), ctx.pick(*N_LINES), ctx.rng)
+    pairs = line_crossings(classify, starts, ends, ctx.pick(*LINE_POINTS))
+    n = min(ctx.pick(*N_BORDERS), len(pairs))
+    pick = ctx.rng.choice(len(pairs), size=n, replace=False)
+    br = bisect_many(classify, [pairs[i] for i in pick], tol=BISECT_WIDTH)
+    ctx.n_throws += classify.n_evals
+    return br, len(pairs)
+
+
+def _concat(brs):
+    from dicetrace.analysis.border_rates import Brackets
+
+    return Brackets(*(np.concatenate([getattr(b, f) for b in brs]) for f in
+                      ("p_lo", "p_hi", "label_lo", "label_hi", "width")), sum(b.n_evals for b in brs))
+
+
+def _join_profiles(profs):
+    return {k: np.concatenate([p[k] for p in profs]) for k in profs[0]}
+
+
+def _corner_rate(cfg):
+    try:
+        from dicetrace.analysis.corner import corner_balance
+    except ImportError:  # pragma: no cover - the corner balance's module is optional here
+        return None
+    return corner_balance(config=cfg).rate
+
+
+def sample_preset(ctx: Context, key: str) -> dict:
+    """The raw measurements of one preset: located borders (brackets, windows, crossings found per window), the
+    settle-time profiles at the tolerance and at a tenth of it, and the bracket ends classified at a tenth."""
+    from dicetrace.analysis.border_rates import profiles
+    from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
+
+    cfg, chk = _config(MODELS[key]), _config(MODELS[key], CHECK_TOL)
+    brs, found, win_of = [], {}, []
+    for w in WINDOWS:
+        br, found[w] = _borders(ctx, cfg, w)
+        brs.append(br)
+        win_of += [w] * len(br.p_lo)
+    br = _concat(brs)
+    settle, settle_chk = settle_on_slice("seed", config=cfg), settle_on_slice("seed", config=chk)
+    classify_chk = classify_on_slice("seed", config=chk)
+    prof, check = profiles(settle, br, DISTS), profiles(settle_chk, br, DISTS)
+    ends = np.asarray(classify_chk(np.concatenate([br.p_lo, br.p_hi]))).ravel()
+    ctx.n_throws += settle.n_evals + settle_chk.n_evals + classify_chk.n_evals
+    return {"br": br, "windows": np.array(win_of), "found": found, "prof": prof, "check": check,
+            "ends_check": ends, "cfg": cfg, "chk": chk}
+
+
+def raw_frame(key: str, raw: dict):
+    """The raw measurements of one preset as a long table: one row per border, side and distance."""
+    import pandas as pd
+
+    br, n = raw["br"], len(raw["br"].p_lo)
+    rows = []
+    for side, p, lab in (("lo", br.p_lo, br.label_lo), ("hi", br.p_hi, br.label_hi)):
+        end_chk = raw["ends_check"][:n] if side == "lo" else raw["ends_check"][n:]
+        for i in range(n):
+            for j, d in enumerate(DISTS):
+                rows.append((key, i, raw["windows"][i], side, br.p_lo[i, 0], br.p_lo[i, 1], br.p_hi[i, 0],
+                             br.p_hi[i, 1], p[i, 0], p[i, 1], int(lab[i]), int(end_chk[i]), float(d),
+                             int(raw["prof"][f"label_{side}"][i, j]), float(raw["prof"][f"t_{side}"][i, j]),
+                             int(raw["check"][f"label_{side}"][i, j]), float(raw["check"][f"t_{side}"][i, j])))
+    return pd.DataFrame(rows, columns=RAW_COLUMNS)
+
+
+#: Columns of ``results/border_rates_profiles.csv``: the border (its bracket ends, window), the side (its end,
+#: its label and the end's label at tol/10), the distance, and the label and settle time at tol and at tol/10.
+RAW_COLUMNS = ["model", "border", "window", "side", "lo_x", "lo_y", "hi_x", "hi_y", "end_x", "end_y", "side_label",
+               "end_label_check", "d", "label", "t_settle_s", "label_check", "t_settle_check_s"]
+
+
+def raw_from_frame(df, key: str) -> dict:
+    """:func:`sample_preset`'s arrays of one preset back from :func:`raw_frame`'s table (without the configs and
+    the crossings found)."""
+    from dicetrace.analysis.border_rates import Brackets
+
+    q = df[df.model == key].sort_values(["side", "border", "d"], key=lambda c: c.map({"lo": 0, "hi": 1})
+                                        if c.name == "side" else c)
+    nd = len(DISTS)
+    lo, hi = q[q.side == "lo"], q[q.side == "hi"]
+    n = len(lo) // nd
+    first_lo, first_hi = lo.iloc[::nd], hi.iloc[::nd]
+    p_lo = first_lo[["lo_x", "lo_y"]].to_numpy(float)
+    p_hi = first_lo[["hi_x", "hi_y"]].to_numpy(float)
+    br = Brackets(p_lo, p_hi, first_lo.side_label.to_numpy(), first_hi.side_label.to_numpy(),
+                  np.linalg.norm(p_hi - p_lo, axis=1), 0)
+
+    def grid(frame, col):
+        return frame[col].to_numpy().reshape(n, nd)
+
+    prof = {"label_lo": grid(lo, "label"), "label_hi": grid(hi, "label"), "t_lo": grid(lo, "t_settle_s"),
+            "t_hi": grid(hi, "t_settle_s")}
+    check = {"label_lo": grid(lo, "label_check"), "label_hi": grid(hi, "label_check"),
+             "t_lo": grid(lo, "t_settle_check_s"), "t_hi": grid(hi, "t_settle_check_s")}
+    ends = np.concatenate([first_lo.end_label_check.to_numpy(), first_hi.end_label_check.to_numpy()])
+    return {"br": br, "windows": first_lo.window.to_numpy(), "prof": prof, "check": check, "ends_check": ends}
+
+
+def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> dict:
+    """Every number of one preset from its raw measurements (:func:`sample_preset`): the stability at tol/10, the
+    flat range, the fits near the border and over the whole range, their errors, the analytic rates."""
+    from dicetrace.analysis.border_rates import (border_bootstrap, edge_saddle, fit_sides, flat_range, local_slopes,
+                                                 tolerance_stability)
+
+    br, prof, check = raw["br"], raw["prof"], raw["check"]
+    n = len(br.p_lo)
+    ends_changed = np.concatenate([raw["ends_check"][:n] != br.label_lo, raw["ends_check"][n:] != br.label_hi])
+    ends = {"n_ends": 2 * n, "n_changed": int(ends_changed.sum()), "fraction_changed": float(ends_changed.mean()),
+            "n_borders_moved": int(np.sum(ends_changed[:n] | ends_changed[n:]))}
+    stab = tolerance_stability(DISTS, br, prof, check, t_res=numerics["dt_s"])
+    if stab["d_min"] is None:
+        raise RuntimeError(f"{numerics['preset']}: no distance is stable at tol/10")
+    want = np.concatenate([br.label_lo, br.label_hi])
+    t = np.concatenate([prof["t_lo"], prof["t_hi"]])
+    got = np.concatenate([prof["label_lo"], prof["label_hi"]])
+    ok = (got == want[:, None]) & (DISTS[None, :] >= stab["d_min"])
+    slopes, d_mid = local_slopes(DISTS, t, ok, window=SLOPE_WINDOW)
+    first = stab["start"]  # the first window of stable points
+    flat = flat_range(d_mid, slopes, rel=FLAT_REL, start=min(first, len(d_mid) - 1))
+    d_lo = stab["d_min"]
+    d_hi = flat["d_max"] if flat["d_max"] is not None else float(DISTS[min(first + SLOPE_WINDOW, len(DISTS) - 1)])
+    rng = np.random.default_rng(seed)
+
+    def summary(lams):
+        return border_bootstrap(lams, n, seed=int(rng.integers(2**31)))
+
+    near_l = fit_sides(DISTS, br, prof, d_lo, d_hi)
+    near = summary(near_l)
+    alt_check = summary(fit_sides(DISTS, br, check, d_lo, d_hi))
+    alt_short = summary(fit_sides(DISTS, br, prof, d_lo, max(d_hi / 10, d_lo * 10 ** 0.75)))
+    all_l = fit_sides(DISTS, br, prof, d_lo, DISTS[-1])
+    whole = summary(all_l)
+    syst = max(abs(a.get("median", near["median"]) - near["median"]) for a in (alt_check, alt_short))
+    near.update(syst=syst, total=math.hypot(near["median_stderr"] or 0.0, syst), d_lo=d_lo, d_hi=d_hi)
+    whole.update(d_lo=d_lo, d_hi=float(DISTS[-1]))
+    cfg = _config(MODELS[numerics["preset"]])
+    saddle = edge_saddle(config=cfg)
+    by_window = {}
+    sides_win = np.concatenate([raw["windows"], raw["windows"]])
+    for w in WINDOWS:
+        sel = sides_win == w
+        lam, lam_all = np.where(sel, near_l, np.nan), np.where(sel, all_l, np.nan)
+        has, has_all = np.isfinite(lam).any(), np.isfinite(lam_all).any()
+        by_window[w] = {"n_crossings": found.get(w), "n_borders": int(sel.sum() // 2),
+                        "near_median": float(np.nanmedian(lam)) if has else None,
+                        "near_q25": float(np.nanquantile(lam, 0.25)) if has else None,
+                        "near_q75": float(np.nanquantile(lam, 0.75)) if has else None,
+                        "all_median": float(np.nanmedian(lam_all)) if has_all else None}
+    return {
+        "numerics": numerics,
+        "analytic": {"edge": saddle.rate, "edge_rigid": saddle.rate_rigid, "edge_free": saddle.rate_free,
+                     "slip_c": saddle.slip_c if math.isfinite(saddle.slip_c) else None, "corner": _corner_rate(cfg)},
+        "n_borders": n, "bisect_max_width": float(br.width.max()), "ends": ends,
+        "stability": {"flips": stab["flips"], "n_sides": stab["n_sides"], "median_abs_dt": stab["median_abs_dt"],
+                      "d_min": d_lo, "t_res": stab["t_res"], "flips_total": int(stab["flips"].sum()),
+                      "flips_from_d_min": int(stab["flips"][first:].sum())},
+        "flat": {"reference_slope": flat["reference_slope"], "reference_rate": 1.0 / flat["reference_slope"],
+                 "rel": FLAT_REL, "window": SLOPE_WINDOW, "d_max": d_hi, "median_slope": flat["median_slope"],
+                 "count": flat["count"], "d_mid": d_mid, "q25_slope": _nanq(slopes, 0.25),
+                 "q75_slope": _nanq(slopes, 0.75)},
+        "near": near, "near_check_tol": alt_check, "near_short": alt_short, "all_range": whole,
+        "near_minus_edge": near["median"] - saddle.rate,
+        "near_z_edge": (near["median"] - saddle.rate) / near["total"] if near["total"] else None,
+        "all_minus_edge": whole["median"] - saddle.rate,
+        "by_window": by_window, "lambdas_near": near_l, "lambdas_all": all_l,
+    }
+
+
+def _numerics(key: str, cfg, chk) -> dict:
+    return {"preset": key, "integrator": cfg.numerics.integrator, "tol": cfg.numerics.tol,
+            "tol_growth": cfg.numerics.tol_growth, "check_tol": chk.numerics.tol, "dt_s": cfg.numerics.dt_s,
+            "bisect_width": BISECT_WIDTH}
+
+
+def _nanq(a, q: float) -> np.ndarray:
+    """The ``q`` quantile of each column of ``a`` over its finite values (NaN for a column without any)."""
+    a = np.asarray(a, float)
+    return np.array([np.quantile(c[np.isfinite(c)], q) if np.isfinite(c).any() else np.nan for c in a.T])
+
+
+def compute(ctx: Context) -> Computed:
+    results, plot = {"windows": list(WINDOWS), "dists": DISTS}, {}
+    for key in MODELS:
+        raw = sample_preset(ctx, key)
+        seed = int(ctx.rng.integers(2**31))
+        r = results[key] = analyse_preset(raw, _numerics(key, raw["cfg"], raw["chk"]), raw["found"], seed=seed)
+        r.update(bootstrap_seed=seed, bisect_n_evals=raw["br"].n_evals)
+        plot[key] = raw
+        ctx.log(f"{key}: {r['n_borders']} borders, ends changed at tol/10 {r['ends']['n_changed']}/"
+                f"{r['ends']['n_ends']}, stable from d = {r['near']['d_lo']:.1e}, flat to {r['near']['d_hi']:.1e}; "
+                f"λ near {r['near']['median']:.2f} ± {r['near']['total']:.2f}, all-range "
+                f"{r['all_range']['median']:.2f}, edge saddle {r['analytic']['edge']:.2f} /s")
+    return Computed(results, plot)
+
+
+def _letter() -> str:
+    from dicetrace.studies import LETTERS
+
+    return {v: k for k, v in LETTERS.items()}.get(NAME, "x")
+
+
+def render(c: Computed, out: Output) -> None:
+    import matplotlib.pyplot as plt
+
+    import pandas as pd
+
+    R, L = c.results, _letter()
+    if c.plot:  # a fresh run: its raw measurements, from which :func:`rerender` recomputes every number
+        out.write_csv(pd.concat([raw_frame(k, c.plot[k]) for k in MODELS], ignore_index=True), RAW_CSV)
+    colours = {"seed": "tab:blue", "physical": "tab:red"}
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.4), sharey=True)
+    for ax, key in zip(axes, MODELS):
+        r = R[key]
+        f = r["flat"]
+        dm, med = np.asarray(f["d_mid"], float), np.asarray([math.nan if v is None else v for v in f["median_slope"]])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ax.semilogx(dm, 1.0 / med, "o-", ms=3, color=colours[key], label="1 / pooled local slope")
+            q25, q75 = (np.asarray(f[q], float) for q in ("q25_slope", "q75_slope"))
+            ax.fill_between(dm, 1.0 / q75, 1.0 / q25,
+                            color=colours[key], alpha=0.15, label="interquartile range of the sides")
+        ax.axhline(r["analytic"]["edge"], color="k", lw=1, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
+        if r["analytic"].get("corner"):
+            ax.axhline(r["analytic"]["corner"], color="k", ls=":", lw=1,
+                       label=f"corner balance {r['analytic']['corner']:.2f} /s")
+        ax.axhline(r["all_range"]["median"], color="0.5", ls="--", lw=1,
+                   label=f"all-range fits, median {r['all_range']['median']:.2f} /s")
+        if r["near"].get("d_hi"):
+            ax.axvspan(r["near"]["d_lo"], r["near"]["d_hi"], color="0.85", zorder=0, label="near-border fit range")
+        ax.set_ylim(15, 45)
+        ax.set_title(f"{key}: contact-tsit5, uniform tol {r['numerics']['tol']:g}", fontsize=10)
+        ax.set_xlabel("distance d from the border (slice units)")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("local rate 1 / (dT/d(−ln d)) / (1/s)")
+    fig.tight_layout()
+    out.save_fig(fig, f"{L}_local_slope", key="local_slope",
+                 caption="The local rate 1/(dT/d(−ln d)) of the settle time against the distance from the border "
+                 "(least squares over a sliding decade, median over every side of every border of home and "
+                 "zoom-out; band: interquartile range). Grey: the near-border fit range (stable at tol/10, slope "
+                 "within 2 % of its value at the smallest stable distances).")
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.0), sharey=True)
+    for ax, key in zip(axes, MODELS):
+        r = R[key]
+        near = np.asarray(r["lambdas_near"], float)
+        whole = np.asarray(r["lambdas_all"], float)
+        bins = np.linspace(15, 45, 61)
+        ax.hist(near[np.isfinite(near)], bins=bins, color=colours[key], alpha=0.7,
+                label=f"near the border: {pm(r['near']['median'], r['near']['total'], '.2f')} /s")
+        ax.hist(whole[np.isfinite(whole)], bins=bins, histtype="step", color="k",
+                label=f"whole range: {pm(r['all_range']['median'], r['all_range']['median_stderr'], '.2f')} /s")
+        ax.axvline(r["analytic"]["edge"], color="k", lw=1.5, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
+        ax.set_title(f"{key}: λ of every side ({r['near']['n_sides']} sides)", fontsize=10)
+        ax.set_xlabel("λ / (1/s)")
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel("sides")
+    fig.tight_layout()
+    out.save_fig(fig, f"{L}_lambdas", key="lambdas",
+                 caption="λ of every side fitted near the border (filled) and over the whole range from the same "
+                 "smallest distance to 1e-3 (outline), with the analytic edge saddle of each preset.")
+
+    rows = []
+    for key in MODELS:
+        r = R[key]
+        rows.append({
+            "model": key, "num": f"{r['numerics']['integrator']}, tol {r['numerics']['tol']:g} uniform",
+            "edge": r["analytic"]["edge"], "corner": r["analytic"].get("corner"),
+            "range": f"{r['near']['d_lo']:.0e} – {r['near']['d_hi']:.0e}" if r["near"].get("d_hi") else "–",
+            "near": pm(r["near"]["median"], r["near"]["total"], ".2f"),
+            "parts": f"{r['near']['median_stderr']:.2f} / {r['near']['syst']:.2f}",
+            "all": pm(r["all_range"]["median"], r["all_range"]["median_stderr"], ".2f"),
+            "sides": f"{r['near']['n_sides']} ({r['n_borders']} borders)",
+            "ends": f"{r['ends']['n_changed']}/{r['ends']['n_ends']}",
+        })
+    out.tables["rates"] = md_table(rows, [
+        ("model", "model", ""), ("num", "numerics", ""), ("edge", "edge saddle (1/s)", ".2f"),
+        ("corner", "corner balance (1/s)", ".2f"), ("range", "near-border d range", ""),
+        ("near", "λ near the border (1/s)", ""), ("parts", "stat / syst", ""),
+        ("all", "λ whole range (1/s)", ""), ("sides", "sides", ""), ("ends", "bracket ends changed at tol/10", "")])
+    rows = []
+    for key in MODELS:
+        for w, b in R[key]["by_window"].items():
+            rows.append({"model": key, "window": w, "borders": b["n_borders"], "crossings": b["n_crossings"],
+                         "near": b["near_median"], "iqr": f"{b['near_q25']:.2f}–{b['near_q75']:.2f}"
+                         if b["near_q25"] is not None else "–", "all": b["all_median"]})
+    out.tables["windows"] = md_table(rows, [
+        ("model", "model", ""), ("window", "window", ""), ("borders", "borders", "d"),
+        ("crossings", "crossings found", "d"), ("near", "median λ near (1/s)", ".2f"),
+        ("iqr", "interquartile range", ""), ("all", "median λ whole range (1/s)", ".2f")])
+
+
+def rerender(out) -> Path:
+    """Recompute every number of a finished run in ``out`` from its raw measurements
+    (``results/border_rates_profiles.csv``) and redraw its figures and tables (no simulation; the figures take
+    the study's letter as it is registered now); rewrites ``results/border_rates.json``."""
+    import json
+
+    import pandas as pd
+
+    from dicetrace.studies.context import write_json
+
+    out = Path(out)
+    path = out / "results" / f"{NAME}.json"
+    results = json.loads(path.read_text())
+    df = pd.read_csv(out / "results" / f"{RAW_CSV}.csv")
+    for key in MODELS:
+        old = results[key]
+        found = {w: b["n_crossings"] for w, b in old["by_window"].items()}
+        new = analyse_preset(raw_from_frame(df, key), old["numerics"], found, seed=old["bootstrap_seed"])
+        new.update(bootstrap_seed=old["bootstrap_seed"], bisect_n_evals=old.get("bisect_n_evals"))
+        results[key] = new
+    output = Output(out)
+    render(Computed(results), output)
+    results["figures"], results["tables"] = output.figures, output.tables
+    write_json(path, results)
+    return path
