@@ -186,3 +186,29 @@ def test_compare_verdicts():
     assert dt.compare(1.0, 0.1, 2.0, 0.1)["verdict"] == "inconsistent"
     assert dt.compare(1.0, 0.1, 1.35, 0.1)["verdict"] == "undetermined"
     assert dt.compare(1.0, math.nan, 1.0, 0.1)["verdict"] == "undetermined"
+
+
+def test_crossover_fit_with_saturation_uses_the_saturated_scales():
+    rng = np.random.default_rng(11)
+    eps = 10.0 ** np.arange(-10.5, -2.9, 0.5)
+    g = _crossover_f(eps, 1e7, 1e-9, 0.4)
+    f_sat = 0.8
+    f_true = f_sat * g / (1 + g)
+    assert f_true[-1] > 0.5 * f_sat  # the coarse scales are saturated
+    c = _pairs(f_true, 100_000, rng)
+    cx = dt.crossover_fit(c, eps, used=np.ones(len(eps), bool), f_sat=f_sat, n_boot=40, rng=12)
+    assert cx.status == "fitted"
+    assert abs(math.log10(cx.eps_c) + 9) < max(4 * cx.log10_eps_c_stderr, 0.05)
+    assert abs(cx.beta - 0.4) < max(4 * cx.beta_stderr, 0.02)
+    # the model without saturation reads the saturated scales as a lower beta
+    naive = dt.crossover_fit(c, eps, used=np.ones(len(eps), bool), n_boot=5, rng=12)
+    assert naive.beta < cx.beta - 0.1
+
+
+def test_throw_floor_bounds_the_pair_floor():
+    a = np.array([1, 2, 3, 4, 5, 6] * 50)
+    b = a.copy()
+    b[:3] = 6
+    tf = dt.throw_floor(a, b)
+    assert tf["flips"] == 3 and tf["n"] == 300 and tf["fraction"] == pytest.approx(3 / 300)
+    assert tf["lo"] < 3 / 300 < tf["hi"]

@@ -10,8 +10,9 @@ basin borders look fractal only down to a crossover scale ε_c, below which they
 * :func:`local_slopes`: the fraction ``f(ε)`` of IC pairs ``ε`` apart whose outcomes differ
   and its local slope ``d ln f / d ln ε`` between neighbouring scales, with bootstrap errors
   (the pairs resampled by base point, so that the scales' correlation is kept);
-* :func:`crossover_fit`: ``ε_c`` from ``f = A ε / (1 + (ε/ε_c)^(1-β))``: slope 1 below ε_c,
-  β above it, the local slope halfway at ε_c; bootstrap errors;
+* :func:`crossover_fit`: ``ε_c`` from ``g = A ε / (1 + (ε/ε_c)^(1-β))``, ``f = f_sat g / (1 + g)``:
+  slope 1 below ε_c, β above it (the local slope of ``g`` halfway at ε_c), saturating at ``f_sat``;
+  bootstrap errors;
 * :func:`hazard_curve`, :func:`hazard_windows`: the hazard ``h(t)`` of lifetimes (piecewise
   constant maximum likelihood, censoring allowed), in bins and between quantiles;
 * :func:`discrete_hazard`: the hazard per bounce, ``P(N = n | N ≥ n)``;
@@ -31,7 +32,7 @@ import warnings
 import numpy as np
 
 __all__ = ["LocalSlopes", "local_slopes", "Crossover", "crossover_fit", "Hazard", "hazard_curve", "hazard_windows",
-           "discrete_hazard", "covariate_hazard", "FACE_NODE_MASK", "commit_steps", "perturbed", "floor_test",
+           "discrete_hazard", "covariate_hazard", "FACE_NODE_MASK", "commit_steps", "perturbed", "floor_test", "throw_floor",
            "pair_divergence", "compare"]
 
 #: Bit mask of the four nodes of each face (face 1..6; bit k-1 is node k; docs/model.md §3).
@@ -96,7 +97,7 @@ def local_slopes(changed, eps, *, valid=None, n_boot: int = 400, rng=0) -> Local
 
 @dataclasses.dataclass(frozen=True)
 class Crossover:
-    """The crossover of ``f = A ε / (1 + (ε/ε_c)^(1-β))``: ``eps_c`` with the bootstrap standard error of
+    """The crossover of ``g = A ε / (1 + (ε/ε_c)^(1-β))``, ``f = f_sat g / (1 + g)``: ``eps_c`` with the bootstrap standard error of
     ``log10 eps_c``, the exponent ``beta`` above it (stderr), the scales used and a ``status``:
     ``fitted`` (ε_c inside the scales used), ``below`` (ε_c below them: no smooth range resolved, slope β
     throughout), ``above`` (above them: slope 1 throughout) or ``too few scales``."""
@@ -111,12 +112,12 @@ class Crossover:
     n_boot: int
 
 
-def _fit_crossover(leps: np.ndarray, lf: np.ndarray, w: np.ndarray, lo: float, hi: float):
+def _fit_crossover(leps: np.ndarray, lf: np.ndarray, w: np.ndarray, lo: float, hi: float, f_sat: float | None):
     from scipy.optimize import least_squares
 
     def model(p):
-        x = np.exp((1.0 - p[2]) * (leps - p[1]))
-        return p[0] + leps - np.log1p(x)
+        lg = p[0] + leps - np.log1p(np.exp((1.0 - p[2]) * (leps - p[1])))
+        return lg if f_sat is None else math.log(f_sat) + lg - np.logaddexp(0.0, lg)
 
     best = None
     for l0 in np.linspace(lo, hi, 5):  # a few starts: the crossover's position is the hard parameter
@@ -130,9 +131,11 @@ def _fit_crossover(leps: np.ndarray, lf: np.ndarray, w: np.ndarray, lo: float, h
     return best.x if best is not None else None
 
 
-def crossover_fit(changed, eps, *, used, valid=None, n_boot: int = 200, rng=0) -> Crossover:
+def crossover_fit(changed, eps, *, used, valid=None, f_sat: float | None = None, n_boot: int = 200,
+                  rng=0) -> Crossover:
     """Fit the crossover model to ``f(ε)`` on the scales ``used`` (a boolean mask), weighted by the binomial
-    variance of ``ln f``; ε_c is bounded to two decades either side of the scales used, β to [0, 1].  The
+    variance of ``ln f``; ε_c is bounded to two decades either side of the scales used, β to [0, 1].
+    ``f_sat``: the fraction of unrelated outcomes, ``1 - Σ p²`` (None: no saturation, ``f = g``).  The
     bootstrap refits the model to ``n_boot`` resamples of the base points."""
     c = np.asarray(changed, dtype=bool)
     eps = np.asarray(eps, dtype=float).ravel()
@@ -151,7 +154,7 @@ def crossover_fit(changed, eps, *, used, valid=None, n_boot: int = 200, rng=0) -
         if np.any(cu <= 0):
             return None
         w = np.sqrt(nu * f / np.maximum(1 - f, 1e-12))
-        return _fit_crossover(leps, np.log(f), w, lo, hi)
+        return _fit_crossover(leps, np.log(f), w, lo, hi, f_sat)
 
     p = fit(counts[used], n[used])
     if p is None:
@@ -325,6 +328,15 @@ def floor_test(changed, changed_tight, *, valid=None, confidence: float = 0.95) 
         hw = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return {"fraction": p, "lo": np.clip(c - hw, 0, 1), "hi": np.clip(c + hw, 0, 1), "flips": k.astype(np.int64),
             "n": n.astype(np.int64)}
+
+
+def throw_floor(outcome, outcome_tight, *, confidence: float = 0.95) -> dict:
+    """The numerical floor per throw: the fraction of throws whose outcome changes at the tighter tolerance, with its
+    Wilson interval.  A pair's verdict can change only where one of its two throws does, so twice this fraction
+    bounds the pair floor at every scale."""
+    a, b = np.asarray(outcome).ravel(), np.asarray(outcome_tight).ravel()
+    fl = floor_test((a != b)[:, None], np.zeros((a.size, 1), dtype=bool), confidence=confidence)
+    return {k: v[0] for k, v in fl.items()}
 
 
 def _state_distance(a, b, n: int, cfg, tau: float) -> np.ndarray:

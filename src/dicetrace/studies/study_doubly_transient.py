@@ -6,11 +6,13 @@ random ICs of the zoom-out window of the seed slice (L in the program's conventi
 thrown with ``contact-tsit5`` at a uniform tolerance of 1e-10 (no loosening over the throw):
 
 * each base IC and its neighbours at ``ε · |ic| · ξ`` (ξ a random unit 6-vector, one per
-  scale, ε = 1e-10 … 1e-3) give ``f(ε)``, its local slopes with bootstrap errors and the
+  scale, ε = 1e-10 … 1e-3; 10⁴ pairs per scale for ``physical`` and ``seed``, 4000 for the
+  variations) give ``f(ε)``, its local slopes with bootstrap errors and the
   crossover ε_c (:func:`~dicetrace.analysis.doubly_transient.crossover_fit`);
-* the numerical floor: the first pairs rerun at tol 1e-11; a scale counts only where the
-  fraction of pairs whose verdict changes is (95 % upper bound) below a third of ``f(ε)`` and
-  at least ten pairs changed;
+* the numerical floor: the first base ICs and their neighbours rerun at tol 1e-11; a pair's
+  verdict can change only where one of its throws does, so twice the fraction of throws whose
+  outcome changes (95 % upper bound) bounds the floor of every scale; a scale counts only where
+  that bound is below a third of ``f(ε)`` and at least ten pairs changed;
 * the settling hazard against time (settle time and commit time, the last contact off the
   final face), against bounce number and against energy;
 * λ₁ on throws that outlive the median settle time (pairs nudged by 1e-10), beside all throws;
@@ -33,30 +35,32 @@ WINDOW = "zoom-out"
 TOL, TOL_FLOOR = 1e-10, 1e-11
 #: Nudge of the λ₁ pairs (relative to |ic|) and the distance (cm) where their fit stops.
 LAMBDA_DELTA, LAMBDA_SATURATION = 1e-10, 1e-2
-_HALF_DECADES, _DECADES = 10.0 ** np.arange(-10, -3.9, 0.5), 10.0 ** np.arange(-10.0, -2.0)
-#: key -> (preset, make_config overrides, ε scales of the full run: relative 6-D IC perturbations).  The two models
-#: of the answers table get half decades, the γ and k variations whole decades.
+#: ε scales of the full run (relative 6-D IC perturbations): the two models of the answers table get half decades
+#: where f is below saturation, the γ and k variations whole decades.
+_PRESET_EPS = 10.0 ** np.r_[np.arange(-10, -6.9, 0.5), -6.0, -5.0]
+_SEED_EPS = 10.0 ** np.r_[np.arange(-8, -3.9, 0.5), -3.0]
+_DECADES = 10.0 ** np.arange(-10.0, -2.5)
+#: key -> (preset, make_config overrides, ε scales of the full run, base ICs (pairs per scale) of the full run)
 CONDITIONS = {
-    "physical": ("physical", {}, _HALF_DECADES),
-    "physical γ 0.0025": ("physical", {"gamma": 0.0025}, _DECADES),
-    "physical γ 0.01": ("physical", {"gamma": 0.01}, _DECADES),
-    "physical k 2e5": ("physical", {"k": 2e5}, _DECADES),
-    "physical k 5e6": ("physical", {"k": 5e6}, _DECADES),
-    "seed": ("seed", {"integrator": "contact-tsit5"}, 10.0 ** np.arange(-9, -2.9, 0.5)),
+    "physical": ("physical", {}, _PRESET_EPS, 10_000),
+    "physical γ 0.0025": ("physical", {"gamma": 0.0025}, _DECADES, 4000),
+    "physical γ 0.01": ("physical", {"gamma": 0.01}, _DECADES, 4000),
+    "physical k 2e5": ("physical", {"k": 2e5}, _DECADES, 4000),
+    "physical k 5e6": ("physical", {"k": 5e6}, _DECADES, 4000),
+    "seed": ("seed", {"integrator": "contact-tsit5"}, _SEED_EPS, 10_000),
 }
 QUICK_CONDITIONS = ("physical", "physical γ 0.01", "seed")
 #: ε scales of the quick run.
 EPS_QUICK = 10.0 ** np.arange(-8, -1, 2)
-#: A scale counts where the floor's 95 % upper bound is below this fraction of f(ε) and at least MIN_CHANGED pairs changed.
+#: A scale counts where the floor's 95 % upper bound (twice the throws' flip fraction) is below this fraction of f(ε)
+#: and at least MIN_CHANGED pairs changed.
 FLOOR_SHARE, MIN_CHANGED = 1.0 / 3.0, 10
-#: The crossover fit uses counted scales with f below this fraction of f_sat (saturation bends the curve).
-SAT_SHARE = 0.25
 
 
 def _config(cond: str, tol: float):
     from dicetrace.params import make_config
 
-    preset, over, _ = CONDITIONS[cond]
+    preset, over, _, _ = CONDITIONS[cond]
     return make_config(preset, tol=tol, tol_growth=0.0, **over)
 
 
@@ -154,14 +158,18 @@ def _traced(ctx: Context, cfg, ics, t_settle, rng, n_surv: int, n_rand: int) -> 
 
 
 def _measure(ctx: Context, cond: str, index: int) -> dict:
-    from dicetrace.analysis.doubly_transient import commit_steps, compare, crossover_fit, floor_test, local_slopes, perturbed
+    from dicetrace.analysis.doubly_transient import (commit_steps, compare, crossover_fit, floor_test, local_slopes,
+                                                     perturbed, throw_floor)
     from dicetrace.analysis.edge import edge_release_rate
     from dicetrace.analysis.settle import edge_balance_rate
     from dicetrace.ics import seed_slice
 
+    import time
+
+    t_start = time.perf_counter()
     cfg, tight = _config(cond, TOL), _config(cond, TOL_FLOOR)
     eps = EPS_QUICK if ctx.quick else CONDITIONS[cond][2]
-    n, n_floor = ctx.pick(10_000, 300), ctx.pick(1000, 100)
+    n, n_floor = ctx.pick(CONDITIONS[cond][3], 300), ctx.pick(CONDITIONS[cond][3] // 10, 100)
     rng = np.random.default_rng([ctx.options.seed, index])
     (x0, x1), (y0, y1) = window_ranges(WINDOW)
     ics = cfg.to_preset_convention(np.asarray(seed_slice(rng.uniform(x0, x1, n), rng.uniform(y0, y1, n))), "program")
@@ -173,13 +181,14 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
     ctx.n_throws += out_t.size
     changed_t, valid_t = _verdicts(out_t)
     floor = floor_test(changed[:n_floor], changed_t, valid=valid[:n_floor] & valid_t)
-    single_flips = int((out_t[0] != out[0, :n_floor]).sum())
+    tf = throw_floor(out[:, :n_floor], out_t)
+    single_flips = int(tf["flips"])
     ls = local_slopes(changed, eps, valid=valid, n_boot=ctx.pick(400, 50), rng=rng)
     p = np.bincount(out[0][out[0] >= 1], minlength=7)[1:] / max((out[0] >= 1).sum(), 1)
     f_sat = float(1 - (p**2).sum())
-    counted = (floor["hi"] <= FLOOR_SHARE * ls.f) & (ls.changed >= MIN_CHANGED)
-    used = counted & (ls.f <= SAT_SHARE * f_sat)
-    cx = crossover_fit(changed, eps, used=used, valid=valid, n_boot=ctx.pick(200, 20), rng=rng)
+    floor_bound = min(2 * float(tf["hi"]), 1.0)
+    counted = (floor_bound <= FLOOR_SHARE * ls.f) & (ls.changed >= MIN_CHANGED)
+    cx = crossover_fit(changed, eps, used=counted, valid=valid, f_sat=f_sat, n_boot=ctx.pick(200, 20), rng=rng)
     both = counted[:-1] & counted[1:] & np.isfinite(ls.slope_stderr)
     fine = int(np.flatnonzero(both)[0]) if both.any() else -1
     alpha_fine = (float(ls.slope[fine]), float(ls.slope_stderr[fine])) if fine >= 0 else (math.nan, math.nan)
@@ -190,7 +199,7 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
     commit, landings = commit_steps(b.sets, b.set_steps, b.set_offsets[: n + 1], b.outcome[sl], b.steps[sl])
     t_settle = np.where(base, b.t_settle_s[sl], np.nan)
     hz = _hazards(t_settle[base], commit[base] * dt, landings[base], t_cap)
-    n_s, n_r = ctx.pick(150, 6), ctx.pick(300 if cond == "physical" else 120, 8)
+    n_s, n_r = ctx.pick(100 if cond in ("physical", "seed") else 50, 6), ctx.pick(200 if cond == "physical" else 60, 8)
     tr = _traced(ctx, cfg, ics, t_settle, rng, n_s, n_r)
     try:
         er = edge_release_rate(config=_edge_config(cfg), tilt0=1e-6)
@@ -217,7 +226,8 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
         "pairs": ls.n.tolist(), "eps_mid": ls.eps_mid.tolist(), "slope": ls.slope.tolist(),
         "slope_stderr": ls.slope_stderr.tolist(), "floor_fraction": floor["fraction"].tolist(),
         "floor_hi": floor["hi"].tolist(), "floor_flips": floor["flips"].tolist(), "counted": counted.tolist(),
-        "used_in_fit": cx.used.tolist(), "single_throw_flips": single_flips,
+        "used_in_fit": cx.used.tolist(), "floor_throw_flips": single_flips, "floor_throws": int(tf["n"]),
+        "floor_throw_fraction": float(tf["fraction"]), "floor_throw_hi": float(tf["hi"]), "floor_bound": floor_bound,
         "eps_smallest_counted": float(eps[counted][0]) if counted.any() else math.nan,
         "alpha_fine": alpha_fine[0], "alpha_fine_stderr": alpha_fine[1],
         "alpha_fine_eps": float(ls.eps_mid[fine]) if fine >= 0 else math.nan,
@@ -225,6 +235,7 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
         "beta": cx.beta, "beta_stderr": cx.beta_stderr, "crossover_boot": cx.n_boot,
         "hazard": hz, "lambda": tr, "edge_rate": edge, "edge_rate_analytic": edge_balance_rate(),
         "kappa_over_lambda1": ratio, "kappa_over_lambda1_stderr": ratio_se, "tests": tests,
+        "wall_s": time.perf_counter() - t_start,
     }
     ctx.log(f"{cond}: α_fine {alpha_fine[0]:.2f} ± {alpha_fine[1]:.2f} at ε {row['alpha_fine_eps']:.1e}, "
             f"ε_c {cx.eps_c:.2g} ({cx.status}), β {cx.beta:.2f}, κ_mid {k_mid:.2f}, κ_late "
@@ -238,7 +249,7 @@ def compute(ctx: Context) -> Computed:
     by = {r["condition"]: r for r in rows}
     return Computed({"rows": rows, "by": by, "window": WINDOW, "tol": TOL, "floor_tol": TOL_FLOOR,
                      "lambda_delta": LAMBDA_DELTA, "lambda_saturation_cm": LAMBDA_SATURATION,
-                     "floor_share": FLOOR_SHARE, "min_changed": MIN_CHANGED, "sat_share": SAT_SHARE})
+                     "floor_share": FLOOR_SHARE, "min_changed": MIN_CHANGED})
 
 
 def render(c: Computed, out: Output) -> None:
