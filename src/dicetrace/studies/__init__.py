@@ -10,7 +10,7 @@ the machinery the studies share (context, outputs, report, runner, text).
 Two kinds, both shipped in the package and run from any folder:
 
 - the **writeup studies** (the writeup's nine, the transient-chaos study j, the referee's
-  items k and the converged maps l; ``dicetrace analyze NAME|all``), one module
+  items k, the converged maps l, the corner balance m, doubly transient chaos n and the border rates o; ``dicetrace analyze NAME|all``), one module
   each, ``compute(ctx)`` then ``render(computed, out)`` (see
   :mod:`dicetrace.studies.context`); :func:`dicetrace.studies.runner.run`
   runs them and :mod:`dicetrace.studies.report` assembles ``REPORT.md``;
@@ -32,11 +32,12 @@ from types import ModuleType
 
 #: Prefix of a study's module name: study ``NAME`` is ``dicetrace.studies.study_NAME``.
 MODULE_PREFIX = "study_"
-#: The writeup studies, in run order (module ``dicetrace.studies.study_<name>``; letters a..l).
+#: The writeup studies, in run order (module ``dicetrace.studies.study_<name>``; letters a..o).
 WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation",
-                   "transient", "referee", "converged")
+                   "transient", "referee", "converged", "corner", "doubly_transient",
+                   "border_rates")
 #: Letter of each writeup study (its figures' prefix) -> name.
-LETTERS = dict(zip("abcdefghijkl", WRITEUP_STUDIES))
+LETTERS = dict(zip("abcdefghijklmno", WRITEUP_STUDIES))
 #: What each writeup study is about (the first line of its module's docstring, after the name).
 TITLES = {
     "cells": "the cell structure of the home window and the zoom ladder (writeup 4.1)",
@@ -51,6 +52,10 @@ TITLES = {
     "transient": "transient chaos of the discrete and the converged die: λ, κ and α, with convergence certificates",
     "referee": "every claim the referee marked, redone with controls, error bars and enough scales",
     "converged": "converged maps beside the discrete ones: every measure of a map, side by side, with certificates",
+    "corner": "the corner balance: its two unstable rates, the faces around it, triple points of converged maps (4.3)",
+    "doubly_transient": "doubly transient chaos measured as such: f(ε) local slopes and ε_c, settling hazards, λ₁ on "
+                        "survivors",
+    "border_rates": "border λ fitted near the border with a uniform tight tolerance, against each preset's edge saddle",
 }
 #: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
 INTEGRATOR_STUDIES = ("accuracy", "stability", "friction")
@@ -65,15 +70,16 @@ STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES
 
 
 def resolve(names) -> list[str]:
-    """Writeup study names from names, letters (a..l) or ``all`` (ValueError naming the choices)."""
+    """Writeup study names from names (a hyphen for an underscore: ``doubly-transient``), letters (a..o) or ``all``
+    (ValueError naming the choices)."""
     out: list[str] = []
     for n in names or ("all",):
         key = str(n).strip().lower()
         if key == "all":
             return list(WRITEUP_STUDIES)
-        key = LETTERS.get(key, key)
+        key = LETTERS.get(key, key).replace("-", "_")
         if key not in WRITEUP_STUDIES:
-            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..l)")
+            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..o)")
         if key not in out:
             out.append(key)
     return out
