@@ -1,0 +1,81 @@
+"""Study n (doubly_transient): registered, and its quick run end to end (``dicetrace analyze doubly-transient --quick``).
+
+The quick run (about 15 s on two cores: 300 pairs per scale, four scales, three models) checks the pipeline and
+that every number the report quotes is written with its model, integrator, tolerance and error bar.  The full run
+is ``dicetrace analyze doubly-transient --out analysis``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from dicetrace.studies import LETTERS, resolve
+from dicetrace.studies import study_doubly_transient as dts
+
+
+def test_registered_as_study_n_with_a_hyphenated_name():
+    assert LETTERS["n"] == "doubly_transient"
+    assert resolve(["n"]) == resolve(["doubly-transient"]) == ["doubly_transient"]
+
+
+def test_every_condition_is_a_uniform_tight_tolerance():
+    for cond in dts.CONDITIONS:
+        cfg = dts._config(cond, dts.TOL)
+        assert cfg.numerics.integrator == "contact-tsit5"
+        assert cfg.numerics.tol == dts.TOL and cfg.numerics.tol_growth == 0.0
+        assert dts._config(cond, dts.TOL_FLOOR).numerics.tol == pytest.approx(dts.TOL / 10, rel=1e-12)
+    assert dts._config("physical k 5e6", dts.TOL).preset.k == 5e6
+    assert dts._config("physical γ 0.01", dts.TOL).preset.gamma == 0.01
+    assert dts._config("physical", dts.TOL).preset.gamma == dts._config("physical γ 0.0025", dts.TOL).preset.gamma * 2
+    assert set(dts.QUICK_CONDITIONS) <= set(dts.CONDITIONS)
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dt") / "out"
+    proc = subprocess.run([sys.executable, "-m", "dicetrace.cli", "analyze", "doubly-transient", "--quick", "--out",
+                           str(out), "--no-report"], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    return out, json.loads((out / "results" / "doubly_transient.json").read_text())
+
+
+@pytest.mark.slow
+def test_quick_run_writes_every_measure(quick):
+    out, r = quick
+    assert r["study"] == "doubly_transient" and r["quick"] is True
+    assert [row["condition"] for row in r["rows"]] == list(dts.QUICK_CONDITIONS)
+    for name in ("n_slopes", "n_hazard", "n_tests"):
+        assert (out / r["figures"][name]["path"]).stat().st_size > 0
+    for key in ("slopes", "hazard", "tests"):
+        assert r["tables"][key].count("\n") == len(dts.QUICK_CONDITIONS) + 1
+    for row in r["rows"]:
+        # each row names its model and numerics
+        assert row["integrator"] == "contact-tsit5" and row["tol"] == dts.TOL and row["tol_growth"] == 0.0
+        assert row["floor_tol"] == dts.TOL_FLOOR and row["preset"] in ("physical", "seed")
+        s = len(row["eps"])
+        assert len(row["f"]) == len(row["floor_hi"]) == len(row["counted"]) == s and len(row["slope"]) == s - 1
+        f = np.array(row["f"], dtype=float)
+        assert np.all((f >= 0) & (f <= 1)) and f[-1] > f[0]  # farther neighbours differ more often
+        assert row["pairs"][0] <= row["n_pairs"] == 300
+        # a counted scale is above its floor and has enough changes
+        assert row["floor_throws"] == 100 * (s + 1) and row["floor_bound"] >= 2 * row["floor_throw_fraction"]
+        for c, fv, k in zip(row["counted"], f, row["changed"]):
+            if c:
+                assert row["floor_bound"] <= dts.FLOOR_SHARE * fv and k >= dts.MIN_CHANGED
+        hz = row["hazard"]["commit"]
+        assert hz["kappa_mid"] > 0 and hz["kappa_mid_stderr"] > 0
+        assert hz["median_s"] <= row["hazard"]["settle"]["median_s"]  # a throw commits before it stops
+        assert row["hazard"]["bounce"]["h"][0] >= 0
+        lam = row["lambda"]["survivors"]
+        assert lam["n"] >= 3 and 0 < lam["mean"] < 100 and lam["stderr"] > 0
+        assert row["edge_rate"]["rate"] == pytest.approx(row["edge_rate_analytic"], rel=0.15)
+        for t in row["tests"].values():
+            assert t["verdict"] in ("consistent", "inconsistent", "undetermined")
+            if t["verdict"] != "undetermined":
+                assert math.isfinite(t["z"]) and t["x_err"] > 0
