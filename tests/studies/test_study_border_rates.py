@@ -46,7 +46,8 @@ def test_reanalysis_from_the_raw_profiles_gives_the_same_numbers(quick_run, tmp_
     mine = tmp_path / "out"
     (mine / "results").mkdir(parents=True)
     shutil.copy(out / "results" / "border_rates.json", mine / "results")
-    shutil.copy(out / "results" / "border_rates_profiles.csv", mine / "results")
+    (mine / "results" / "raw").mkdir()
+    shutil.copy(out / "results" / "raw" / "border_rates_profiles.csv", mine / "results" / "raw")
     rerender(mine)
     again = json.loads((mine / "results" / "border_rates.json").read_text())
     for key in ("seed", "physical"):

@@ -44,8 +44,9 @@ from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table, pm
 
 NAME = "border_rates"
-#: The raw measurements (``results/<RAW_CSV>.csv``): every border, side and distance.
-RAW_CSV = "border_rates_profiles"
+#: The raw measurements (``results/<RAW_CSV>.csv``): every border, side and distance (in a folder of their own:
+#: the report quotes none of these numbers, it quotes what the study computed from them).
+RAW_CSV = "raw/border_rates_profiles"
 #: The models: make_config options of each preset at the uniform tight tolerance.
 TOL = 1e-13
 CHECK_TOL = 1e-14
@@ -154,20 +155,20 @@ def raw_frame(key: str, raw: dict):
 
     br, n = raw["br"], len(raw["br"].p_lo)
     rows = []
-    for side, p, lab in (("lo", br.p_lo, br.label_lo), ("hi", br.p_hi, br.label_hi)):
+    for side, lab in (("lo", br.label_lo), ("hi", br.label_hi)):
         end_chk = raw["ends_check"][:n] if side == "lo" else raw["ends_check"][n:]
         for i in range(n):
             for j, d in enumerate(DISTS):
                 rows.append((key, i, raw["windows"][i], side, br.p_lo[i, 0], br.p_lo[i, 1], br.p_hi[i, 0],
-                             br.p_hi[i, 1], p[i, 0], p[i, 1], int(lab[i]), int(end_chk[i]), float(d),
+                             br.p_hi[i, 1], int(lab[i]), int(end_chk[i]), float(d),
                              int(raw["prof"][f"label_{side}"][i, j]), float(raw["prof"][f"t_{side}"][i, j]),
                              int(raw["check"][f"label_{side}"][i, j]), float(raw["check"][f"t_{side}"][i, j])))
     return pd.DataFrame(rows, columns=RAW_COLUMNS)
 
 
-#: Columns of ``results/border_rates_profiles.csv``: the border (its bracket ends, window), the side (its end,
-#: its label and the end's label at tol/10), the distance, and the label and settle time at tol and at tol/10.
-RAW_COLUMNS = ["model", "border", "window", "side", "lo_x", "lo_y", "hi_x", "hi_y", "end_x", "end_y", "side_label",
+#: Columns of ``results/raw/border_rates_profiles.csv``: the border (its bracket ends, window), the side (its
+#: label and its bracket end's label at tol/10), the distance, and the label and settle time at tol and at tol/10.
+RAW_COLUMNS = ["model", "border", "window", "side", "lo_x", "lo_y", "hi_x", "hi_y", "side_label",
                "end_label_check", "d", "label", "t_settle_s", "label_check", "t_settle_check_s"]
 
 
@@ -308,6 +309,7 @@ def render(c: Computed, out: Output) -> None:
 
     R, L = c.results, _letter()
     if c.plot:  # a fresh run: its raw measurements, from which :func:`rerender` recomputes every number
+        (out.res_dir / Path(RAW_CSV).parent).mkdir(parents=True, exist_ok=True)
         out.write_csv(pd.concat([raw_frame(k, c.plot[k]) for k in MODELS], ignore_index=True), RAW_CSV)
     colours = {"seed": "tab:blue", "physical": "tab:red"}
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.4), sharey=True)
@@ -392,7 +394,7 @@ def render(c: Computed, out: Output) -> None:
 
 def rerender(out) -> Path:
     """Recompute every number of a finished run in ``out`` from its raw measurements
-    (``results/border_rates_profiles.csv``) and redraw its figures and tables (no simulation; the figures take
+    (``results/raw/border_rates_profiles.csv``) and redraw its figures and tables (no simulation; the figures take
     the study's letter as it is registered now); rewrites ``results/border_rates.json``."""
     import json
 
