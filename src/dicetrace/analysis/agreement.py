@@ -14,8 +14,10 @@ import dataclasses
 import math
 
 import numpy as np
+from scipy.stats import chi2_contingency
 
-from .grouping import wilson_interval
+from .cells import block_fraction_stderr
+from .grouping import basins_fractions_table, wilson_interval
 
 __all__ = ["Agreement", "agreement", "face_stats", "settled_agreement", "compare_presets", "counts_chi2_p"]
 
@@ -74,11 +76,6 @@ def agreement(a, b, *, confidence: float = 0.95) -> Agreement:
 
 def face_stats(g: np.ndarray, ref: np.ndarray | None) -> dict:
     """Face fractions with block errors (as study a), and a χ² test of the face counts against ``ref``'s."""
-    from scipy.stats import chi2_contingency
-
-    from .cells import block_fraction_stderr
-    from .grouping import basins_fractions_table
-
     fr = {str(int(r.label)): {"fraction": float(r.fraction), "count": int(r.count),
                          "block_stderr": block_fraction_stderr(g, int(r.label))}
           for r in basins_fractions_table(g).itertuples() if r.label > 0}
@@ -123,8 +120,6 @@ def _mean(x) -> float:
 def counts_chi2_p(a, b) -> float:
     """p-value of the χ² test that the counts ``a`` and ``b`` (per category) come from one distribution; categories
     empty in both are left out."""
-    from scipy.stats import chi2_contingency
-
     table = np.vstack([a, b])
     table = table[:, table.sum(axis=0) > 0]
     return float(chi2_contingency(table)[1])

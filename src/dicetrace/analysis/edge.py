@@ -31,11 +31,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import replace
 
 import numpy as np
+from scipy import stats
 
 from dicetrace.params import Config
+from dicetrace.simulate import Record, simulate
 
+from .lyapunov import finite_time_lyapunov
 from .simulator import _resolve_config
 
 __all__ = ["EdgeRelease", "edge_release_rate", "EdgeJacobian", "edge_jacobian_rate", "PooledRate", "pooled_rate"]
@@ -68,10 +72,6 @@ def edge_release_rate(*, config: Config | None = None, preset: str = "seed", til
     ValueError when the run ends before the tilt reaches ``saturation``
     (e.g. a numerical failure).
     """
-    from dicetrace.simulate import Record, simulate
-
-    from .lyapunov import finite_time_lyapunov
-
     cfg = _balanced_config(_resolve_config(config, preset, overrides), float(tilt0), 0.0, t_max_s)
     roll = simulate(np.zeros(6), config=cfg, orientation=_rot_x(math.pi / 4 + float(tilt0)),
                     record=Record(states=True))
@@ -87,8 +87,6 @@ def edge_release_rate(*, config: Config | None = None, preset: str = "seed", til
 
 
 def _balanced_config(cfg: Config, tilt: float, dz: float, t_max_s: float) -> Config:
-    from dataclasses import replace
-
     p = cfg.preset
     d_eq = 8.0 * abs(p.g) / (2.0 * p.k)
     theta = math.pi / 4 + tilt
@@ -108,8 +106,6 @@ class EdgeJacobian:
 
 def _planar_map(cfg: Config, x: np.ndarray, horizon_s: float) -> np.ndarray:
     """The die's planar state (dz cm, v_y, v_z cm/s, tilt rad, ω_x rad/s) after ``horizon_s`` from ``x``."""
-    from dicetrace.simulate import Record, simulate
-
     p = cfg.preset
     c = _balanced_config(cfg, float(x[3]), float(x[0]), horizon_s)
     sign = 1.0 if p.l_convention == "physical" else -1.0  # the program's L is the negative of the physical one
@@ -178,8 +174,6 @@ def pooled_rate(rates, *, alternatives=()) -> PooledRate:
     med = float(np.median(r))
     stat = math.nan
     if r.size >= 6:  # distribution-free 95 % interval of the median from order statistics (binomial, p = 1/2)
-        from scipy import stats
-
         s = np.sort(r)
         k = int(stats.binom.ppf(0.025, r.size, 0.5))
         lo, hi = s[max(k - 1, 0)], s[min(r.size - k, r.size - 1)]

@@ -138,7 +138,7 @@ def contact_sequence_text(sets: Iterable[int]) -> str:
         set), joined by ``-``; e.g. ``[0, 32, 40, 128, 0, 4]`` ->
         ``"0-6-68-8-0-3"``.
     """
-    from dicetrace.simulate import sets_to_text
+    from dicetrace.simulate import sets_to_text  # lazy: numba, through dicetrace.simulate; dicetrace.analysis has none
 
     return sets_to_text(_sets_to_array(sets))
 
@@ -155,7 +155,7 @@ def parse_contact_sequence(text: str) -> np.ndarray:
     -------
     numpy.ndarray of uint8
     """
-    from dicetrace.simulate import text_to_sets
+    from dicetrace.simulate import text_to_sets  # lazy: numba, through dicetrace.simulate; dicetrace.analysis has none
 
     if text == "":
         return np.zeros(0, dtype=np.uint8)

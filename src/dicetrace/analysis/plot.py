@@ -19,6 +19,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 
 from .grouping import contact_sequence_text
+from .wedge import ball_hill_separatrices, ball_hill_vector_field
 
 __all__ = [
     "FACE_COLORS",
@@ -57,7 +58,7 @@ _ORDER = [-1, 0, 1, 2, 3, 4, 5, 6]
 
 
 def _figure(ax=None, figsize=(5.5, 5.0)):
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     if ax is not None:
         return ax.figure, ax
@@ -71,7 +72,7 @@ def _save(fig, path):
 
 
 def _cmap_norm():
-    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.colors import BoundaryNorm, ListedColormap  # matplotlib is slow to import: only when drawing
 
     cmap = ListedColormap([FACE_COLORS[k] for k in _ORDER])
     norm = BoundaryNorm(np.arange(-1.5, 7.0, 1.0), cmap.N)
@@ -90,7 +91,7 @@ def _image_extent(shape, extent):
 
 
 def _legend(ax, labels_present):
-    from matplotlib.patches import Patch
+    from matplotlib.patches import Patch  # matplotlib is slow to import: only when drawing
 
     handles = [
         Patch(facecolor=FACE_COLORS[k], edgecolor="0.3", label=FACE_LABELS[k])
@@ -173,7 +174,7 @@ def plot_zoom_series(
     -------
     matplotlib.figure.Figure
     """
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
     from matplotlib.patches import Rectangle
 
     n = len(grids)
@@ -233,7 +234,7 @@ def plot_settle_map(
     -------
     matplotlib.figure.Figure
     """
-    from matplotlib import cm
+    from matplotlib import cm  # matplotlib is slow to import: only when drawing
     from matplotlib.colors import LinearSegmentedColormap, Normalize, to_rgb
 
     arr = np.asarray(grid)
@@ -300,7 +301,7 @@ def animate_slices(
     matplotlib.figure.Figure
         The figure after the last frame.
     """
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.animation import FuncAnimation, PillowWriter  # matplotlib is slow to import: only when drawing
 
     arr = np.moveaxis(np.asarray(grid3d), axis, 2)
     nz = arr.shape[2]
@@ -454,8 +455,6 @@ def plot_ball_hill_phase_portrait(
     -------
     matplotlib.figure.Figure
     """
-    from .wedge import ball_hill_separatrices, ball_hill_vector_field
-
     k = g / radius_cm
     wmax = omega_max if omega_max is not None else 1.6 * math.sqrt(2 * k)
     fig, ax = _figure(ax, figsize=(6.0, 4.6))

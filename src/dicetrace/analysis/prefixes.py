@@ -21,6 +21,8 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from .boundaries import fit_power_law
 
@@ -139,9 +141,6 @@ def fast_components(codes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, in
     Same result as ``label_cells`` restricted to ``mask``, in one pass over the edges (label_cells
     loops over the labels, which is slow for tens of thousands of contact sequences).
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     idx = np.arange(codes.size).reshape(codes.shape)
     rows, cols = [], []
     for off in ((1, 0), (0, 1)):

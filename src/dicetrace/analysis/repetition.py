@@ -17,7 +17,8 @@ import pandas as pd
 from scipy import ndimage
 
 from ._grid import as_label_grid, encode_labels
-from .cells import label_cells
+from .boundaries import boundary_mask
+from .cells import cells_table, label_cells
 
 __all__ = ["label_autocorrelation", "find_periods", "periodic_cells_connected", "texture_labels", "off_centre_max",
            "periods_rows", "stripe_spacing", "period_overlaps", "repetition_stats"]
@@ -290,8 +291,6 @@ def periodic_cells_connected(
 
 def texture_labels(grid: np.ndarray, sigma_nodes: float) -> np.ndarray:
     """1 where the smoothed density of cell borders is above its median, else 0."""
-    from .boundaries import boundary_mask
-
     dens = ndimage.gaussian_filter(boundary_mask(grid).astype(float), sigma_nodes)
     return (dens > np.median(dens)).astype(np.int64)
 
@@ -325,8 +324,6 @@ def period_overlaps(g, h, win, period_xy, min_period_cell) -> list[dict]:
     slice z = 0 the shift maps onto themselves (overlap > 0.5, at least ``min_period_cell`` nodes) and how many of
     those are one 3-D cell with their image (:func:`periodic_cells_connected`).  Vectors shorter than 5 % of the
     window (the along-stripe vector of a stripe texture) or longer than the grid are skipped."""
-    from .cells import cells_table
-
     sizes = cells_table(g[:, :, 0]).set_index("cell_id")["size"]
     width = min(w[1] - w[0] for w in win[:2])
     res_p = []

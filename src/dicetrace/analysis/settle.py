@@ -27,6 +27,9 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from .boundaries import boundary_mask
+from .escape import escape_rate
+
 __all__ = [
     "BoundaryBracket",
     "SettleFit",
@@ -400,9 +403,6 @@ def divergence_summary(fits: list[dict]) -> dict:
 def settle_stats(s) -> dict:
     """Settle-time statistics of a map ``s`` (``labels``, ``t_settle_s``): quantiles, border against interior, and
     the escape rate κ."""
-    from .boundaries import boundary_mask
-    from .escape import escape_rate
-
     t, g = s.t_settle_s, s.labels
     ok = g > 0
     tt = t[ok]

@@ -31,10 +31,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from collections.abc import Callable
 
 import numpy as np
 
+from dicetrace.ics import get_slice
 from dicetrace.params import Config, resolve_config
 from dicetrace.simulate import simulate_batch
 from dicetrace.status import Status
@@ -80,18 +82,6 @@ class _ResolvedSlice:
     l_convention: str  # "program" or "physical"
 
 
-def _seed_fallback(name: str) -> _ResolvedSlice | None:
-    from dicetrace.ics import seed_slice
-
-    if name == "seed":
-        return _ResolvedSlice("seed", 2, lambda p: seed_slice(p[:, 0], p[:, 1]).reshape(-1, 6), "program")
-    if name == "seed3":
-        return _ResolvedSlice(
-            "seed3", 3, lambda p: seed_slice(p[:, 0], p[:, 1], p[:, 2]).reshape(-1, 6), "program"
-        )
-    return None
-
-
 def resolve_slice(slice_spec) -> _ResolvedSlice:
     """Turn a slice name, a slice object or a function into ``points -> ICs``.
 
@@ -105,13 +95,6 @@ def resolve_slice(slice_spec) -> _ResolvedSlice:
         preset's L convention.
     """
     if isinstance(slice_spec, str):
-        try:
-            from dicetrace.ics import get_slice
-        except ImportError:  # an ics module without named slices
-            res = _seed_fallback(slice_spec)
-            if res is None:
-                raise ValueError(f"unknown slice {slice_spec!r} (this build knows 'seed' and 'seed3')") from None
-            return res
         slice_spec = get_slice(slice_spec)
     if hasattr(slice_spec, "ics") and hasattr(slice_spec, "ndim"):
         sl = slice_spec
@@ -468,8 +451,6 @@ def sample_window(
     sequences : bool
         Keep the contact sequences (memory: ~100 bytes per point).
     """
-    import time
-
     ndim = 2 if isinstance(window, str) else len(window)
     pts, shape, axes = window_points(resolve_window(window, ndim), res)
     t0 = time.perf_counter()

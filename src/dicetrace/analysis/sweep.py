@@ -18,6 +18,7 @@ import pandas as pd
 from ._grid import as_label_grid
 from .boundaries import basin_entropy, boundary_dimension, boundary_mask
 from .uncertainty import uncertainty_exponent, uncertainty_exponent_perturbation, uncertainty_exponent_resolution
+from .wada import wada_grid_test, wada_merge_test
 
 __all__ = ["chaos_measures", "chaos_sweep", "map_measures"]
 
@@ -195,8 +196,6 @@ def map_measures(w, s, classify, rng: np.random.Generator, *, perturb: bool, wad
     ``wada_segments`` segments).  ``rng`` draws everything random, in that order; ``log`` hears of a perturbation
     fit that failed (fewer than two ε with a nonzero fraction: α is NaN then).
     """
-    from .wada import wada_grid_test, wada_merge_test
-
     g = s.labels
     h = s.spacing[0]
     W = s.window[0][1] - s.window[0][0]

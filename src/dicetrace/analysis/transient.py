@@ -15,13 +15,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import replace
 
 import numpy as np
 
+from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import Config
+from dicetrace.simulate import Record, simulate
 from dicetrace.status import Status
 
+from .agreement import agreement
 from .grouping import UNSETTLED_LABEL
+from .lyapunov import finite_time_lyapunov
 from .simulator import BATCH_POINTS, _resolve_config, _run, resolve_slice, resolve_window, window_points
 
 __all__ = ["DIVERGENCE_TIME_SCALE_S", "throw_divergence", "throw_lyapunov", "FTLEMap", "ftle_on_slice",
@@ -60,8 +65,6 @@ def throw_divergence(
         When the first throw first touches the ground (its bouncing phase
         starts); ``nan`` if it never does.
     """
-    from dicetrace.simulate import Record, simulate
-
     cfg = _resolve_config(config, preset, overrides)
     ic = np.asarray(ic, dtype=float)
     if direction is None:
@@ -102,8 +105,6 @@ def throw_lyapunov(ic, *, delta: float = 1e-9, saturation: float | None = 1e-2, 
     :func:`dicetrace.analysis.lyapunov.finite_time_lyapunov`.  ``options`` go
     to :func:`throw_divergence`.
     """
-    from .lyapunov import finite_time_lyapunov
-
     if phase not in ("bouncing", "whole"):
         raise ValueError(f"phase must be 'bouncing' or 'whole', not {phase!r}")
     t, d, t_contact = throw_divergence(ic, delta=delta, **options)
@@ -147,8 +148,6 @@ def ftle_on_slice(
     expected along the cell borders, where neighbouring throws part.
     Serial (two traced throws per node): keep ``res`` modest (32² ≈ 10 s).
     """
-    from dicetrace.simulate import simulate
-
     sl = resolve_slice(slice_spec)
     cfg = _resolve_config(config, preset, overrides)
     pts, shape, axes = window_points(resolve_window(window, 2), res)
@@ -192,10 +191,6 @@ class MapCertificate:
 
 
 def _tightened(cfg: Config, factor: float) -> Config:
-    from dataclasses import replace
-
-    from dicetrace.integrators import INTEGRATORS
-
     num = cfg.numerics
     if INTEGRATORS[num.integrator].adaptive:
         # uniform: a tolerance that loosens over the throw (tol_growth) is never tighter than its start,
@@ -212,8 +207,6 @@ def certify_map(window, res, slice_spec="seed", *, config: Config | None = None,
     shape holding the grid's points in :func:`window_points` order), so that
     only the tightened and the moved maps are run.
     """
-    from .agreement import agreement
-
     sl = resolve_slice(slice_spec)
     cfg = _resolve_config(config, preset, overrides)
     pts, shape, axes = window_points(resolve_window(window, 2), res)

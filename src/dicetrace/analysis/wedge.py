@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.integrate import solve_ivp
 
 __all__ = [
     "OVER",
@@ -226,8 +227,6 @@ def ball_hill_transit_time(
         Transit time in s (``nan`` when ``t_max`` is reached) and
         ``OVER``/``RETURN`` (``UNDEFINED`` when ``t_max`` is reached).
     """
-    from scipy.integrate import solve_ivp
-
     k = g / radius_cm
     th0 = float(theta0)
     far = math.pi - th0
