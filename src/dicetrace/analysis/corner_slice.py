@@ -17,9 +17,10 @@ points where three faces meet, in three sectors.  Here:
   three sectors on every circle of a shrinking series is what a triple point
   looks like;
 * :func:`corner_distance`: how close a throw comes to a corner balance: per
-  trace row, with the lowest node as the pivot, ``D² = α² + (|ω|/λ)² +
+  trace row, with the lowest node as the pivot, ``D² = α² + (|ω⊥|/λ)² +
   (|U|/(λ d))²`` (``α``: the tilt of the centre of mass from straight above
-  the pivot; ``|ω|``, ``|U|``: angular and centre-of-mass speed, turned
+  the pivot; ``|ω⊥|``: the angular speed across the pivot–centre axis (a
+  spin about it keeps the balance), ``|U|``: the centre's speed, turned
   into angles by the corner's rate ``λ`` and the half diagonal ``d``); 0 at
   the balance, 0.62 at rest on an edge, 0.96 at rest on a face.
 """
@@ -142,19 +143,27 @@ def circle_sectors(classify, centre, radius: float, *, n: int = 48, angle_tol: f
 
 def corner_distance(trace, rate: float, d: float, inertia: float, *, near: float = 0.05) -> dict:
     """How close a throw comes to a corner balance (module docstring): the minimum of ``D`` over the trace rows,
-    where it is reached (time, pivot node, tilt, angular and centre speeds) and the time spent with ``D < near``."""
+    where it is reached (time, pivot node, tilt, tilting and spin rates, centre speed) and the time spent with
+    ``D < near``.
+
+    Only the angular velocity across the pivot–centre axis counts (``omega``): a spin about that axis, ``spin``,
+    neither tilts the die nor moves its centre, and a die spinning on its corner is still balanced on it.
+    """
     ok = trace.written
     off = trace.node_offsets[ok]
     t = trace.t_s[ok]
     z = trace.cm_pos[ok][:, 2][:, None] + off[:, :, 2]
     low = np.argmin(z, axis=1)
     up = -off[np.arange(len(low)), low]
+    axis = up / np.linalg.norm(up, axis=1)[:, None]
     alpha = np.arctan2(np.hypot(up[:, 0], up[:, 1]), up[:, 2])
-    w = np.linalg.norm(trace.L[ok], axis=1) / inertia
+    w = trace.L[ok] / inertia  # the sign convention does not matter for the magnitudes below
+    spin = np.abs(np.einsum("ij,ij->i", w, axis))
+    tilting = np.linalg.norm(w - np.einsum("ij,ij->i", w, axis)[:, None] * axis, axis=1)
     u = np.linalg.norm(trace.cm_vel[ok], axis=1)
-    D = np.sqrt(alpha**2 + (w / rate) ** 2 + (u / (rate * d)) ** 2)
+    D = np.sqrt(alpha**2 + (tilting / rate) ** 2 + (u / (rate * d)) ** 2)
     i = int(np.argmin(D))
     dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
     return {"d_min": float(D[i]), "t_min": float(t[i]), "node": int(low[i]) + 1, "tilt": float(alpha[i]),
-            "omega": float(w[i]), "speed": float(u[i]), "t_near": float(dt * np.count_nonzero(D < near)),
-            "height": float(z[i, low[i]])}
+            "omega": float(tilting[i]), "spin": float(spin[i]), "speed": float(u[i]),
+            "t_near": float(dt * np.count_nonzero(D < near)), "height": float(z[i, low[i]])}

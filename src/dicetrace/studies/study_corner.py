@@ -206,28 +206,41 @@ def face_maps(ctx: Context) -> tuple[dict, dict]:
 # --------------------------------------------------------------------------- 3. triple points
 
 
-def triple_points(ctx: Context) -> tuple[dict, dict]:
+def _thrower():
+    """``throw(x, y)``: the seed-slice throw at (x, y) in the hunt's model, its outcome and closest approach to a
+    corner balance."""
     from dicetrace.analysis.corner import corner_balance
-    from dicetrace.analysis.corner_slice import circle_sectors, clean_junctions, corner_distance, refine_triple
-    from dicetrace.analysis.simulator import classify_on_slice
-    from dicetrace.analysis.transient import certify_map, converged_verdict
+    from dicetrace.analysis.corner_slice import corner_distance
     from dicetrace.ics import seed_slice
     from dicetrace.simulate import Record, simulate
 
     hunt_cfg = config(HUNT_MODEL)
     cb = corner_balance(config=hunt_cfg)
-    classify = classify_on_slice("seed", config=hunt_cfg)
-    res = ctx.res(161, 17)
-    n_cand = ctx.pick(16, 1)
-    tol = ctx.pick(1e-11, 1e-6)
-    radii = RADII if not ctx.quick else RADII[:2]
-    maps, plot, points = [], {}, []
 
     def throw(x, y):
         ic = seed_slice(np.array([x]), np.array([y]))[0]
         roll = simulate(ic, config=hunt_cfg, record=Record(states=True))
         return {"x": x, "y": y, "outcome": roll.outcome, "status": roll.status.label,
                 **corner_distance(roll.trace, cb.rate, cb.d, cb.inertia)}
+
+    return throw
+
+
+def triple_points(ctx: Context) -> tuple[dict, dict]:
+    from dicetrace.analysis.corner import corner_balance
+    from dicetrace.analysis.corner_slice import circle_sectors, clean_junctions, refine_triple
+    from dicetrace.analysis.simulator import classify_on_slice
+    from dicetrace.analysis.transient import certify_map, converged_verdict
+
+    hunt_cfg = config(HUNT_MODEL)
+    cb = corner_balance(config=hunt_cfg)
+    throw = _thrower()
+    classify = classify_on_slice("seed", config=hunt_cfg)
+    res = ctx.res(161, 17)
+    n_cand = ctx.pick(16, 1)
+    tol = ctx.pick(1e-11, 1e-6)
+    radii = RADII if not ctx.quick else RADII[:2]
+    maps, plot, points = [], {}, []
 
     for w in (WINDOWS if not ctx.quick else WINDOWS[:1]):
         (x0, x1), (y0, y1) = window_ranges(w)
@@ -295,9 +308,12 @@ def _border_points(classify, s, ctx: Context, n: int) -> list[tuple[float, float
     return out
 
 
-def rerender(out, options: Options = Options()):
-    """Redraw the figures and tables of a finished run in ``out`` without simulating (the maps from ``out/cache``;
-    RuntimeError if one is not there), refresh the verdict from the stored numbers, and rewrite the JSON."""
+def rerender(out, options: Options = Options(), *, remeasure: bool = False):
+    """Redraw the figures and tables of a finished run in ``out`` without simulating a map (the maps from
+    ``out/cache``; RuntimeError if one is not there), refresh the verdict from the stored numbers, and rewrite the
+    JSON.  ``remeasure``: the throws' closest approaches to a corner balance computed again from their stored
+    points with the current :func:`~dicetrace.analysis.corner_slice.corner_distance` (a pure function of the
+    point: the same numbers a new run gives); its time is added to ``wall_s`` and kept in ``remeasure_s``."""
     import json
     from pathlib import Path
 
@@ -310,6 +326,17 @@ def rerender(out, options: Options = Options()):
     maps = {m["window"]: ctx.sample(m["window"], m["res"], **MAP_MODEL) for m in R["triple"]["maps"]}
     if ctx.n_throws:
         raise RuntimeError(f"{ctx.n_throws} throws were not in {out / 'cache'}: not the run's grids")
+    if remeasure:
+        t0 = time.perf_counter()
+        throw = _thrower()
+        for p in R["triple"]["points"]:
+            if "throw" in p:
+                p["throw"] = throw(p["x"], p["y"])
+        for m in R["triple"]["maps"]:
+            m["random"] = [throw(t["x"], t["y"]) for t in m["random"]]
+            m["border"] = [throw(t["x"], t["y"]) for t in m["border"]]
+        R["remeasure_s"] = time.perf_counter() - t0
+        R["wall_s"] += R["remeasure_s"]
     fm = {(model, r["tilt"], r["spin_ratio"]): np.asarray(r["labels"])
           for model, v in R["face_maps"]["models"].items() for r in v["rings"]}
     R["verdict"] = verdict(R)

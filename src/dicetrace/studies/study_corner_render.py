@@ -19,10 +19,19 @@ from dicetrace.studies.text import fmt, md_table, pm
 
 #: Largest recording kept (bytes).
 MAX_RRD_BYTES = 2_000_000
+#: A throw "passes near" the corner balance when its D_min is below this (rad-equivalent; the linear range).
+NEAR_D = 0.05
 
 
 def _deg(v):
     return None if v is None else math.degrees(v)
+
+
+def faces_up(node: int) -> list[int]:
+    """The faces that can come up from a balance on ``node`` (1-8): those opposite its three faces (docs/model.md §3)."""
+    k = node - 1
+    at = [6 if k & 4 else 1, 5 if k & 2 else 2, 4 if k & 1 else 3]
+    return sorted(7 - f for f in at)
 
 
 def _vertices(R: dict) -> list[dict]:
@@ -43,7 +52,7 @@ def verdict(R: dict) -> str:
     d_v = [p["throw"]["d_min"] for p in clean]
     parts = [
         f"The corner balance has two unstable directions of equal rate: in `physical` the simulator's rate "
-        f"{ph['rate']:.5f} ± {ph['error']:.1e} /s matches the slipping pivot's {ph['analytic']:.5f} /s "
+        f"{ph['rate']:.9f} ± {ph['error']:.1e} /s matches the slipping pivot's {ph['analytic']:.9f} /s "
         f"({fmt(ph['sigmas'], '+.1f')} σ), and a tilt keeps its direction to {ph['max_drift']:.1e} rad."]
     if three:
         parts.append(
@@ -55,23 +64,32 @@ def verdict(R: dict) -> str:
     else:
         parts.append("The `physical` release map does not show three clean sectors on every ring.")
     parts.append(
-        f"On the converged seed-slice maps, {len(pts)} clean three-face boxes were refined: {len(verts)} closed on a "
+        f"On the converged seed-slice maps, {len(pts)} of the {sum(m['n_candidates'] for m in R['triple']['maps'])} "
+        f"clean three-face boxes were refined: {len(verts)} closed on a "
         f"point (to {R['triple']['tol']:.0e}), {len(clean)} of them with three sectors on every circle down to "
         f"{min(R['triple']['radii']):.0e} of the window.")
     if clean:
         med_c = float(np.median(ctrl)) if ctrl else math.nan
+        same = sum(p["labels"] == faces_up(p["throw"]["node"]) for p in clean)
         parts.append(
             f"Their throws come within D = {min(d_v):.3g} … {max(d_v):.3g} of a corner balance (median of the "
-            f"random and two-face-border throws: {med_c:.3g}).")
-        near = max(d_v) < (min(ctrl) if ctrl else math.inf)
+            f"random and two-face-border throws: {med_c:.3g}), and at {same} of the {len(clean)} points the three "
+            "faces that meet are the three that can come up from a balance on the node the throw comes nearest to.")
+        below = max(d_v) < (min(ctrl) if ctrl else math.inf)
+        if below and max(d_v) < NEAR_D:
+            how = ("Every such throw passes nearer a corner balance than any control throw, within the linear range "
+                   f"(D < {NEAR_D:g}): the corner balance is their mechanism.")
+        elif below:
+            how = ("Every such throw passes nearer a corner balance than any control throw, but none comes within "
+                   f"the linear range (D < {NEAR_D:g}): they cross over a corner still turning, so the corner "
+                   "balance is not shown to be their mechanism.")
+        else:
+            how = ("Not every such throw passes nearer a corner balance than the control throws, so the corner "
+                   "balance is not shown to be their mechanism.")
         parts.append(
             "**Refuted:** isolated points where three faces meet exist in the converged model's 2-D slices, as a "
             "codimension-2 set of the 6-D IC space must cut a generic plane; three cells meeting need not be a "
-            "point of IC⁶ joining 7 cells. " + (
-                "Every such throw passes nearer a corner balance than any control throw: the corner balance is "
-                "their mechanism." if near else
-                "Not every such throw passes nearer a corner balance than the control throws, so the corner "
-                "balance is not shown to be the only mechanism."))
+            "point of IC⁶ joining 7 cells. " + how)
     elif three:
         parts.append(
             "**Refuted in principle** (the release map has its triple point at the balance, a codimension-2 set), "
@@ -96,7 +114,7 @@ def _rates_table(R: dict, out: Output) -> None:
     rows = [
         {"model": ra["physical"]["model"], "release": "at rest, 1e-10 rad",
          "analytic": b["physical"]["rate"], "rigid": b["physical"]["rate_rigid"],
-         "sim": pm(ra["physical"]["rate"], ra["physical"]["error"], ".6f"),
+         "sim": pm(ra["physical"]["rate"], ra["physical"]["error"], ".9f"),
          "sig": ra["physical"]["sigmas"], "drift": ra["physical"]["max_drift"]},
         {"model": ra["seed_converged"]["model"], "release": f"turning, {ra['seed_converged']['tilt0']:.0e} rad",
          "analytic": b["seed"]["rate"], "rigid": b["seed"]["rate_rigid"],
@@ -179,13 +197,14 @@ def _triple_tables(R: dict, out: Output) -> None:
                      "labels": " ".join(str(v) for v in p.get("labels", [])), "x": p.get("x"), "y": p.get("y"),
                      "size": p.get("size"),
                      "circ": (" ".join(str(c["n_arcs"]) for c in p["circles"]) if "circles" in p else None),
-                     "d": th.get("d_min"), "tilt": th.get("tilt"), "omega": th.get("omega"), "t": th.get("t_min")})
+                     "d": th.get("d_min"), "tilt": th.get("tilt"), "omega": th.get("omega"), "spin": th.get("spin"),
+                     "t": th.get("t_min")})
     out.tables["points"] = md_table(rows, [
         ("window", "window", ""), ("box", "box", ""), ("status", "refinement", ""), ("depth", "depth", "d"),
         ("labels", "faces", ""),
         ("x", "x", ".12f"), ("y", "y", ".12f"), ("size", "located to", ".1e"),
         ("circ", "arcs on circles 1e-3 … 1e-7", ""), ("d", "D_min", ".3g"), ("tilt", "tilt at D_min (rad)", ".2e"),
-        ("omega", "|ω| there (rad/s)", ".3g"), ("t", "at t (s)", ".3f")])
+        ("omega", "ω⊥ there (rad/s)", ".3g"), ("spin", "spin there (rad/s)", ".3g"), ("t", "at t (s)", ".3f")])
 
 
 def _triple_figure(R: dict, maps: dict, out: Output) -> None:
@@ -218,10 +237,9 @@ def _triple_figure(R: dict, maps: dict, out: Output) -> None:
                   title="How near each throw passes a corner balance", legend=False, caption=(
                       "Left: the converged maps, with the located triple points (stars) and the boxes that split "
                       "(grey crosses). Right: the closest approach D_min = min over the throw of "
-                      "√(α² + (|ω|/λ)² + (|U|/λd)²) (0 at the corner balance, 0.62 at rest on an edge, "
-                      "0.96 on a "
-                      "face) of the throws through the triple points, against random throws and throws on two-face "
-                      "borders of the same maps."))
+                      "√(α² + (|ω⊥|/λ)² + (|U|/λd)²) (ω⊥: across the pivot–centre axis; 0 at the corner "
+                      "balance, 0.62 at rest on an edge, 0.96 on a face) of the throws through the triple points, "
+                      "against random throws and throws on two-face borders of the same maps."))
 
 
 def _recording(R: dict, out: Output) -> None:
