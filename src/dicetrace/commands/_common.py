@@ -17,9 +17,16 @@ import sys
 import warnings
 from pathlib import Path
 
+import click
 import typer
 
+try:  # typer >= 0.20 vendors its own click
+    from typer._click import exceptions as _typer_click
+except ImportError:  # pragma: no cover - older typer uses click itself
+    _typer_click = None
+
 from dicetrace.commands._compiling import compile_notice
+from dicetrace.sinks._common import OutputError, destination, output_folder, staged
 
 EXIT_BAD_INPUT = 2
 EXIT_NUMERICAL_FAILURE = 1  # a throw ended in a numerical failure (non_finite, blow_up): simulate, record, scan --strict
@@ -45,16 +52,10 @@ def one_line(text) -> str:
 
 def _click_exceptions():
     """(UsageError, ClickException, Exit) classes of both click and typer's vendored click."""
-    import click
-
     usage, cexc, exits = [click.exceptions.UsageError], [click.exceptions.ClickException], [click.exceptions.Exit]
-    try:  # typer >= 0.20 vendors its own click
-        from typer._click import exceptions as tce
-
-        usage.append(tce.UsageError)
-        cexc.append(tce.ClickException)
-    except ImportError:  # pragma: no cover - older typer uses click itself
-        pass
+    if _typer_click is not None:
+        usage.append(_typer_click.UsageError)
+        cexc.append(_typer_click.ClickException)
     exits.append(typer.Exit)
     return tuple(usage), tuple(cexc), tuple(exits)
 
@@ -62,7 +63,7 @@ def _click_exceptions():
 def _immediate(category) -> bool:
     """dicetrace's own notices are shown as they happen."""
     try:
-        from dicetrace.scan.folder import ScanWarning
+        from dicetrace.scan.folder import ScanWarning  # lazy: keeps `dicetrace --help` fast (imports numba)
     except ImportError:  # pragma: no cover
         return False
     return issubclass(category, ScanWarning)
@@ -173,8 +174,6 @@ def output_file(path, option: str, *, suffix: str | None = None, allow_stdout: b
     regular file; a character device, a FIFO or ``-`` (standard output)
     are written directly.  Nothing is created.
     """
-    from dicetrace.sinks._common import OutputError, destination
-
     try:
         return destination(path, what=option, suffix=suffix, allow_stdout=allow_stdout, expected_bytes=expected_bytes)
     except OutputError as e:
@@ -183,8 +182,6 @@ def output_file(path, option: str, *, suffix: str | None = None, allow_stdout: b
 
 def output_dir(path, option: str, *, expected_bytes=None) -> Path:
     """An output folder option checked before any work (exists or can be made; writable), or a one-line failure."""
-    from dicetrace.sinks._common import OutputError, output_folder
-
     try:
         return output_folder(path, what=option, expected_bytes=expected_bytes)
     except OutputError as e:
@@ -204,7 +201,5 @@ def atomic_path(path: Path):
     Nothing is left behind on failure, and an existing file is untouched
     until the new one is complete.
     """
-    from dicetrace.sinks._common import staged
-
     with staged(path) as tmp:
         yield tmp

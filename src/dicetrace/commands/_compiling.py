@@ -14,9 +14,11 @@ import contextlib
 import sys
 import time
 
+from rich.console import Console
+
 
 def _message() -> str:
-    from dicetrace.core._jit import CACHE
+    from dicetrace.core._jit import CACHE  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     why = "first run only: they are cached for later runs" if CACHE else "DICETRACE_CACHE=0: not cached"
     return f"compiling the simulation kernels ({why})…"
@@ -33,8 +35,7 @@ def compile_notice(stream=None):
     if not tty:
         yield
         return
-    from numba.core import event
-    from rich.console import Console
+    from numba.core import event  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     console = Console(file=stream, stderr=stream is sys.stderr)
     state = {"depth": 0, "t0": 0.0, "total": 0.0, "status": None}

@@ -25,14 +25,21 @@ from __future__ import annotations
 
 import shlex
 import sys
+import time
 from pathlib import Path
 from typing import Optional
 
 import typer
 
-from dicetrace.commands._common import fail
+from dicetrace.commands._common import fail, parse_floats
 from dicetrace.integrators import REMOVED, unknown_integrator
+from dicetrace.params import INTEGRATORS, PRESETS
+from dicetrace.studies import study_accuracy as acc
+from dicetrace.studies import study_friction as fr
+from dicetrace.studies import study_stability as stab
 from dicetrace.studies.outputs import default_out, prepare_out
+from dicetrace.studies.study_accuracy_render import write_study
+from dicetrace.windows import get_window
 
 _REGENERATE = ("Default ./dicetrace-results/{name}; the committed results: --out analysis/accuracy "
                "(full runs only).")
@@ -82,11 +89,6 @@ def run_accuracy(*, window: Optional[str] = None, n: Optional[int] = None, seed:
                  threads: Optional[int] = None, out: Optional[Path] = None, quiet: bool = False,
                  command: str = "dicetrace analyze accuracy") -> None:
     """The work-precision study: every option checked (one line, exit 2), then run and written."""
-    from dicetrace.params import INTEGRATORS, PRESETS
-    from dicetrace.studies import study_accuracy as acc
-    from dicetrace.studies.study_accuracy_render import write_study
-    from dicetrace.windows import get_window
-
     window = acc.DEFAULT_WINDOW if window is None else window
     seed = acc.DEFAULT_SEED if seed is None else seed
     threads = 2 if threads is None else threads
@@ -120,10 +122,6 @@ def run_stability(*, quick: bool = False, presets: Optional[str] = None, integra
                   k_values: Optional[str] = None, out: Optional[Path] = None, quiet: bool = False,
                   command: str = "dicetrace analyze stability") -> None:
     """The stable-step map: every option checked (one line, exit 2), then run and written."""
-    from dicetrace.commands._common import parse_floats
-    from dicetrace.params import INTEGRATORS, PRESETS
-    from dicetrace.studies import study_stability as stab
-
     # every option is checked before anything touches the disk or computes
     ps = _names(presets, tuple(PRESETS), "--presets", "preset") or stab.PRESETS
     integs = _names(integrators, tuple(INTEGRATORS), "--integrator", "integrator")
@@ -148,11 +146,7 @@ def run_stability(*, quick: bool = False, presets: Optional[str] = None, integra
 def run_friction(*, quick: bool = False, out: Optional[Path] = None, quiet: bool = False,
                  command: str = "dicetrace analyze friction") -> None:
     """The friction-regularisation study (one numba thread: its CPU times are per throw on one core)."""
-    import time
-
-    import numba
-
-    from dicetrace.studies import study_friction as fr
+    import numba  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     folder = _out_dir(out, "friction", {"--quick": quick})
     threads = numba.get_num_threads()
@@ -170,8 +164,6 @@ def run_friction(*, quick: bool = False, out: Optional[Path] = None, quiet: bool
 
 def register(app: typer.Typer) -> None:
     """``dicetrace accuracy`` and ``dicetrace stability``: aliases of ``dicetrace analyze accuracy|stability``."""
-    from dicetrace.studies import study_accuracy as acc
-
     @app.command("accuracy")
     def accuracy_cmd(
         window: str = typer.Option(acc.DEFAULT_WINDOW, "--window", help="Window of the seed slice: a name (home, zoom-out, ...) or x0,x1,y0,y1."),

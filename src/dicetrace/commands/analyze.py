@@ -46,8 +46,16 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail
+from dicetrace.commands.accuracy import command_line, run_accuracy, run_friction, run_stability
+from dicetrace.commands.options import config_errors
+from dicetrace.devices import resolve_device
 from dicetrace.studies import INTEGRATOR_STUDIES, INTEGRATOR_TITLES, LETTERS, TITLES, resolve
+from dicetrace.studies import runner as studies_runner
+from dicetrace.studies import study_accuracy as acc
+from dicetrace.studies.context import DEFAULT_SEED, Options
 from dicetrace.studies.outputs import default_out, prepare_out
+from dicetrace.studies.report import build as build_report
+from dicetrace.studies.study_converged import check_overrides
 
 #: The studies as ``analyze --help`` lists them: letter (writeup studies), name, what it is about.
 STUDIES_HELP = "\n".join(f"  {letter}  {name:<11} {TITLES[name]}" for letter, name in LETTERS.items())
@@ -103,8 +111,6 @@ def _not_taken(kind: str, name: str, given: dict) -> None:
 
 
 def register(app: typer.Typer) -> None:
-    from dicetrace.studies import study_accuracy as acc
-
     @app.command("analyze", help=_help())
     def analyze_cmd(
         study: Optional[list[str]] = typer.Argument(None, help="Study names or letters (listed above), or all.",
@@ -145,8 +151,6 @@ def register(app: typer.Typer) -> None:
                                          "OUT/results/*.json (no simulation)."),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="Integrator studies: no progress lines."),
     ) -> None:
-        from dicetrace.studies.context import DEFAULT_SEED
-
         # every option is checked before anything touches the disk or computes
         given = {"--quick": quick, "--out": out is not None, "--res": res is not None, "--seed": seed is not None,
                  "--integrator": integrator is not None, "--tol": tol is not None, "--window": window is not None,
@@ -162,9 +166,7 @@ def register(app: typer.Typer) -> None:
                 fail(f"{extra[0]}: --report-only runs no study, so it takes no {', '.join(extra)}")
             if not (target / "results").is_dir():
                 fail(f"--out {str(target)!r} has no results/ folder to build a report from")
-            from dicetrace.studies.report import build
-
-            print(f"wrote {build(target)}")
+            print(f"wrote {build_report(target)}")
             return
         if not study:
             fail("name the studies to run (or all)")
@@ -191,16 +193,12 @@ def register(app: typer.Typer) -> None:
             prepare_out(target, full=options.full, why=why)
         except ValueError as e:
             fail(f"--out: {e}")
-        from dicetrace.studies.runner import run
-
-        run(names, options=options, out=target, report=not no_report)
+        studies_runner.run(names, options=options, out=target, report=not no_report)
 
 
 def _integrator_study(name: str, *, window, n, seed, quick, presets, integrators, k_values, threads, out,
                       quiet) -> None:
     """Run integrator study ``name`` (its options already known to be its own; each is checked there)."""
-    from dicetrace.commands.accuracy import command_line, run_accuracy, run_friction, run_stability
-
     command = command_line(f"analyze {name}")
     if name == "accuracy":
         run_accuracy(window=window, n=n, seed=seed, quick=quick, presets=presets, integrators=integrators,
@@ -218,16 +216,11 @@ SEED_RANGE = (0, 2**64)
 
 def _checked_options(names, *, quick, res, seed, integrator, tol, device, no_cache):
     """The run's :class:`~dicetrace.studies.context.Options`, each option checked (one line naming it, exit 2)."""
-    from dicetrace.commands.options import config_errors
-    from dicetrace.studies.context import DEFAULT_SEED, Options
-
     if res is not None and res < 3:
         fail(f"--res must be at least 3, got {res}")
     if seed is not None and not SEED_RANGE[0] <= seed < SEED_RANGE[1]:
         fail(f"--seed must be an integer in [0, 2**64), got {seed}")
     if integrator is not None or tol is not None:
-        from dicetrace.studies.study_converged import check_overrides
-
         try:  # the configuration layer checks both (a ConfigError names its field, so its option)
             with config_errors({"--integrator": integrator, "--tol": tol}):
                 check_overrides(integrator, tol)
@@ -236,16 +229,12 @@ def _checked_options(names, *, quick, res, seed, integrator, tol, device, no_cac
             fail(f"{given}: {e}")
     where = "cpu"
     if device is not None:
-        from dicetrace.devices import resolve_device
-
         with config_errors():  # a DeviceError: one line naming --device (cuda without a GPU)
             where = resolve_device(device)
     options = Options(quick=quick, res=res, seed=DEFAULT_SEED if seed is None else seed, no_cache=no_cache,
                       integrator=integrator, tol=tol, device=where)
-    from dicetrace.studies.runner import check_memory
-
     try:
-        check_memory(names, options)
+        studies_runner.check_memory(names, options)
     except ValueError as e:
         fail(str(e))
     return options

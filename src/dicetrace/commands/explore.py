@@ -21,6 +21,9 @@ without a GPU), nothing served.
 
 from __future__ import annotations
 
+import os
+import sys
+import webbrowser
 from pathlib import Path
 from typing import Optional
 
@@ -28,6 +31,8 @@ import typer
 
 from dicetrace.commands._common import fail, output_dir
 from dicetrace.commands.options import DEVICE_HELP, INTEGRATOR_HELP, PRESET_HELP, device_or_fail
+from dicetrace.explore.server import check_budget, check_host, check_port, check_threads, make_view, serve_forever
+from dicetrace.explore.view import ViewError
 
 WINDOW_HELP = "Start window: a name (red-sea, home, party, green-island, ...) or x0,x1,y0,y1."
 
@@ -58,9 +63,6 @@ def register(app: typer.Typer) -> None:
             "longer is refused with a message (fewer pixels or a longer dt)."),
     ) -> None:
         """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer."""
-        from dicetrace.explore.server import check_budget, check_host, check_port, check_threads, make_view, serve_forever
-        from dicetrace.explore.view import ViewError
-
         try:
             view = make_view(slice_name, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
         except ViewError as e:
@@ -79,8 +81,6 @@ def register(app: typer.Typer) -> None:
         def ready(url: str) -> None:
             print(f"dicetrace explore: serving {url}  (maps on {label}; Ctrl-C to stop)", flush=True)
             if not no_browser:
-                import webbrowser
-
                 webbrowser.open(url)
 
         try:
@@ -92,9 +92,6 @@ def register(app: typer.Typer) -> None:
             # Ctrl-C: the server has stopped (every map cancelled, nothing half-written: a save in progress is a
             # resumable scan folder).  A kernel call can still be running on a worker thread and the interpreter's
             # own teardown of numba's compiled code takes a second or more, so end the process now.
-            import os
-            import sys
-
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(0)

@@ -23,8 +23,21 @@ import math
 import numpy as np
 
 from dicetrace.commands._common import fail, parse_floats
-from dicetrace.devices import DeviceError
-from dicetrace.params import INTEGRATORS, PRESETS, TOL_LOOSEST, TOL_MIN, ConfigError, Numerics
+from dicetrace.devices import DeviceError, device_label, resolve_device
+from dicetrace.ic_arrays import IC_FIELDS
+from dicetrace.ics import SLICES
+from dicetrace.params import (
+    INTEGRATORS,
+    PRESETS,
+    TOL_LOOSEST,
+    TOL_MIN,
+    ConfigError,
+    Numerics,
+    convert_l,
+    get_preset,
+    make_config,
+)
+from dicetrace.stepsize import impact_speed_cm_s
 
 IC_HELP = (
     "One IC: VX,VY,VZ,LX,LY,LZ: centre-of-mass velocity (cm/s) and angular momentum "
@@ -114,16 +127,12 @@ def config_errors(given: dict | None = None, *, fallback: str = "--preset", **re
 def device_or_fail(device: str) -> str:
     """Where ``--device DEVICE`` runs here, as a result records it (``"cpu"`` or ``"cuda: <GPU name>"``), or a
     one-line failure naming ``--device`` (``cuda`` without a GPU).  ``auto`` says which it took, in one line."""
-    from dicetrace.devices import device_label, resolve_device
-
     with config_errors():
         return device_label(resolve_device(device))
 
 
 def preset_or_fail(name: str):
     """The :class:`~dicetrace.params.Preset` named ``--preset NAME`` (looked up once a command), or a one-line failure."""
-    from dicetrace.params import get_preset
-
     with config_errors():
         return get_preset(name)
 
@@ -142,9 +151,6 @@ def build_config(
     the fastest first impact of ``ics`` (see ``dicetrace.stepsize.auto_dt``),
     or refuses.
     """
-    from dicetrace.params import make_config
-    from dicetrace.stepsize import impact_speed_cm_s
-
     given = {"--preset": getattr(preset, "name", preset), "--integrator": integrator, "--dt": dt, "--t-max": t_max,
              "--tol": tol, "--tol-growth": tol_growth}
     model = preset_or_fail(preset) if isinstance(preset, str) else preset
@@ -174,8 +180,6 @@ def get_slice(name: str | None, ndim: int | None = None):
     ``seed`` given 3 coordinates is the writeup's 3-D seed slice (``seed3``),
     as :func:`dicetrace.ics.seed_slice` with z.
     """
-    from dicetrace.ics import SLICES
-
     if name not in SLICES:
         fail(f"--slice: unknown slice {name!r} (choose from {', '.join(SLICES)})")
     sl = SLICES[name]
@@ -192,9 +196,6 @@ def slice_ics(name: str, coords: np.ndarray, l_convention: str, what: str = "--a
     The seed slices give the 2019 program's L; a preset that takes the
     physical L (``physical``) gets it negated, so the throw is the same.
     """
-    from dicetrace.ic_arrays import IC_FIELDS
-    from dicetrace.params import convert_l
-
     coords = np.asarray(coords, dtype=np.float64)
     sl = get_slice(name, coords.shape[1])
     with np.errstate(all="ignore"):  # overflow shows as a non-finite IC, refused below in one line

@@ -28,6 +28,7 @@ Exit codes: 0 done (settled or time cap); 1 numerical failure (status
 
 from __future__ import annotations
 
+import hashlib
 import os
 import sys
 from pathlib import Path
@@ -53,6 +54,21 @@ from dicetrace.commands.options import (
     ic_from_options,
     preset_or_fail,
 )
+from dicetrace.params import Numerics
+from dicetrace.sinks._common import Staging, human_bytes
+from dicetrace.sinks.rerun_channels import CHANNELS, parse_channels
+from dicetrace.sinks.rerun_stream import (
+    DEFAULT_PORT,
+    DEFAULT_WEB_PORT,
+    Stream,
+    StreamError,
+    check_connect,
+    check_serve,
+    check_spawn,
+    parse_bind,
+    quiet_sdk_logs,
+    wait_serving,
+)
 
 DEFAULT_FOLDER = Path("recordings")
 
@@ -65,9 +81,6 @@ def default_name(ic, coords, desc: dict, cfg, channels=frozenset()) -> str:
     different content never get the same default name, so a default-named file is only ever
     replaced by a recording of the same throw with the same content.
     """
-    from dicetrace.params import Numerics
-    from dicetrace.sinks.rerun_channels import CHANNELS
-
     if desc.get("kind") == "scan":
         parts = [Path(desc["scan"]).resolve().name or "scan"] + [f"{a}{fmt_num(v)}" for a, v in zip("xyz", coords)]
     elif desc.get("kind") == "slice":
@@ -97,8 +110,6 @@ def default_name(ic, coords, desc: dict, cfg, channels=frozenset()) -> str:
 def compare_name(name: str, all_ics, eps, layout: str) -> str:
     """The default file stem of a comparison: ``<first throw's name>_nudge<EPS>`` for one nudged throw, else
     ``compare<N>_<first throw's name>_<digest of every IC>``; ``_side`` for the side-by-side layout."""
-    import hashlib
-
     if eps is not None and len(all_ics) == 2:
         out = f"{name}_nudge{fmt_num(eps)}"
     else:
@@ -139,8 +150,8 @@ def check_record_size(cfg, n_throws: int = 1, forces: bool = False) -> None:
 
     The worst case is throws that run to the time cap: max_steps + 1 rows each.
     """
+    # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.simulate import Record, available_memory, trace_bytes
-    from dicetrace.sinks._common import human_bytes
 
     steps = cfg.numerics.max_steps
     need = trace_bytes(steps + 1, Record(states=True, energy=True, forces=forces)) * RECORD_MEMORY_FACTOR * n_throws
@@ -166,7 +177,7 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
         fail(f"--scan {str(folder)!r} is not a folder")
     coords = parse_floats(at, None, "--at")
     try:
-        from dicetrace.scan import ic_at, scan_definition
+        from dicetrace.scan import ic_at, scan_definition  # lazy: keeps `dicetrace --help` fast (imports numba)
 
         the_ic, cfg, row = ic_at(folder, coords)
         slice_name = scan_definition(folder).space.slice.name
@@ -234,8 +245,6 @@ def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, w
 
 def check_bind(bind: str | None) -> str:
     """The address --serve / --spawn listen on (default 127.0.0.1); one-line failure."""
-    from dicetrace.sinks.rerun_stream import parse_bind
-
     try:
         return parse_bind(bind)
     except ValueError as e:
@@ -311,8 +320,6 @@ def register(app: typer.Typer) -> None:
         failure (the files are still written for inspection), 2 on bad input or an unreachable
         viewer or server.
         """
-        from dicetrace.sinks.rerun_stream import DEFAULT_PORT, DEFAULT_WEB_PORT, StreamError, quiet_sdk_logs
-
         quiet_sdk_logs()  # before rerun is imported: failures are one line of ours, not the SDK's log lines
         ics = list(ic or [])
         mode = check_sinks(spawn, connect, serve, url, serve_for, port, web_port, bind)
@@ -320,8 +327,6 @@ def register(app: typer.Typer) -> None:
         serve_s = parse_seconds(serve_for, "--serve-for")
         eps = parse_nudge(nudge)
         comparing = len(ics) > 1 or eps is not None
-        from dicetrace.sinks.rerun_channels import parse_channels
-
         try:
             chans = parse_channels(channels)
         except ValueError as e:
@@ -330,7 +335,7 @@ def register(app: typer.Typer) -> None:
             fail("--channels records one throw: drop it when comparing throws (several --ic or --nudge)")
         if comparing and parquet is not None:
             fail("--parquet records one throw: drop it when comparing throws (several --ic or --nudge)")
-        from dicetrace.sinks.rerun_compare import LAYOUTS
+        from dicetrace.sinks.rerun_compare import LAYOUTS  # lazy: keeps `dicetrace --help` fast (imports numba)
 
         if layout is not None and layout not in LAYOUTS:
             fail(f"--layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
@@ -370,16 +375,10 @@ def register(app: typer.Typer) -> None:
                 fail(f"--out {str(out)!r} and --parquet {str(parquet)!r} are the same path")
         try:
             if mode == "connect":
-                from dicetrace.sinks.rerun_stream import check_connect
-
                 target = check_connect(url)
             elif mode == "serve":
-                from dicetrace.sinks.rerun_stream import check_serve
-
                 check_serve(port or DEFAULT_PORT, web_port or DEFAULT_WEB_PORT, host)
             elif mode == "spawn":
-                from dicetrace.sinks.rerun_stream import check_spawn
-
                 check_spawn(port or DEFAULT_PORT, host)
         except StreamError as e:
             fail(str(e))
@@ -387,7 +386,7 @@ def register(app: typer.Typer) -> None:
             fail(f"--url {url}: {e}")
         check_record_size(cfg, len(all_ics), "forces" in chans)
 
-        from dicetrace.simulate import Record, simulate
+        from dicetrace.simulate import Record, simulate  # lazy: keeps `dicetrace --help` fast (imports numba)
 
         rec_what = Record(states=True, energy=True, forces="forces" in chans)
         rolls = [simulate(v, config=cfg, record=rec_what) for v in all_ics]
@@ -407,8 +406,7 @@ def register(app: typer.Typer) -> None:
 
         written = []
         if dest is not None:
-            from dicetrace.sinks._common import Staging
-            from dicetrace.sinks.rerun import encode_rrd
+            from dicetrace.sinks.rerun import encode_rrd  # lazy: keeps `dicetrace --help` fast (imports numba)
 
             # Everything is staged first and put in place together: a failure (a full
             # disk) leaves neither a half-written file nor a recording without its tables.
@@ -433,8 +431,6 @@ def register(app: typer.Typer) -> None:
         stream_out = sys.stderr if (dest is not None and dest.kind == "stdout") or sys.stdout is None else sys.stdout
         sent = ""
         if mode is not None:
-            from dicetrace.sinks.rerun_stream import Stream, wait_serving
-
             st = Stream(blueprint)
             try:
                 if mode == "connect":

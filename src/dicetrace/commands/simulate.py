@@ -28,7 +28,10 @@ from typing import Optional
 
 import numpy as np
 import typer
+from rich.console import Console
+from rich.table import Table
 
+import dicetrace
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_file
 from dicetrace.commands.options import (
     AT_HELP,
@@ -47,6 +50,7 @@ from dicetrace.commands.options import (
     preset_or_fail,
     slice_ics,
 )
+from dicetrace.sinks._common import STDOUT, _stdout_open, write_bytes
 from dicetrace.status import Status
 
 FORMATS = ("table", "csv", "json")
@@ -125,6 +129,7 @@ def run_ics(ics: np.ndarray, cfg):
 
     (Both are bit-identical; the single throw skips the batch's thread start-up.)
     """
+    # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.simulate import BatchResult, simulate, simulate_batch
 
     if len(ics) != 1:
@@ -204,9 +209,6 @@ def plain_table(names, rows) -> str:
 
 def terminal_table(names, rows, stream) -> None:
     """The table on a terminal: rich's, fitted to its width; beyond TTY_ROWS rows only the first, a count and a hint."""
-    from rich.console import Console
-    from rich.table import Table
-
     shown = rows if len(rows) <= TTY_ROWS else rows[:TTY_HEAD]
     table = Table(box=None, header_style="bold", pad_edge=False)
     for n in names:
@@ -243,8 +245,6 @@ def render(names, rows, fmt: str, stream, *, meta: dict) -> None:
 
 def emit(names, rows, fmt: str, out, *, meta: dict) -> None:
     """Print the rows, or write them to ``out`` (a checked Destination or a path; atomically for a regular file)."""
-    from dicetrace.sinks._common import STDOUT, write_bytes
-
     if out is None or str(getattr(out, "given", out)) == STDOUT:
         if fmt == "table" and sys.stdout.isatty():
             terminal_table(names, rows, sys.stdout)
@@ -304,8 +304,6 @@ def register(app: typer.Typer) -> None:
         if fmt not in FORMATS:
             fail(f"unknown --format {fmt!r} (choose from {', '.join(FORMATS)})")
         if out is None:
-            from dicetrace.sinks._common import STDOUT, _stdout_open
-
             if not _stdout_open():
                 fail("standard output is closed: give --out FILE")
         dest = output_file(out if out is not None else STDOUT, "--out")
@@ -324,8 +322,6 @@ def register(app: typer.Typer) -> None:
 
         batch = run_ics(ic_arr, cfg)
         names, rows = result_rows(batch, coords)
-        import dicetrace
-
         meta = {
             "dicetrace_version": dicetrace.__version__,
             "config": cfg.as_dict(),
