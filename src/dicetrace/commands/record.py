@@ -394,11 +394,13 @@ def register(app: typer.Typer) -> None:
         label = labels[0]
 
         if comparing:
+            # lazy: keeps `dicetrace --help` fast (imports numba)
             from dicetrace.sinks.rerun_compare import compare_blueprint, compare_logger
 
             lay = layout or "overlay"
             log, blueprint = compare_logger(rolls, labels, name=name, layout=lay), compare_blueprint(rolls, lay)
         else:
+            # lazy: keeps `dicetrace --help` fast (imports numba)
             from dicetrace.sinks.rerun import default_blueprint, roll_logger
 
             log = roll_logger(roll, name=name, ic_label=label, channels=chans)
@@ -419,6 +421,7 @@ def register(app: typer.Typer) -> None:
                     raise staging.fail(dest, e) from None
                 written = [dest.label if dest.kind == "stdout" else str(out)]
                 if parquet is not None:
+                    # lazy: keeps `dicetrace --help` fast (imports numba)
                     from dicetrace.sinks.parquet import write_tables
 
                     meta = {"ic_label": label, **{k: v for k, v in desc.items() if k != "kind"}}
