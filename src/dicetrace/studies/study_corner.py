@@ -40,32 +40,18 @@ import time
 import numpy as np
 
 from dicetrace.studies.context import Computed, Context, Options, window_ranges
+from dicetrace.studies.study_corner_models import (HUNT_MODEL, MAP_MODEL, MODEL_OPTS, PHYSICAL,  # noqa: F401
+                                                   SEED_CONVERGED, SEED_DISCRETE, STUDY_CONVERGED, config)
 from dicetrace.studies.study_corner_render import render, verdict  # noqa: F401  (the study's render)
 
 NAME = "corner"
-#: The model of each part: make_config options.
-PHYSICAL = {"preset": "physical", "integrator": "contact-tsit5", "tol": 1e-10, "tol_growth": 0.0}
-SEED_CONVERGED = {"preset": "seed", "integrator": "contact-adaptive", "tol": 1e-9}
-SEED_DISCRETE = {"preset": "seed"}
-#: The model of the converged maps and of every refinement and bisection on them: one uniform tight tolerance.
-MAP_MODEL = HUNT_MODEL = SEED_CONVERGED
-#: The converged model of studies j-l (its die released at rest, to show where its integrator stops).
-STUDY_CONVERGED = {"preset": "seed", "integrator": "contact-adaptive", "tol": 1e-7}
 WINDOWS = ("home", "zoom-out")
 #: Ring tilts (rad) of the face maps, per model; (tilt, spin ratio) rings.
 RINGS = {"physical": ((1e-8, 0.0), (1e-6, 0.0), (1e-4, 0.0), (1e-2, 0.0), (1e-6, 1.0)),
          "seed-converged": ((1e-3, 0.0), (1e-2, 0.0), (1e-4, 1.0), (1e-3, 1.0)),
          "seed-discrete": ((1e-8, 0.0), (1e-6, 0.0), (1e-4, 0.0), (1e-2, 0.0))}
-MODEL_OPTS = {"physical": PHYSICAL, "seed-converged": SEED_CONVERGED, "seed-discrete": SEED_DISCRETE}
 #: Circle radii about a located point, as fractions of the window's width.
 RADII = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
-
-
-def config(opts: dict):
-    from dicetrace.params import make_config
-
-    kw = dict(opts)
-    return make_config(kw.pop("preset"), **kw)
 
 
 def _model_text(opts: dict) -> str:

@@ -28,7 +28,7 @@ def _deg(v):
 
 
 def faces_up(node: int) -> list[int]:
-    """The faces that can come up from a balance on ``node`` (1-8): those opposite its three faces (docs/model.md §3)."""
+    """The faces that can come up from a balance on ``node`` (1-8): those opposite its own three (docs/model.md §3)."""
     k = node - 1
     at = [6 if k & 4 else 1, 5 if k & 2 else 2, 4 if k & 1 else 3]
     return sorted(7 - f for f in at)
@@ -237,9 +237,9 @@ def _triple_figure(R: dict, maps: dict, out: Output) -> None:
                   title="How near each throw passes a corner balance", legend=False, caption=(
                       "Left: the converged maps, with the located triple points (stars) and the boxes that split "
                       "(grey crosses). Right: the closest approach D_min = min over the throw of "
-                      "√(α² + (|ω⊥|/λ)² + (|U|/λd)²) (ω⊥: across the pivot–centre axis; 0 at the corner "
-                      "balance, 0.62 at rest on an edge, 0.96 on a face) of the throws through the triple points, "
-                      "against random throws and throws on two-face borders of the same maps."))
+                      "√(α² + (|ω⊥|/λ)² + (|U|/λd)²) (ω⊥: across the pivot–centre axis; 0 at the "
+                      "corner balance, 0.62 at rest on an edge, 0.96 on a face) of the throws through the triple "
+                      "points, against random throws and throws on two-face borders of the same maps."))
 
 
 def _recording(R: dict, out: Output) -> None:
@@ -255,7 +255,7 @@ def _recording(R: dict, out: Output) -> None:
     from dicetrace.ics import seed_slice
     from dicetrace.simulate import Record, simulate
     from dicetrace.sinks.rerun import write_rrd
-    from dicetrace.studies.study_corner import HUNT_MODEL, config
+    from dicetrace.studies.study_corner_models import HUNT_MODEL, config
 
     p = verts[0]
     ic = seed_slice(np.array([p["x"]]), np.array([p["y"]]))[0]
