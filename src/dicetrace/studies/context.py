@@ -24,11 +24,14 @@ import math
 import os
 import sys
 import time
+import warnings
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from dicetrace.windows import get_window
 
 #: Default seed of the studies' perturbations and random picks.
 DEFAULT_SEED = 20191001
@@ -73,8 +76,6 @@ class Computed:
 
 def window_ranges(window) -> tuple[tuple[float, float], ...]:
     """Ranges of a window: a name in ``dicetrace.ics.WINDOWS``, or ranges (returned as tuples)."""
-    from dicetrace.windows import get_window
-
     if isinstance(window, str):
         return get_window(window, 2)
     return tuple((float(a), float(b)) for a, b in window)
@@ -107,7 +108,7 @@ class Context:
 
     def sample(self, window, res, *, slice_spec="seed", sequences=False, **overrides):
         """:func:`dicetrace.analysis.simulator.sample_window`, cached in the cache folder."""
-        from dicetrace.analysis.simulator import sample_window
+        from dicetrace.analysis.simulator import sample_window  # lazy: keeps `dicetrace --help` fast (imports numba)
         from dicetrace.core._jit import kernel_digest
 
         win = window_ranges(window)
@@ -174,7 +175,7 @@ def read_cached_sample(path: Path, key: str, window, res_t: tuple, sequences: bo
     Read with ``allow_pickle=False``: a file holding Python objects (a pickle, an object array) is refused
     by numpy before anything in it is run.  A file that does not load, is of another layout or key, or whose
     arrays do not have the grid's shape is not used."""
-    from dicetrace.analysis.simulator import WindowSample
+    from dicetrace.analysis.simulator import WindowSample  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -219,9 +220,7 @@ def read_cached_sample(path: Path, key: str, window, res_t: tuple, sequences: bo
 def _resolved(overrides: dict) -> dict:
     """The whole configuration a sample with these options runs (so that a cached grid is never one of an
     older default: a preset's tolerance, a Numerics default)."""
-    import warnings
-
-    from dicetrace.analysis.simulator import _resolve_config
+    from dicetrace.analysis.simulator import _resolve_config  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     opts = dict(overrides)
     preset = opts.pop("preset", "seed")  # sample_window's default
@@ -234,7 +233,7 @@ class Output:
     """What ``render`` gets: the output folder, figure and CSV writers, and the report's tables."""
 
     def __init__(self, out_dir: Path):
-        import matplotlib
+        import matplotlib  # matplotlib is slow to import: only when rendering
 
         matplotlib.use("Agg")
         self.out = Path(out_dir)
@@ -247,7 +246,7 @@ class Output:
 
     def save_fig(self, fig, name: str, *, key: str | None = None, caption: str = "") -> str:
         """Save a figure as a small palette PNG (< 300 KB); returns the path relative to the output folder."""
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # matplotlib and PIL: only when drawing
         from PIL import Image
 
         path = self.fig_dir / f"{name}.png"

@@ -14,11 +14,16 @@ import json
 import os
 import platform
 import time
+from importlib.metadata import version
 from pathlib import Path
 
+from dicetrace import memory  # memory.available_memory is looked up at each call (tests patch it)
 from dicetrace.devices import device_label, use_device
+from dicetrace.sinks._common import human_bytes
 from dicetrace.studies import WRITEUP_STUDIES, resolve, study_module
 from dicetrace.studies.context import Context, Options, Output, write_json
+from dicetrace.studies.report import build
+from dicetrace.studies.study_animation import NZ
 
 #: The timings file (the report reads ``run_all.*``).
 TIMINGS = "run_all"
@@ -34,7 +39,6 @@ def largest_grid(names, options: Options) -> int:
     res² × the frames of study i); 0 without ``--res`` (the studies' own sizes, which fit)."""
     if options.res is None:
         return 0
-    from dicetrace.studies.study_animation import NZ
 
     nz = NZ[1 if options.quick else 0] if "animation" in names else 1
     return int(options.res) ** 2 * nz
@@ -42,11 +46,8 @@ def largest_grid(names, options: Options) -> int:
 
 def check_memory(names, options: Options) -> None:
     """Refuse (ValueError naming --res) a run whose largest grid will not fit in the available memory."""
-    from dicetrace.memory import available_memory
-    from dicetrace.sinks._common import human_bytes
-
     nodes = largest_grid(names, options)
-    need, avail = nodes * BYTES_PER_GRID_NODE, available_memory()
+    need, avail = nodes * BYTES_PER_GRID_NODE, memory.available_memory()
     if nodes and avail is not None and need > avail:
         raise ValueError(f"--res {options.res}: the largest grid of this run ({nodes:,} nodes) needs about "
                          f"{human_bytes(need)} of memory, {human_bytes(avail)} available: use a smaller --res")
@@ -74,15 +75,13 @@ def _environment() -> dict:
     info = {"cpu_count": os.cpu_count(), "machine": platform.machine(), "python": platform.python_version(),
             "finished": time.strftime("%Y-%m-%d %H:%M:%S %Z")}
     try:
-        import numba
+        import numba  # lazy: keeps `dicetrace --help` fast (imports numba)
 
         info["numba_threads"] = numba.get_num_threads()
         info["numba"] = numba.__version__
     except ImportError:  # pragma: no cover
         pass
     try:
-        from importlib.metadata import version
-
         info["dicetrace"] = version("dicetrace")
     except Exception:  # pragma: no cover - not installed as a distribution
         pass
@@ -114,8 +113,6 @@ def run(studies, *, options: Options = Options(), out: Path, report: bool = True
             info.update(timings_s=merged, total_s=sum(merged.values()), studies=list(merged))
     path.write_text(json.dumps(info, indent=1))
     if report:
-        from dicetrace.studies.report import build
-
         build(out)
     print(f"=== done: {', '.join(names)} in {total:.1f} s ===", flush=True)
     return info

@@ -48,11 +48,15 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import pandas as pd
 
+from dicetrace import memory  # memory.available_memory is looked up at each call (tests patch it)
+from dicetrace.analysis.agreement import agreement as wilson_agreement
 from dicetrace.analysis.agreement import compare_presets, settled_agreement
 from dicetrace.analysis.scaling import convergence_order
 from dicetrace.ics import SEED_SLICE, Sample
 from dicetrace.params import INTEGRATORS, Config, convert_l, get_preset, make_config, unknown_integrator
+from dicetrace.sinks._common import human_bytes
 from dicetrace.status import Status
 from dicetrace.studies.study_accuracy_grids import grid
 from dicetrace.windows import WINDOWS, get_window
@@ -93,10 +97,7 @@ SEED_RANGE = (0, 2**64)
 
 def check_size(n: int) -> None:
     """Refuse (ValueError naming --n) a sample of ``n`` ICs whose runs will not fit in the available memory."""
-    from dicetrace.memory import available_memory
-    from dicetrace.sinks._common import human_bytes
-
-    need, avail = int(n) * BYTES_PER_IC, available_memory()
+    need, avail = int(n) * BYTES_PER_IC, memory.available_memory()
     if avail is not None and need > avail:
         raise ValueError(f"--n {n:,}: the study's runs of {n:,} ICs need about {human_bytes(need)} of memory, "
                          f"{human_bytes(avail)} available: use a smaller --n")
@@ -203,7 +204,7 @@ class Runs:
 def run_batch(ics_preset: np.ndarray, cfg: Config, *, threads: int | None = None, timed: bool = False,
               repeat: int = 1) -> Runs:
     """``simulate_batch`` over ICs already in the preset's convention (timed on request: one thread, best of ``repeat``)."""
-    from dicetrace.core.loop import BATCH_BLOCK
+    from dicetrace.core.loop import BATCH_BLOCK  # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.simulate import simulate_batch
 
     cpu = float("nan")
@@ -262,7 +263,7 @@ class Trajectory:
 
 def run_trajectory(ic_preset: np.ndarray, cfg: Config, horizon_s: float) -> Trajectory:
     """Trace one IC (preset convention) up to ``horizon_s`` (a multiple of dt) and measure what the study needs."""
-    from dicetrace.simulate import Record, simulate
+    from dicetrace.simulate import Record, simulate  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     c = replace(cfg, numerics=replace(cfg.numerics, t_max_s=horizon_s))
     r = simulate(ic_preset, config=c, record=Record(states=True, energy=True))
@@ -298,15 +299,11 @@ class StudyResult:
     preset_comparison: dict = field(default_factory=dict)
 
     def table(self):
-        import pandas as pd
-
         return pd.DataFrame(self.rows, columns=list(STUDY_COLUMNS))
 
 
 def _reference(preset, ics, ref_spec: Reference, second: Reference, floor_ics, n_traj: int, seed: int, threads, say):
     """The reference runs of one preset: its summary row, runs, chaos floors and trajectory subsample."""
-    from dicetrace.analysis.agreement import agreement as wilson_agreement
-
     say(f"[{preset}] reference {ref_spec.label} on {len(ics)} ICs")
     ref_cfg = ref_spec.config(preset)
     chk_cfg = config_for(preset, ref_spec.integrator, ref_spec.check_dt_s, tol=ref_spec.tol)

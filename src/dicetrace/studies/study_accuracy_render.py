@@ -7,7 +7,11 @@ computed: ``study.csv``, ``orders.csv``, ``reference.csv``, ``presets.json``
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
+import pandas as pd
 
 from dicetrace.params import INTEGRATORS
 from dicetrace.studies.study_accuracy import (
@@ -213,7 +217,7 @@ def _budget_points(costs, seed_cost):
 
 def plot_study(res: StudyResult, path) -> None:
     """Outcome agreement and first-impact error against CPU time per IC, one line per integrator."""
-    import matplotlib
+    import matplotlib  # matplotlib is slow to import: only when drawing
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -275,9 +279,6 @@ def plot_study(res: StudyResult, path) -> None:
 
 def write_study(res: StudyResult, out_dir, command: str) -> dict:
     """Write study.csv, orders.csv, reference.csv, work_precision.png and summary.md into ``out_dir``."""
-    import pandas as pd
-    from pathlib import Path
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {
@@ -289,8 +290,6 @@ def write_study(res: StudyResult, out_dir, command: str) -> dict:
     }
     res.table().to_csv(paths["csv"], index=False)
     if res.preset_comparison:
-        import json
-
         (out / "presets.json").write_text(json.dumps(res.preset_comparison, indent=1) + "\n")
         paths["presets"] = out / "presets.json"
     pd.DataFrame(res.orders).to_csv(paths["orders"], index=False)

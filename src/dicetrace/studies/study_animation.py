@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis.plot import animate_slices, plot_outcome_map
 from dicetrace.studies.context import MAX_FIG_BYTES, Computed, Context, Output, window_ranges
 
 NAME = "animation"
@@ -38,10 +39,8 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib
+    import matplotlib  # matplotlib is slow to import: only when drawing
     import matplotlib.pyplot as plt
-
-    from dicetrace.analysis.plot import animate_slices, plot_outcome_map
 
     g, zs = c.plot["grid"], np.asarray(c.results["z"])
     res, _, nz = c.results["res"]

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis import basins_fractions_table
 from dicetrace.analysis.cells import block_fraction_stderr, cell_stats
+from dicetrace.analysis.plot import plot_outcome_map, plot_zoom_series
 from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table
 
@@ -20,8 +22,6 @@ WINDOWS = ("home", "zoom-out", "more-out", "most-out")
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import basins_fractions_table
-
     res = ctx.res(401, 41)
     # coarser grids are subsamples of the main one (every 2nd / 4th node): same nominal points
     steps = [1, 2, 4] if (res - 1) % 4 == 0 else [1]
@@ -59,9 +59,7 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis.plot import plot_outcome_map, plot_zoom_series
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     win, res = c.results["windows"], c.results["res"]
     samples = c.plot["samples"]

@@ -41,13 +41,20 @@ are drawn by :mod:`dicetrace.studies.study_converged_render`.
 
 from __future__ import annotations
 
+import json
 import math
+import warnings
+from pathlib import Path
 
 import numpy as np
 
-from pathlib import Path
-
-from dicetrace.studies.context import Computed, Context, Options, Output
+from dicetrace.analysis import agreement
+from dicetrace.analysis.agreement import face_stats
+from dicetrace.analysis.cells import cell_stats
+from dicetrace.analysis.repetition import repetition_stats
+from dicetrace.analysis.settle import border_pairs, divergence_lambdas, fit_border, settle_stats
+from dicetrace.params import make_config
+from dicetrace.studies.context import Computed, Context, Options, Output, write_json
 from dicetrace.studies.study_converged_changes import CHANGE_SIGMA, changes
 from dicetrace.studies.study_converged_render import render, verdict_text
 
@@ -61,7 +68,7 @@ BORDERS_FULL = 12
 
 def models(integrator: str | None = None, tol: float | None = None) -> dict[str, dict]:
     """make_config options of each model: those of study j (transient), with the converged models' overrides."""
-    from dicetrace.studies.study_transient import MODELS
+    from dicetrace.studies.study_transient import MODELS  # lazy: keeps `dicetrace --help` fast (it imports numba)
 
     out = {m: dict(MODELS[m]) for m in MODEL_NAMES}
     for m in ("converged", "physical"):
@@ -74,8 +81,6 @@ def models(integrator: str | None = None, tol: float | None = None) -> dict[str,
 
 def check_overrides(integrator: str | None = None, tol: float | None = None) -> None:
     """Refuse (ValueError) an integrator or tolerance that a converged model cannot run with, before any work."""
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # make_config's notes (a tolerance a fixed step ignores) belong to the run
         for opts in models(integrator, tol).values():
@@ -83,8 +88,6 @@ def check_overrides(integrator: str | None = None, tol: float | None = None) -> 
 
 
 def model_config(opts: dict):
-    from dicetrace.params import make_config
-
     kw = dict(opts)
     return make_config(kw.pop("preset"), **kw)
 
@@ -92,7 +95,7 @@ def model_config(opts: dict):
 def settle_divergence(ctx: Context, s, cfg) -> dict:
     """Section g's settle-time divergence T ≈ T0 − ln(d)/λ at borders of this map: λ over all fitted sides
     (mean ± se, median ± bootstrap se) and over the clean fits (r < −0.995)."""
-    from dicetrace.analysis.settle import border_pairs, divergence_lambdas, fit_border
+    # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
 
     classify, settle = classify_on_slice("seed", config=cfg), settle_on_slice("seed", config=cfg)
@@ -107,14 +110,9 @@ def settle_divergence(ctx: Context, s, cfg) -> dict:
 
 def measure_map(ctx: Context, window: str, model: str, opts: dict, res: int, ref=None) -> tuple[dict, object]:
     """Every map measure of one window and model, and its certificate: (numbers, the sample)."""
-    from dicetrace.analysis import agreement
-    from dicetrace.analysis.agreement import face_stats
-    from dicetrace.analysis.cells import cell_stats
-    from dicetrace.analysis.repetition import repetition_stats
-    from dicetrace.analysis.settle import settle_stats
-    from dicetrace.analysis.simulator import classify_on_slice
+    from dicetrace.analysis.simulator import classify_on_slice  # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.analysis.transient import certify_map, converged_verdict
-    from dicetrace.studies.study_fractal import measures
+    from dicetrace.studies.study_fractal import measures  # lazy: keeps `dicetrace --help` fast (it imports numba)
 
     cfg = model_config(opts)
     s = ctx.sample(window, res, **opts)
@@ -216,11 +214,6 @@ def rerender(out, options: Options = Options()) -> Path:
     numbers (and the repetition measures, a deterministic function of the
     cached grids), and rewrites the JSON. RuntimeError if a grid is not cached.
     """
-    import json
-
-    from dicetrace.analysis.repetition import repetition_stats
-    from dicetrace.studies.context import write_json
-
     out = Path(out)
     path = out / "results" / f"{NAME}.json"
     results = json.loads(path.read_text())

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis.plot import plot_outcome_map
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.studies.context import Computed, Output
 from dicetrace.studies.study_converged_changes import CHANGE_SIGMA, MEASURES
@@ -185,8 +186,6 @@ def answers(by: dict, summary: dict, windows, sigma: float = CHANGE_SIGMA) -> di
 def render(c: Computed, out: Output) -> None:
     """The study's figures and tables, from the run's results (its windows, models and threshold as it ran)."""
     import matplotlib.pyplot as plt  # heavy, optional: only rendering needs it
-
-    from dicetrace.analysis.plot import plot_outcome_map  # imports matplotlib
 
     by, res = c.results["by"], c.results["res"]
     windows, models = tuple(c.results["windows"]), tuple(c.results["models"])

@@ -14,6 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis import boundary_fraction, chaos_sweep
+from dicetrace.analysis.plot import plot_outcome_map
+from dicetrace.analysis.simulator import classify_on_slice, run_on_slice, sample_window
+from dicetrace.params import make_config
 from dicetrace.status import LABELS, Status
 from dicetrace.studies.context import Computed, Context, Output, window_ranges
 from dicetrace.studies.text import md_table, pm
@@ -30,8 +34,6 @@ CONVERGED = {"integrator": "contact-dop853", "tol": 1e-7}
 
 def _contact_counts(ctx: Context, extra: dict) -> None:
     """Mean contact changes and airborne phases per throw, from a random sample of the window."""
-    from dicetrace.analysis.simulator import run_on_slice
-
     m = ctx.pick(4000, 200)
     pts = ctx.rng.random((m, 2)) * 0.1
     for gam in GAMMAS:
@@ -46,10 +48,6 @@ def _contact_counts(ctx: Context, extra: dict) -> None:
 
 def _dt_check(ctx: Context) -> list[dict]:
     """The same window at the program's dt and half of it, on a smaller grid."""
-    from dicetrace.analysis import boundary_fraction
-    from dicetrace.analysis.simulator import sample_window
-    from dicetrace.params import make_config
-
     rdt = ctx.pick(101, 21)
     rows = []
     for gam in GAMMAS:
@@ -66,8 +64,6 @@ def _dt_check(ctx: Context) -> list[dict]:
 
 def _chaos_rows(ctx: Context, grids, classifiers, extra, npts: int, eps, res: int):
     """``chaos_sweep`` over the γ grids at ``npts`` random points of the window; (table, rows with ``extra``)."""
-    from dicetrace.analysis import chaos_sweep
-
     pts = ctx.rng.random((npts, 2)) * 0.1
     table = chaos_sweep(grids, classifiers=classifiers, points=pts, eps_list=eps, rng=ctx.rng,
                         param_name="gamma", spacing=0.1 / (res - 1), n_blocks=4, n_boot=200)
@@ -75,9 +71,6 @@ def _chaos_rows(ctx: Context, grids, classifiers, extra, npts: int, eps, res: in
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import boundary_fraction
-    from dicetrace.analysis.simulator import classify_on_slice
-
     res = ctx.res(401, 41)
     grids, classifiers, extra = {}, {}, {}
     for gam in GAMMAS:
@@ -107,8 +100,6 @@ def compute(ctx: Context) -> Computed:
 
 def _converged_sweep(ctx: Context, eps) -> dict:
     """The sweep again with the force law integrated to convergence (``CONVERGED``), on a smaller grid."""
-    from dicetrace.analysis.simulator import classify_on_slice
-
     res = ctx.res(201, 41)
     grids, classifiers, extra = {}, {}, {}
     for gam in GAMMAS:
@@ -131,7 +122,7 @@ def _converged_sweep(ctx: Context, eps) -> dict:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     R, grids = c.results, c.plot["grids"]
     res, rows = R["res"], R["sweep"]
@@ -140,7 +131,6 @@ def render(c: Computed, out: Output) -> None:
         ("largest_outcome_frac", "most common outcome (fraction)", ".3f"), ("blow_ups", "blow-ups", "d"),
         ("mean_settle_s", "mean settle (s)", ".3f")])
     out.write_csv(c.plot["sweep_table"], "damping_sweep")
-    from dicetrace.analysis.plot import plot_outcome_map
 
     fig, axes = plt.subplots(1, len(GAMMAS), figsize=(3.4 * len(GAMMAS) + 1, 3.6))
     for ax, gam in zip(axes, GAMMAS):

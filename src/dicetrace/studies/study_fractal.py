@@ -16,6 +16,10 @@ import math
 
 import numpy as np
 
+from dicetrace.analysis import uncertainty_exponent
+from dicetrace.analysis.plot import plot_zoom_series
+from dicetrace.analysis.simulator import classify_on_slice
+from dicetrace.analysis.sweep import map_measures
 from dicetrace.studies.context import WRITEUP_WINDOWS, Computed, Context, Output, window_ranges
 from dicetrace.studies.text import md_table, pm
 
@@ -32,17 +36,12 @@ EXTRA = ("red-sea-3", "red-sea-4", "party-2", "party-3")
 
 def measures(ctx: Context, w, s, classify, *, perturb: bool, wada_grid: bool = True) -> dict:
     """:func:`~dicetrace.analysis.sweep.map_measures` of one window's map at this run's sizes."""
-    from dicetrace.analysis.sweep import map_measures
-
     return map_measures(w, s, classify, ctx.rng, perturb=perturb, wada_grid=wada_grid,
                         wada_levels=ctx.pick(12, 4), wada_segments=ctx.pick(300, 20), n_points=ctx.pick(4000, 200),
                         eps_rel=np.logspace(-8, -2, 7) if not ctx.quick else np.logspace(-4, -1, 4), log=ctx.log)
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import uncertainty_exponent
-    from dicetrace.analysis.simulator import classify_on_slice
-
     res = ctx.res(401, 41)
     classify = classify_on_slice("seed")
     samples = {}
@@ -89,9 +88,7 @@ def _table_row(r: dict) -> dict:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis.plot import plot_zoom_series
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     samples, res = c.plot["samples"], c.results["res"]
     rows = list(c.results["windows"].values())

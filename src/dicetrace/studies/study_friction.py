@@ -37,6 +37,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from dicetrace.analysis.agreement import agreement, counts_chi2_p
 from dicetrace.params import make_config
@@ -130,8 +131,6 @@ def summarise(rows: list[dict]) -> list[dict]:
 
 def render(rows: list[dict], summary: list[dict], out: Path, command: str, wall_s: float) -> dict[str, Path]:
     """``v_reg.csv`` (every run) and ``v_reg.md`` (the tables and the answer) in ``out``; their paths."""
-    import pandas as pd
-
     out.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(out / "v_reg.csv", index=False)
     n = rows[0]["n"]

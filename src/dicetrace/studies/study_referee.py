@@ -29,8 +29,29 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import stats
 
+from dicetrace.analysis import basins_fractions, edge_balance_rate, find_periods, uncertainty_exponent_perturbation
+from dicetrace.analysis.agreement import agreement
+from dicetrace.analysis.cells import slice_cell_components
+from dicetrace.analysis.edge import edge_jacobian_rate, edge_release_rate, pooled_rate
+from dicetrace.analysis.floor import chaos_floor, equivalent_perturbation
+from dicetrace.analysis.grouping import wilson_interval
+from dicetrace.analysis.junctions import junction_row, strip_map, three_sector_map
+from dicetrace.analysis.onecell import join_fraction, resolution_verdict, shift_overlap_test
+from dicetrace.analysis.prefixes import coarse_grain, prefix_entropy
+from dicetrace.analysis.repetition import texture_labels
+from dicetrace.analysis.scaling import saturation_level, unsaturated_exponent
+from dicetrace.analysis.settle import fit_border, free_pivot_rate, refit_halves
+from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
+from dicetrace.ics import seed_slice
+from dicetrace.params import convert_l, make_config
+from dicetrace.simulate import Record, simulate, simulate_batch
 from dicetrace.studies.context import Computed, Context, window_ranges
+from dicetrace.studies.study_referee_render import render as _render
+from dicetrace.studies.study_repetition import STACK_DEPTH
+from dicetrace.studies.study_settle import borders
+from dicetrace.studies.text import pm
 
 NAME = "referee"
 #: model name -> make_config options (as the transient study)
@@ -50,8 +71,6 @@ K_WINDOW = "red-sea"
 
 
 def config(model: str, **overrides):
-    from dicetrace.params import make_config
-
     opts = dict(MODELS[model])
     return make_config(opts.pop("preset"), **opts, **overrides)
 
@@ -79,8 +98,6 @@ def _uniform(ctx: Context, window, n: int) -> np.ndarray:
 
 
 def vertices(ctx: Context) -> tuple[dict, dict]:
-    from dicetrace.analysis.junctions import junction_row, strip_map, three_sector_map
-
     res_c = ctx.pick(513, 129)
     controls = [junction_row("three sectors (one triple point)", three_sector_map(res_c)),
                 junction_row("strip (three outcomes, no vertex)", strip_map(res_c))]
@@ -104,11 +121,6 @@ def vertices(ctx: Context) -> tuple[dict, dict]:
 
 
 def chaos_floors(ctx: Context) -> dict:
-    from dicetrace.analysis.agreement import agreement
-    from dicetrace.analysis.floor import chaos_floor, equivalent_perturbation
-    from dicetrace.analysis.simulator import classify_on_slice
-    from dicetrace.ics import seed_slice
-
     n = ctx.pick(2000, 40)
     deltas = FLOOR_DELTAS if not ctx.quick else (1e-12, 1e-6, 1e-2)
     out = {}
@@ -140,10 +152,6 @@ def chaos_floors(ctx: Context) -> dict:
 
 
 def alpha_unsaturated(ctx: Context) -> dict:
-    from dicetrace.analysis import uncertainty_exponent_perturbation
-    from dicetrace.analysis.scaling import saturation_level, unsaturated_exponent
-    from dicetrace.analysis.simulator import classify_on_slice
-
     n = ctx.pick(2000, 60)
     out = {}
     for w in ALPHA_WINDOWS:
@@ -177,8 +185,6 @@ def alpha_unsaturated(ctx: Context) -> dict:
 
 def _alpha_text(row: dict) -> dict:
     """The unsaturated α as the verdict quotes it ('0.88 ± 0.01'; a fit with no error bar says over how many scales)."""
-    from dicetrace.studies.text import pm
-
     if row.get("alpha") is None:
         return {"alpha_text": "none (too few changes)", "n_scales": 0}
     n = int(sum(row["used"]))
@@ -221,12 +227,6 @@ def alpha_small_scale_note(alpha: dict) -> str:
 
 
 def edge_rates(ctx: Context) -> dict:
-    from dicetrace.analysis import edge_balance_rate
-    from dicetrace.analysis.edge import edge_jacobian_rate, edge_release_rate, pooled_rate
-    from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
-    from dicetrace.analysis.settle import fit_border, free_pivot_rate, refit_halves
-    from dicetrace.studies.study_settle import borders
-
     out: dict = {"analytic_fixed_pivot": edge_balance_rate(), "analytic_free_pivot": free_pivot_rate()}
     releases = []
     cases = (("seed, contact-substep dt 0.25 ms", {"preset": "seed", "integrator": "contact-substep", "dt_s": 2.5e-4}),
@@ -288,12 +288,6 @@ def edge_rates(ctx: Context) -> dict:
 
 
 def one_cell(ctx: Context) -> dict:
-    from dicetrace.analysis import find_periods
-    from dicetrace.analysis.onecell import join_fraction, resolution_verdict, shift_overlap_test
-    from dicetrace.analysis.cells import slice_cell_components
-    from dicetrace.analysis.repetition import texture_labels
-    from dicetrace.studies.study_repetition import STACK_DEPTH
-
     res = ctx.res(401, 61)
     s = ctx.sample("zoom-out", res)
     g, h = s.labels, s.spacing
@@ -327,10 +321,6 @@ def one_cell(ctx: Context) -> dict:
 
 
 def _sequences(ctx: Context, model: str, pts: np.ndarray, min_steps_list) -> dict:
-    from dicetrace.analysis.prefixes import coarse_grain
-    from dicetrace.ics import seed_slice
-    from dicetrace.simulate import simulate_batch
-
     res = simulate_batch(seed_slice(pts[:, 0], pts[:, 1]), config=config(model))
     ctx.n_throws += len(pts)
     out = {m: [] for m in min_steps_list}
@@ -344,8 +334,6 @@ def _sequences(ctx: Context, model: str, pts: np.ndarray, min_steps_list) -> dic
 
 
 def entropy(ctx: Context) -> dict:
-    from dicetrace.analysis.prefixes import prefix_entropy
-
     n = ctx.pick(20000, 300)
     pts = _uniform(ctx, "red-sea", n)
     min_steps_list = (1, 3, 5)
@@ -368,8 +356,6 @@ def entropy(ctx: Context) -> dict:
 
 
 def _peak_penetration(ics: np.ndarray, cfg) -> np.ndarray:
-    from dicetrace.simulate import Record, simulate
-
     out = []
     for ic in ics:
         r = simulate(ic, config=cfg, record=Record(states=True))
@@ -378,16 +364,6 @@ def _peak_penetration(ics: np.ndarray, cfg) -> np.ndarray:
 
 
 def stiffness(ctx: Context) -> dict:
-    from scipy import stats
-
-    from dicetrace.analysis import basins_fractions, uncertainty_exponent_perturbation
-    from dicetrace.analysis.agreement import agreement
-    from dicetrace.analysis.grouping import wilson_interval
-    from dicetrace.analysis.scaling import saturation_level, unsaturated_exponent
-    from dicetrace.analysis.simulator import classify_on_slice
-    from dicetrace.ics import seed_slice
-    from dicetrace.params import convert_l
-
     res = ctx.res(41, 7)
     n_alpha = ctx.pick(400, 20)
     n_pen = ctx.pick(30, 3)
@@ -451,6 +427,4 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out) -> None:
-    from dicetrace.studies.study_referee_render import render as _render
-
     _render(c, out)

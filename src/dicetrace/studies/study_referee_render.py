@@ -9,7 +9,7 @@ from dicetrace.studies.text import fmt, md_table, pm
 
 
 def _vertices(R: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     V = R["vertices"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -61,7 +61,7 @@ def _delta(v, deltas) -> str:
 
 
 def _floor(R: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     F = R["floor"]
     fig, axes = plt.subplots(1, len(F), figsize=(5.5 * len(F), 4.2), squeeze=False)
@@ -98,7 +98,7 @@ def _floor(R: dict, out: Output) -> None:
 
 
 def _alpha(R: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     A = R["alpha"]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -139,7 +139,7 @@ def _alpha(R: dict, out: Output) -> None:
 
 
 def _lambda(R: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     L = R["lambda"]
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
@@ -174,7 +174,7 @@ def _lambda(R: dict, out: Output) -> None:
 
 
 def _onecell(R: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     O = R["onecell"]
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -199,7 +199,7 @@ def _onecell(R: dict, out: Output) -> None:
 
 
 def _entropy(R: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     E = R["entropy"]
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
@@ -223,7 +223,7 @@ def _entropy(R: dict, out: Output) -> None:
 
 
 def _stiffness(R: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     S = R["stiffness"]
     ks = np.array([r["k"] for r in S["rows"]])

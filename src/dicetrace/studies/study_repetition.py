@@ -20,6 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis import find_periods, label_autocorrelation, label_cells, slice_cell_components
+from dicetrace.analysis.cells import slice_joins
+from dicetrace.analysis.plot import plot_outcome_map
 from dicetrace.analysis.repetition import off_centre_max, period_overlaps, periods_rows, stripe_spacing, texture_labels
 from dicetrace.studies.context import Computed, Context, Output, window_ranges
 from dicetrace.studies.text import md_table
@@ -32,8 +35,6 @@ STACK_DEPTH = {"zoom-out": 0.25, "red-sea": 0.3}
 
 def stack_study(ctx: Context, name, res_xy, period_xy=None, min_cell=5, min_period_cell=20):
     """One 3-D stack over window ``name``: its numbers, and its label grid."""
-    from dicetrace.analysis.cells import slice_joins
-
     depth = STACK_DEPTH[name]
     win = tuple(window_ranges(name)) + ((0.0, depth),)
     s = ctx.sample(win, (res_xy, res_xy, int(round(depth * (res_xy - 1))) + 1), slice_spec="seed3")
@@ -47,8 +48,6 @@ def stack_study(ctx: Context, name, res_xy, period_xy=None, min_cell=5, min_peri
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import find_periods, label_autocorrelation, label_cells, slice_cell_components
-
     res = ctx.res(401, 61)
     sigma = max(1.0, 0.015 * (res - 1))  # 1.5 % of the window
     prow, summary, fields = [], {}, {}
@@ -91,9 +90,7 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis.plot import plot_outcome_map
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     fields = c.plot["fields"]
     fig, axes = plt.subplots(len(WINDOWS), 3, figsize=(14, 4.4 * len(WINDOWS)))

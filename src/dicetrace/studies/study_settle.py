@@ -19,7 +19,10 @@ import math
 
 import numpy as np
 
+from dicetrace.analysis import edge_balance_rate
+from dicetrace.analysis.plot import plot_settle_map
 from dicetrace.analysis.settle import border_pairs, divergence_summary, fit_border, free_pivot_rate
+from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
 from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table, pm
 
@@ -47,9 +50,6 @@ def borders(ctx: Context, preset: str, integrator, n_borders: int, res):
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import edge_balance_rate
-    from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
-
     results: dict = {"predicted": {"fixed_pivot_per_s": edge_balance_rate(), "free_pivot_per_s": free_pivot_rate()}}
     res = ctx.res(401, 41)
     maps = {}
@@ -81,9 +81,7 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis.plot import plot_settle_map
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     R = c.results
     for w, s in c.plot["maps"].items():

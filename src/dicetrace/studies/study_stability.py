@@ -12,8 +12,10 @@ and compares it with the linear bound ω·dt < ``IntegratorSpec.stability_bound`
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from dicetrace.ics import SEED_SLICE
 from dicetrace.params import INTEGRATORS, Config, Numerics, convert_l, get_preset
@@ -67,7 +69,7 @@ def extreme_corpus(seed: int = 0) -> tuple[np.ndarray, list[str]]:
 
 def corpus_stable(ics_preset: np.ndarray, cfg: Config) -> tuple[bool, int, int]:
     """(all stable, index of the first unstable IC or -1, time caps); stops at the first failure."""
-    from dicetrace.simulate import simulate
+    from dicetrace.simulate import simulate  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     caps = 0
     for i, ic in enumerate(ics_preset):
@@ -218,7 +220,7 @@ def stability_markdown(rows: list[dict], command: str) -> str:
 
 
 def plot_stability(rows: list[dict], path) -> None:
-    import matplotlib
+    import matplotlib  # matplotlib is slow to import: only when drawing
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -247,9 +249,6 @@ def plot_stability(rows: list[dict], path) -> None:
 
 
 def write_stability(rows: list[dict], out_dir, command: str) -> dict:
-    import pandas as pd
-    from pathlib import Path
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out / "stability.csv", "png": out / "stability.png", "summary": out / "stability.md"}

@@ -13,8 +13,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from dicetrace.ics import TOPOLOGY_POINTS
+from dicetrace.analysis import canonical_contact_sequence, label_cells
+from dicetrace.analysis.plot import plot_contact_tree, plot_outcome_map
 from dicetrace.analysis.prefixes import fast_components, prefix_codes, simpson
+from dicetrace.ics import TOPOLOGY_POINTS, seed_slice
+from dicetrace.simulate import simulate
 from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table
 
@@ -32,10 +35,6 @@ TREE_DEPTH = 8
 
 def three_throws() -> tuple[list[dict], list[dict]]:
     """The writeup's three throws (checked against the program) and their pairwise comparison."""
-    from dicetrace.analysis import canonical_contact_sequence
-    from dicetrace.ics import seed_slice
-    from dicetrace.simulate import simulate
-
     throws = []
     for x, y in TOPOLOGY_POINTS:
         r = simulate(seed_slice(x, y))
@@ -65,8 +64,6 @@ def three_throws() -> tuple[list[dict], list[dict]]:
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import canonical_contact_sequence, label_cells
-
     throws, pairs = three_throws()
     # ---- the red-sea grid grouped by contact sequence
     res = ctx.res(301, 41)
@@ -139,9 +136,7 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis.plot import plot_contact_tree, plot_outcome_map
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     R = c.results
     out.tables["throws"] = md_table(R["throws"], [

@@ -27,6 +27,11 @@ import math
 
 import numpy as np
 
+from dicetrace.analysis import escape_rate, survival_function, uncertainty_exponent, uncertainty_exponent_perturbation
+from dicetrace.analysis.plot import plot_outcome_map
+from dicetrace.analysis.simulator import classify_on_slice, sample_window
+from dicetrace.analysis.transient import certify_map, ftle_on_slice
+from dicetrace.params import make_config
 from dicetrace.studies.context import Computed, Context, Output, window_ranges
 from dicetrace.studies.text import md_table, pm, verdict_word
 
@@ -41,17 +46,11 @@ MODELS = {
 
 
 def _config(model: str):
-    from dicetrace.params import make_config
-
     opts = dict(MODELS[model])
     return make_config(opts.pop("preset"), **opts)
 
 
 def _measure(ctx: Context, window: str, model: str) -> tuple[dict, dict]:
-    from dicetrace.analysis import escape_rate, uncertainty_exponent, uncertainty_exponent_perturbation
-    from dicetrace.analysis.simulator import classify_on_slice, sample_window
-    from dicetrace.analysis.transient import certify_map, ftle_on_slice
-
     cfg = _config(model)
     res = ctx.res(201, 11)
     s = sample_window(window, res, config=cfg)
@@ -109,10 +108,7 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis import survival_function
-    from dicetrace.analysis.plot import plot_outcome_map
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     rows = c.results["rows"]
     fig, axes = plt.subplots(1, len(WINDOWS), figsize=(6 * len(WINDOWS), 4))

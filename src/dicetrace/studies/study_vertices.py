@@ -19,6 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from dicetrace.analysis import fit_power_law
+from dicetrace.analysis.plot import plot_zoom_series
+from dicetrace.analysis.simulator import classify_on_slice
 from dicetrace.analysis.vertices import guarded_find_vertices, triple_boxes
 from dicetrace.studies.context import Computed, Context, Output, window_ranges
 from dicetrace.studies.text import md_table, pm
@@ -54,9 +57,6 @@ def hunt(ctx: Context, classify, window, res_full, res_quick, max_squares) -> di
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import fit_power_law
-    from dicetrace.analysis.simulator import classify_on_slice
-
     classify = classify_on_slice("seed")
     hunts = [hunt(ctx, classify, *h) for h in HUNTS]
     # the program's green-island hunt as a zoom series, and triple-square counts
@@ -79,9 +79,7 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
-
-    from dicetrace.analysis.plot import plot_zoom_series
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
 
     R = c.results
     out.tables["hunts"] = md_table([{

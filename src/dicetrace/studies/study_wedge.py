@@ -14,6 +14,10 @@ import math
 
 import numpy as np
 
+from dicetrace.analysis import (
+    ball_hill_outcome, ball_hill_saddle_rate, ball_hill_separatrices, ball_hill_transit_time, fit_settle_divergence,
+)
+from dicetrace.analysis.plot import plot_ball_hill_phase_portrait
 from dicetrace.studies.context import Computed, Context, Output
 from dicetrace.studies.text import md_table, pm
 
@@ -24,13 +28,6 @@ THETA0 = math.pi / 4
 
 
 def compute(ctx: Context) -> Computed:
-    from dicetrace.analysis import (
-        ball_hill_outcome,
-        ball_hill_saddle_rate,
-        ball_hill_transit_time,
-        fit_settle_divergence,
-    )
-
     k = G / R_CM
     # outcome map of the phase plane
     n = ctx.pick(301, 61)
@@ -53,11 +50,8 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # matplotlib is slow to import: only when drawing
     from matplotlib.colors import ListedColormap
-
-    from dicetrace.analysis import ball_hill_separatrices
-    from dicetrace.analysis.plot import plot_ball_hill_phase_portrait
 
     R, wmax = c.results, c.plot["wmax"]
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
