@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import os
 import pty
+import re
 import select
 import subprocess
 import sys
@@ -57,8 +58,8 @@ def test_no_compile_no_notice_and_off_a_terminal_nothing():
 
 @pytest.mark.slow
 def test_a_cold_record_says_it_is_compiling_within_seconds(tmp_path):
-    """DICETRACE_CACHE=0 (nothing cached): in a terminal, the notice comes before the compile is done,
-    within a few seconds of the start (measured 1.2 s here), and the record finishes."""
+    """DICETRACE_CACHE=0 (nothing cached): in a terminal, the notice comes before the compile is done
+    (measured 1.2 s after the start of a compile of several seconds), and the record finishes."""
     exe = Path(sys.executable).with_name("dicetrace")
     master, slave = pty.openpty()
     env = dict(os.environ, DICETRACE_CACHE="0", COLUMNS="120")
@@ -89,6 +90,10 @@ def test_a_cold_record_says_it_is_compiling_within_seconds(tmp_path):
         proc.wait(10)
     text = buf.decode(errors="replace")
     assert proc.returncode == 0, text[-2000:]
-    assert first is not None and first < 5.0, (first, text[-500:])
-    assert "compiled the simulation kernels in" in text and "wrote" in text
+    # the notice comes first, while the compile is still running: before its end is reported, and sooner after
+    # the start than the compile lasted (a ratio of two times on the same machine, not a wall-time limit)
+    assert first is not None, text[-500:]
+    done = re.search(r"compiled the simulation kernels in ([\d.]+) s", text)
+    assert done and text.index("compiling the simulation kernels") < done.start() and "wrote" in text, text[-800:]
+    assert first < float(done.group(1)), (first, done.group(0))
     assert (tmp_path / "r.rrd").stat().st_size > 10_000

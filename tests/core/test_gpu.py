@@ -131,12 +131,14 @@ def test_cuda_without_a_gpu_is_one_error_line_and_runs_nothing():
     assert last.startswith("dicetrace.devices.DeviceError: device 'cuda': "), res.stderr
 
 
-@pytest.mark.parametrize("bad", ["gpu", "CUDA", None, 1])
+@pytest.mark.parametrize("bad", ["gpu", "CUDA", "", 1])
 def test_unknown_device_is_refused_naming_the_choices(bad):
     with pytest.raises(DeviceError, match="device must be one of cpu, cuda, auto"):
         simulate_batch(seed_slice([1.0], [1.0]), config="seed", device=bad)
     with pytest.raises(DeviceError):
         resolve_device(bad)
+    with pytest.raises(DeviceError):  # None means "the default" to simulate_batch only
+        resolve_device(None)
 
 
 def test_cpu_result_records_its_device_in_the_table_metadata():
