@@ -405,3 +405,16 @@ def test_a_batch_that_cannot_fit_is_refused_before_anything_runs(monkeypatch):
 def test_a_bad_chunk_is_refused_naming_it(bad):
     with pytest.raises(ValueError, match="^chunk must be an integer >= 1 or None"):
         simulate_batch(seed_slice([1.0], [3.5]), chunk=bad)
+
+
+def test_trace_rotation_of_a_tilted_start_is_the_start_orientation():
+    """The trace's rotation matrices read the half side off the offsets' length, so a tilted start gives its
+    own orientation at row 0 and orthonormal matrices after (the largest offset component is no half side)."""
+    from scipy.spatial.transform import Rotation
+
+    orient = Rotation.from_euler("xyz", [0.4, -0.3, 1.1]).as_matrix()
+    r = simulate([50.0, 20.0, 0.0, 400.0, -300.0, 200.0], t_max_s=0.05, orientation=orient,
+                 record=Record(states=True))
+    rot = r.trace.rotation
+    np.testing.assert_allclose(rot[0], orient, atol=1e-12)
+    np.testing.assert_allclose(np.einsum("nji,njk->nik", rot, rot), np.broadcast_to(np.eye(3), rot.shape), atol=1e-9)

@@ -98,7 +98,10 @@ class Trace:
         """World-from-body rotation matrices (n+1, 3, 3) read off the node offsets."""
         if self.node_offsets is None:
             return None
-        half = np.abs(self.node_offsets[0]).max()
+        x0 = self.node_offsets[0]
+        half = np.abs(x0).max()
+        if not np.all(np.abs(x0) == half):  # a tilted start: the half side is |x_k| / √3
+            half = float(np.linalg.norm(x0, axis=1).mean() / np.sqrt(3.0))
         # column j: Σ_k sign_kj · x_k / (8·half) is body axis j in the world frame
         return np.einsum("kj,nki->nij", NODE_SIGNS, self.node_offsets) / (8.0 * half)
 
