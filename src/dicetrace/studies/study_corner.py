@@ -1,4 +1,4 @@
-"""Study m (corner): the corner balance, its two unstable rates, the faces around it, triple points of converged maps.
+"""Study m (corner): the corner balance: its two unstable rates, the faces around it, triple points of converged maps (4.3).
 
 The writeup (section 4.3) argued that "a vertex in 6-D must connect 7
 cells, so IC⁶ has none".  A die balanced on one corner is an equilibrium
