@@ -51,6 +51,8 @@ EXCEPTIONS: dict[str, tuple[str, object]] = {
     "2016": ("a citation year (Daza et al. 2016)", None),
     "2021": ("a citation year (Puy et al. 2021)", None),
     "2003": ("a citation year (Celledoni, Marthinsen & Owren 2003)", None),
+    "2013": ("a citation year (Motter, Gruiz, Károlyi & Tél 2013)", None),
+    "2017": ("a citation year (Chen, Nishikawa & Motter 2017)", None),
     "3.51": ("Tsit5's real-axis stability reach, a property of its coefficients; tests/core/test_integrators.py",
              "tests/core/test_integrators.py"),
     # the seed 3-D slice's z direction, an input of section c's stacks (docs/model.md §11)

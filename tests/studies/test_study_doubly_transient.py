@@ -79,3 +79,11 @@ def test_quick_run_writes_every_measure(quick):
             assert t["verdict"] in ("consistent", "inconsistent", "undetermined")
             if t["verdict"] != "undetermined":
                 assert math.isfinite(t["z"]) and t["x_err"] > 0
+
+
+@pytest.mark.slow
+def test_rerender_from_the_results_changes_no_number(quick):
+    out, r = quick
+    again = dts.rerender(out)
+    assert again["tables"] == r["tables"] and again["rows"] == r["rows"]
+    assert set(again["figures"]) == set(r["figures"])

@@ -15,17 +15,21 @@ def _e(v, spec=".2g"):
     return fmt(v, spec)
 
 
-def _slopes_figure(rows, out: Output) -> None:
+def _arr(values) -> np.ndarray:
+    """A list from the results (None where a value is missing) as floats (nan)."""
+    return np.array([np.nan if v is None else v for v in values], dtype=float)
+
+
+def _slopes_figure(rows, out: Output, tol: float, floor_tol: float) -> None:
     import matplotlib.pyplot as plt
 
     fig, (a0, a1) = plt.subplots(1, 2, figsize=(12, 4.5))
     for k, r in enumerate(rows):
         col = f"C{k}"
-        eps, f, cnt = np.array(r["eps"]), np.array(r["f"], dtype=float), np.array(r["counted"], dtype=bool)
+        eps, f, cnt = np.array(r["eps"]), _arr(r["f"]), np.array(r["counted"], dtype=bool)
         a0.loglog(eps[cnt], f[cnt], "o-", color=col, label=r["condition"])
         a0.loglog(eps[~cnt & (f > 0)], f[~cnt & (f > 0)], "o", mfc="none", color=col)
-        em, s = np.array(r["eps_mid"]), np.array(r["slope"], dtype=float)
-        se = np.array(r["slope_stderr"], dtype=float)
+        em, s, se = np.array(r["eps_mid"]), _arr(r["slope"]), _arr(r["slope_stderr"])
         both = cnt[:-1] & cnt[1:]
         a1.errorbar(em[both], s[both], yerr=se[both], fmt="o-", color=col, capsize=2, label=r["condition"])
         other = ~both & np.isfinite(s)
@@ -43,7 +47,7 @@ def _slopes_figure(rows, out: Output) -> None:
     a1.set_title("local slopes (bootstrap 1σ); dotted: fitted ε_c")
     fig.tight_layout()
     out.save_fig(fig, "n_slopes", caption="Uncertainty fraction f(ε) and its local slopes for every model; filled points "
-                 "are above the numerical floor (tol 1e-9 against 1e-10) with at least 10 changed pairs; dotted lines "
+                 f"are above the numerical floor (tol {tol:g} against {floor_tol:g}) with at least 10 changed pairs; dotted lines "
                  "mark the crossover ε_c where it falls inside the counted scales.")
 
 
@@ -56,14 +60,14 @@ def _hazard_figure(rows, out: Output) -> None:
         for key, ls in (("commit", "-"), ("settle", "--")):
             hc = r["hazard"][key]["curve"]
             t = (np.array(hc["t0"]) + np.array(hc["t1"])) / 2
-            h, ev = np.array(hc["h"], dtype=float), np.array(hc["events"])
+            h, ev = _arr(hc["h"]), np.array(hc["events"])
             ok = ev >= 5
             axes[0].plot(t[ok], h[ok], ls, color=col, label=f"{r['condition']} ({key})" if key == "commit" else None)
         b = r["hazard"]["bounce"]
         axes[1].errorbar(b["n"], b["h"], yerr=b["stderr"], fmt="o-", ms=3, color=col, capsize=2, label=r["condition"])
         eh = r["lambda"]["energy_hazard"]
         e = np.sqrt(np.array(eh["t0"]) * np.array(eh["t1"]))
-        h, se, ev = (np.array(eh[x], dtype=float) for x in ("h", "stderr", "events"))
+        h, se, ev = (_arr(eh[x]) for x in ("h", "stderr", "events"))
         ok = ev >= 3
         axes[2].errorbar(e[ok], h[ok], yerr=se[ok], fmt="o-", ms=3, color=col, capsize=2, label=r["condition"])
     edge = rows[0]["edge_rate"]["rate"]
@@ -78,6 +82,7 @@ def _hazard_figure(rows, out: Output) -> None:
     axes[1].set_ylabel("P(commit at landing n | reached n)")
     axes[1].set_title("hazard per bounce")
     axes[2].set_xscale("log")
+    axes[2].set_yscale("log")
     axes[2].set_xlabel("energy above rest / energy to stand on an edge")
     axes[2].set_ylabel("commit hazard / (1/s)")
     axes[2].set_title("hazard against energy (traced random throws)")
@@ -95,20 +100,25 @@ def _tests_figure(rows, out: Output) -> None:
     x = np.arange(len(rows))
     lab = [r["condition"].replace(" ", "\n", 1) for r in rows]
     t = [r["tests"] for r in rows]
-    a0.errorbar(x - 0.1, [v["edge_late_hazard"]["x"] for v in t], yerr=[v["edge_late_hazard"]["x_err"] for v in t],
-                fmt="o", capsize=3, label="late commit hazard κ_late")
-    a0.errorbar(x + 0.1, [v["edge_late_hazard"]["y"] for v in t], yerr=[v["edge_late_hazard"]["y_err"] for v in t],
-                fmt="s", capsize=3, label="edge-release rate")
+    def col(test, key):
+        return _arr([v[test][key] for v in t])
+
+    a0.errorbar(x - 0.1, col("edge_late_hazard", "x"), yerr=col("edge_late_hazard", "x_err"), fmt="o", capsize=3,
+                label="late commit hazard κ_late")
+    a0.errorbar(x + 0.1, col("edge_late_hazard", "y"), yerr=col("edge_late_hazard", "y_err"), fmt="s", capsize=3,
+                label="edge-release rate")
     a0.set_xticks(x, lab, fontsize=7)
     a0.set_ylabel("rate / (1/s)")
     a0.set_title("edge hypothesis: κ_late → edge rate")
     a0.legend(fontsize=7)
-    a1.errorbar(x - 0.15, [r["alpha_fine"] for r in rows], yerr=[r["alpha_fine_stderr"] for r in rows], fmt="o",
-                capsize=3, label="α at the finest counted scale")
-    a1.errorbar(x, [r["beta"] for r in rows], yerr=[r["beta_stderr"] for r in rows], fmt="^", capsize=3,
-                label="β (slope above ε_c)")
-    a1.errorbar(x + 0.15, [r["kappa_over_lambda1"] for r in rows], yerr=[r["kappa_over_lambda1_stderr"] for r in rows],
-                fmt="s", capsize=3, label="κ_mid / λ₁")
+    def field(key):
+        return _arr([r[key] for r in rows])
+
+    a1.errorbar(x - 0.15, field("alpha_fine"), yerr=field("alpha_fine_stderr"), fmt="o", capsize=3,
+                label="α at the finest counted scale")
+    a1.errorbar(x, field("beta"), yerr=field("beta_stderr"), fmt="^", capsize=3, label="β (slope above ε_c)")
+    a1.errorbar(x + 0.15, field("kappa_over_lambda1"), yerr=field("kappa_over_lambda1_stderr"), fmt="s", capsize=3,
+                label="κ_mid / λ₁")
     a1.axhline(1.0, color="k", lw=0.8)
     a1.set_xticks(x, lab, fontsize=7)
     a1.set_ylabel("exponent")
@@ -120,7 +130,7 @@ def _tests_figure(rows, out: Output) -> None:
 
 def render(c: Computed, out: Output) -> None:
     rows = c.results["rows"]
-    _slopes_figure(rows, out)
+    _slopes_figure(rows, out, c.results["tol"], c.results["floor_tol"])
     _hazard_figure(rows, out)
     _tests_figure(rows, out)
     out.tables["slopes"] = md_table([{
