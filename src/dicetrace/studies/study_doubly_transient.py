@@ -23,11 +23,25 @@ thrown with ``contact-tsit5`` at a uniform tolerance of 1e-10 (no loosening over
 
 from __future__ import annotations
 
+import json
 import math
+import time
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
-from dicetrace.studies.context import Computed, Context, Output, window_ranges
+from dicetrace.analysis.doubly_transient import (commit_steps, compare, covariate_hazard, crossover_fit,
+                                                 discrete_hazard, floor_test, hazard_curve, hazard_windows,
+                                                 local_slopes, pair_divergence, perturbed, throw_floor)
+from dicetrace.analysis.edge import edge_release_rate
+from dicetrace.analysis.lyapunov import finite_time_lyapunov
+from dicetrace.analysis.settle import edge_balance_rate
+from dicetrace.ics import seed_slice
+from dicetrace.params import make_config
+from dicetrace.simulate import simulate_batch
+from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
+from dicetrace.studies.study_doubly_transient_render import render as _render
 
 NAME = "doubly_transient"
 WINDOW = "zoom-out"
@@ -58,8 +72,6 @@ FLOOR_SHARE, MIN_CHANGED = 1.0 / 3.0, 10
 
 
 def _config(cond: str, tol: float):
-    from dicetrace.params import make_config
-
     preset, over, _, _ = CONDITIONS[cond]
     return make_config(preset, tol=tol, tol_growth=0.0, **over)
 
@@ -67,8 +79,6 @@ def _config(cond: str, tol: float):
 def _edge_config(cfg):
     """The edge release's numerics: the model's, but ``seed`` (whose signed ground and degree-0 friction stop an
     error-controlled release at its first step) with ``contact-substep`` at dt 0.1 ms, as section k4 releases it."""
-    from dataclasses import replace
-
     if cfg.preset.name != "seed":
         return cfg
     return replace(cfg, numerics=replace(cfg.numerics, integrator="contact-substep", dt_s=1e-4))
@@ -81,8 +91,6 @@ def _numerics(cfg) -> dict:
 
 
 def _pair_outcomes(ics, moved, cfg):
-    from dicetrace.simulate import simulate_batch
-
     b = simulate_batch(np.concatenate([ics, *moved]), config=cfg)
     return b, b.outcome.reshape(len(moved) + 1, len(ics)).astype(np.int64)
 
@@ -92,8 +100,6 @@ def _verdicts(out):
 
 
 def _hazards(t_settle, t_commit, landings, t_cap) -> dict:
-    from dicetrace.analysis.doubly_transient import compare, discrete_hazard, hazard_curve, hazard_windows
-
     res = {}
     for key, t in (("settle", t_settle), ("commit", t_commit)):
         cen = t >= t_cap
@@ -121,9 +127,6 @@ def _hz(h) -> dict:
 
 def _traced(ctx: Context, cfg, ics, t_settle, rng, n_surv: int, n_rand: int) -> dict:
     """λ₁ on throws that outlive the median settle time and on random throws; the energy hazard (random throws)."""
-    from dicetrace.analysis.doubly_transient import commit_steps, covariate_hazard, pair_divergence
-    from dicetrace.analysis.lyapunov import finite_time_lyapunov
-
     settled = np.flatnonzero(np.isfinite(t_settle))
     med = float(np.median(t_settle[settled]))
     surv = settled[t_settle[settled] > med]
@@ -158,14 +161,6 @@ def _traced(ctx: Context, cfg, ics, t_settle, rng, n_surv: int, n_rand: int) -> 
 
 
 def _measure(ctx: Context, cond: str, index: int) -> dict:
-    from dicetrace.analysis.doubly_transient import (commit_steps, compare, crossover_fit, floor_test, local_slopes,
-                                                     perturbed, throw_floor)
-    from dicetrace.analysis.edge import edge_release_rate
-    from dicetrace.analysis.settle import edge_balance_rate
-    from dicetrace.ics import seed_slice
-
-    import time
-
     t_start = time.perf_counter()
     cfg, tight = _config(cond, TOL), _config(cond, TOL_FLOOR)
     eps = EPS_QUICK if ctx.quick else CONDITIONS[cond][2]
@@ -253,19 +248,12 @@ def compute(ctx: Context) -> Computed:
 
 
 def render(c: Computed, out: Output) -> None:
-    from dicetrace.studies.study_doubly_transient_render import render as _render
-
     _render(c, out)
 
 
 def rerender(out) -> dict:
     """Draw the figures and tables again from ``OUT/results/doubly_transient.json`` alone (the render reads nothing
     else) and write them back into it: no simulation, no number changed."""
-    import json
-    from pathlib import Path
-
-    from dicetrace.studies.context import write_json
-
     path = Path(out) / "results" / f"{NAME}.json"
     r = json.loads(path.read_text())
     output = Output(Path(out))
