@@ -55,6 +55,7 @@ def main() -> int:
         subprocess.run(["git", "clone", "-q", str(ROOT), str(clone)], check=True)
         env = {**os.environ, "CI": "true", "DICETRACE_CACHE_DIR": str(tmp / "kernels")}
         env.pop("VIRTUAL_ENV", None)
+        load_before = os.getloadavg()[0]
         t0 = time.perf_counter()
         res = subprocess.run(["bash", ".ci/run"], cwd=clone, env=env, capture_output=True, text=True)
         wall = time.perf_counter() - t0
@@ -70,6 +71,8 @@ def main() -> int:
             "pytest_summary": summary[-1][0] if summary else None,
             "machine": {"cpu": _cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
                         "system": platform.platform()},
+            # other work on the machine slows the run: the 1-minute load average before and after it
+            "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],
             "measured": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         }
         print(json.dumps(figures, indent=1))
