@@ -55,7 +55,9 @@ from dataclasses import replace
 import numpy as np
 
 from dicetrace.params import Config
+from dicetrace.simulate import Record, simulate
 
+from .lyapunov import finite_time_lyapunov
 from .simulator import _resolve_config
 
 __all__ = ["CornerBalance", "corner_balance", "corner_orientation", "corner_release", "corner_tilt",
@@ -168,8 +170,6 @@ def corner_release(cfg: Config, tilt: float, phi: float, *, spin: float = 0.0, t
     toward ``phi + π/2`` (the centre of mass moves with the rigid rotation
     about the resting pivot).  Returns the :class:`~dicetrace.simulate.Roll`.
     """
-    from dicetrace.simulate import simulate
-
     c = _release_config(cfg, tilt, t_max_s)
     ic = np.zeros(6)
     if spin:
@@ -214,10 +214,6 @@ def corner_release_rate(*, config: Config | None = None, preset: str = "physical
     leaves along ``phi + atan(spin_ratio)`` for a rigid pivot.
     ValueError when the tilt never reaches ``saturation``.
     """
-    from dicetrace.simulate import Record
-
-    from .lyapunov import finite_time_lyapunov
-
     cfg = _resolve_config(config, preset, overrides)
     spin = float(spin_ratio) * corner_balance(config=cfg).rate_rigid * float(tilt0)
     roll = corner_release(cfg, float(tilt0), float(phi), spin=spin, t_max_s=t_max_s, record=Record(states=True))

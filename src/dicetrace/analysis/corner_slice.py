@@ -31,6 +31,8 @@ import math
 
 import numpy as np
 
+from .vertices import guarded_find_vertices
+
 __all__ = ["clean_junctions", "refine_triple", "circle_sectors", "corner_distance", "arcs"]
 
 
@@ -72,8 +74,6 @@ def refine_triple(classify, centre, half_width: float, *, tol: float, res: int =
     (``"vertex"`` first, then the deepest) with ``n_rows`` and the status
     counts, and ``evals`` (throws).
     """
-    from .vertices import guarded_find_vertices
-
     cx, cy = map(float, centre)
     h = float(half_width)
     try:

@@ -34,12 +34,29 @@ The figures and tables are drawn by :mod:`dicetrace.studies.study_corner_render`
 
 from __future__ import annotations
 
+import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
-from dicetrace.studies.context import Computed, Context, Options, window_ranges
+from dicetrace.analysis.corner import (
+    EDGE_AZIMUTHS,
+    FACE_AZIMUTHS,
+    corner_balance,
+    corner_release,
+    corner_release_rate,
+    corner_tilt,
+    face_map,
+    sector_boundaries,
+)
+from dicetrace.analysis.corner_slice import circle_sectors, clean_junctions, corner_distance, refine_triple
+from dicetrace.analysis.simulator import classify_on_slice
+from dicetrace.analysis.transient import certify_map, converged_verdict
+from dicetrace.ics import seed_slice
+from dicetrace.simulate import Record, simulate
+from dicetrace.studies.context import Computed, Context, Options, Output, window_ranges, write_json
 from dicetrace.studies.study_corner_models import (HUNT_MODEL, MAP_MODEL, MODEL_OPTS, PHYSICAL,  # noqa: F401
                                                    SEED_CONVERGED, SEED_DISCRETE, STUDY_CONVERGED, config)
 from dicetrace.studies.study_corner_render import render, verdict  # noqa: F401  (the study's render)
@@ -66,8 +83,6 @@ def _model_text(opts: dict) -> str:
 
 
 def _fit(cfg, **kw):
-    from dicetrace.analysis.corner import corner_release_rate
-
     try:
         r = corner_release_rate(config=cfg, **kw)
         return {"rate": r.rate, "stderr": r.stderr, "fit_range": list(r.fit_range), "drift": r.drift,
@@ -77,9 +92,6 @@ def _fit(cfg, **kw):
 
 
 def rates(ctx: Context) -> dict:
-    from dicetrace.analysis.corner import corner_balance, corner_release, corner_tilt
-    from dicetrace.simulate import Record
-
     out = {"balance": {p: corner_balance(preset=p).as_dict() for p in ("seed", "physical")}}
     phis = ctx.pick((0.3, 1.3, 2.5, 3.7, 5.0), (0.3, 2.5))
     # physical: at rest, 1e-10 rad; fit from 1e4× the start (the stable directions gone: at 100× they still
@@ -155,8 +167,6 @@ def _extrapolated(lo: list, hi: dict, sats, analytic: float, **extra) -> dict:
 
 
 def face_maps(ctx: Context) -> tuple[dict, dict]:
-    from dicetrace.analysis.corner import EDGE_AZIMUTHS, FACE_AZIMUTHS, face_map, sector_boundaries
-
     n_phi = ctx.pick(72, 12)
     phis = np.linspace(0.0, 2 * math.pi, n_phi, endpoint=False)
     out, plot = {}, {}
@@ -195,10 +205,6 @@ def face_maps(ctx: Context) -> tuple[dict, dict]:
 def _thrower():
     """``throw(x, y)``: the seed-slice throw at (x, y) in the hunt's model, its outcome and closest approach to a
     corner balance."""
-    from dicetrace.analysis.corner import corner_balance
-    from dicetrace.analysis.corner_slice import corner_distance
-    from dicetrace.ics import seed_slice
-    from dicetrace.simulate import Record, simulate
 
     hunt_cfg = config(HUNT_MODEL)
     cb = corner_balance(config=hunt_cfg)
@@ -213,11 +219,6 @@ def _thrower():
 
 
 def triple_points(ctx: Context) -> tuple[dict, dict]:
-    from dicetrace.analysis.corner import corner_balance
-    from dicetrace.analysis.corner_slice import circle_sectors, clean_junctions, refine_triple
-    from dicetrace.analysis.simulator import classify_on_slice
-    from dicetrace.analysis.transient import certify_map, converged_verdict
-
     hunt_cfg = config(HUNT_MODEL)
     cb = corner_balance(config=hunt_cfg)
     throw = _thrower()
@@ -300,10 +301,6 @@ def rerender(out, options: Options = Options(), *, remeasure: bool = False):
     JSON.  ``remeasure``: the throws' closest approaches to a corner balance computed again from their stored
     points with the current :func:`~dicetrace.analysis.corner_slice.corner_distance` (a pure function of the
     point: the same numbers a new run gives); its time is added to ``wall_s`` and kept in ``remeasure_s``."""
-    import json
-    from pathlib import Path
-
-    from dicetrace.studies.context import Output, write_json
 
     out = Path(out)
     path = out / "results" / f"{NAME}.json"

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from dicetrace.params import make_config
+
 #: The model of each part: make_config options.
 PHYSICAL = {"preset": "physical", "integrator": "contact-tsit5", "tol": 1e-10, "tol_growth": 0.0}
 SEED_CONVERGED = {"preset": "seed", "integrator": "contact-adaptive", "tol": 1e-9}
@@ -17,7 +19,5 @@ MODEL_OPTS = {"physical": PHYSICAL, "seed-converged": SEED_CONVERGED, "seed-disc
 
 def config(opts: dict):
     """The configuration of one model's options."""
-    from dicetrace.params import make_config
-
     kw = dict(opts)
     return make_config(kw.pop("preset"), **kw)
