@@ -31,6 +31,8 @@ import warnings
 
 import numpy as np
 
+from dicetrace.simulate import Record, simulate
+
 __all__ = ["LocalSlopes", "local_slopes", "Crossover", "crossover_fit", "Hazard", "hazard_curve", "hazard_windows",
            "discrete_hazard", "covariate_hazard", "FACE_NODE_MASK", "commit_steps", "perturbed", "floor_test", "throw_floor",
            "pair_divergence", "compare"]
@@ -113,7 +115,7 @@ class Crossover:
 
 
 def _fit_crossover(leps: np.ndarray, lf: np.ndarray, w: np.ndarray, lo: float, hi: float, f_sat: float | None):
-    from scipy.optimize import least_squares
+    from scipy.optimize import least_squares  # scipy.optimize is slow to import: only for this fit
 
     def model(p):
         lg = p[0] + leps - np.log1p(np.exp((1.0 - p[2]) * (leps - p[1])))
@@ -316,7 +318,7 @@ def perturbed(ics, eps: float, rng) -> np.ndarray:
 def floor_test(changed, changed_tight, *, valid=None, confidence: float = 0.95) -> dict:
     """The numerical floor of a pair measurement: per scale, the fraction of pairs whose verdict (changed or not)
     differs between the run and the same pairs at a tighter tolerance, with its Wilson interval."""
-    from scipy import stats
+    from scipy import stats  # scipy.stats is slow to import: only for these tests
 
     a, b = np.asarray(changed, dtype=bool), np.asarray(changed_tight, dtype=bool)
     v = np.ones_like(a) if valid is None else np.asarray(valid, dtype=bool)
@@ -354,7 +356,6 @@ def pair_divergence(ic, config, *, delta: float = 1e-10, rng=0, time_scale_s: fl
     times (s), their state distance (cm; the metric of :func:`dicetrace.analysis.transient.throw_divergence`), the
     throw's energy above rest in units of the energy that stands the die on an edge, its first-contact time (s) and
     the throw itself (a ``Roll``)."""
-    from dicetrace.simulate import Record, simulate
 
     cfg = config
     ic = np.asarray(ic, dtype=float)

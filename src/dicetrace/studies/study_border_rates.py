@@ -35,12 +35,30 @@ balance's (:func:`dicetrace.analysis.corner.corner_balance`).
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
-from dicetrace.studies.context import Computed, Context, Output
+from dicetrace.analysis.border_rates import (
+    Brackets,
+    bisect_many,
+    border_bootstrap,
+    edge_saddle,
+    fit_sides,
+    flat_range,
+    line_crossings,
+    local_slopes,
+    profiles,
+    tolerance_stability,
+)
+from dicetrace.analysis.corner import corner_balance
+from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
+from dicetrace.params import make_config
+from dicetrace.studies import LETTERS
+from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
 from dicetrace.studies.text import md_table, pm
 
 NAME = "border_rates"
@@ -68,8 +86,6 @@ LINE_POINTS = (64, 24)
 
 
 def _config(opts: dict, tol: float | None = None):
-    from dicetrace.params import make_config
-
     kw = dict(opts)
     if tol is not None:
         kw["tol"] = tol
@@ -94,9 +110,6 @@ def _lines(ranges, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
 
 def _borders(ctx: Context, cfg, window: str):
     """Located borders of one window: (brackets, crossings found)."""
-    from dicetrace.analysis.border_rates import bisect_many, line_crossings
-    from dicetrace.analysis.simulator import classify_on_slice
-    from dicetrace.studies.context import window_ranges
 
     classify = classify_on_slice("seed", config=cfg)
     starts, ends = _lines(window_ranges(window), ctx.pick(*N_LINES), ctx.rng)
@@ -109,8 +122,6 @@ def _borders(ctx: Context, cfg, window: str):
 
 
 def _concat(brs):
-    from dicetrace.analysis.border_rates import Brackets
-
     return Brackets(*(np.concatenate([getattr(b, f) for b in brs]) for f in
                       ("p_lo", "p_hi", "label_lo", "label_hi", "width")), sum(b.n_evals for b in brs))
 
@@ -120,18 +131,12 @@ def _join_profiles(profs):
 
 
 def _corner_rate(cfg):
-    try:
-        from dicetrace.analysis.corner import corner_balance
-    except ImportError:  # pragma: no cover - the corner balance's module is optional here
-        return None
     return corner_balance(config=cfg).rate
 
 
 def sample_preset(ctx: Context, key: str) -> dict:
     """The raw measurements of one preset: located borders (brackets, windows, crossings found per window), the
     settle-time profiles at the tolerance and at a tenth of it, and the bracket ends classified at a tenth."""
-    from dicetrace.analysis.border_rates import profiles
-    from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
 
     cfg, chk = _config(MODELS[key]), _config(MODELS[key], CHECK_TOL)
     brs, found, win_of = [], {}, []
@@ -151,7 +156,6 @@ def sample_preset(ctx: Context, key: str) -> dict:
 
 def raw_frame(key: str, raw: dict):
     """The raw measurements of one preset as a long table: one row per border, side and distance."""
-    import pandas as pd
 
     br, n = raw["br"], len(raw["br"].p_lo)
     rows = []
@@ -175,7 +179,6 @@ RAW_COLUMNS = ["model", "border", "window", "side", "lo_x", "lo_y", "hi_x", "hi_
 def raw_from_frame(df, key: str) -> dict:
     """:func:`sample_preset`'s arrays of one preset back from :func:`raw_frame`'s table (without the configs and
     the crossings found)."""
-    from dicetrace.analysis.border_rates import Brackets
 
     q = df[df.model == key].sort_values(["side", "border", "d"], key=lambda c: c.map({"lo": 0, "hi": 1})
                                         if c.name == "side" else c)
@@ -202,8 +205,6 @@ def raw_from_frame(df, key: str) -> dict:
 def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> dict:
     """Every number of one preset from its raw measurements (:func:`sample_preset`): the stability at tol/10, the
     flat range, the fits near the border and over the whole range, their errors, the analytic rates."""
-    from dicetrace.analysis.border_rates import (border_bootstrap, edge_saddle, fit_sides, flat_range, local_slopes,
-                                                 tolerance_stability)
 
     br, prof, check = raw["br"], raw["prof"], raw["check"]
     n = len(br.p_lo)
@@ -297,15 +298,12 @@ def compute(ctx: Context) -> Computed:
 
 
 def _letter() -> str:
-    from dicetrace.studies import LETTERS
-
     return {v: k for k, v in LETTERS.items()}.get(NAME, "x")
 
 
 def render(c: Computed, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
-    import pandas as pd
 
     R, L = c.results, _letter()
     if c.plot:  # a fresh run: its raw measurements, from which :func:`rerender` recomputes every number
@@ -396,11 +394,7 @@ def rerender(out) -> Path:
     """Recompute every number of a finished run in ``out`` from its raw measurements
     (``results/raw/border_rates_profiles.csv``) and redraw its figures and tables (no simulation; the figures take
     the study's letter as it is registered now); rewrites ``results/border_rates.json``."""
-    import json
 
-    import pandas as pd
-
-    from dicetrace.studies.context import write_json
 
     out = Path(out)
     path = out / "results" / f"{NAME}.json"

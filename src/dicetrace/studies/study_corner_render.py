@@ -14,7 +14,13 @@ import math
 
 import numpy as np
 
+from dicetrace.analysis.corner import EDGE_AZIMUTHS
+from dicetrace.analysis.plot import FACE_COLORS, plot_outcome_map
+from dicetrace.ics import seed_slice
+from dicetrace.simulate import Record, simulate
+from dicetrace.sinks.rerun import write_rrd
 from dicetrace.studies.context import Output
+from dicetrace.studies.study_corner_models import HUNT_MODEL, config
 from dicetrace.studies.text import fmt, md_table, pm
 
 #: Largest recording kept (bytes).
@@ -133,10 +139,8 @@ def _rates_table(R: dict, out: Output) -> None:
 
 
 def _face_map_figure(R: dict, plot: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
-    from dicetrace.analysis.corner import EDGE_AZIMUTHS
-    from dicetrace.analysis.plot import FACE_COLORS
 
     fm = R["face_maps"]
     phis = np.asarray(fm["phis"])
@@ -208,9 +212,8 @@ def _triple_tables(R: dict, out: Output) -> None:
 
 
 def _triple_figure(R: dict, maps: dict, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
-    from dicetrace.analysis.plot import plot_outcome_map
 
     T = R["triple"]
     fig, axes = plt.subplots(1, len(maps) + 1, figsize=(4.4 * (len(maps) + 1), 4.2))
@@ -244,7 +247,7 @@ def _triple_figure(R: dict, maps: dict, out: Output) -> None:
 
 def _recording(R: dict, out: Output) -> None:
     try:
-        import rerun  # noqa: F401
+        import rerun  # noqa: F401  (optional here: without it the run writes no recording)
     except ImportError:
         out.tables["recording"] = "(no recording: the rerun package is not installed)"
         return
@@ -252,10 +255,6 @@ def _recording(R: dict, out: Output) -> None:
     if not verts:
         out.tables["recording"] = "(no recording: no triple point was located)"
         return
-    from dicetrace.ics import seed_slice
-    from dicetrace.simulate import Record, simulate
-    from dicetrace.sinks.rerun import write_rrd
-    from dicetrace.studies.study_corner_models import HUNT_MODEL, config
 
     p = verts[0]
     ic = seed_slice(np.array([p["x"]]), np.array([p["y"]]))[0]

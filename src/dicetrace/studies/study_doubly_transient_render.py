@@ -21,7 +21,7 @@ def _arr(values) -> np.ndarray:
 
 
 def _slopes_figure(rows, out: Output, tol: float, floor_tol: float) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
     fig, (a0, a1) = plt.subplots(1, 2, figsize=(12, 4.5))
     for k, r in enumerate(rows):
@@ -52,7 +52,7 @@ def _slopes_figure(rows, out: Output, tol: float, floor_tol: float) -> None:
 
 
 def _hazard_figure(rows, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
     for k, r in enumerate(rows):
@@ -94,7 +94,7 @@ def _hazard_figure(rows, out: Output) -> None:
 
 
 def _tests_figure(rows, out: Output) -> None:
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
     fig, (a0, a1) = plt.subplots(1, 2, figsize=(12, 4.2))
     x = np.arange(len(rows))
