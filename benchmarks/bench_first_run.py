@@ -10,7 +10,7 @@ machine.  ``--write FILE`` also writes them as JSON: the committed figures the
 README quotes are ``benchmarks/results/first_run.json``, rewritten only by
 ``python benchmarks/bench_first_run.py --write benchmarks/results/first_run.json``.
 
-Usage: ``python benchmarks/bench_first_run.py [--write FILE] [--keep]``.
+Usage: ``python benchmarks/bench_first_run.py [--write FILE] [--log FILE] [--keep]``.
 """
 
 from __future__ import annotations
@@ -44,6 +44,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--write", type=Path, default=None, help="also write the figures to this JSON file")
     ap.add_argument("--keep", action="store_true", help="keep the clone (its path is printed)")
+    ap.add_argument("--log", type=Path, default=None, help="write the run's whole output to this file")
     args = ap.parse_args()
     head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True)
     if head.returncode != 0:
@@ -76,8 +77,11 @@ def main() -> int:
             "measured": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         }
         print(json.dumps(figures, indent=1))
-        if res.returncode != 0:
-            print(out[-4000:], file=sys.stderr)
+        if args.log is not None:
+            args.log.write_text(out)
+        if res.returncode != 0:  # what failed: pytest's short summary, else the end of the output
+            i = res.stdout.rfind("short test summary info")
+            print(res.stdout[i - 40:] if i >= 0 else out[-4000:], file=sys.stderr)
         if args.write is not None:
             args.write.parent.mkdir(parents=True, exist_ok=True)
             args.write.write_text(json.dumps(figures, indent=1) + "\n")
