@@ -200,6 +200,8 @@ def test_kernels_compile_for_the_device():
         """
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=900)
+    if res.returncode != 0 and "DynamicLibNotFoundError" in res.stderr:  # NVVM without NVRTC (numba-cuda alone)
+        pytest.skip("NVIDIA's compiler libraries are incomplete here: " + res.stderr.strip().splitlines()[-1][:200])
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout)
     assert out["seed"]["seed_kernel"] and out["seed"]["strict"]

@@ -463,3 +463,22 @@ def test_a_scan_of_points_that_overflow_is_refused_before_writing(tmp_path):
     with pytest.raises(ValueError, match="non-finite ICs"):
         scan(Points("seed", [(0.05, 0.05), (1e308, 1e308)]), tmp_path / "s")
     assert not (tmp_path / "s").exists()
+
+
+def test_a_folder_another_scan_is_making_is_busy_not_foreign(tmp_path, dicetrace_cli, assert_one_line_error):
+    """A new folder that another scan holds the lock of and has begun to fill, before its manifest: the scan
+    that comes second says the other scan is writing there (it used to call the folder 'not a dicetrace scan',
+    in the race of two scans for one new folder), and touches nothing."""
+    out = tmp_path / "s"
+    (out / "rolls").mkdir(parents=True)
+    lock = _hold_lock(out)
+    try:
+        before = sorted(p.name for p in out.iterdir())
+        res = dicetrace_cli("scan", "--window", "home", "--res", "5", "--out", str(out), "-q", cwd=tmp_path)
+        assert_one_line_error(res, "--out", "another dicetrace scan is writing", f"'{out}'")
+        assert sorted(p.name for p in out.iterdir()) == before
+    finally:
+        lock.release()
+    # with the lock free, the same leftovers are what they are: not a scan
+    res = dicetrace_cli("scan", "--window", "home", "--res", "5", "--out", str(out), "-q", cwd=tmp_path)
+    assert_one_line_error(res, "--out", "holds no dicetrace scan")

@@ -267,13 +267,13 @@ def _check_out(out: Path, defn) -> None:
     device (``--device``), or files that are not a scan."""
     # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.scan import DeviceMismatchError, ScanMismatchError
-    from dicetrace.scan.folder import check_folder
+    from dicetrace.scan.folder import ScanBusyError, check_folder
 
     try:
         check_folder(out, defn)
     except DeviceMismatchError as e:
         fail(f"--device: {e}")
-    except (ScanMismatchError, FileExistsError) as e:
+    except (ScanMismatchError, FileExistsError, ScanBusyError) as e:
         fail(f"--out: {e}")
 
 

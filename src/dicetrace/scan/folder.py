@@ -344,11 +344,36 @@ def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
 
 
 def _check_empty(folder: Path) -> None:
-    """FileExistsError unless ``folder`` (holding no manifest) has no data files (hidden files do not count)."""
+    """FileExistsError unless ``folder`` (holding no manifest) has no data files (hidden files do not count).
+
+    A folder whose writer lock another scan holds is that scan's, still
+    before its manifest: :class:`ScanBusyError`, as the lock itself says.
+    """
     if any(not p.name.startswith(".") for p in folder.iterdir()):
+        if _lock_held(folder):
+            raise ScanBusyError(
+                f"another dicetrace scan is writing into {str(folder)!r} (it holds {LOCK}); let it finish "
+                "(then re-run: finished chunks are skipped), or use another --out folder"
+            )
         raise FileExistsError(
             f"{str(folder)!r} is not empty and holds no dicetrace scan ({MANIFEST} missing): use another folder"
         )
+
+
+def _lock_held(folder: Path) -> bool:
+    """Whether another process holds ``folder``'s writer lock now (a lock file nobody holds is not a writer)."""
+    path = folder / LOCK
+    if not path.exists():
+        return False
+    lock = FileLock(str(path), thread_local=False)
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        return True
+    except OSError:  # a lock file we cannot open: not ours to judge
+        return False
+    lock.release()
+    return False
 
 
 def has_chunk_log(folder) -> bool:
