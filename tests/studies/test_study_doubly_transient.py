@@ -1,4 +1,4 @@
-"""Study n (doubly_transient): registered, and its quick run end to end (``dicetrace analyze doubly-transient --quick``).
+"""Study n (doubly_transient): registered, and its quick run end to end (its part of the shared ``dicetrace analyze all --quick``).
 
 The quick run (about 15 s on two cores: 300 pairs per scale, four scales, three models) checks the pipeline and
 that every number the report quotes is written with its model, integrator, tolerance and error bar.  The full run
@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
+import shutil
 
 import numpy as np
 import pytest
@@ -37,12 +36,14 @@ def test_every_condition_is_a_uniform_tight_tolerance():
 
 
 @pytest.fixture(scope="module")
-def quick(tmp_path_factory):
+def quick(quick_run, tmp_path_factory):
+    """Study n's part of the shared ``dicetrace analyze all --quick`` run, copied (its rerender writes into the copy)."""
+    shared, results = quick_run
     out = tmp_path_factory.mktemp("dt") / "out"
-    proc = subprocess.run([sys.executable, "-m", "dicetrace.cli", "analyze", "doubly-transient", "--quick", "--out",
-                           str(out), "--no-report"], capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
-    return out, json.loads((out / "results" / "doubly_transient.json").read_text())
+    (out / "results").mkdir(parents=True)
+    shutil.copy(shared / "results" / "doubly_transient.json", out / "results")
+    shutil.copytree(shared / "figures", out / "figures")
+    return out, results["doubly_transient"]
 
 
 @pytest.mark.slow
