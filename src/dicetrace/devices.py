@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import contextvars
 import functools
-import os
 import sys
 
 #: The values of ``device``.
@@ -29,10 +28,6 @@ DEVICES = ("cpu", "cuda", "auto")
 
 class DeviceError(ValueError):
     """A device that cannot be used (``device="cuda"`` without a GPU, or a name not in :data:`DEVICES`)."""
-
-
-def _simulated() -> bool:
-    return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
 
 
 @functools.cache
