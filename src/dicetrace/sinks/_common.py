@@ -103,15 +103,34 @@ def _nearest_existing(path: Path) -> Path:
     return p
 
 
+def _require_folder(path: Path, unusable: str, not_folder: str) -> None:
+    """Fail unless the existing ``path`` is a folder: ``unusable: <the OS's reason>`` when it cannot be
+    examined (a symlink loop, no permission), ``not_folder`` when it is something else."""
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise OutputError(f"{unusable}: {_reason(e)}") from None
+    if not stat.S_ISDIR(st.st_mode):
+        raise OutputError(not_folder)
+
+
+def _check_free_space(folder: Path, expected_bytes: int | None, what: str, given: str) -> None:
+    """Fail when the file system of ``folder`` (or of its nearest existing parent) has less room than
+    ``expected_bytes`` (no check without it, or where the free space is unknown)."""
+    if not expected_bytes:
+        return
+    free = free_bytes(_nearest_existing(folder))
+    if free is not None and expected_bytes > free:
+        raise OutputError(
+            f"{what} {given!r}: needs about {human_bytes(expected_bytes)}, only {human_bytes(free)} free there"
+        )
+
+
 def _check_creatable_folder(folder: Path, what: str, given: str) -> None:
     """Fail unless ``folder`` is, or can be made, a folder we can create files in (nothing is left behind)."""
     base = _nearest_existing(folder)
-    try:
-        st = os.stat(base)
-    except OSError as e:
-        raise OutputError(f"{what} {given!r}: cannot use folder {str(base)!r}: {_reason(e)}") from None
-    if not stat.S_ISDIR(st.st_mode):
-        raise OutputError(f"{what} {given!r}: {str(base)!r} is not a folder")
+    _require_folder(base, f"{what} {given!r}: cannot use folder {str(base)!r}",
+                    f"{what} {given!r}: {str(base)!r} is not a folder")
     probe = base / f".dicetrace-probe.{os.getpid()}-{uuid.uuid4().hex[:12]}"
     try:
         fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
@@ -216,12 +235,7 @@ def destination(
     if suffix is not None and not (p.name.endswith(suffix) or target.name.endswith(suffix)):
         raise OutputError(f"{what} {given!r} must end in {suffix}")
     _check_creatable_folder(target.parent if str(target.parent) else Path("."), what, given)
-    if expected_bytes:
-        free = free_bytes(_nearest_existing(target.parent))
-        if free is not None and expected_bytes > free:
-            raise OutputError(
-                f"{what} {given!r}: needs about {human_bytes(expected_bytes)}, only {human_bytes(free)} free there"
-            )
+    _check_free_space(target.parent, expected_bytes, what, given)
     return Destination(given, target, "file", what)
 
 
@@ -234,19 +248,9 @@ def output_folder(path, *, what: str = "output folder", expected_bytes: int | No
         raise OutputError(f"{what} {given!r}: give a folder")
     p = Path(given)
     if os.path.lexists(p):
-        try:
-            st = os.stat(p)
-        except OSError as e:
-            raise OutputError(f"{what} {given!r}: {_reason(e)}") from None
-        if not stat.S_ISDIR(st.st_mode):
-            raise OutputError(f"{what} {given!r} exists and is not a folder")
+        _require_folder(p, f"{what} {given!r}", f"{what} {given!r} exists and is not a folder")
     _check_creatable_folder(p, what, given)
-    if expected_bytes:
-        free = free_bytes(_nearest_existing(p))
-        if free is not None and expected_bytes > free:
-            raise OutputError(
-                f"{what} {given!r}: needs about {human_bytes(expected_bytes)}, only {human_bytes(free)} free there"
-            )
+    _check_free_space(p, expected_bytes, what, given)
     return p
 
 
