@@ -357,37 +357,46 @@ class Worker:
                         return
                     if self._queue and self._may_start(time.monotonic()):
                         job = self._queue.popleft()
-                        if job.cancelled:
-                            continue
-                        break
+                        if not job.cancelled:
+                            break
+                        del job
+                        continue
                     # something queued behind a running piece: look again when that piece may count as stuck
                     self._wake.wait(timeout=0.1 if self._queue else None)
                 known = [] if job.build is not None else [  # a coarser pass's points may be this grid's
                     m for m in self._cache.values() if replace(m.view, res=job.view.res) == job.view]
                 me = object()
                 self._running[me] = time.monotonic()
-            try:
-                finished = self._turn(job, known)
-            except BaseException as e:  # a bad configuration, over budget, ...
-                with self._lock:
-                    del self._running[me]
-                    if not job.cancelled:
-                        self.refused_count += isinstance(e, OverBudget)
-                        self._drop(job, e)
-                    self._wake.notify_all()
-                continue
+            self._run(job, known, me)
+            # nothing of this job stays bound in this frame while the lane waits for the next one (its map may
+            # have left the cache meanwhile: a lane keeps no map alive)
+            del job, known, me
+
+    def _run(self, job: _Job, known, me) -> None:
+        """One piece of ``job`` on this lane (registered as running under ``me``), and what follows from it:
+        cached and settled, refused, or queued for its next turn."""
+        try:
+            finished = self._turn(job, known)
+        except BaseException as e:  # a bad configuration, over budget, ...
             with self._lock:
                 del self._running[me]
-                if finished and job.cancelled and not self._stopped:  # superseded as its last piece ran: keep it
-                    self._cache_put(job.key, job.build.map)
                 if not job.cancelled:
-                    if finished:
-                        self.computed_count += 1
-                        self._cache_put(job.key, job.build.map)
-                        self._drop(job, None, job.build.map)
-                    else:
-                        self._queue.append(job)
+                    self.refused_count += isinstance(e, OverBudget)
+                    self._drop(job, e)
                 self._wake.notify_all()
+            return
+        with self._lock:
+            del self._running[me]
+            if finished and job.cancelled and not self._stopped:  # superseded as its last piece ran: keep it
+                self._cache_put(job.key, job.build.map)
+            if not job.cancelled:
+                if finished:
+                    self.computed_count += 1
+                    self._cache_put(job.key, job.build.map)
+                    self._drop(job, None, job.build.map)
+                else:
+                    self._queue.append(job)
+            self._wake.notify_all()
 
     def _turn(self, job: _Job, known) -> bool:
         """One piece of ``job`` (on the worker's thread); True once its map is whole."""
