@@ -152,3 +152,18 @@ def test_a_config_with_options_is_refused_as_by_every_entry_point():
         resolve_config(cfg, gamma=0.01)
     assert classify_on_slice("seed", config=cfg).config is cfg
     assert classify_on_slice("seed", preset="physical", gamma=0.01).config == make_config("physical", gamma=0.01)
+
+
+def test_window_and_settle_take_run_and_classify_options():
+    # sample_window passes its options to run_on_slice, settle_on_slice to classify_on_slice
+    s = sample_window("home", 2, sequences=True, chunk=3, gamma=0.01)
+    r = run_on_slice(window_points(resolve_window("home"), 2)[0], "seed", sequences=True, gamma=0.01)
+    assert s.sequences.shape == (2, 2) and s.sequences.ravel().tolist() == r.sequences
+    assert s.labels.ravel().tolist() == r.outcome.tolist()
+    assert sample_window("home", 2).sequences is None
+    settle = settle_on_slice("seed", label="contact_sequence", chunk=1, gamma=0.01)
+    assert (settle.label, settle.chunk, settle.config.preset.gamma) == ("contact_sequence", 1, 0.01)
+    labels, t = settle([[1.65, 3.9]])
+    assert labels[0] == classify_on_slice("seed", label="contact_sequence", gamma=0.01)([[1.65, 3.9]])[0]
+    with pytest.raises(ValueError, match="label must be"):
+        settle_on_slice("seed", label="face")

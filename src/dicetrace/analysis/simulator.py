@@ -368,23 +368,15 @@ def classify_on_slice(
     return SliceClassifier(sl, _resolve_config(config, preset, overrides), label, chunk)
 
 
-def settle_on_slice(
-    slice_spec="seed",
-    *,
-    config: Config | None = None,
-    preset: str = "seed",
-    label: str = "outcome",
-    chunk: int = BATCH_POINTS,
-    **overrides,
-) -> SliceSettle:
-    """Like :func:`classify_on_slice`, returning ``(labels, t_settle_s)``.
+def settle_on_slice(slice_spec="seed", **options) -> SliceSettle:
+    """Like :func:`classify_on_slice` (the same parameters), returning ``(labels, t_settle_s)``.
 
     ``t_settle_s`` is the simulated time (s) at which the stop test fired
     (or the time cap, for label -1). For
     :func:`~dicetrace.analysis.settle.settle_profile`.
     """
-    sl = resolve_slice(slice_spec)
-    return SliceSettle(sl, _resolve_config(config, preset, overrides), label, chunk)
+    c = classify_on_slice(slice_spec, **options)
+    return SliceSettle(c._slice, c.config, c.label, c.chunk)
 
 
 # --------------------------------------------------------------------------
@@ -427,17 +419,7 @@ class WindowSample:
         return self.labels.shape
 
 
-def sample_window(
-    window,
-    res,
-    *,
-    slice_spec="seed",
-    config: Config | None = None,
-    preset: str = "seed",
-    sequences: bool = False,
-    chunk: int = BATCH_POINTS,
-    **overrides,
-) -> WindowSample:
+def sample_window(window, res, *, slice_spec="seed", **options) -> WindowSample:
     """Outcome (and settle-time) grid of a window, by simulation.
 
     Parameters
@@ -446,18 +428,18 @@ def sample_window(
         A named window (2-D) or ranges; 3 ranges for a 3-D slice.
     res : int or sequence of int
         Points per axis (the program's grid formula).
-    slice_spec, config, preset, chunk, **overrides
-        As :func:`run_on_slice`.
-    sequences : bool
-        Keep the contact sequences (memory: ~100 bytes per point).
+    slice_spec, **options
+        As :func:`run_on_slice` (``config``, ``preset``, ``chunk``, the
+        overrides), which takes them with its defaults; ``sequences=True``
+        keeps the contact sequences (memory: ~100 bytes per point).
     """
     ndim = 2 if isinstance(window, str) else len(window)
     pts, shape, axes = window_points(resolve_window(window, ndim), res)
     t0 = time.perf_counter()
-    r = run_on_slice(pts, slice_spec, config=config, preset=preset, sequences=sequences, chunk=chunk, **overrides)
+    r = run_on_slice(pts, slice_spec, **options)
     wall = time.perf_counter() - t0
     seq = None
-    if sequences:
+    if r.sequences is not None:
         seq = np.empty(len(pts), dtype=object)
         seq[:] = r.sequences
         seq = seq.reshape(shape)
