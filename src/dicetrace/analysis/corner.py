@@ -57,7 +57,7 @@ import numpy as np
 from dicetrace.params import Config
 from dicetrace.simulate import Record, simulate
 
-from .lyapunov import finite_time_lyapunov
+from .release import Release, fit_release, never_reached
 from .simulator import _resolve_config
 
 __all__ = ["CornerBalance", "corner_balance", "corner_orientation", "corner_release", "corner_tilt",
@@ -190,14 +190,11 @@ def corner_tilt(node_offsets: np.ndarray, node: int = PIVOT_NODE) -> tuple[np.nd
 
 
 @dataclasses.dataclass(frozen=True)
-class CornerRelease:
-    """The fitted rate (1/s) and its stderr, the fit range (s), the azimuth drift (rad) over it, the run's status."""
+class CornerRelease(Release):
+    """The die released from its corner (:class:`~dicetrace.analysis.release.Release`), and the azimuth drift (rad)
+    over the fit."""
 
-    rate: float
-    stderr: float
-    fit_range: tuple[float, float]
     drift: float
-    status: str
 
 
 def corner_release_rate(*, config: Config | None = None, preset: str = "physical", tilt0: float = 1e-7,
@@ -220,14 +217,12 @@ def corner_release_rate(*, config: Config | None = None, preset: str = "physical
     tr = roll.trace
     ok = tr.written
     t, (tilt, az) = tr.t_s[ok], corner_tilt(tr.node_offsets[ok])
-    if not (tilt > saturation).any() or not (tilt > start * tilt0).any():
-        raise ValueError(f"the die released at tilt {tilt0:g} never reached {saturation:g} rad "
-                         f"(status {roll.status.label} after {roll.steps} steps)")
-    t0 = t[np.argmax(tilt > start * tilt0)]
-    fit = finite_time_lyapunov(t, tilt, saturation=saturation, t_min=t0)
+    if not (tilt > start * tilt0).any():  # the fit must start inside the run, too
+        raise never_reached(roll, tilt0, saturation)
+    fit = fit_release(roll, t, tilt, tilt0=tilt0, start=start, saturation=saturation)
     end = int(np.argmax(tilt > saturation))
     drift = abs(math.remainder(float(az[end]) - float(phi), 2 * math.pi))
-    return CornerRelease(fit.exponent, fit.stderr, fit.fit_range, drift, roll.status.label)
+    return CornerRelease(fit.exponent, fit.stderr, fit.fit_range, roll.status.label, drift=drift)
 
 
 def release_outcome(cfg: Config, tilt: float, phi: float, spin: float = 0.0) -> int:

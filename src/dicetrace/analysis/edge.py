@@ -39,20 +39,16 @@ from scipy import stats
 from dicetrace.params import Config
 from dicetrace.simulate import Record, simulate
 
-from .lyapunov import finite_time_lyapunov
+from .release import Release, fit_release
 from .simulator import _resolve_config
 
 __all__ = ["EdgeRelease", "edge_release_rate", "EdgeJacobian", "edge_jacobian_rate", "PooledRate", "pooled_rate"]
 
 
 @dataclasses.dataclass(frozen=True)
-class EdgeRelease:
-    """The die released from its edge: the fitted rate (1/s) and its stderr, the fit range (s), the tilt series."""
+class EdgeRelease(Release):
+    """The die released from its edge (:class:`~dicetrace.analysis.release.Release`), and the tilt series."""
 
-    rate: float
-    stderr: float
-    fit_range: tuple[float, float]
-    status: str
     t_s: np.ndarray
     tilt: np.ndarray
 
@@ -78,11 +74,7 @@ def edge_release_rate(*, config: Config | None = None, preset: str = "seed", til
     rot = roll.trace.rotation
     tilt = np.abs(np.arctan2(rot[:, 2, 1], rot[:, 1, 1]) - math.pi / 4)
     t = roll.trace.t_s
-    if not (tilt > saturation).any():
-        raise ValueError(f"the die released at tilt {tilt0:g} never reached {saturation:g} rad "
-                         f"(status {roll.status.label} after {roll.steps} steps)")
-    start = t[np.argmax(tilt > 10 * tilt0)]
-    fit = finite_time_lyapunov(t, tilt, saturation=saturation, t_min=start)
+    fit = fit_release(roll, t, tilt, tilt0=tilt0, start=10.0, saturation=saturation)
     return EdgeRelease(fit.exponent, fit.stderr, fit.fit_range, roll.status.label, t, tilt)
 
 
