@@ -10,6 +10,7 @@ contact sets per IC; throws that fill their buffer are re-run with
 from __future__ import annotations
 
 import collections
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -44,8 +45,12 @@ class _Threads:
 
 
 def _run_batch(kin, cap: int, threads, device: str = "cpu"):
-    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC, on ``device`` ("cpu" or "cuda").
+    """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC, on ``device`` ("cpu" or "cuda"):
+    (status, steps, outcome, nsets, sets, set_steps, starts), throw i's sets from ``starts[i]``.
 
+    On the CPU the sets are the kernel's buffers (``cap`` per throw,
+    ``starts[i] = i * cap``); on the GPU they come back packed, without the
+    sets of a throw that filled its buffer (``core.gpu.run_batch_cuda``).
     On the CPU, up to ``BATCH_BLOCK`` ICs (one work item of the batch
     kernel, so one thread either way) run one by one through the
     single-throw loop instead: the same results bit for bit, without
@@ -53,8 +58,13 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu"):
     compiles a third as much).
     """
     m = len(kin.ics)
-    if m <= BATCH_BLOCK and device == "cpu":
-        return _run_serial(kin, cap)
+    if device == "cuda":
+        from dicetrace.core.gpu import run_batch_cuda  # numba-cuda: optional, imported only for a GPU run
+
+        return run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap)
+    starts = np.arange(m, dtype=np.int64) * cap
+    if m <= BATCH_BLOCK:
+        return (*_run_serial(kin, cap), starts)
     out = (
         np.zeros(m, dtype=np.int8),
         np.zeros(m, dtype=np.int64),
@@ -63,15 +73,10 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu"):
         np.zeros(m * cap, dtype=np.uint8),
         np.zeros(m * cap, dtype=np.int32),
     )
-    if m and device == "cuda":
-        from dicetrace.core.gpu import run_batch_cuda  # numba-cuda: optional, imported only for a GPU run
-
-        run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, *out)
-    elif m:
-        status, steps, outcome, nsets, sets, set_steps = out
-        with _Threads(threads), numba.parallel_chunksize(1):
-            run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, status, steps, outcome, nsets, sets, set_steps)
-    return out
+    status, steps, outcome, nsets, sets, set_steps = out
+    with _Threads(threads), numba.parallel_chunksize(1):
+        run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, status, steps, outcome, nsets, sets, set_steps)
+    return (*out, starts)
 
 
 def _run_serial(kin, cap: int):
@@ -110,17 +115,19 @@ def batch_chunk(cap: int = DEFAULT_CAP) -> int:
 
 #: Most ICs per chunk on a GPU (2²⁰: several times the threads an H200 keeps resident).
 GPU_CHUNK_MAX = 2**20
-#: Share of the GPU's free memory one chunk may take.
-GPU_MEMORY_SHARE = 0.4
+#: Share of a GPU's free memory that the chunks in flight on it (one per stream) may take together.
+GPU_MEMORY_SHARE = 0.8
 
 
 def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP) -> int:
-    """ICs per chunk on the GPU by default: at most ``GPU_CHUNK_MAX``, ``GPU_MEMORY_SHARE`` of its free
-    memory, and 16 times the CPU's chunk of host buffers."""
+    """ICs per chunk on the GPU by default: at most ``GPU_CHUNK_MAX``, one stream's part of
+    ``GPU_MEMORY_SHARE`` of the free memory of the GPU it runs on (of this Dask worker's part of it, where
+    workers share one: ``core.gpu.memory_share``), and 16 times the CPU's chunk of host buffers."""
     from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
 
-    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0)
-    n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * gpu.free_memory()) // per, 16 * batch_chunk(cap))
+    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0) * gpu.streams_per_device()
+    free = gpu.free_memory(gpu.device_ids()[0]) * gpu.memory_share()
+    n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * free) // per, 16 * batch_chunk(cap))
     return max(BATCH_BLOCK, n)
 
 
@@ -153,62 +160,115 @@ def run_chunk(kin, cap: int, threads, device: str = "cpu"):
     ``CAP_GROWTH`` times more until they fit, on the same ``device``.
     """
     m = len(kin.ics)
-    status, steps, outcome, nsets, sets, set_steps = _run_batch(kin, cap, threads, device)
+    status, steps, outcome, nsets, sets, set_steps, starts = _run_batch(kin, cap, threads, device)
     extra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     todo = np.nonzero(status == Status.BUFFER_FULL)[0]
     big = cap
     while todo.size:
         big *= CAP_GROWTH
-        st, sp, oc, ns, ss, sst = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads, device)
+        st, sp, oc, ns, ss, sst, at = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads, device)
         done = st != Status.BUFFER_FULL
         for r in np.nonzero(done)[0]:
             i = todo[r]
             status[i], steps[i], outcome[i], nsets[i] = st[r], sp[r], oc[r], ns[r]
-            extra[int(i)] = (ss[r * big : r * big + ns[r]].copy(), sst[r * big : r * big + ns[r]].copy())
+            extra[int(i)] = (ss[at[r] : at[r] + ns[r]].copy(), sst[at[r] : at[r] + ns[r]].copy())
         todo = todo[~done]
-    sets2, steps2 = sets.reshape(m, cap), set_steps.reshape(m, cap)
     if not extra:
+        if len(sets) == int(nsets.sum()):  # packed already (the GPU's)
+            return status, steps, outcome, nsets, sets, set_steps
         full = np.arange(cap)[None, :] < nsets[:, None]
-        return status, steps, outcome, nsets, sets2[full], steps2[full]
+        return status, steps, outcome, nsets, sets.reshape(m, cap)[full], set_steps.reshape(m, cap)[full]
     ends = np.cumsum(nsets)
     flat_sets = np.empty(int(ends[-1]), dtype=np.uint8)
     flat_steps = np.empty(int(ends[-1]), dtype=np.int32)
     for i in range(m):
         a, b = ends[i] - nsets[i], ends[i]
-        flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets2[i, : nsets[i]], steps2[i, : nsets[i]])
+        s0 = starts[i]
+        flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets[s0 : s0 + nsets[i]], set_steps[s0 : s0 + nsets[i]])
     return status, steps, outcome, nsets, flat_sets, flat_steps
+
+
+#: Least ICs of a piece that :func:`chunk_results` cuts a GPU chunk into (so that each GPU has chunks in flight).
+GPU_PIECE_MIN = 2**16
+
+
+def _pieces(a: int, b: int, n: int) -> list[tuple[int, int]]:
+    """``(a, b)`` cut into up to ``n`` near-equal pieces of at least ``GPU_PIECE_MIN`` ICs (one if it is smaller)."""
+    k = max(1, min(n, (b - a) // GPU_PIECE_MIN))
+    cuts = [a + (b - a) * j // k for j in range(k + 1)]
+    return list(zip(cuts[:-1], cuts[1:]))
+
+
+def _joined(results: list):
+    """One chunk's summaries from those of its pieces, in order."""
+    if len(results) == 1:
+        return results[0]
+    return tuple(np.concatenate(parts) for parts in zip(*results))
+
+
+#: Per GPU: the host threads that run its chunks, each with its own CUDA stream (made once per process).
+_POOLS: dict = {}
+_POOLS_LOCK = threading.Lock()
+
+
+def _gpu_pool(k: int, streams: int) -> ThreadPoolExecutor:
+    """The thread pool of device ``k``: ``streams`` threads, each with device ``k`` current."""
+    from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
+
+    with _POOLS_LOCK:
+        pool = _POOLS.get((k, streams))
+        if pool is None:
+            pool = _POOLS[(k, streams)] = ThreadPoolExecutor(
+                streams, thread_name_prefix=f"dicetrace-gpu{k}", initializer=gpu.select_device, initargs=(k,))
+        return pool
 
 
 def chunk_results(bounds, run, device: str = "cpu"):
     """``run(a, b)`` for each ``(a, b)`` of ``bounds``, yielded in order.
 
-    On a machine with several GPUs (``device == "cuda"``) the chunks go
-    round-robin to one thread per GPU, each with that GPU as its current
-    device, at most two chunks ahead per GPU; every chunk runs the same
-    kernels from its own ICs, so the results are those of one GPU, chunk for
-    chunk.  Otherwise the chunks run one after the other here.
+    On the CPU the chunks run one after the other here.  On GPUs
+    (``device == "cuda"``) each chunk is cut into pieces (at least
+    ``GPU_PIECE_MIN`` ICs each) so that every GPU has work, and the pieces go
+    round-robin to the GPUs (``core.gpu.device_ids``: every device, or the
+    one a Dask worker was given), each GPU's to its own threads, one CUDA
+    stream each (``core.gpu.streams_per_device``): while one piece's results
+    are copied back and packed, the next one's ICs are copied in and its
+    kernel runs.  At most two pieces per stream are ahead of the one yielded.
+    Every piece runs the same kernels from its own ICs, so the results are
+    those of one GPU running the chunks one by one.
     """
-    ndev = 1
-    if device == "cuda":
-        from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
-
-        ndev = gpu.device_count()
-    if ndev <= 1:
+    if device != "cuda":
         for a, b in bounds:
             yield run(a, b)
         return
-    pools = [ThreadPoolExecutor(1, initializer=gpu.select_device, initargs=(k,)) for k in range(ndev)]
+    from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
+
+    devices, streams = gpu.device_ids(), gpu.streams_per_device()
+    pools = [_gpu_pool(k, streams) for k in devices]
+    lanes = len(devices) * streams
+    pending: collections.deque = collections.deque()  # (chunk number, future)
+    turn = 0
     try:
-        pending: collections.deque = collections.deque()
-        for i, (a, b) in enumerate(bounds):
-            pending.append(pools[i % ndev].submit(run, a, b))
-            if len(pending) >= 2 * ndev:
-                yield pending.popleft().result()
+        for c, (a, b) in enumerate(bounds):
+            for lo, hi in _pieces(a, b, lanes):
+                pending.append((c, pools[turn % len(pools)].submit(run, lo, hi)))
+                turn += 1
+                while len(pending) > 2 * lanes:  # a chunk has at most `lanes` pieces: the first is all queued
+                    yield _first_chunk(pending)
         while pending:
-            yield pending.popleft().result()
+            yield _first_chunk(pending)
     finally:
-        for pool in pools:
-            pool.shutdown(wait=True, cancel_futures=True)
+        for _, fut in pending:
+            fut.cancel()
+
+
+def _first_chunk(pending: collections.deque):
+    """The summaries of the first chunk in ``pending`` (all its pieces are queued), once its pieces are done."""
+    c = pending[0][0]
+    results = []
+    while pending and pending[0][0] == c:
+        results.append(pending.popleft()[1].result())
+    return _joined(results)
 
 
 def join_parts(parts: list, dtype, total: int) -> np.ndarray:

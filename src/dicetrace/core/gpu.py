@@ -28,11 +28,18 @@ compiled with NVVM's default contraction: the same model, rounded
 differently, so their throws agree with the CPU's to rounding and, through
 the chaos, in outcome wherever a throw is not within rounding of a border.
 
-Memory.  Each thread owns ``cap`` contact sets in device memory and, on
-the general kernel, one state record (``core.state.STATE``, 3.8 kB).
-``run_batch_cuda`` runs one chunk; ``dicetrace.batch_chunks`` sizes chunks
-to the device's free memory and retries the throws that fill their buffer,
-as on the CPU.
+Memory and transfers.  Each thread owns ``cap`` contact sets in device
+memory and, on the general kernel, one state record (``core.state.STATE``,
+3.8 kB, scratch that ``init_state`` overwrites, so uploaded once and reused
+as on the CPU).  ``run_batch_cuda`` runs one chunk on the calling host
+thread's own CUDA stream, with that thread's pinned host buffers and device
+buffers (grown as needed, kept for its next chunk): the ICs go in, the
+kernel runs, the summaries come back, and then only the contact sets the
+throws used (a gather kernel packs them end to end on the device).
+``dicetrace.batch_chunks`` runs :func:`streams_per_device` host threads per
+GPU, so that one chunk's transfers and host work overlap another's compute;
+it sizes chunks to the device's free memory and retries the throws that
+fill their buffer, as on the CPU.
 
 numba-cuda is optional (``pip install 'dicetrace[cuda]'``) and this module
 imports it: import this module only where a GPU is asked for
@@ -44,6 +51,7 @@ Python, calling the CPU's compiled functions.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import threading
 
@@ -59,6 +67,7 @@ from dicetrace.core import fast, loop  # noqa: E402
 from dicetrace.core._jit import CACHE, kernel_digest  # noqa: E402
 from dicetrace.core.kernels import scheme_of  # noqa: E402
 from dicetrace.core.state import new_states  # noqa: E402
+from dicetrace.status import Status  # noqa: E402
 
 #: Threads per block: the kernels hold ~180 registers a thread, so blocks of 128 keep several resident.
 THREADS_PER_BLOCK = 128
@@ -80,6 +89,58 @@ def select_device(k: int) -> None:
         cuda.select_device(k)
 
 
+#: The one device (and the share of its memory) that this context's batches use: set by :func:`only_device`.
+_ONLY: contextvars.ContextVar = contextvars.ContextVar("dicetrace_gpu_only", default=None)
+
+
+@contextlib.contextmanager
+def only_device(k: int, share: float = 1.0):
+    """Within the block, batches run on device ``k`` alone and size their chunks to ``share`` of its free memory.
+
+    A Dask worker's chunk task runs in such a block (``dicetrace.scan.dask``),
+    so that each worker uses its own GPU, and workers that must share one
+    (more workers than GPUs) split its memory.
+    """
+    if not 0 <= k < device_count():
+        raise ValueError(f"device {k} is not one of the {device_count()} CUDA devices this process sees")
+    token = _ONLY.set((int(k), float(share)))
+    try:
+        yield
+    finally:
+        _ONLY.reset(token)
+
+
+def device_ids() -> list[int]:
+    """The devices a batch started here runs on: every device, or the one an :func:`only_device` block names."""
+    only = _ONLY.get()
+    return list(range(device_count())) if only is None else [only[0]]
+
+
+def memory_share() -> float:
+    """The share of a device's free memory that a batch started here may size its chunks to (:func:`only_device`)."""
+    only = _ONLY.get()
+    return 1.0 if only is None else only[1]
+
+
+#: Host threads, each with its own CUDA stream, that run chunks on one GPU at a time (``DICETRACE_GPU_STREAMS``).
+DEFAULT_STREAMS = 2
+
+
+def streams_per_device() -> int:
+    """Chunks in flight on one GPU, each on its own stream: ``DICETRACE_GPU_STREAMS`` (1 or more), default 2.
+
+    With 2, one chunk's copies and the host's work on its results (the
+    compaction, the tables) overlap the next chunk's kernel; 1 runs the
+    chunks one after the other (a benchmark's baseline).
+    """
+    text = os.environ.get("DICETRACE_GPU_STREAMS", "").strip()
+    if not text:
+        return DEFAULT_STREAMS
+    if not text.isdigit() or int(text) < 1:
+        raise ValueError(f"DICETRACE_GPU_STREAMS must be a whole number >= 1, got {text!r}")
+    return int(text)
+
+
 def device_name() -> str:
     """The device the kernels run on, in words (e.g. 'NVIDIA H200', or the simulator)."""
     if simulated():
@@ -89,11 +150,12 @@ def device_name() -> str:
     return name
 
 
-def free_memory() -> int:
-    """Free device memory in bytes (the simulator: 2 GiB, a size for tests)."""
+def free_memory(k: int | None = None) -> int:
+    """Free memory of device ``k`` (None: this thread's current one) in bytes (the simulator: 2 GiB, a size for tests)."""
     if simulated():
         return 2 << 30
-    free, _total = cuda.current_context().get_memory_info()
+    with contextlib.nullcontext() if k is None else cuda.gpus[k]:
+        free, _total = cuda.current_context().get_memory_info()
     return int(free)
 
 
@@ -191,8 +253,9 @@ def _kernel(integ: int, seed_path: bool):
 _COMPILE_LOCK = threading.Lock()
 
 
-def _launch(kernel, strict: bool, m: int, args) -> None:
-    """Launch ``kernel`` over m threads; compile it first, with ``-fma=0`` where ``strict`` (or load it from the cache)."""
+def _launch(kernel, strict: bool, m: int, args, stream) -> None:
+    """Launch ``kernel`` over m threads on ``stream``; compile it first, with ``-fma=0`` where ``strict`` (or load
+    it from the cache).  Every array argument is a device array: the launch copies nothing and returns at once."""
     blocks = (m + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
     sig = tuple(typeof(a) for a in args)
     if not simulated() and sig not in kernel.overloads:
@@ -200,7 +263,22 @@ def _launch(kernel, strict: bool, m: int, args) -> None:
             if sig not in kernel.overloads:
                 with _nvvm_without_fma() if strict else contextlib.nullcontext():
                     kernel.compile(sig)
-    kernel[blocks, THREADS_PER_BLOCK](*args)
+    kernel[blocks, THREADS_PER_BLOCK, stream](*args)
+
+
+def _gather_kernel(sets, set_steps, cap, starts, out_sets, out_steps):
+    """Thread i copies its throw's contact sets (``starts[i+1] - starts[i]`` of them, from ``i * cap``) to
+    ``starts[i]`` of the packed outputs: only the sets the throws used cross to the host."""
+    i = cuda.grid(1)
+    if i < starts.shape[0] - 1:
+        a = starts[i]
+        lo = i * cap
+        for j in range(starts[i + 1] - a):
+            out_sets[a + j] = sets[lo + j]
+            out_steps[a + j] = set_steps[lo + j]
+
+
+_GATHER = cuda.jit(_gather_kernel, cache=CACHE)
 
 
 def uses_seed_kernel(kp, off0, integ: int) -> bool:
@@ -210,42 +288,125 @@ def uses_seed_kernel(kp, off0, integ: int) -> bool:
 
 
 def bytes_per_throw(integ: int, cap: int, kp=None, off0=None) -> int:
-    """Device memory one throw of a chunk takes: IC, summaries, ``cap`` contact sets and (general kernel) its state."""
+    """Device memory one throw of a chunk takes: IC, summaries, ``cap`` contact sets, as many packed for the
+    host (at most), its offset there and (general kernel) its state record."""
     state = 0 if (kp is not None and uses_seed_kernel(kp, off0, integ)) else new_states(1).itemsize
-    return 6 * 8 + 1 + 8 + 1 + 8 + 5 * cap + state
+    return 6 * 8 + 1 + 8 + 1 + 8 + 2 * 5 * cap + 8 + state
 
 
-def run_batch_cuda(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps) -> None:
-    """``core.kernels.run_batch`` on the GPU: the same arguments, the outputs written in place.
+class _Buffers:
+    """One host thread's CUDA stream and its buffers, device and pinned host, kept from chunk to chunk.
 
-    One chunk: the caller sizes it to the device's memory
-    (:func:`bytes_per_throw`, :func:`free_memory`).  Threads may run chunks
-    on several GPUs at once; under the simulator, which swaps this module's
-    ``cuda`` for a stand-in while a kernel runs, one at a time.
+    A buffer grows (it is made anew) when a chunk needs more than it
+    holds; a chunk uses its first rows.  The state records (general
+    kernel) are uploaded when made and are scratch after: every throw's
+    ``init_state`` sets what it reads, as on the CPU, where a batch block
+    reuses one record for all its throws.
+    """
+
+    def __init__(self, device: int):
+        self.device = device
+        self.stream = cuda.stream()
+        self._dev: dict = {}
+        self._host: dict = {}
+
+    def dev(self, name: str, n: int, dtype, width: int = 0):
+        """The first ``n`` rows of device buffer ``name`` (rows of ``width`` where > 0)."""
+        have = self._dev.get(name)
+        if have is None or len(have) < n:
+            shape = (n, width) if width else n
+            have = cuda.to_device(new_states(n), stream=self.stream) if dtype is None else cuda.device_array(shape, dtype)
+            self._dev[name] = have
+        return have[:n]
+
+    def host(self, name: str, n: int, dtype, width: int = 0):
+        """The first ``n`` rows of pinned (page-locked) host buffer ``name``: copies from and to it are asynchronous."""
+        have = self._host.get(name)
+        if have is None or len(have) < n:
+            have = cuda.pinned_array((n, width) if width else n, dtype)
+            self._host[name] = have
+        return have[:n]
+
+
+_LOCAL = threading.local()
+
+
+def _buffers() -> _Buffers:
+    """This host thread's stream and buffers on its current device (made on its first chunk there)."""
+    dev = 0 if simulated() else cuda.get_current_device().id
+    bufs = getattr(_LOCAL, "buffers", None)
+    if bufs is None or bufs.device != dev:
+        bufs = _LOCAL.buffers = _Buffers(dev)
+    return bufs
+
+
+def run_batch_cuda(ics, off0, kp, integ, cap):
+    """``core.kernels.run_batch`` on the GPU, its contact sets packed: (status, steps, outcome, nsets, sets,
+    set_steps, starts).
+
+    One chunk, on this host thread's stream (:class:`_Buffers`); the caller
+    sizes it to the device's memory (:func:`bytes_per_throw`,
+    :func:`free_memory`).  Throw i's sets are ``sets[starts[i] :
+    starts[i] + nsets[i]]``, end to end in throw order; a throw that filled
+    its ``cap`` sets (``Status.BUFFER_FULL``, re-run by the caller with more)
+    has none there.  Threads may run chunks on one GPU or several at once;
+    under the simulator, which swaps this module's ``cuda`` for a stand-in
+    while a kernel runs, one at a time.
     """
     with _SIMULATOR_LOCK if simulated() else contextlib.nullcontext():
-        _run_batch_cuda(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps)
+        return _run_batch_cuda(ics, off0, kp, integ, cap)
 
 
 _SIMULATOR_LOCK = threading.Lock()
 
 
-def _run_batch_cuda(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps) -> None:
+def _run_batch_cuda(ics, off0, kp, integ, cap):
     m = len(ics)
     if m == 0:
-        return
+        return (np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int8), np.zeros(0, np.int64),
+                np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0, np.int64))
     seed_path = uses_seed_kernel(kp, off0, integ)
     kernel, strict = _kernel(integ, seed_path)
-    d_ics = cuda.to_device(np.ascontiguousarray(ics, dtype=np.float64))
-    d_off0 = cuda.to_device(np.ascontiguousarray(off0, dtype=np.float64))
-    outs = [cuda.device_array(a.shape, a.dtype) for a in (status, steps, outcome, nsets, sets, set_steps)]
+    buf = _buffers()
+    stream = buf.stream
+    # in: the ICs and the offsets, through pinned buffers (asynchronous copies on this thread's stream)
+    h_ics, h_off0 = buf.host("ics", m, np.float64, 6), buf.host("off0", 8, np.float64, 3)
+    h_ics[:] = ics
+    h_off0[:] = off0
+    d_ics, d_off0 = buf.dev("ics", m, np.float64, 6), buf.dev("off0", 8, np.float64, 3)
+    d_ics.copy_to_device(h_ics, stream=stream)
+    d_off0.copy_to_device(h_off0, stream=stream)
+    kinds = (("status", np.int8), ("steps", np.int64), ("outcome", np.int8), ("nsets", np.int64))
+    outs = [buf.dev(name, m, dt) for name, dt in kinds]
+    d_sets, d_set_steps = buf.dev("sets", m * cap, np.uint8), buf.dev("set_steps", m * cap, np.int32)
     if seed_path:
-        args = (d_ics, d_off0, kp, cap, *outs)
+        args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps)
     else:
-        states = cuda.to_device(new_states(m))
-        empty = (cuda.device_array((0, loop.STATE_COLS)), cuda.device_array((0, loop.FORCE_COLS)),
-                 cuda.device_array((0, loop.ENERGY_COLS)))
-        args = (d_ics, d_off0, kp, cap, states, *outs, *empty)
-    _launch(kernel, strict, m, args)
-    for host, dev in zip((status, steps, outcome, nsets, sets, set_steps), outs):
-        dev.copy_to_host(host)
+        empty = (buf.dev("tr_state", 0, np.float64, loop.STATE_COLS), buf.dev("tr_force", 0, np.float64, loop.FORCE_COLS),
+                 buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS))
+        args = (d_ics, d_off0, kp, cap, buf.dev("states", m, None), *outs, d_sets, d_set_steps, *empty)
+    _launch(kernel, strict, m, args, stream)
+    # out: the summaries first, then only the contact sets the throws used
+    hosts = [buf.host(name, m, dt) for name, dt in kinds]
+    for dev, host in zip(outs, hosts):
+        dev.copy_to_host(host, stream=stream)
+    stream.synchronize()
+    status, steps, outcome, nsets = (h.copy() for h in hosts)
+    used = np.where(status == Status.BUFFER_FULL, 0, np.minimum(nsets, cap))
+    starts = np.zeros(m + 1, dtype=np.int64)
+    np.cumsum(used, out=starts[1:])
+    total = int(starts[-1])
+    sets, set_steps = np.empty(total, np.uint8), np.empty(total, np.int32)
+    if total:
+        h_starts = buf.host("starts", m + 1, np.int64)
+        h_starts[:] = starts
+        d_starts = buf.dev("starts", m + 1, np.int64)
+        d_starts.copy_to_device(h_starts, stream=stream)
+        d_out = (buf.dev("packed_sets", total, np.uint8), buf.dev("packed_steps", total, np.int32))
+        _launch(_GATHER, False, m, (d_sets, d_set_steps, cap, d_starts, *d_out), stream)
+        h_out = (buf.host("packed_sets", total, np.uint8), buf.host("packed_steps", total, np.int32))
+        for dev, host in zip(d_out, h_out):
+            dev.copy_to_host(host, stream=stream)
+        stream.synchronize()
+        sets[:], set_steps[:] = h_out
+    return status, steps, outcome, nsets, sets, set_steps, starts[:-1]

@@ -1,4 +1,15 @@
-"""Scans on a Dask cluster: connecting within a stated bound, and running chunks as tasks."""
+"""Scans on a Dask cluster: connecting within a stated bound, and running chunks as tasks.
+
+On a GPU scan every worker runs its chunks on a GPU of its own, as
+dask-cuda's ``LocalCUDACluster`` gives each worker one (there by
+``CUDA_VISIBLE_DEVICES``): when the scan starts, the workers on each host
+are numbered (:func:`gpu_places`), and each chunk task runs on device
+``number mod GPUs`` of its worker's host (``dicetrace.core.gpu.only_device``),
+so that workers use distinct GPUs as long as a host has no more workers than
+GPUs; where it has more, those on one GPU split its memory.  A worker that
+sees one GPU only (a dask-cuda worker) uses that one.  Every chunk runs the
+same kernels from its own ICs: the rows are those of a one-GPU run.
+"""
 
 from __future__ import annotations
 
@@ -172,12 +183,56 @@ def worker_device(client, device: str) -> str:
         fut.release()
 
 
+def gpu_places(client) -> dict[str, tuple[int, int]]:
+    """Worker address → (its number among the workers of its host, how many workers the host has).
+
+    Workers are numbered by name (LocalCluster's 0, 1, 2, … in order), then address.
+    """
+    try:
+        workers = client.scheduler_info(n_workers=-1)["workers"]
+    except TypeError:  # a distributed without n_workers: it lists them all
+        workers = client.scheduler_info()["workers"]
+    hosts: dict[str, list] = {}
+    for addr, info in workers.items():
+        name = info.get("name", addr)
+        key = (0, name, addr) if isinstance(name, int) else (1, str(name), addr)
+        hosts.setdefault(str(info.get("host", addr)), []).append((key, addr))
+    places = {}
+    for members in hosts.values():
+        for i, (_key, addr) in enumerate(sorted(members)):
+            places[addr] = (i, len(members))
+    return places
+
+
+def _gpu_of(place: tuple[int, int], ndev: int) -> tuple[int, float]:
+    """(device, share of its memory) of the worker at ``place`` on a host whose workers see ``ndev`` GPUs."""
+    i, n = place
+    k = i % ndev
+    return k, 1.0 / max(1, len(range(k, n, ndev)))
+
+
+def _gpu_chunk_task(defn_dict: dict, c: int, threads: int | None, places: dict) -> tuple[int, pa.Table]:
+    """A Dask task: chunk ``c`` of a GPU scan, on this worker's own GPU (:func:`gpu_places`)."""
+    from dask.distributed import get_worker  # dask.distributed is slow to import: only for a Dask run
+
+    from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
+
+    worker = get_worker()
+    # a worker that joined after the scan started: numbered by its name where it is a number
+    place = places.get(worker.address) or (worker.name if isinstance(worker.name, int) else 0, 1)
+    k, share = _gpu_of(place, gpu.device_count())
+    with gpu.only_device(k, share):
+        return _chunk_task(defn_dict, c, threads)
+
+
 def _iter_dask(defn: ScanDefinition, todo: Iterable[int], client, threads) -> Iterator[tuple[int, pa.Table]]:
-    """Chunks on a Dask cluster as they complete, with a bounded number of tasks in flight."""
+    """Chunks on a Dask cluster as they complete, with a bounded number of tasks in flight; a GPU scan's on
+    each worker's own GPU (:func:`_gpu_chunk_task`)."""
     from dask.distributed import as_completed  # dask.distributed is slow to import: only for a Dask run
 
     d = defn.to_dict()
     run = uuid.uuid4().hex[:8]
+    task, places = (_chunk_task, ()) if defn.device == "cpu" else (_gpu_chunk_task, (gpu_places(client),))
     try:
         width = max(4, 2 * sum(client.nthreads().values()))
     except Exception:  # noqa: BLE001
@@ -185,7 +240,7 @@ def _iter_dask(defn: ScanDefinition, todo: Iterable[int], client, threads) -> It
     it = iter(todo)
 
     def submit(c):
-        return client.submit(_chunk_task, d, c, threads or 1, key=f"dicetrace-scan-{run}-{c}", pure=False)
+        return client.submit(task, d, c, threads or 1, *places, key=f"dicetrace-scan-{run}-{c}", pure=False)
 
     live = {submit(c) for c in itertools.islice(it, width)}
     try:
