@@ -125,8 +125,10 @@ def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP) -> int:
     workers share one: ``core.gpu.memory_share``), and 16 times the CPU's chunk of host buffers."""
     from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
 
-    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0) * gpu.streams_per_device()
-    free = gpu.free_memory(gpu.device_ids()[0]) * gpu.memory_share()
+    streams = gpu.streams_per_device()
+    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0) * streams
+    # asked in a thread of that GPU's pool: a thread has one CUDA device, and this one may never have had one
+    free = _gpu_pool(gpu.device_ids()[0], streams).submit(gpu.free_memory).result() * gpu.memory_share()
     n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * free) // per, 16 * batch_chunk(cap))
     return max(BATCH_BLOCK, n)
 

@@ -160,8 +160,8 @@ def _nvvm_missing() -> str | None:
 
 @pytest.mark.slow
 def test_kernels_compile_for_the_device():
-    """Both kernels compile to PTX for an H200 (sm_90) with NVIDIA's compiler; the seed kernel without
-    contraction: its only fused multiply-adds are libdevice's own (sin, cos), so far fewer than NVVM's
+    """Both kernels (and the one that packs the contact sets) compile to PTX for an H200 (sm_90) with NVIDIA's
+    compiler; the seed kernel without contraction: its only fused multiply-adds are libdevice's own (sin, cos), so far fewer than NVVM's
     default makes of the same kernel."""
     why = _nvvm_missing()
     if why:
@@ -196,6 +196,10 @@ def test_kernels_compile_for_the_device():
                     ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
                 counts.append(ptx.count("fma.rn.f64"))
             out[preset] = dict(seed_kernel=seed, strict=strict, fma=counts)
+        gather = tuple(typeof(a) for a in (np.zeros(16, np.uint8), np.zeros(16, np.int32), 8, np.zeros(3, np.int64),
+                                           np.zeros(4, np.uint8), np.zeros(4, np.int32)))
+        ptx, _ = cuda.compile_ptx(gpu._GATHER.py_func, gather, cc=(9, 0))
+        out["gather"] = ".entry" in ptx
         print(json.dumps(out))
         """
     )
@@ -208,6 +212,7 @@ def test_kernels_compile_for_the_device():
     strict_fma, default_fma = out["seed"]["fma"]
     assert strict_fma < default_fma / 3, out
     assert not out["physical"]["seed_kernel"] and not out["physical"]["strict"]
+    assert out["gather"]  # the kernel that packs the used contact sets for the copy back
 
 
 def _gpu_missing() -> str | None:
@@ -238,30 +243,81 @@ def test_real_gpu_agrees_with_the_cpu(preset):
 
 
 @pytest.mark.slow
-def test_several_gpus_share_the_chunks_and_give_one_gpus_results():
-    """With several GPUs the chunks go round-robin to one thread per GPU: here three stand-in devices (the
-    simulator has one) on 8 `seed` throws in chunks of 3, the CPU's summaries bit for bit, in order."""
+@pytest.mark.parametrize("streams", ["1", "2"])
+def test_several_gpus_share_the_chunks_and_give_one_gpus_results(streams):
+    """With several GPUs the chunks are cut into pieces that go round-robin to the GPUs, each GPU's to its own
+    threads (one CUDA stream each, ``DICETRACE_GPU_STREAMS``): here three stand-in devices (the simulator has
+    one) on 8 `seed` throws in chunks of 4 cut in two, with 30 contact sets a throw (5 of the 8 fill them and
+    are re-run on the device with more): the CPU's summaries bit for bit, in order."""
     code = textwrap.dedent(
         """
         import json, threading
         import numpy as np
+        import dicetrace.batch_chunks as bc
         import dicetrace.core.gpu as gpu
         from dicetrace.ics import seed_slice
         from dicetrace.simulate import simulate_batch
-        chosen = []
+        chosen, pieces = [], []
         gpu.device_count = lambda: 3
         gpu.select_device = lambda k: chosen.append((k, threading.get_ident()))
+        bc.GPU_PIECE_MIN = 2
+        run_batch_cuda = gpu.run_batch_cuda
+        def spy(ics, *args):
+            pieces.append((len(ics), args[-1]))
+            return run_batch_cuda(ics, *args)
+        gpu.run_batch_cuda = spy
         a = json.loads(__import__("sys").argv[1])
-        r = simulate_batch(seed_slice(np.array(a["xs"]), np.array(a["ys"])), config="seed", device="cuda", chunk=3)
+        r = simulate_batch(seed_slice(np.array(a["xs"]), np.array(a["ys"])), config="seed", device="cuda", chunk=4,
+                           cap=30)
         print(json.dumps(dict(outcome=r.outcome.tolist(), steps=r.steps.tolist(), status=r.status_code.tolist(),
                               offsets=r.set_offsets.tolist(), sets=r.sets.tolist(), set_steps=r.set_steps.tolist(),
-                              devices=sorted(k for k, _ in chosen), threads=len({t for _, t in chosen}))))
+                              devices=sorted({k for k, _ in chosen}), pieces=pieces,
+                              threads={k: len({t for j, t in chosen if j == k}) for k, _ in chosen})))
         """
     )
     arg = json.dumps(dict(xs=list(map(float, XS)), ys=list(map(float, YS))))
     res = subprocess.run([sys.executable, "-c", code, arg], capture_output=True, text=True, timeout=600,
-                         env={**os.environ, **SIM})
+                         env={**os.environ, **SIM, "DICETRACE_GPU_STREAMS": streams})
     assert res.returncode == 0, res.stderr
     got = json.loads(res.stdout)
-    assert got.pop("devices") == [0, 1, 2] and got.pop("threads") == 3  # one thread per device, each selected once
-    assert got == _cpu("seed", XS, YS)
+    assert got.pop("devices") == [0, 1, 2]  # 4 pieces round-robin: every device has one
+    assert all(1 <= n <= int(streams) for n in got.pop("threads").values())  # its threads: at most one per stream
+    pieces = got.pop("pieces")
+    assert [m for m, cap in pieces if cap == 30] == [2, 2, 2, 2], pieces  # 2 chunks of 4, each cut in two
+    assert {cap for m, cap in pieces} == {30, 240}  # and the re-runs of the throws that filled their 30 sets
+    want = _cpu("seed", XS, YS, cap=30)
+    assert got == want
+    assert 0 < sum(np.diff(want["offsets"]) > 30) < 8  # some throws overflowed their first buffer, not all
+
+
+def test_gpu_streams_setting_is_checked(monkeypatch):
+    """``DICETRACE_GPU_STREAMS``: a whole number >= 1, or refused naming it (checked where numba-cuda is)."""
+    pytest.importorskip("numba.cuda")
+    from dicetrace.core import gpu
+
+    monkeypatch.setenv("DICETRACE_GPU_STREAMS", "1")
+    assert gpu.streams_per_device() == 1
+    monkeypatch.delenv("DICETRACE_GPU_STREAMS")
+    assert gpu.streams_per_device() == gpu.DEFAULT_STREAMS == 2
+    for bad in ("0", "two", "-1", "1.5"):
+        monkeypatch.setenv("DICETRACE_GPU_STREAMS", bad)
+        with pytest.raises(ValueError, match="DICETRACE_GPU_STREAMS must be a whole number >= 1"):
+            gpu.streams_per_device()
+
+
+def test_pieces_cut_a_chunk_for_the_gpus_and_join_back():
+    """A GPU chunk is cut into near-equal pieces of at least ``GPU_PIECE_MIN`` ICs, and its summaries joined back."""
+    from dicetrace.batch_chunks import GPU_PIECE_MIN, _joined, _pieces
+
+    assert _pieces(0, 10, 4) == [(0, 10)]  # too small to cut
+    assert _pieces(5, 5 + 4 * GPU_PIECE_MIN + 3, 4) == [(5, 5 + GPU_PIECE_MIN), (5 + GPU_PIECE_MIN, 5 + 2 * GPU_PIECE_MIN + 1),
+                                                       (5 + 2 * GPU_PIECE_MIN + 1, 5 + 3 * GPU_PIECE_MIN + 2),
+                                                       (5 + 3 * GPU_PIECE_MIN + 2, 5 + 4 * GPU_PIECE_MIN + 3)]
+    assert len(_pieces(0, 3 * GPU_PIECE_MIN - 1, 8)) == 2
+    a = (np.array([1, 2], np.int8), np.array([3, 4]), np.array([5, 6], np.int8), np.array([1, 2]),
+         np.array([7, 8, 9], np.uint8), np.array([1, 2, 3], np.int32))
+    b = (np.array([0], np.int8), np.array([9]), np.array([1], np.int8), np.array([1]), np.array([4], np.uint8),
+         np.array([5], np.int32))
+    j = _joined([a, b])
+    assert [x.tolist() for x in j] == [[1, 2, 0], [3, 4, 9], [5, 6, 1], [1, 2, 1], [7, 8, 9, 4], [1, 2, 3, 5]]
+    assert [x.dtype for x in j] == [x.dtype for x in a]

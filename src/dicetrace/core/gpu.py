@@ -142,20 +142,19 @@ def streams_per_device() -> int:
 
 
 def device_name() -> str:
-    """The device the kernels run on, in words (e.g. 'NVIDIA H200', or the simulator)."""
+    """The device the kernels run on, in words (e.g. 'NVIDIA H200', or the simulator): the first of
+    :func:`device_ids`, read without making a CUDA context in the calling thread."""
     if simulated():
         return "numba-cuda simulator"
-    dev = cuda.get_current_device()
-    name = dev.name.decode() if isinstance(dev.name, bytes) else str(dev.name)
-    return name
+    name = cuda.gpus[device_ids()[0]].name
+    return name.decode() if isinstance(name, bytes) else str(name)
 
 
-def free_memory(k: int | None = None) -> int:
-    """Free memory of device ``k`` (None: this thread's current one) in bytes (the simulator: 2 GiB, a size for tests)."""
+def free_memory() -> int:
+    """Free memory of this thread's current device in bytes (the simulator: 2 GiB, a size for tests)."""
     if simulated():
         return 2 << 30
-    with contextlib.nullcontext() if k is None else cuda.gpus[k]:
-        free, _total = cuda.current_context().get_memory_info()
+    free, _total = cuda.current_context().get_memory_info()
     return int(free)
 
 
