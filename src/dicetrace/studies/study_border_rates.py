@@ -301,64 +301,75 @@ def _letter() -> str:
     return {v: k for k, v in LETTERS.items()}.get(NAME, "x")
 
 
-def render(c: Computed, out: Output) -> None:
+#: Each preset's colour in the figures.
+COLOURS = {"seed": "tab:blue", "physical": "tab:red"}
+
+
+def _draw_local_slope(ax, key: str, r: dict) -> None:
+    """One preset's panel of the local rate against the distance from the border."""
+    f = r["flat"]
+    dm, med = np.asarray(f["d_mid"], float), np.asarray([math.nan if v is None else v for v in f["median_slope"]])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ax.semilogx(dm, 1.0 / med, "o-", ms=3, color=COLOURS[key], label="1 / pooled local slope")
+        q25, q75 = (np.asarray(f[q], float) for q in ("q25_slope", "q75_slope"))
+        ax.fill_between(dm, 1.0 / q75, 1.0 / q25,
+                        color=COLOURS[key], alpha=0.15, label="interquartile range of the sides")
+    ax.axhline(r["analytic"]["edge"], color="k", lw=1, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
+    if r["analytic"].get("corner"):
+        ax.axhline(r["analytic"]["corner"], color="k", ls=":", lw=1,
+                   label=f"corner balance {r['analytic']['corner']:.2f} /s")
+    ax.axhline(r["all_range"]["median"], color="0.5", ls="--", lw=1,
+               label=f"all-range fits, median {r['all_range']['median']:.2f} /s")
+    if r["near"].get("d_hi"):
+        ax.axvspan(r["near"]["d_lo"], r["near"]["d_hi"], color="0.85", zorder=0, label="near-border fit range")
+    ax.set_ylim(15, 45)
+    ax.set_title(f"{key}: contact-tsit5, uniform tol {r['numerics']['tol']:g}", fontsize=10)
+    ax.set_xlabel("distance d from the border (slice units)")
+
+
+def _draw_lambdas(ax, key: str, r: dict) -> None:
+    """One preset's panel of the histograms of every side's λ, near the border and over the whole range."""
+    near = np.asarray(r["lambdas_near"], float)
+    whole = np.asarray(r["lambdas_all"], float)
+    bins = np.linspace(15, 45, 61)
+    ax.hist(near[np.isfinite(near)], bins=bins, color=COLOURS[key], alpha=0.7,
+            label=f"near the border: {pm(r['near']['median'], r['near']['total'], '.2f')} /s")
+    ax.hist(whole[np.isfinite(whole)], bins=bins, histtype="step", color="k",
+            label=f"whole range: {pm(r['all_range']['median'], r['all_range']['median_stderr'], '.2f')} /s")
+    ax.axvline(r["analytic"]["edge"], color="k", lw=1.5, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
+    ax.set_title(f"{key}: λ of every side ({r['near']['n_sides']} sides)", fontsize=10)
+    ax.set_xlabel("λ / (1/s)")
+
+
+def _save_by_preset(out: Output, results: dict, draw, name: str, key: str, *, height: float, ylabel: str,
+                    caption: str) -> None:
+    """A figure of one panel a preset side by side on one y axis: ``draw(ax, preset, its results)`` fills each
+    (title and x label too), then each gets a legend and the first the y label."""
     import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
+    fig, axes = plt.subplots(1, len(MODELS), figsize=(12, height), sharey=True)
+    for ax, preset in zip(axes, MODELS):
+        draw(ax, preset, results[preset])
+        ax.legend(fontsize=7)
+    axes[0].set_ylabel(ylabel)
+    fig.tight_layout()
+    out.save_fig(fig, name, key=key, caption=caption)
 
+
+def render(c: Computed, out: Output) -> None:
     R, L = c.results, _letter()
     if c.plot:  # a fresh run: its raw measurements, from which :func:`rerender` recomputes every number
         (out.res_dir / Path(RAW_CSV).parent).mkdir(parents=True, exist_ok=True)
         out.write_csv(pd.concat([raw_frame(k, c.plot[k]) for k in MODELS], ignore_index=True), RAW_CSV)
-    colours = {"seed": "tab:blue", "physical": "tab:red"}
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.4), sharey=True)
-    for ax, key in zip(axes, MODELS):
-        r = R[key]
-        f = r["flat"]
-        dm, med = np.asarray(f["d_mid"], float), np.asarray([math.nan if v is None else v for v in f["median_slope"]])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ax.semilogx(dm, 1.0 / med, "o-", ms=3, color=colours[key], label="1 / pooled local slope")
-            q25, q75 = (np.asarray(f[q], float) for q in ("q25_slope", "q75_slope"))
-            ax.fill_between(dm, 1.0 / q75, 1.0 / q25,
-                            color=colours[key], alpha=0.15, label="interquartile range of the sides")
-        ax.axhline(r["analytic"]["edge"], color="k", lw=1, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
-        if r["analytic"].get("corner"):
-            ax.axhline(r["analytic"]["corner"], color="k", ls=":", lw=1,
-                       label=f"corner balance {r['analytic']['corner']:.2f} /s")
-        ax.axhline(r["all_range"]["median"], color="0.5", ls="--", lw=1,
-                   label=f"all-range fits, median {r['all_range']['median']:.2f} /s")
-        if r["near"].get("d_hi"):
-            ax.axvspan(r["near"]["d_lo"], r["near"]["d_hi"], color="0.85", zorder=0, label="near-border fit range")
-        ax.set_ylim(15, 45)
-        ax.set_title(f"{key}: contact-tsit5, uniform tol {r['numerics']['tol']:g}", fontsize=10)
-        ax.set_xlabel("distance d from the border (slice units)")
-        ax.legend(fontsize=7)
-    axes[0].set_ylabel("local rate 1 / (dT/d(−ln d)) / (1/s)")
-    fig.tight_layout()
-    out.save_fig(fig, f"{L}_local_slope", key="local_slope",
-                 caption="The local rate 1/(dT/d(−ln d)) of the settle time against the distance from the border "
-                 "(least squares over a sliding decade, median over every side of every border of home and "
-                 "zoom-out; band: interquartile range). Grey: the near-border fit range (stable at tol/10, slope "
-                 "within 2 % of its value at the smallest stable distances).")
-
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.0), sharey=True)
-    for ax, key in zip(axes, MODELS):
-        r = R[key]
-        near = np.asarray(r["lambdas_near"], float)
-        whole = np.asarray(r["lambdas_all"], float)
-        bins = np.linspace(15, 45, 61)
-        ax.hist(near[np.isfinite(near)], bins=bins, color=colours[key], alpha=0.7,
-                label=f"near the border: {pm(r['near']['median'], r['near']['total'], '.2f')} /s")
-        ax.hist(whole[np.isfinite(whole)], bins=bins, histtype="step", color="k",
-                label=f"whole range: {pm(r['all_range']['median'], r['all_range']['median_stderr'], '.2f')} /s")
-        ax.axvline(r["analytic"]["edge"], color="k", lw=1.5, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
-        ax.set_title(f"{key}: λ of every side ({r['near']['n_sides']} sides)", fontsize=10)
-        ax.set_xlabel("λ / (1/s)")
-        ax.legend(fontsize=7)
-    axes[0].set_ylabel("sides")
-    fig.tight_layout()
-    out.save_fig(fig, f"{L}_lambdas", key="lambdas",
-                 caption="λ of every side fitted near the border (filled) and over the whole range from the same "
-                 "smallest distance to 1e-3 (outline), with the analytic edge saddle of each preset.")
+    _save_by_preset(out, R, _draw_local_slope, f"{L}_local_slope", "local_slope", height=4.4,
+                    ylabel="local rate 1 / (dT/d(−ln d)) / (1/s)",
+                    caption="The local rate 1/(dT/d(−ln d)) of the settle time against the distance from the border "
+                    "(least squares over a sliding decade, median over every side of every border of home and "
+                    "zoom-out; band: interquartile range). Grey: the near-border fit range (stable at tol/10, slope "
+                    "within 2 % of its value at the smallest stable distances).")
+    _save_by_preset(out, R, _draw_lambdas, f"{L}_lambdas", "lambdas", height=4.0, ylabel="sides",
+                    caption="λ of every side fitted near the border (filled) and over the whole range from the same "
+                    "smallest distance to 1e-3 (outline), with the analytic edge saddle of each preset.")
 
     rows = []
     for key in MODELS:
