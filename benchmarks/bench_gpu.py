@@ -32,7 +32,13 @@ The ICs are the seed slice (``dicetrace.ics.seed_slice``), x, y uniform in
 window; the whole command in a new process, numba-cuda loading its kernel
 from its cache there (or compiling it) and the Parquet written to a
 temporary folder) with ``--device cpu``
-and ``--device cuda``, where the CLI has ``--device``.
+and ``--device cuda``, where the CLI has ``--device``: the GPU three times,
+the first loading (or compiling) the kernel, then with one CUDA stream a GPU
+(``DICETRACE_GPU_STREAMS=1``: no overlap of a chunk's copies and host work
+with the next chunk's kernel) and with the default again, from a warm cache,
+and the gain of the overlap on the wall time (the two scans' rows compared).
+The throughput lines likewise give the GPU's rate with one stream beside the
+default, and whether the results are identical (they must be).
 
 Without a GPU it prints one line saying why and exits 2.  Under numba-cuda's
 simulator (``NUMBA_ENABLE_CUDASIM=1``) it runs with ``--quick`` sizes only:
@@ -224,6 +230,13 @@ def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int, repea
     print(f"  CPU  {f'{threads} numba threads':<32} {n / t_cpu:>12,.0f} throws/s  ({n:,} ICs in {t_cpu:.2f} s, "
           f"{cpu.steps.mean():.0f} steps per throw)", flush=True)
     print(f"  GPU/CPU throughput ×{(rate_n / t_gpu) / (n / t_cpu):.1f}", flush=True)
+    with _streams(1):
+        one, t_one = _timed(lambda: simulate_batch(ics, config=preset, device="cuda"), repeat)
+    same = all(np.array_equal(getattr(one, k), getattr(gpu, k))
+               for k in ("outcome", "steps", "status_code", "set_offsets", "sets", "set_steps"))
+    print(f"  GPU, one stream a GPU (no overlap) {rate_n / t_one:>10,.0f} throws/s  ({rate_n:,} ICs in {t_one:.2f} s): "
+          f"the overlap of {_streams_default()} streams gains ×{t_one / t_gpu:.2f}; results "
+          + ("identical" if same else "DIFFERENT (a defect)"), flush=True)
     print(f"  GPU vs CPU, {n:,} ICs of the seed slice, x, y uniform in [0, 20]² (rng {seed}):")
     for name, mask in agreement(gpu, cpu, n).items():
         print(f"    {name:<26} {_frac(mask)}")
@@ -239,6 +252,32 @@ def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int, repea
     failed = int(((cpu.status_code == 0) & (gpu.status_code[:n] != 0)).sum())
     if failed:
         print(f"  {failed:,} throws settle on the CPU but not on the GPU")
+
+
+class _streams:
+    """Context: batches on ``n`` CUDA streams a GPU (``DICETRACE_GPU_STREAMS``, read at each batch)."""
+
+    def __init__(self, n: int | None):
+        self.n = n
+
+    def __enter__(self):
+        self.old = os.environ.get("DICETRACE_GPU_STREAMS")
+        if self.n is None:
+            os.environ.pop("DICETRACE_GPU_STREAMS", None)
+        else:
+            os.environ["DICETRACE_GPU_STREAMS"] = str(self.n)
+
+    def __exit__(self, *exc):
+        if self.old is None:
+            os.environ.pop("DICETRACE_GPU_STREAMS", None)
+        else:
+            os.environ["DICETRACE_GPU_STREAMS"] = self.old
+
+
+def _streams_default() -> int:
+    from dicetrace.core.gpu import streams_per_device
+
+    return streams_per_device()
 
 
 def _cli() -> list[str]:
@@ -265,25 +304,47 @@ def bench_scan(res: int, window: str) -> None:
         print("  scan --device: not available (this CLI's scan has no --device)")
         return
     tmp = Path(tempfile.mkdtemp(prefix="bench_gpu_scan_"))
+    # the GPU three times: the first loads (or compiles) the kernel; then one stream a GPU (no overlap of one
+    # chunk's copies and host work with the next one's kernel) and the default again, from a warm cache
+    runs = [("cpu", "cpu", None), ("cuda", "cuda", None), ("cuda", "cuda, 1 stream", 1), ("cuda", "cuda, again", None)]
+    walls: dict = {}
     try:
-        for device in ("cpu", "cuda"):
-            out = tmp / device
+        for i, (device, label, streams) in enumerate(runs):
+            out = tmp / str(i)
             cmd = [*_cli(), "scan", "--window", window, "--res", str(res), "--out", str(out), "--device", device, "--yes"]
+            run_env = {k: v for k, v in env.items() if k != "DICETRACE_GPU_STREAMS"}
+            if streams is not None:
+                run_env["DICETRACE_GPU_STREAMS"] = str(streams)
             t = time.perf_counter()
             try:
-                r = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=env)
+                r = subprocess.run(cmd, capture_output=True, text=True, timeout=1800, env=run_env)
             except subprocess.TimeoutExpired:
-                print(f"  {device:<5} timed out after 1800 s")
+                print(f"  {label:<15} timed out after 1800 s")
                 continue
             wall = time.perf_counter() - t
             if r.returncode != 0:
-                print(f"  {device:<5} failed (exit {r.returncode}): {_last_line(r.stderr)}")
-            else:
-                print(f"  {device:<5} {wall:8.2f} s wall, {res * res:,} ICs (the whole command: start-up, "
-                      + ("compiling the GPU kernel, " if device == "cuda" else "loading the kernels, ")
-                      + "throws, Parquet)", flush=True)
+                print(f"  {label:<15} failed (exit {r.returncode}): {_last_line(r.stderr)}")
+                continue
+            walls[i] = wall
+            print(f"  {label:<15} {wall:8.2f} s wall, {res * res:,} ICs (the whole command: start-up, "
+                  + ("loading or compiling the GPU kernel, " if device == "cuda" else "loading the kernels, ")
+                  + "throws, Parquet)", flush=True)
+        if 2 in walls and 3 in walls:
+            same = _same_rows(tmp / "2", tmp / "3")
+            print(f"  overlap (DICETRACE_GPU_STREAMS default {_streams_default()} against 1, warm cache): "
+                  f"×{walls[2] / walls[3]:.2f} on the scan's wall time; rows "
+                  + ("identical" if same else "DIFFERENT (a defect)"), flush=True)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _same_rows(a: Path, b: Path) -> bool:
+    """Whether two scan folders hold the same rows (outcome, status, steps, contact sequences)."""
+    from dicetrace.scan import read_scan
+
+    x, y = read_scan(a), read_scan(b)
+    cols = [c for c in ("ic_id", "outcome", "status", "steps", "contact_sequence") if c in x.columns]
+    return len(x) == len(y) and x[cols].equals(y[cols])
 
 
 def main(argv=None) -> int:

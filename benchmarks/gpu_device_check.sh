@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # The GPU check, in one run, on a machine with a CUDA GPU: the tests marked gpu (tests/core/test_gpu.py), then
 # benchmarks/bench_gpu.py at the sizes the GPU issue asks for (10^5 ICs of agreement per preset, 10^6 for the
-# GPU's rate, the 1000 x 1000 scan on each device).
+# GPU's rate, the 1000 x 1000 scan on each device; on the GPU with one CUDA stream and with two, which gives the
+# gain of overlapping a chunk's transfers and host work with the next chunk's kernel), and a 300 x 300 GPU scan
+# on two Dask workers against the same scan in one process (their rows must be identical).
 #
 # For a machine with numba-cuda, numpy, scipy, pyarrow and pandas and nothing else of dicetrace's dependencies
 # (no rerun-sdk, no internet): it runs the working tree as it is (PYTHONPATH=src, nothing installed), from the
-# repository root.  Sized for about 6 minutes on an H200 beside a 16-core CPU, where the numba cache starts cold
+# repository root.  Sized for about 7 minutes on an H200 beside a 16-core CPU, where the numba cache starts cold
 # (the CPU's kernels compile in the tests' run and load from the cache after); each part has a time limit, and
 # the benchmark prints as it goes, so a part cut short still leaves what it measured.  dicetrace scan needs
 # typer as well: without it bench_gpu.py says the scan is not available.
@@ -46,8 +48,30 @@ if "$PY" -c 'import pytest' 2>/dev/null; then
 else
     say "### tests marked gpu: not run (pytest is not installed)"
 fi
-# seed first, with the scan (quick); then physical, the long one
-part 120 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
+# seed first, with the scan (quick; the GPU's scan with one stream and with two: the overlap); then physical
+part 150 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
 part 240 "bench_gpu: physical" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 --rate-n 1000000 --skip-scan
+# two Dask workers on the GPU(s) (sharing one where there is one): the rows of the one-process GPU scan
+if "$PY" -c 'import dask.distributed, typer' 2>/dev/null; then
+    part 120 "scan on Dask, --device cuda, 2 workers, against one process" "$PY" - <<'PYEOF'
+import subprocess, sys, tempfile, time
+from pathlib import Path
+from dicetrace.scan import read_scan
+tmp = Path(tempfile.mkdtemp(prefix="gpu_check_dask_"))
+base = [sys.executable, "-m", "dicetrace.cli", "scan", "--window", "0,20,0,20", "--res", "300", "--chunk", "16384",
+        "--device", "cuda", "--yes", "-q"]
+walls = {}
+for name, extra in (("one", []), ("dask", ["--dask", "--workers", "2"])):
+    t = time.perf_counter()
+    r = subprocess.run([*base, "--out", str(tmp / name), *extra], capture_output=True, text=True)
+    walls[name] = time.perf_counter() - t
+    print(f"{name}: exit {r.returncode} in {walls[name]:.1f} s {r.stderr.strip()[-300:]}", flush=True)
+a, b = read_scan(tmp / "one"), read_scan(tmp / "dask")
+cols = ["ic_id", "outcome", "status", "steps", "contact_sequence"]
+print("rows identical to the one-process GPU scan:", len(a) == len(b) == 90000 and a[cols].equals(b[cols]))
+PYEOF
+else
+    say "### scan on Dask: not run (dask.distributed or typer is not installed)"
+fi
 say ""
 say "### done after ${SECONDS} s"
