@@ -40,57 +40,38 @@ class StudyGrid:
     quick_graded: tuple[tuple[float, float], ...] = ()
 
 
-#: The study's grid of each integrator of :data:`dicetrace.integrators.INTEGRATORS`, by name.
+#: The one step of every error-controlled scheme in the study (s): their tolerance is what the study varies.
+ADAPTIVE_DT_S = (1e-3,)
+
+
+def _fixed_step(color: str, study_dt_s: tuple[float, ...], quick_dt_s: tuple[float, ...]) -> StudyGrid:
+    """The grid of a fixed-step scheme: its steps (full and ``--quick``), no tolerances."""
+    return StudyGrid(color, study_dt_s, quick_dt_s)
+
+
+def _error_controlled(color: str, study_tol: tuple[float, ...], quick_tol: tuple[float, ...],
+                      study_graded: tuple[tuple[float, float], ...] = (),
+                      quick_graded: tuple[tuple[float, float], ...] = ()) -> StudyGrid:
+    """The grid of an error-controlled scheme: its tolerances (full and ``--quick``, uniform and loosening) at
+    :data:`ADAPTIVE_DT_S`."""
+    return StudyGrid(color, ADAPTIVE_DT_S, ADAPTIVE_DT_S, study_tol, quick_tol, study_graded, quick_graded)
+
+
+#: The study's grid of each integrator of :data:`dicetrace.integrators.INTEGRATORS`, by name: colour, then the
+#: steps (full, ``--quick``) of a fixed-step scheme or the tolerances (full, ``--quick``; then the loosening ones)
+#: of an error-controlled one.
 GRIDS: dict[str, StudyGrid] = {
-    "semi-implicit-euler": StudyGrid(
-        "tab:blue",
-        study_dt_s=(1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5, 1.5625e-5, 7.8125e-6),
-        quick_dt_s=(1e-3, 2.5e-4),
-    ),
-    "forward-euler": StudyGrid(
-        "tab:red",
-        study_dt_s=(1e-3, 2.5e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5),
-        quick_dt_s=(1e-4, 5e-5),
-    ),
-    "verlet": StudyGrid(
-        "tab:green",
-        study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
-        quick_dt_s=(1e-3, 2.5e-4),
-    ),
-    "rk4": StudyGrid(
-        "tab:purple",
-        study_dt_s=(2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5),
-        quick_dt_s=(1e-3, 2.5e-4),
-    ),
-    "contact-substep": StudyGrid(
-        "tab:orange",
-        study_dt_s=(8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4),
-        quick_dt_s=(2e-3, 1e-3),
-    ),
-    "contact-adaptive": StudyGrid(
-        "tab:brown",
-        study_dt_s=(1e-3,),
-        quick_dt_s=(1e-3,),
-        study_tol=(1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8),
-        quick_tol=(1e-4, 1e-6),
-        study_graded=((10.0, 2e-8),),
-    ),
-    "contact-dop853": StudyGrid(
-        "tab:pink",
-        study_dt_s=(1e-3,),
-        quick_dt_s=(1e-3,),
-        study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10),
-        quick_tol=(1e-6, 1e-8),
-    ),
-    "contact-tsit5": StudyGrid(
-        "tab:olive",
-        study_dt_s=(1e-3,),
-        quick_dt_s=(1e-3,),
-        study_tol=(1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9),
-        quick_tol=(1e-6, 1e-8),
-        study_graded=((10.0, 2e-8), (10.0, 5e-8)),
-        quick_graded=((10.0, 1e-6),),
-    ),
+    "semi-implicit-euler": _fixed_step(
+        "tab:blue", (1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5, 1.5625e-5, 7.8125e-6), (1e-3, 2.5e-4)),
+    "forward-euler": _fixed_step("tab:red", (1e-3, 2.5e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5), (1e-4, 5e-5)),
+    "verlet": _fixed_step("tab:green", (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5), (1e-3, 2.5e-4)),
+    "rk4": _fixed_step("tab:purple", (2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5), (1e-3, 2.5e-4)),
+    "contact-substep": _fixed_step("tab:orange", (8e-3, 4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4), (2e-3, 1e-3)),
+    "contact-adaptive": _error_controlled("tab:brown", (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8), (1e-4, 1e-6),
+                                          study_graded=((10.0, 2e-8),)),
+    "contact-dop853": _error_controlled("tab:pink", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9, 1e-10), (1e-6, 1e-8)),
+    "contact-tsit5": _error_controlled("tab:olive", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9), (1e-6, 1e-8),
+                                       study_graded=((10.0, 2e-8), (10.0, 5e-8)), quick_graded=((10.0, 1e-6),)),
 }
 
 
@@ -107,4 +88,4 @@ def color(integrator: str) -> str:
     return grid(integrator).color
 
 
-__all__ = ["StudyGrid", "GRIDS", "grid", "color"]
+__all__ = ["StudyGrid", "GRIDS", "ADAPTIVE_DT_S", "grid", "color"]
