@@ -192,6 +192,9 @@ def run_chunk(kin, cap: int, threads, device: str = "cpu"):
 
 #: Least ICs of a piece that :func:`chunk_results` cuts a GPU chunk into (so that each GPU has chunks in flight).
 GPU_PIECE_MIN = 2**16
+#: Most pieces of a GPU chunk per stream: more than one, so that a stream's copies overlap another's kernel
+#: through the chunk, not only at its end.
+PIECES_PER_STREAM = 4
 
 
 def _pieces(a: int, b: int, n: int) -> list[tuple[int, int]]:
@@ -230,12 +233,14 @@ def chunk_results(bounds, run, device: str = "cpu"):
 
     On the CPU the chunks run one after the other here.  On GPUs
     (``device == "cuda"``) each chunk is cut into pieces (at least
-    ``GPU_PIECE_MIN`` ICs each) so that every GPU has work, and the pieces go
+    ``GPU_PIECE_MIN`` ICs each, at most ``PIECES_PER_STREAM`` per stream)
+    so that every GPU has work, and the pieces go
     round-robin to the GPUs (``core.gpu.device_ids``: every device, or the
     one a Dask worker was given), each GPU's to its own threads, one CUDA
     stream each (``core.gpu.streams_per_device``): while one piece's results
     are copied back and packed, the next one's ICs are copied in and its
-    kernel runs.  At most two pieces per stream are ahead of the one yielded.
+    kernel runs.  At most two pieces per stream (or one chunk's pieces) are
+    queued beyond the chunk being yielded.
     Every piece runs the same kernels from its own ICs, so the results are
     those of one GPU running the chunks one by one.
     """
@@ -252,10 +257,10 @@ def chunk_results(bounds, run, device: str = "cpu"):
     turn = 0
     try:
         for c, (a, b) in enumerate(bounds):
-            for lo, hi in _pieces(a, b, lanes):
+            for lo, hi in _pieces(a, b, PIECES_PER_STREAM * lanes):
                 pending.append((c, pools[turn % len(pools)].submit(run, lo, hi)))
                 turn += 1
-                while len(pending) > 2 * lanes:  # a chunk has at most `lanes` pieces: the first is all queued
+                while len(pending) > 2 * lanes and pending[0][0] != c:  # the first chunk is all queued
                     yield _first_chunk(pending)
         while pending:
             yield _first_chunk(pending)
