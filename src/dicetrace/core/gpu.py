@@ -230,12 +230,18 @@ def _fused(scheme) -> bool:
 
 
 _KERNELS: dict = {}
+_KERNELS_LOCK = threading.Lock()
 
 
 def _kernel(integ: int, seed_path: bool):
     """The CUDA dispatcher for integrator ``integ`` (kernel id), the seed kernel or the general one, and whether strict."""
     scheme = scheme_of(integ)
     key = "seed" if seed_path else scheme.__name__
+    with _KERNELS_LOCK:  # the threads of a GPU (or of several) share one dispatcher, compiled once
+        return _kernel_locked(key, scheme, seed_path)
+
+
+def _kernel_locked(key: str, scheme, seed_path: bool):
     if key not in _KERNELS:
         tag = int(kernel_digest()[:15], 16)
         if seed_path:
@@ -316,7 +322,7 @@ class _Buffers:
             shape = (n, width) if width else n
             have = cuda.to_device(new_states(n), stream=self.stream) if dtype is None else cuda.device_array(shape, dtype)
             self._dev[name] = have
-        return have[:n]
+        return have if len(have) == n else have[:n]
 
     def host(self, name: str, n: int, dtype, width: int = 0):
         """The first ``n`` rows of pinned (page-locked) host buffer ``name``: copies from and to it are asynchronous."""
@@ -324,7 +330,7 @@ class _Buffers:
         if have is None or len(have) < n:
             have = cuda.pinned_array((n, width) if width else n, dtype)
             self._host[name] = have
-        return have[:n]
+        return have if len(have) == n else have[:n]
 
 
 _LOCAL = threading.local()
