@@ -9,9 +9,9 @@ Examples::
     dicetrace analyze accuracy --quick            # an integrator study, into ./dicetrace-results/accuracy
     dicetrace analyze friction --out analysis/accuracy   # regenerate the committed v_reg.csv, v_reg.md
 
-Writeup studies: cells (a), fractal (b), repetition (c), topology (d), damping (e),
-vertices (f), settle (g), wedge (h), animation (i), transient (j), referee (k),
-converged (l), or ``all``; several at once share one output folder.  Integrator
+Writeup studies: the names and letters of :data:`dicetrace.studies.WRITEUP_STUDIES` and
+:data:`~dicetrace.studies.LETTERS` (``dicetrace analyze --help`` lists them, from cells (a) to the
+latest), or ``all``; several at once share one output folder.  Integrator
 studies: accuracy, stability, friction, each run alone with options of its own
 (:mod:`dicetrace.commands.accuracy`; ``dicetrace accuracy`` and ``dicetrace
 stability`` are aliases kept from before).  An option the named study does not
