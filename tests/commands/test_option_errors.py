@@ -110,3 +110,20 @@ def test_one_reader_of_each_value_in_the_commands():
         text = path.read_text()
         for sign in ("TOL_MIN <=", "TOL_GROWTH_MAX", "def _parse_res", "def parse_positive", "in msg"):
             assert sign not in text, (path.name, sign)
+
+
+def test_simulate_and_record_declare_their_shared_options_once():
+    """``--slice`` and the model options of ``simulate`` and ``record`` are the annotations of ``commands.options``:
+    the same flag, help text and default (None: the configuration layer's) in both commands."""
+    import typer.main
+
+    from dicetrace.cli import app
+    from dicetrace.commands import options
+
+    shared = {"--slice": options.SLICE_HELP, "--integrator": options.INTEGRATOR_HELP, "--dt": options.DT_HELP,
+              "--t-max": options.T_MAX_HELP, "--tol": options.TOL_HELP, "--tol-growth": options.TOL_GROWTH_HELP}
+    group = typer.main.get_command(app)
+    for command in ("simulate", "record"):
+        params = {p.opts[0]: p for p in group.commands[command].params}
+        for flag, text in shared.items():
+            assert params[flag].help == text and params[flag].default is None, (command, flag)

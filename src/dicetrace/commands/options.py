@@ -6,7 +6,8 @@ run: :mod:`dicetrace.devices`; its refusals, a
 ``--device``, exit code 2).  ``simulate``, ``record``, ``scan`` and ``explore`` take the same model
 options (``--preset``, ``--integrator``, ``--dt``, ``--t-max``, ``--tol``,
 ``--tol-growth``) and ``simulate`` and ``record`` the same IC options
-(``--ic``, ``--slice``, ``--at``).  The option text goes as it is to the
+(``--ic``, ``--slice``, ``--at``); the options those two declare alike are
+typer annotations here (``DtOption``, ...), one declaration each.  The option text goes as it is to the
 configuration layer (:func:`dicetrace.params.make_config`, the one parser
 and validator of a configuration; :func:`dicetrace.windows.get_window` and
 ``get_res`` for windows and resolutions): no command checks a value itself.
@@ -19,8 +20,10 @@ from __future__ import annotations
 
 import contextlib
 import math
+from typing import Annotated, Optional
 
 import numpy as np
+import typer
 
 from dicetrace.commands._common import fail, parse_floats
 from dicetrace.devices import DeviceError, device_label, resolve_device
@@ -76,6 +79,15 @@ DEVICE_HELP = (
     "package's cuda extra; refused where there is none) or auto (the GPU where numba-cuda finds one, "
     "else the CPU; one line on stderr says which)."
 )
+
+#: The options that ``simulate`` and ``record`` declare alike, as typer reads them from a parameter's annotation:
+#: ``dt: DtOption = None`` is ``--dt`` with its help text, and the parameter gets the option's text (None if not given).
+IntegratorOption = Annotated[Optional[str], typer.Option("--integrator", help=INTEGRATOR_HELP)]
+DtOption = Annotated[Optional[str], typer.Option("--dt", help=DT_HELP)]
+TMaxOption = Annotated[Optional[str], typer.Option("--t-max", help=T_MAX_HELP)]
+TolOption = Annotated[Optional[str], typer.Option("--tol", help=TOL_HELP)]
+TolGrowthOption = Annotated[Optional[str], typer.Option("--tol-growth", help=TOL_GROWTH_HELP)]
+SliceOption = Annotated[Optional[str], typer.Option("--slice", help=SLICE_HELP)]
 
 #: The option that sets each field the configuration layer names in a ConfigError (``dicetrace.params``,
 #: ``dicetrace.windows``, ``dicetrace.ics``, ``dicetrace.scan``).  A Preset field not here comes from the

@@ -39,21 +39,8 @@ import typer
 import numpy as np
 
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
-from dicetrace.commands.options import (
-    AT_HELP,
-    DT_HELP,
-    IC_HELP,
-    INTEGRATOR_HELP,
-    PRESET_HELP,
-    SLICE_HELP,
-    T_MAX_HELP,
-    TOL_GROWTH_HELP,
-    TOL_HELP,
-    build_config,
-    fmt_num,
-    ic_from_options,
-    preset_or_fail,
-)
+from dicetrace.commands import options as opts
+from dicetrace.commands.options import AT_HELP, IC_HELP, PRESET_HELP, build_config, fmt_num, ic_from_options, preset_or_fail
 from dicetrace.params import Numerics
 from dicetrace.sinks._common import Staging, human_bytes
 from dicetrace.sinks.rerun_channels import CHANNELS, parse_channels
@@ -257,7 +244,7 @@ def register(app: typer.Typer) -> None:
         ic: Optional[List[str]] = typer.Option(
             None, "--ic", help=IC_HELP + " Repeat it to compare throws in one recording."
         ),
-        slice_name: Optional[str] = typer.Option(None, "--slice", help=SLICE_HELP),
+        slice_name: opts.SliceOption = None,
         at: Optional[str] = typer.Option(None, "--at", help=AT_HELP + " With --scan: a scanned point (the nearest one)."),
         scan: Optional[Path] = typer.Option(
             None, "--scan", help="A scan folder (dicetrace scan): record its point nearest to --at, with its configuration."
@@ -267,11 +254,11 @@ def register(app: typer.Typer) -> None:
             "both dice side by side and their divergence on a log scale."
         ),
         preset: Optional[str] = typer.Option(None, "--preset", help=PRESET_HELP + " [default: seed]"),
-        integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
-        dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
-        t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
-        tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
-        tol_growth: Optional[str] = typer.Option(None, "--tol-growth", help=TOL_GROWTH_HELP),
+        integrator: opts.IntegratorOption = None,
+        dt: opts.DtOption = None,
+        t_max: opts.TMaxOption = None,
+        tol: opts.TolOption = None,
+        tol_growth: opts.TolGrowthOption = None,
         out: Optional[Path] = typer.Option(
             None, "--out", "--save", help="Output .rrd file (default, when no other sink is given: "
             "recordings/<name>.rrd, the name encoding the IC and every non-default option); a character device or FIFO is written directly, "

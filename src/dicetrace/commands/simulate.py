@@ -33,23 +33,9 @@ from rich.table import Table
 
 import dicetrace
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_file
-from dicetrace.commands.options import (
-    AT_HELP,
-    DT_HELP,
-    IC_HELP,
-    INTEGRATOR_HELP,
-    PRESET_HELP,
-    SLICE_HELP,
-    T_MAX_HELP,
-    TOL_GROWTH_HELP,
-    TOL_HELP,
-    build_config,
-    fmt_num,
-    get_slice,
-    ic_from_options,
-    preset_or_fail,
-    slice_ics,
-)
+from dicetrace.commands import options as opts
+from dicetrace.commands.options import (AT_HELP, IC_HELP, PRESET_HELP, build_config, fmt_num, get_slice,
+                                        ic_from_options, preset_or_fail, slice_ics)
 from dicetrace.sinks._common import STDOUT, _stdout_open, write_bytes
 from dicetrace.status import Status
 
@@ -278,17 +264,17 @@ def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
         ic: Optional[str] = typer.Option(None, "--ic", help=IC_HELP),
-        slice_name: Optional[str] = typer.Option(None, "--slice", help=SLICE_HELP),
+        slice_name: opts.SliceOption = None,
         at: Optional[str] = typer.Option(None, "--at", help=AT_HELP),
         ics: Optional[Path] = typer.Option(
             None, "--ics", help="CSV file of ICs: columns vx,vy,vz,Lx,Ly,Lz, or x,y[,z] with --slice seed."
         ),
         preset: str = typer.Option("seed", "--preset", help=PRESET_HELP),
-        integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
-        dt: Optional[str] = typer.Option(None, "--dt", help=DT_HELP),
-        t_max: Optional[str] = typer.Option(None, "--t-max", help=T_MAX_HELP),
-        tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
-        tol_growth: Optional[str] = typer.Option(None, "--tol-growth", help=TOL_GROWTH_HELP),
+        integrator: opts.IntegratorOption = None,
+        dt: opts.DtOption = None,
+        t_max: opts.TMaxOption = None,
+        tol: opts.TolOption = None,
+        tol_growth: opts.TolGrowthOption = None,
         fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json. On a terminal a table of more "
                                f"than {TTY_ROWS} rows shows the first {TTY_HEAD} and the outcomes of all; a file "
                                "or pipe gets every row."),
