@@ -223,6 +223,8 @@ def _gpu_pool(k: int, streams: int) -> ThreadPoolExecutor:
     with _POOLS_LOCK:
         pool = _POOLS.get((k, streams))
         if pool is None:
+            for key in [key for key in _POOLS if key[0] == k]:  # another number of streams: its threads end when idle
+                _POOLS.pop(key).shutdown(wait=False)          # (and with them their buffers)
             pool = _POOLS[(k, streams)] = ThreadPoolExecutor(
                 streams, thread_name_prefix=f"dicetrace-gpu{k}", initializer=gpu.select_device, initargs=(k,))
         return pool
