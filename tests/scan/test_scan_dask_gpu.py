@@ -111,3 +111,18 @@ def test_gpu_places_number_workers_per_host_and_share_a_gpu_when_there_are_more(
     assert [_gpu_of(places[a], 2) for a in ("tcp://a:1", "tcp://a:2", "tcp://a:3")] == [(0, 0.5), (1, 1.0), (0, 0.5)]
     assert _gpu_of(places["tcp://b:8"], 4) == (1, 1.0)
     assert _gpu_of((5, 6), 1) == (0, 1 / 6)  # a dask-cuda worker sees its one GPU
+
+
+def test_a_gpu_chunk_on_a_worker_without_a_gpu_is_refused_saying_why():
+    """A GPU scan's chunk task on a worker that has no GPU: the device error of any GPU chunk (no device picked)."""
+    from dicetrace.devices import DeviceError, gpu_unavailable_reason
+    from dicetrace.ics import Grid
+    from dicetrace.params import make_config
+    from dicetrace.scan import ScanDefinition
+    from dicetrace.scan.dask import _gpu_chunk_task
+
+    if gpu_unavailable_reason() is None:
+        pytest.skip("this machine has a GPU (or the simulator is on)")
+    defn = ScanDefinition(Grid("seed", "home", 2), make_config("seed"), 4, device="cuda: Some GPU")
+    with pytest.raises(DeviceError, match="device 'cuda': "):
+        _gpu_chunk_task(defn.to_dict(), 0, 1, {})

@@ -23,7 +23,7 @@ from collections.abc import Iterable, Iterator
 
 import pyarrow as pa
 
-from dicetrace.devices import device_label, resolve_device
+from dicetrace.devices import device_label, gpu_unavailable_reason, resolve_device
 from dicetrace.scan.definition import ScanDefinition
 
 from dicetrace.scan.folder import _chunk_task
@@ -215,6 +215,8 @@ def _gpu_chunk_task(defn_dict: dict, c: int, threads: int | None, places: dict) 
     """A Dask task: chunk ``c`` of a GPU scan, on this worker's own GPU (:func:`gpu_places`)."""
     from dask.distributed import get_worker  # dask.distributed is slow to import: only for a Dask run
 
+    if gpu_unavailable_reason() is not None:  # a worker without a GPU: the chunk refuses, saying why
+        return _chunk_task(defn_dict, c, threads)
     from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
 
     worker = get_worker()
