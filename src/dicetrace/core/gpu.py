@@ -4,7 +4,8 @@ There is no second copy of the physics here.  numba-cuda compiles a
 function that numba's CPU ``jit`` made (``core._jit``) as a device function
 when device code calls it, so the force law, the steps, the sub-step
 drivers and the run loop are the very functions the CPU runs.  This module
-only adds the two kernels that give each thread its throw:
+only adds the two kernels that give each thread its throw (and a third that
+packs the contact sets the throws used, for the copy back):
 
 ``seed kernel``
     the `seed` preset's specialised summary kernel
