@@ -7,7 +7,7 @@
 #
 # For a machine with numba-cuda, numpy, scipy, pyarrow and pandas and nothing else of dicetrace's dependencies
 # (no rerun-sdk, no internet): it runs the working tree as it is (PYTHONPATH=src, nothing installed), from the
-# repository root.  Sized for about 7 minutes on an H200 beside a 16-core CPU, where the numba cache starts cold
+# repository root.  Sized for about 6 minutes on an H200, at most 9 minutes 20 s (the sum of the parts' limits), beside a 16-core CPU, where the numba cache starts cold
 # (the CPU's kernels compile in the tests' run and load from the cache after); each part has a time limit, and
 # the benchmark prints as it goes, so a part cut short still leaves what it measured.  dicetrace scan needs
 # typer as well: without it bench_gpu.py says the scan is not available.
@@ -49,11 +49,11 @@ else
     say "### tests marked gpu: not run (pytest is not installed)"
 fi
 # seed first, with the scan (quick; the GPU's scan with one stream and with two: the overlap); then physical
-part 150 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
-part 240 "bench_gpu: physical" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 --rate-n 1000000 --skip-scan
+part 120 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
+part 170 "bench_gpu: physical" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 --rate-n 1000000 --skip-scan
 # two Dask workers on the GPU(s) (sharing one where there is one): the rows of the one-process GPU scan
 if "$PY" -c 'import dask.distributed, typer' 2>/dev/null; then
-    part 120 "scan on Dask, --device cuda, 2 workers, against one process" "$PY" - <<'PYEOF'
+    part 70 "scan on Dask, --device cuda, 2 workers, against one process" "$PY" - <<'PYEOF'
 import subprocess, sys, tempfile, time
 from pathlib import Path
 from dicetrace.scan import read_scan
