@@ -7,8 +7,9 @@
 #
 # For a machine with numba-cuda, numpy, scipy, pyarrow and pandas and nothing else of dicetrace's dependencies
 # (no rerun-sdk, no internet): it runs the working tree as it is (PYTHONPATH=src, nothing installed), from the
-# repository root.  Sized for about 6 minutes on an H200, at most 9 minutes 20 s (the sum of the parts' limits), beside a 16-core CPU, where the numba cache starts cold
-# (the CPU's kernels compile in the tests' run and load from the cache after); each part has a time limit, and
+# repository root.  Sized for about 6 minutes on an H200 beside a 16-core CPU, at most 9 min 20 s (the sum of
+# the parts' limits), where the numba cache starts cold (the CPU's kernels compile in the tests' run and load
+# from the cache after); each part has a time limit, and
 # the benchmark prints as it goes, so a part cut short still leaves what it measured.  dicetrace scan needs
 # typer as well: without it bench_gpu.py says the scan is not available.
 #
