@@ -38,6 +38,9 @@ WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "ver
                    "border_rates")
 #: Letter of each writeup study (its figures' prefix) -> name.
 LETTERS = dict(zip("abcdefghijklmno", WRITEUP_STUDIES))
+#: Study q (the sweeps of γ and k with certificates), registered apart from the tuple above.
+WRITEUP_STUDIES += ("sweeps",)
+LETTERS["q"] = "sweeps"
 #: What each writeup study is about (the first line of its module's docstring, after the name).
 TITLES = {
     "cells": "the cell structure of the home window and the zoom ladder (writeup 4.1)",
@@ -57,6 +60,7 @@ TITLES = {
                         "survivors",
     "border_rates": "border λ fitted near the border with a uniform tight tolerance, against each preset's edge saddle",
 }
+TITLES["sweeps"] = "damping γ and ground stiffness k on three windows of the converged die, with certificates"
 #: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
 INTEGRATOR_STUDIES = ("accuracy", "stability", "friction")
 #: What each integrator study is about (the first line of its module's docstring).

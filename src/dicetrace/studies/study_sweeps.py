@@ -1,0 +1,253 @@
+"""Study q (sweeps): damping γ and ground stiffness k on three windows of the converged die, with certificates.
+
+The ``physical`` preset at its γ and k, at two other γ and at two other k (one parameter moved at a time), in
+the windows home [0, .1]², zoom-out [0, 1]² and red sea [1, 2] × [3.5, 4.5] of the seed slice (L in the program's
+convention).  Each condition and window gets, with numerics chosen for each measurement:
+
+* **an outcome map** (``contact-tsit5``, graded tolerance: :data:`MAP_TOL` loosening by :data:`MAP_GROWTH`/s, the
+  schedule fit for outcomes only), its face fractions with moving-block bootstrap errors
+  (:func:`~dicetrace.analysis.face_fractions.face_fractions`: the grid's nodes are correlated, so no χ² on their
+  counts), the Puy fractal test (:func:`~dicetrace.analysis.fractality.basins_fractal_test`) and the Wada merge
+  test (:func:`~dicetrace.analysis.wada.wada_merge_test`);
+* **its certificate**: random nodes of the map thrown again with an independent integrator (``contact-substep``
+  at dt 0.1 ms, the accuracy study's reference), the agreement with its Wilson interval; the map is
+  *converged* where the agreement is at least :data:`CERTIFIED` and *statistics only* below; the reference
+  itself checked on fewer nodes against a third integrator (``contact-adaptive`` at tol 1e-10);
+* **f(ε) and its local slopes** (uniform tolerance 1e-10, the numerical floor at 1e-11, exactly as study n:
+  :mod:`dicetrace.analysis.doubly_transient`'s ``local_slopes``, ``crossover_fit``, ``throw_floor``; study n's
+  pair runner, verdicts and hazards), so ε_c, the finest counted local slope α and β;
+* **the tail hazard** of committing to the final face and of settling, from the same base throws (uniform
+  tolerance: settle times are a fit's input).
+
+The figures and tables are drawn by :mod:`dicetrace.studies.study_sweeps_render`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dicetrace.analysis.agreement import agreement
+from dicetrace.analysis.doubly_transient import (commit_steps, compare, crossover_fit, local_slopes, perturbed,
+                                                 throw_floor)
+from dicetrace.analysis.face_fractions import face_fractions
+from dicetrace.analysis.fractality import basins_fractal_test
+from dicetrace.analysis.simulator import run_on_slice, window_points
+from dicetrace.analysis.wada import wada_merge_test
+from dicetrace.ics import seed_slice
+from dicetrace.params import make_config
+from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
+from dicetrace.studies.study_doubly_transient import (FLOOR_SHARE, MIN_CHANGED, TOL, TOL_FLOOR, _hazards,
+                                                      _pair_outcomes, _verdicts)
+from dicetrace.studies.study_sweeps_render import render as _render
+
+NAME = "sweeps"
+WINDOWS = ("home", "zoom-out", "red-sea")
+QUICK_WINDOWS = ("zoom-out", "red-sea")
+#: condition -> make_config overrides of the ``physical`` preset (one parameter moved at a time).
+CONDITIONS = {
+    "physical": {},
+    "γ 0.0025": {"gamma": 0.0025},
+    "γ 0.01": {"gamma": 0.01},
+    "k 2e5": {"k": 2e5},
+    "k 5e6": {"k": 5e6},
+}
+QUICK_CONDITIONS = ("physical", "γ 0.01", "k 5e6")
+#: The maps' graded schedule: ``contact-tsit5`` from MAP_TOL, loosening by MAP_GROWTH per second.
+MAP_INTEGRATOR, MAP_TOL, MAP_GROWTH = "contact-tsit5", 2e-10, 5.0
+#: The independent reference of the certificate and the third integrator that checks it.
+REFERENCE = {"integrator": "contact-substep", "dt_s": 1e-4}
+REFERENCE_CHECK = {"integrator": "contact-adaptive", "tol": 1e-10, "tol_growth": 0.0}
+#: A map is converged where its agreement with the reference is at least this.
+CERTIFIED = 0.99
+#: Relative IC perturbations of f(ε) (whole decades) and of the quick run.
+EPS = 10.0 ** np.arange(-10.0, -2.5)
+EPS_QUICK = 10.0 ** np.arange(-8.0, -1.0, 2.0)
+#: Ball radius (grid nodes) of the Puy test, and its balls.
+PUY_EPS, PUY_BALLS = 4, 1000
+PUY_EPS_QUICK, PUY_BALLS_QUICK = 3, 100
+
+
+def _config(cond: str, **numerics):
+    return make_config("physical", **{**CONDITIONS[cond], **numerics})
+
+
+def map_options(cond: str) -> dict:
+    return {"preset": "physical", "integrator": MAP_INTEGRATOR, "tol": MAP_TOL, "tol_growth": MAP_GROWTH,
+            **CONDITIONS[cond]}
+
+
+def _numerics(cfg) -> dict:
+    n = cfg.numerics
+    return {"integrator": n.integrator, "tol": n.tol, "tol_growth": n.tol_growth, "dt_s": n.dt_s}
+
+
+def _agr(a) -> dict:
+    return {"fraction": a.fraction, "ci": list(a.ci), "chance": a.chance, "kappa": a.kappa,
+            "kappa_stderr": a.kappa_stderr, "n": a.n}
+
+
+def _map(ctx: Context, cond: str, window: str, rng) -> dict:
+    """The outcome map, its faces (block bootstrap), the Puy and Wada tests, and its certificate."""
+    res = ctx.res(81, 25)
+    opts = map_options(cond)
+    s = ctx.sample(window, res, **opts)
+    g = s.labels
+    row: dict = {"res": res, "numerics": _numerics(make_config(**opts)),
+                 "faces": face_fractions(g, n_boot=ctx.pick(500, 100), rng=rng)}
+    eps, balls = ctx.pick(PUY_EPS, PUY_EPS_QUICK), ctx.pick(PUY_BALLS, PUY_BALLS_QUICK)
+    try:
+        pt = basins_fractal_test(g, eps=eps, n_balls=balls, rng=rng)
+        row["puy"] = {"verdict": pt.verdict, "Sbb": pt.Sbb, "Sbb_stderr": pt.Sbb_stderr, "smooth": pt.smooth_Sbb,
+                      "band": list(pt.band), "eps_nodes": pt.eps, "n_balls": pt.n_balls, "error": None}
+    except ValueError as e:
+        row["puy"] = {"verdict": "undetermined", "eps_nodes": eps, "n_balls": balls, "error": str(e)}
+    try:
+        wm = wada_merge_test(g, r_max=5, tol=0.01, exclude=(-1, 0))
+        row["wada"] = {"wada": wm.wada, "r_wada": wm.r_wada, "far_r1": float(wm.far_fraction[1]),
+                       "far_r5": float(wm.far_fraction[-1]), "n_labels": len(wm.labels), "error": None}
+    except ValueError as e:
+        row["wada"] = {"wada": None, "r_wada": None, "error": str(e)}
+    # the certificate: random nodes of the map against the independent reference, and the reference against a third
+    pts, _, _ = window_points(window_ranges(window), res)
+    n_cert, n_check = ctx.pick(400, 40), ctx.pick(100, 10)
+    idx = rng.choice(len(pts), min(n_cert, len(pts)), replace=False)
+    ref = run_on_slice(pts[idx], "seed", config=_config(cond, **REFERENCE)).outcome
+    chk = run_on_slice(pts[idx[:n_check]], "seed", config=_config(cond, **REFERENCE_CHECK)).outcome
+    ctx.n_throws += len(idx) + n_check
+    cert = agreement(g.ravel()[idx], ref)
+    row.update(certificate=_agr(cert), reference=_numerics(_config(cond, **REFERENCE)),
+               reference_check=_agr(agreement(ref[:n_check], chk)),
+               reference_check_numerics=_numerics(_config(cond, **REFERENCE_CHECK)),
+               converged=bool(cert.fraction >= CERTIFIED),
+               status="converged" if cert.fraction >= CERTIFIED else "statistics only")
+    return row
+
+
+def _pairs(ctx: Context, cond: str, window: str, rng) -> dict:
+    """f(ε), its local slopes, ε_c and the tail hazards at a uniform tight tolerance (study n's measures)."""
+    cfg, tight = _config(cond, tol=TOL, tol_growth=0.0), _config(cond, tol=TOL_FLOOR, tol_growth=0.0)
+    eps = EPS_QUICK if ctx.quick else EPS
+    n, n_floor = ctx.pick(1000, 60), ctx.pick(150, 20)
+    (x0, x1), (y0, y1) = window_ranges(window)
+    ics = cfg.to_preset_convention(np.asarray(seed_slice(rng.uniform(x0, x1, n), rng.uniform(y0, y1, n))), "program")
+    moved = [perturbed(ics, e, rng) for e in eps]
+    b, out = _pair_outcomes(ics, moved, cfg)
+    _, out_t = _pair_outcomes(ics[:n_floor], [m[:n_floor] for m in moved], tight)
+    ctx.n_throws += out.size + out_t.size
+    changed, valid = _verdicts(out)
+    tf = throw_floor(out[:, :n_floor], out_t)
+    ls = local_slopes(changed, eps, valid=valid, n_boot=ctx.pick(400, 50), rng=rng)
+    p = np.bincount(out[0][out[0] >= 1], minlength=7)[1:] / max((out[0] >= 1).sum(), 1)
+    floor_bound = min(2 * float(tf["hi"]), 1.0)
+    counted = (floor_bound <= FLOOR_SHARE * ls.f) & (ls.changed >= MIN_CHANGED)
+    cx = crossover_fit(changed, eps, used=counted, valid=valid, f_sat=float(1 - (p**2).sum()),
+                       n_boot=ctx.pick(200, 20), rng=rng)
+    both = counted[:-1] & counted[1:] & np.isfinite(ls.slope_stderr)
+    fine = int(np.flatnonzero(both)[0]) if both.any() else -1
+    base = out[0] >= 1
+    commit, landings = commit_steps(b.sets, b.set_steps, b.set_offsets[: n + 1], b.outcome[:n], b.steps[:n])
+    hz = _hazards(b.t_settle_s[:n][base], commit[base] * cfg.numerics.dt_s, landings[base], cfg.numerics.t_max_s) \
+        if base.sum() >= 20 else None
+    return {
+        "numerics": _numerics(cfg), "floor_tol": TOL_FLOOR, "n_pairs": n, "n_floor_pairs": n_floor,
+        "unsettled": int((~base).sum()), "eps": eps.tolist(), "f": ls.f.tolist(), "f_stderr": ls.f_stderr.tolist(),
+        "changed": ls.changed.tolist(), "eps_mid": ls.eps_mid.tolist(), "slope": ls.slope.tolist(),
+        "slope_stderr": ls.slope_stderr.tolist(), "counted": counted.tolist(),
+        "floor_throw_flips": int(tf["flips"]), "floor_throws": int(tf["n"]), "floor_bound": floor_bound,
+        "n_counted": int(counted.sum()),
+        "eps_smallest_counted": float(eps[counted][0]) if counted.any() else math.nan,
+        "alpha_fine": float(ls.slope[fine]) if fine >= 0 else math.nan,
+        "alpha_fine_stderr": float(ls.slope_stderr[fine]) if fine >= 0 else math.nan,
+        "alpha_fine_eps": float(ls.eps_mid[fine]) if fine >= 0 else math.nan,
+        "eps_c": cx.eps_c, "log10_eps_c_stderr": cx.log10_eps_c_stderr, "eps_c_status": cx.status,
+        "beta": cx.beta, "beta_stderr": cx.beta_stderr, "hazard": hz,
+    }
+
+
+def _measure(ctx: Context, cond: str, window: str, index: int) -> dict:
+    t0 = time.perf_counter()
+    rng = np.random.default_rng([ctx.options.seed, index])
+    cfg = _config(cond)
+    row = {"condition": cond, "window": window, "preset": "physical", "gamma": cfg.preset.gamma, "k": cfg.preset.k,
+           "map": _map(ctx, cond, window, rng), "pairs": _pairs(ctx, cond, window, rng)}
+    row["wall_s"] = time.perf_counter() - t0
+    m, pr = row["map"], row["pairs"]
+    ctx.log(f"{cond} {window}: certificate {m['certificate']['fraction']:.3f} ({m['status']}), Puy "
+            f"{m['puy']['verdict']}, Wada r {m['wada'].get('r_wada')}, α_fine {pr['alpha_fine']:.2f} ± "
+            f"{pr['alpha_fine_stderr']:.2f}, ε_c {pr['eps_c']:.2g} ({pr['eps_c_status']}), {row['wall_s']:.0f} s")
+    return row
+
+
+def compute(ctx: Context) -> Computed:
+    conds = QUICK_CONDITIONS if ctx.quick else tuple(CONDITIONS)
+    wins = QUICK_WINDOWS if ctx.quick else WINDOWS
+    rows = [_measure(ctx, c, w, i * len(wins) + j) for i, c in enumerate(conds) for j, w in enumerate(wins)]
+    by: dict = {}
+    for r in rows:
+        by.setdefault(r["condition"], {})[r["window"]] = r
+    return Computed({"rows": rows, "by": by, "windows": list(wins), "conditions": {c: CONDITIONS[c] for c in conds},
+                     "map_numerics": {"integrator": MAP_INTEGRATOR, "tol": MAP_TOL, "tol_growth": MAP_GROWTH},
+                     "reference": REFERENCE, "reference_check": REFERENCE_CHECK, "certified": CERTIFIED,
+                     "tol": TOL, "floor_tol": TOL_FLOOR, "floor_share": FLOOR_SHARE, "min_changed": MIN_CHANGED,
+                     "summary": _summary(rows)})
+
+
+def face_changes(rows) -> list[dict]:
+    """Per window and condition, how far its face fractions lie from the preset's (``physical``): the largest
+    |z| over the faces of the difference over the two block-bootstrap errors in quadrature (no χ² on the
+    counts: the nodes are correlated), its face, and ``changed`` where that |z| exceeds 3."""
+    base = {r["window"]: r for r in rows if r["condition"] == "physical"}
+    out = []
+    for r in rows:
+        b = base.get(r["window"])
+        if b is None or r is b:
+            continue
+        zs = []
+        for f in range(1, 7):
+            x, y = r["map"]["faces"]["faces"][str(f)], b["map"]["faces"]["faces"][str(f)]
+            zs.append(compare(x["fraction"], x["stderr"], y["fraction"], y["stderr"]))
+        absz = [abs(z["z"]) if math.isfinite(z["z"]) else -1.0 for z in zs]
+        k = int(np.argmax(absz))
+        out.append({"condition": r["condition"], "window": r["window"], "face": k + 1, "z": zs[k]["z"],
+                    "diff": zs[k]["diff"], "diff_err": zs[k]["diff_err"], "changed": bool(absz[k] > 3),
+                    "both_converged": bool(r["map"]["converged"] and b["map"]["converged"])})
+    return out
+
+
+def _summary(rows) -> dict:
+    """Counts of the verdicts over every map, the face changes against the preset's, and the range of the tail
+    hazard's rise (its z-score, last quantile window against the first) over the rows that have one."""
+    fc = face_changes(rows)
+    rise = [r["pairs"]["hazard"]["commit"]["late_minus_first"]["z"] for r in rows if r["pairs"]["hazard"]]
+    rise = [z for z in rise if z is not None and math.isfinite(z)]
+    return {"n_maps": len(rows), "n_converged": sum(r["map"]["converged"] for r in rows),
+            "converged": [f"{r['condition']} / {r['window']}" for r in rows if r["map"]["converged"]],
+            "n_puy_fractal": sum(r["map"]["puy"]["verdict"] == "fractal" for r in rows),
+            "n_wada": sum(bool(r["map"]["wada"].get("wada")) for r in rows),
+            "sbb_random_faces": math.log(6.0),  # the ball entropy of faces drawn at random (a reference, not a fit)
+            "face_changes": fc, "n_face_changes": len(fc), "n_face_changed": sum(c["changed"] for c in fc),
+            "n_hazard_rise": len(rise), "hazard_rise_z_min": min(rise) if rise else math.nan,
+            "hazard_rise_z_max": max(rise) if rise else math.nan, "n_hazard_rise_z2": sum(z > 2 for z in rise),
+            "n_hazard_rise_z3": sum(z > 3 for z in rise)}
+
+
+def render(c: Computed, out: Output) -> None:
+    _render(c, out)
+
+
+def rerender(out) -> dict:
+    """Draw the figures and tables again from ``OUT/results/sweeps.json`` alone and write them back into it (the
+    summary, which derives from its rows alone, is derived again): no simulation, no measured number changed."""
+    path = Path(out) / "results" / f"{NAME}.json"
+    r = json.loads(path.read_text())
+    r["summary"] = _summary(r["rows"])
+    output = Output(Path(out))
+    render(Computed(r), output)
+    r["figures"], r["tables"] = output.figures, output.tables
+    write_json(path, r)
+    return r
