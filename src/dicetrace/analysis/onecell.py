@@ -18,7 +18,9 @@ are one cell of the 6-D space:
   slice.  It can only grow as the stack is refined (thin connections
   appear), so a value is an answer only when it has stopped changing over a
   resolution series; otherwise it is undetermined
-  (:func:`resolution_verdict`).
+  (:func:`resolution_verdict`).  :func:`join_counts` gives the counts behind
+  it, with the cells chosen by a fixed share of the slice's area (so that a
+  resolution series compares the same cells, not ever smaller ones).
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ from ._grid import as_label_grid
 from .cells import cells_table, slice_cell_components
 from .repetition import periodic_cells_connected
 
-__all__ = ["ShiftOverlapTest", "shift_overlap", "shift_overlap_test", "join_fraction", "resolution_verdict"]
+__all__ = ["ShiftOverlapTest", "shift_overlap", "shift_overlap_test", "join_fraction", "join_counts", "min_cell_nodes",
+           "resolution_verdict"]
 
 
 def shift_overlap(grid, shift, *, min_size: int = 20) -> float:
@@ -90,6 +93,32 @@ def join_fraction(grid3d, *, k: int = 0, min_cell: int = 5) -> float:
     if big.empty:
         return math.nan
     return float((big["n_cells_in_component"] > 1).mean())
+
+
+def min_cell_nodes(nx: int, ny: int, min_area: float) -> int:
+    """Nodes of a 2-D cell of at least ``min_area`` (a share of the slice) on an ``nx × ny`` grid (at least 2)."""
+    return max(2, int(math.ceil(float(min_area) * nx * ny)))
+
+
+def join_counts(grid3d, *, k: int = 0, min_area: float = 0.01) -> dict:
+    """The 2-D cells of slice ``k`` of a stack covering at least ``min_area`` of the slice, and how many of them share
+    a 3-D cell with another 2-D cell of that slice.
+
+    Returns ``n_cells`` (those cells), ``n_joined``, ``fraction`` (``n_joined / n_cells``, NaN without cells), its
+    binomial ``stderr``, ``area_fraction`` (the joined cells' share of those cells' nodes), ``n_components`` (the 3-D
+    cells they belong to), ``min_cell`` (nodes) and ``n_cells_2d`` (every 2-D cell of the slice).
+    """
+    g = as_label_grid(grid3d, ndim=(3,))
+    t = slice_cell_components(g, k)
+    m = min_cell_nodes(g.shape[0], g.shape[1], min_area)
+    big = t[t["size"] >= m]
+    joined = big[big["n_cells_in_component"] > 1]
+    n = int(len(big))
+    f = len(joined) / n if n else math.nan
+    return {"n_cells": n, "n_joined": int(len(joined)), "fraction": float(f),
+            "stderr": float(math.sqrt(f * (1 - f) / n)) if n else math.nan,
+            "area_fraction": float(joined["size"].sum() / big["size"].sum()) if n else math.nan,
+            "n_components": int(big["component_3d"].nunique()), "min_cell": int(m), "n_cells_2d": int(len(t))}
 
 
 def resolution_verdict(values, counts, *, z: float = 2.0) -> str:

@@ -27,7 +27,7 @@ from scipy.sparse.csgraph import connected_components
 from .boundaries import fit_power_law
 
 __all__ = ["coarse_grain", "prefix_counts", "PrefixEntropy", "prefix_entropy", "simpson", "prefix_codes",
-           "fast_components"]
+           "fast_components", "subcell_stats"]
 
 
 def coarse_grain(sets, steps, end_step: int, *, min_steps: int) -> tuple:
@@ -157,3 +157,25 @@ def fast_components(codes: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, in
     _, inv = np.unique(lab[mask], return_inverse=True)
     out[mask] = inv.ravel() + 1
     return out, int(inv.max() + 1) if mask.any() else 0
+
+
+def subcell_stats(labels: np.ndarray, mask: np.ndarray) -> dict:
+    """How the nodes in ``mask`` (one outcome cell of a 2-D map) split by a finer label (a contact sequence's text):
+    ``n_nodes``, ``n_labels`` (distinct labels), ``n_subcells`` (connected regions of one label, face neighbours),
+    ``n_singletons`` and ``frac_nodes_in_singletons`` (one-node regions), ``largest_frac`` (the largest region's
+    share of the nodes), ``simpson`` (two nodes drawn share the label: :func:`simpson`)."""
+    mask = np.asarray(mask, dtype=bool)
+    lab = np.asarray(labels)
+    if lab.shape != mask.shape:
+        raise ValueError(f"labels {lab.shape} and mask {mask.shape} must have one shape")
+    n = int(mask.sum())
+    if n == 0:
+        raise ValueError("the mask holds no node")
+    uniq, inv, counts = np.unique(lab[mask].astype(str), return_inverse=True, return_counts=True)
+    codes = np.full(lab.shape, -1, dtype=np.int64)
+    codes[mask] = inv.ravel()
+    ids, n_sub = fast_components(codes, mask)
+    sizes = np.bincount(ids[mask])[1:]
+    return {"n_nodes": n, "n_labels": int(len(uniq)), "n_subcells": int(n_sub),
+            "n_singletons": int((sizes == 1).sum()), "frac_nodes_in_singletons": float(sizes[sizes == 1].sum() / n),
+            "largest_frac": float(sizes.max() / n), "simpson": simpson(counts)}

@@ -21,7 +21,7 @@ from .boundaries import boundary_mask
 from .cells import cells_table, label_cells
 
 __all__ = ["label_autocorrelation", "find_periods", "periodic_cells_connected", "texture_labels", "off_centre_max",
-           "periods_rows", "stripe_spacing", "period_overlaps", "repetition_stats"]
+           "periods_rows", "stripe_spacing", "period_overlaps", "repetition_stats", "period_bootstrap"]
 
 _PERIOD_COLUMNS = ["label", "di", "dj", "dx", "dy", "length", "strength", "n_overlap"]
 
@@ -363,3 +363,79 @@ def repetition_stats(s) -> dict:
         "texture_periods": [{k: r[k] for k in ("dx", "dy", "length", "strength")} for r in rows_tex],
         "texture_stripe_spacing": stripe_spacing(rows_tex),
     }
+
+
+def _peak(c: np.ndarray) -> tuple[float, float, bool]:
+    """Sub-node position of the maximum of a small correlation patch (offsets from its centre) by a parabola through
+    the maximum and its two neighbours on each axis; ``interior``: the maximum is not on the patch's edge."""
+    i, j = np.unravel_index(int(np.nanargmax(c)), c.shape)
+    r0, r1 = (c.shape[0] - 1) // 2, (c.shape[1] - 1) // 2
+    interior = 0 < i < c.shape[0] - 1 and 0 < j < c.shape[1] - 1
+
+    def vertex(a, b, d):
+        den = a - 2 * b + d
+        return 0.5 * (a - d) / den if den < 0 else 0.0
+
+    di = vertex(c[i - 1, j], c[i, j], c[i + 1, j]) if 0 < i < c.shape[0] - 1 else 0.0
+    dj = vertex(c[i, j - 1], c[i, j], c[i, j + 1]) if 0 < j < c.shape[1] - 1 else 0.0
+    return float(i - r0 + di), float(j - r1 + dj), bool(interior)
+
+
+def period_bootstrap(grid, period: Sequence[int], *, tiles: int = 6, n_boot: int = 200, radius: int = 2,
+                     rng: np.random.Generator | int = 0) -> dict:
+    """Bootstrap error of a period vector ``(di, dj)`` (grid nodes) of a 2-D label grid.
+
+    The label autocorrelation (as :func:`label_autocorrelation`: every label's centred indicator) at the lags within
+    ``radius`` nodes of the period is summed tile by tile, the grid cut into ``tiles × tiles`` blocks by the position
+    of the first node of each pair, so that a draw of tiles with replacement rebuilds it from blocks of the map
+    (a block bootstrap: neighbouring nodes are correlated, blocks much less).  Each draw locates the correlation's
+    peak to a fraction of a node (a parabola on each axis through the maximum and its neighbours).
+
+    Returns ``di, dj`` (the peak of the whole grid, sub-node), ``di_stderr, dj_stderr`` (the draws' standard
+    deviations), ``strength`` (the correlation at the integer peak), ``interior`` (the whole grid's peak is not on
+    the edge of the searched box: a period found there) and ``interior_fraction`` (the share of draws whose peak is
+    interior), ``n_boot`` and ``tiles``.
+    """
+    arr = as_label_grid(grid, ndim=(2,))
+    codes, uniques = encode_labels(arr)
+    nx, ny = arr.shape
+    xs = [(codes == u).astype(float) for u in np.unique(codes)]
+    xs = [x - x.mean() for x in xs]
+    var = sum(float(np.mean(x * x)) for x in xs)
+    p0, p1 = int(period[0]), int(period[1])
+    size = 2 * int(radius) + 1
+    ti = np.minimum(np.arange(nx) * tiles // nx, tiles - 1)
+    tj = np.minimum(np.arange(ny) * tiles // ny, tiles - 1)
+    tile_of = (ti[:, None] * tiles + tj[None, :])
+    S = np.zeros((tiles * tiles, size, size))
+    N = np.zeros((tiles * tiles, size, size))
+    for a in range(size):
+        for b in range(size):
+            di, dj = p0 + a - radius, p1 + b - radius
+            i0, i1 = max(0, -di), min(nx, nx - di)
+            j0, j1 = max(0, -dj), min(ny, ny - dj)
+            if i1 <= i0 or j1 <= j0:
+                continue
+            prod = sum(x[i0:i1, j0:j1] * x[i0 + di:i1 + di, j0 + dj:j1 + dj] for x in xs)
+            t = tile_of[i0:i1, j0:j1].ravel()
+            S[:, a, b] = np.bincount(t, weights=prod.ravel(), minlength=tiles * tiles)
+            N[:, a, b] = np.bincount(t, minlength=tiles * tiles)
+
+    def corr(w):
+        num, cnt = np.tensordot(w, S, axes=1), np.tensordot(w, N, axes=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(cnt > 0, num / cnt / max(var, 1e-300), np.nan)
+
+    c0 = corr(np.ones(tiles * tiles))
+    pi, pj, interior = _peak(c0)
+    gen = np.random.default_rng(rng)
+    draws = []
+    for _ in range(int(n_boot)):
+        w = np.bincount(gen.integers(0, tiles * tiles, tiles * tiles), minlength=tiles * tiles).astype(float)
+        draws.append(_peak(corr(w)))
+    d = np.array(draws, dtype=float)
+    ii, jj = np.unravel_index(int(np.nanargmax(c0)), c0.shape)
+    return {"di": p0 + pi, "dj": p1 + pj, "di_stderr": float(d[:, 0].std(ddof=1)) if len(d) > 1 else math.nan,
+            "dj_stderr": float(d[:, 1].std(ddof=1)) if len(d) > 1 else math.nan, "strength": float(c0[ii, jj]),
+            "interior": interior, "interior_fraction": float(d[:, 2].mean()) if len(d) else math.nan,
+            "n_boot": int(n_boot), "tiles": int(tiles)}

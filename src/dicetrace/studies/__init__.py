@@ -38,6 +38,9 @@ WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "ver
                    "border_rates")
 #: Letter of each writeup study (its figures' prefix) -> name.
 LETTERS = dict(zip("abcdefghijklmno", WRITEUP_STUDIES))
+#: Study p (one cell or many, repetition and topology on the converged die), registered apart from the tuple above.
+WRITEUP_STUDIES += ("onecell_converged",)
+LETTERS["p"] = "onecell_converged"
 #: Study q (the sweeps of γ and k with certificates), registered apart from the tuple above.
 WRITEUP_STUDIES += ("sweeps",)
 LETTERS["q"] = "sweeps"
@@ -60,6 +63,7 @@ TITLES = {
                         "survivors",
     "border_rates": "border λ fitted near the border with a uniform tight tolerance, against each preset's edge saddle",
 }
+TITLES["onecell_converged"] = "one cell or many, repetition and topology on the converged die (writeup 5.1, 5.5, 5.7)"
 TITLES["sweeps"] = "damping γ and ground stiffness k on three windows of the converged die, with certificates"
 #: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
 INTEGRATOR_STUDIES = ("accuracy", "stability", "friction")
