@@ -95,12 +95,14 @@ def test_quick_run_writes_every_measure(quick):
         assert 0 <= c["ci"][0] <= c["fraction"] <= c["ci"][1] <= 1 and c["n"] == 40
         assert m["converged"] == (c["fraction"] >= sw.CERTIFIED)
         assert m["status"] == ("converged" if m["converged"] else "statistics only")
-        # faces: every node counted once, block errors of a 25² map of a few dozen cells are not binomial
+        # faces: every node counted once; neighbouring nodes share faces, so the block error is never far below
+        # the binomial error of independent nodes (a 25² map of these windows is nearly speckle: about equal)
         faces = m["faces"]["faces"]
         assert sum(f["fraction"] for f in faces.values()) + m["faces"]["no_face"] == pytest.approx(1.0)
         for f in faces.values():
+            assert f["stderr"] == max(f["stderr_small_block"], f["stderr_large_block"])
             if 0 < f["fraction"] < 1:
-                assert f["stderr"] > math.sqrt(f["fraction"] * (1 - f["fraction"]) / 625)
+                assert f["stderr"] > 0.6 * math.sqrt(f["fraction"] * (1 - f["fraction"]) / 625)
         assert m["puy"]["verdict"] in ("fractal", "smooth", "undetermined")
         assert m["wada"]["error"] is not None or m["wada"]["wada"] in (True, False)
         # f(ε) at a uniform tight tolerance, counted only above its floor

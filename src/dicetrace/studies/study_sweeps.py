@@ -231,8 +231,8 @@ def _summary(rows) -> dict:
             "n_wada": sum(bool(r["map"]["wada"].get("wada")) for r in rows),
             "sbb_random_faces": math.log(6.0),  # the ball entropy of faces drawn at random (a reference, not a fit)
             "face_changes": fc, "n_face_changes": len(fc), "n_face_changed": sum(c["changed"] for c in fc),
-            "n_hazard_rise": len(rise), "hazard_rise_z_min": min(rise) if rise else math.nan,
-            "hazard_rise_z_max": max(rise) if rise else math.nan, "n_hazard_rise_z2": sum(z > 2 for z in rise),
+            "n_hazard_rise": len(rise), "hazard_rise_z_min": min(rise) if rise else None,
+            "hazard_rise_z_max": max(rise) if rise else None, "n_hazard_rise_z2": sum(z > 2 for z in rise),
             "n_hazard_rise_z3": sum(z > 3 for z in rise)}
 
 
