@@ -46,7 +46,7 @@ from dicetrace.simulate import set_to_text, simulate_batch
 from dicetrace.status import Status
 from dicetrace.studies.context import Computed, Context, Output, write_json
 from dicetrace.studies.study_onecell_converged_render import render as _render
-from dicetrace.studies.study_onecell_converged_render import verdicts
+from dicetrace.studies.study_onecell_converged_render import join_figure, verdicts
 from dicetrace.studies.text import CONVERGED_MIN
 
 NAME = "onecell_converged"
@@ -293,13 +293,15 @@ def render(c: Computed, out: Output) -> None:
 
 
 def rerender(out) -> Path:
-    """Write the tables and verdicts of ``OUT/results/onecell_converged.json`` again from its numbers alone (no
-    simulation, no number changed; the figures, drawn from the grids, are kept as they are)."""
+    """Write the tables, the verdicts and the join figure of ``OUT/results/onecell_converged.json`` again from its
+    numbers alone (no simulation, no number changed; the other figures, drawn from the grids, are kept as they are)."""
     path = Path(out) / "results" / f"{NAME}.json"
     R = json.loads(path.read_text())
     R["verdict"] = verdicts(R)
     output = Output(Path(out))
     render(Computed(R), output)
+    join_figure(R, output)
     R["tables"] = output.tables
+    R["figures"].update(output.figures)
     write_json(path, R)
     return path

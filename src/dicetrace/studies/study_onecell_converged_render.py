@@ -9,7 +9,8 @@ from dicetrace.studies.context import Computed, Output
 from dicetrace.studies.text import fmt, md_table
 
 
-def _join_figure(R: dict, out: Output) -> None:
+def join_figure(R: dict, out: Output) -> None:
+    """The join fraction against resolution, and the cells counted (from the results alone)."""
     import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
     st = R["stacks"]
@@ -28,8 +29,6 @@ def _join_figure(R: dict, out: Output) -> None:
     a0.legend(fontsize=7)
     a1.plot(n, [r["n_cells"] for r in rows], "o-", label="2-D cells counted (z = 0)")
     a1.plot(n, [sum(w["n_components"] for w in r["windows"]) for r in rows], "s-", label="3-D cells they lie in")
-    a1.plot(n, [r["certificate"]["certificate"] * max(1, max(x["n_cells"] for x in rows)) for r in rows], ":",
-            color="0.6", label="certificate × max count")
     a1.set_xlabel("nodes per axis of the stack")
     a1.set_ylabel("count (three windows)")
     a1.legend(fontsize=7)
@@ -129,7 +128,7 @@ def _topology_figure(R: dict, plot: dict, out: Output) -> None:
 def render(c: Computed, out: Output) -> None:
     R = c.results
     if c.plot:
-        _join_figure(R, out)
+        join_figure(R, out)
         _slices_figure(R, c.plot["stacks"], out)
         _periods_figure(R, c.plot["periods"], out)
         _topology_figure(R, c.plot["topology"], out)
