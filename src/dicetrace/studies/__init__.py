@@ -32,7 +32,7 @@ from types import ModuleType
 
 #: Prefix of a study's module name: study ``NAME`` is ``dicetrace.studies.study_NAME``.
 MODULE_PREFIX = "study_"
-#: The writeup studies, in run order (module ``dicetrace.studies.study_<name>``; letters a..o).
+#: The writeup studies, in run order (module ``dicetrace.studies.study_<name>``; their letters: ``LETTERS``).
 WRITEUP_STUDIES = ("cells", "fractal", "repetition", "topology", "damping", "vertices", "settle", "wedge", "animation",
                    "transient", "referee", "converged", "corner", "doubly_transient",
                    "border_rates")
@@ -78,8 +78,8 @@ STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES
 
 
 def resolve(names) -> list[str]:
-    """Writeup study names from names (a hyphen for an underscore: ``doubly-transient``), letters (a..o) or ``all``
-    (ValueError naming the choices)."""
+    """Writeup study names from names (a hyphen for an underscore: ``doubly-transient``), letters (``LETTERS``) or
+    ``all`` (ValueError naming the choices)."""
     out: list[str] = []
     for n in names or ("all",):
         key = str(n).strip().lower()
@@ -87,7 +87,8 @@ def resolve(names) -> list[str]:
             return list(WRITEUP_STUDIES)
         key = LETTERS.get(key, key).replace("-", "_")
         if key not in WRITEUP_STUDIES:
-            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, or a..o)")
+            raise ValueError(f"unknown study {n!r} (choose from all, {', '.join(WRITEUP_STUDIES)}, "
+                             f"or a letter of {''.join(sorted(LETTERS))})")
         if key not in out:
             out.append(key)
     return out
