@@ -114,6 +114,15 @@ def test_quick_run_writes_every_measure(quick):
                 assert p["floor_bound"] <= FLOOR_SHARE * fv and k >= MIN_CHANGED
         assert p["hazard"] is None or p["hazard"]["commit"]["median_s"] <= p["hazard"]["settle"]["median_s"]
     assert len(r["summary"]["face_changes"]) == n - len(sw.QUICK_WINDOWS)
+    # the finer maps: the same ball in window units (more nodes) and the same ball in nodes, each certified
+    assert [(f["condition"], f["window"]) for f in r["finer"]] == list(sw.FINER_QUICK)
+    assert r["tables"]["finer"].count("\n") == len(sw.FINER_QUICK) + 1
+    for f in r["finer"]:
+        assert f["res"] == sw.FINER_RES_QUICK and f["base_res"] == 25
+        assert f["puy_same_scale"]["eps_nodes"] == round(sw.PUY_EPS_QUICK * (f["res"] - 1) / 24)
+        assert f["puy_same_nodes"]["eps_nodes"] == sw.PUY_EPS_QUICK
+        assert f["wada_same_scale"]["r_max"] == round(5 * (f["res"] - 1) / 24)
+        assert f["converged"] == (f["certificate"]["fraction"] >= sw.CERTIFIED) and f["certificate"]["n"] == 40
 
 
 @pytest.mark.slow

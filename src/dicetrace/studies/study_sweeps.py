@@ -19,6 +19,10 @@ convention).  Each condition and window gets, with numerics chosen for each meas
 * **the tail hazard** of committing to the final face and of settling, from the same base throws (uniform
   tolerance: settle times are a fit's input).
 
+Then the Puy and Wada tests again on finer maps (:data:`FINER`, 161² against the main maps' 81²) of the preset in
+home and of γ 0.01 in home and zoom-out, each with its own certificate: at the same ball radius and Wada distance in
+window units (only the resolution changes) and at the same radius in nodes.
+
 The figures and tables are drawn by :mod:`dicetrace.studies.study_sweeps_render`.
 """
 
@@ -70,6 +74,10 @@ EPS_QUICK = 10.0 ** np.arange(-8.0, -1.0, 2.0)
 #: Ball radius (grid nodes) of the Puy test, and its balls.
 PUY_EPS, PUY_BALLS = 4, 1000
 PUY_EPS_QUICK, PUY_BALLS_QUICK = 3, 100
+#: The finer maps of the Puy and Wada tests: (condition, window) and their grid (the full and the quick run).
+FINER = (("physical", "home"), ("γ 0.01", "home"), ("γ 0.01", "zoom-out"))
+FINER_QUICK = (("physical", "zoom-out"),)
+FINER_RES, FINER_RES_QUICK = 161, 37
 
 
 def _config(cond: str, **numerics):
@@ -91,28 +99,27 @@ def _agr(a) -> dict:
             "kappa_stderr": a.kappa_stderr, "n": a.n}
 
 
-def _map(ctx: Context, cond: str, window: str, rng) -> dict:
-    """The outcome map, its faces (block bootstrap), the Puy and Wada tests, and its certificate."""
-    res = ctx.res(81, 25)
-    opts = map_options(cond)
-    s = ctx.sample(window, res, **opts)
-    g = s.labels
-    row: dict = {"res": res, "numerics": _numerics(make_config(**opts)),
-                 "faces": face_fractions(g, n_boot=ctx.pick(500, 100), rng=rng)}
-    eps, balls = ctx.pick(PUY_EPS, PUY_EPS_QUICK), ctx.pick(PUY_BALLS, PUY_BALLS_QUICK)
+def _puy(g, eps: float, balls: int, rng) -> dict:
     try:
         pt = basins_fractal_test(g, eps=eps, n_balls=balls, rng=rng)
-        row["puy"] = {"verdict": pt.verdict, "Sbb": pt.Sbb, "Sbb_stderr": pt.Sbb_stderr, "smooth": pt.smooth_Sbb,
-                      "band": list(pt.band), "eps_nodes": pt.eps, "n_balls": pt.n_balls, "error": None}
+        return {"verdict": pt.verdict, "Sbb": pt.Sbb, "Sbb_stderr": pt.Sbb_stderr, "smooth": pt.smooth_Sbb,
+                "band": list(pt.band), "eps_nodes": pt.eps, "n_balls": pt.n_balls, "error": None}
     except ValueError as e:
-        row["puy"] = {"verdict": "undetermined", "eps_nodes": eps, "n_balls": balls, "error": str(e)}
+        return {"verdict": "undetermined", "eps_nodes": eps, "n_balls": balls, "error": str(e)}
+
+
+def _wada(g, r_max: int) -> dict:
     try:
-        wm = wada_merge_test(g, r_max=5, tol=0.01, exclude=(-1, 0))
-        row["wada"] = {"wada": wm.wada, "r_wada": wm.r_wada, "far_r1": float(wm.far_fraction[1]),
-                       "far_r5": float(wm.far_fraction[-1]), "n_labels": len(wm.labels), "error": None}
+        wm = wada_merge_test(g, r_max=r_max, tol=0.01, exclude=(-1, 0))
+        return {"wada": wm.wada, "r_wada": wm.r_wada, "r_max": int(r_max), "far_r1": float(wm.far_fraction[1]),
+                "far_r5": float(wm.far_fraction[min(5, r_max)]), "far_rmax": float(wm.far_fraction[-1]),
+                "n_labels": len(wm.labels), "error": None}
     except ValueError as e:
-        row["wada"] = {"wada": None, "r_wada": None, "error": str(e)}
-    # the certificate: random nodes of the map against the independent reference, and the reference against a third
+        return {"wada": None, "r_wada": None, "r_max": int(r_max), "error": str(e)}
+
+
+def _certificate(ctx: Context, cond: str, window: str, res: int, g, rng) -> dict:
+    """Random nodes of the map against the independent reference, and the reference against a third integrator."""
     pts, _, _ = window_points(window_ranges(window), res)
     n_cert, n_check = ctx.pick(400, 40), ctx.pick(100, 10)
     idx = rng.choice(len(pts), min(n_cert, len(pts)), replace=False)
@@ -120,11 +127,44 @@ def _map(ctx: Context, cond: str, window: str, rng) -> dict:
     chk = run_on_slice(pts[idx[:n_check]], "seed", config=_config(cond, **REFERENCE_CHECK)).outcome
     ctx.n_throws += len(idx) + n_check
     cert = agreement(g.ravel()[idx], ref)
-    row.update(certificate=_agr(cert), reference=_numerics(_config(cond, **REFERENCE)),
-               reference_check=_agr(agreement(ref[:n_check], chk)),
-               reference_check_numerics=_numerics(_config(cond, **REFERENCE_CHECK)),
-               converged=bool(cert.fraction >= CERTIFIED),
-               status="converged" if cert.fraction >= CERTIFIED else "statistics only")
+    return {"certificate": _agr(cert), "reference": _numerics(_config(cond, **REFERENCE)),
+            "reference_check": _agr(agreement(ref[:n_check], chk)),
+            "reference_check_numerics": _numerics(_config(cond, **REFERENCE_CHECK)),
+            "converged": bool(cert.fraction >= CERTIFIED),
+            "status": "converged" if cert.fraction >= CERTIFIED else "statistics only"}
+
+
+def _map(ctx: Context, cond: str, window: str, rng) -> dict:
+    """The outcome map, its faces (block bootstrap), the Puy and Wada tests, and its certificate."""
+    res = ctx.res(81, 25)
+    opts = map_options(cond)
+    g = ctx.sample(window, res, **opts).labels
+    row: dict = {"res": res, "numerics": _numerics(make_config(**opts)),
+                 "faces": face_fractions(g, n_boot=ctx.pick(500, 100), rng=rng)}
+    row["puy"] = _puy(g, ctx.pick(PUY_EPS, PUY_EPS_QUICK), ctx.pick(PUY_BALLS, PUY_BALLS_QUICK), rng)
+    row["wada"] = _wada(g, 5)
+    row.update(_certificate(ctx, cond, window, res, g, rng))
+    return row
+
+
+def _finer(ctx: Context, cond: str, window: str, index: int) -> dict:
+    """The Puy and Wada tests on a finer map of a window, with its own certificate: at the ball radius and Wada
+    distance of the main maps in window units, rounded to whole nodes (so the scale tested is the same and only
+    the resolution changes), and at the main maps' radius in nodes (a scale that many times finer)."""
+    rng = np.random.default_rng([ctx.options.seed, 1000 + index])
+    base, res = ctx.res(81, 25), ctx.pick(FINER_RES, FINER_RES_QUICK)
+    opts = map_options(cond)
+    g = ctx.sample(window, res, **opts).labels
+    eps0, balls = ctx.pick(PUY_EPS, PUY_EPS_QUICK), ctx.pick(PUY_BALLS, PUY_BALLS_QUICK)
+    scale = (res - 1) / (base - 1)
+    row = {"condition": cond, "window": window, "res": res, "base_res": base, "scale": scale,
+           "numerics": _numerics(make_config(**opts)),
+           "puy_same_scale": _puy(g, int(round(eps0 * scale)), balls, rng), "puy_same_nodes": _puy(g, eps0, balls, rng),
+           "wada_same_scale": _wada(g, int(round(5 * scale))), "wada_same_nodes": _wada(g, 5)}
+    row.update(_certificate(ctx, cond, window, res, g, rng))
+    ctx.log(f"finer {cond} {window} {res}²: certificate {row['certificate']['fraction']:.3f}, Puy "
+            f"{row['puy_same_scale']['verdict']} (Sbb {row['puy_same_scale'].get('Sbb', math.nan):.3f}) at the same "
+            f"scale, {row['puy_same_nodes']['verdict']} at {eps0} nodes; Wada r {row['wada_same_scale']['r_wada']}")
     return row
 
 
@@ -187,10 +227,12 @@ def compute(ctx: Context) -> Computed:
     conds = QUICK_CONDITIONS if ctx.quick else tuple(CONDITIONS)
     wins = QUICK_WINDOWS if ctx.quick else WINDOWS
     rows = [_measure(ctx, c, w, i * len(wins) + j) for i, c in enumerate(conds) for j, w in enumerate(wins)]
+    finer = [_finer(ctx, c, w, i) for i, (c, w) in enumerate(FINER_QUICK if ctx.quick else FINER)]
     by: dict = {}
     for r in rows:
         by.setdefault(r["condition"], {})[r["window"]] = r
-    return Computed({"rows": rows, "by": by, "windows": list(wins), "conditions": {c: CONDITIONS[c] for c in conds},
+    return Computed({"rows": rows, "by": by, "finer": finer, "windows": list(wins),
+                     "conditions": {c: CONDITIONS[c] for c in conds},
                      "map_numerics": {"integrator": MAP_INTEGRATOR, "tol": MAP_TOL, "tol_growth": MAP_GROWTH},
                      "reference": REFERENCE, "reference_check": REFERENCE_CHECK, "certified": CERTIFIED,
                      "tol": TOL, "floor_tol": TOL_FLOOR, "floor_share": FLOOR_SHARE, "min_changed": MIN_CHANGED,

@@ -173,6 +173,24 @@ def render(c: Computed, out: Output) -> None:
                        ("cert", "certificate: agreement with the reference (95 %)", ""),
                        ("chk", "reference vs third integrator", ""), ("st", "map is", ""),
                        ("puy", "Puy: Sbb vs smooth", ""), ("wada", "Wada merge", "")])
+    def wada_at(wd):
+        if wd.get("error"):
+            return "fewer than 3 faces"
+        return (f"r = {wd['r_wada']}" if wd["wada"] else "no") + f" (far at r={wd['r_max']}: {wd['far_rmax']:.3f})"
+
+    by = {(x["condition"], x["window"]): x for x in rows}
+    out.tables["finer"] = md_table([{
+        "c": f["condition"], "w": f["window"], "g": f"{f['res']}²", "cert": cert(f), "st": f["status"],
+        "p0": puy(by[(f["condition"], f["window"])]["map"]) if (f["condition"], f["window"]) in by else "—",
+        "p1": f"{puy({'puy': f['puy_same_scale']})} ({f['puy_same_scale']['eps_nodes']:g} nodes)",
+        "p2": f"{puy({'puy': f['puy_same_nodes']})} ({f['puy_same_nodes']['eps_nodes']:g} nodes)",
+        "w1": wada_at(f["wada_same_scale"]), "w2": wada_at(f["wada_same_nodes"]),
+    } for f in r.get("finer", [])], [("c", "condition", ""), ("w", "window", ""), ("g", "finer map", ""),
+                                     ("cert", "its certificate (95 %)", ""), ("st", "map is", ""),
+                                     ("p0", "Puy on the main map", ""), ("p1", "Puy, same ball in window units", ""),
+                                     ("p2", "Puy, same ball in nodes", ""),
+                                     ("w1", "Wada merge, same distance in window units", ""),
+                                     ("w2", "Wada merge, 5 nodes", "")])
     out.tables["faces"] = md_table([{
         "c": x["condition"], "w": x["window"], "st": x["map"]["status"],
         **{f"f{i}": pm(x["map"]["faces"]["faces"][str(i)]["fraction"], x["map"]["faces"]["faces"][str(i)]["stderr"],
