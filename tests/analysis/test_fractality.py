@@ -38,6 +38,18 @@ def test_straight_boundaries_are_smooth_at_the_reference_value(angle, eps):
     assert r.n_balls == 1000 and r.n_tries >= r.n_balls
 
 
+def test_a_fractional_radius_reaches_the_grid_edges_and_still_finds_straight_lines_smooth():
+    """Balls of radius 2.5 on a grid only just wider than them touch both ends of every axis (their window once
+    read past the last node: IndexError); at 7.5 straight boundaries are smooth as at whole radii."""
+    rng = np.random.default_rng(1)
+    small = rng.integers(0, 3, size=(8, 8))
+    for seed in range(20):
+        r = basins_fractal_test(small, eps=2.5, n_balls=100, rng=seed)
+        assert 0 < r.Sbb <= math.log(3) + 1e-12
+    r = basins_fractal_test(_stripes(17), eps=7.5, rng=5)
+    assert r.verdict == "smooth" and r.band[0] <= r.Sbb <= r.band[1]
+
+
 def test_circles_and_a_1d_step_are_smooth():
     x, y = np.meshgrid(np.arange(N), np.arange(N), indexing="ij")
     circles = (np.floor(np.hypot(x - 350.3, y - 350.7) / 83.1) % 2).astype(np.int8)

@@ -142,7 +142,10 @@ def basins_fractal_test(
         base = np.floor(centre).astype(np.int64)
         nodes = base[:, None, :] + offsets[None, :, :]  # (m, W, d)
         inside = ((nodes - centre[:, None, :]) ** 2).sum(axis=2) <= eps * eps
-        vals = codes[tuple(nodes[..., a] for a in range(arr.ndim))]  # (m, W)
+        # the window reaches a node past the ball on each side, outside the grid for a fractional eps: those
+        # nodes are masked out, so read them at the nearest edge node instead of past the end
+        at = np.clip(nodes, 0, shape - 1)
+        vals = codes[tuple(at[..., a] for a in range(arr.ndim))]  # (m, W)
         counts = np.zeros((m, nlab))
         np.add.at(counts, (np.repeat(np.arange(m), vals.shape[1]), vals.ravel()), inside.ravel())
         p = counts / counts.sum(axis=1, keepdims=True)
