@@ -70,14 +70,15 @@ def test_sampling_a_throw_at_a_longer_step_misses_the_short_sets():
 
 
 def _results(fractions, interior, singletons) -> dict:
-    lv = [{"res": n, "fraction": f, "stderr": 0.02, "n_cells": 60} for n, f in zip((16, 24, 32), fractions)]
+    lv = [{"res": n, "fraction": f, "stderr": 0.02, "n_cells": 60, "windows": [{"n_joined": round(60 * f), "n_cells": 60}]}
+          for n, f in zip((16, 24, 32), fractions)]
     per = {"dx": 0.1, "dy": 0.02, "dx_stderr": 0.001, "dy_stderr": 0.001, "strength": 0.3,
            "interior_fraction": interior}
     sub = [{"n_labels": 10, "n_subcells": 12, "frac_nodes_in_singletons": s} for s in singletons]
     exact = {"n": 10, "same_outcome_exact_dt": 1.0, "same_outcome_program_dt": 1.0,
              "same_when_sampled_at_program_dt": 0.0, "mean_sets_sampled_at_program_dt": 40.0,
              "by_min_set": [{"same_at_exact_dt": 0.9, "same_at_program_dt": 0.0, "mean_sets": 50.0}] * 3}
-    return {"stacks": {"levels": lv, "verdict": "converged" if fractions[-1] == fractions[-2] else "undetermined",
+    return {"model": "physical, contact-tsit5 tol 2e-09 uniform", "stacks": {"levels": lv, "verdict": "converged" if fractions[-1] == fractions[-2] else "undetermined",
                        "certificate_min": 0.999, "certificate_word": "converged"},
             "periods": {"window": "zoom-out", "periods": [per], "certificate": {"certificate": 0.995, "word": "converged"},
                         "frac_nodes_in_singletons": 0.1, "texture_offcentre_max_corr": 0.4,
@@ -90,11 +91,13 @@ def test_the_verdicts_follow_the_numbers():
     from dicetrace.studies.study_onecell_converged_render import verdicts
 
     v = verdicts(_results((0.2, 0.5, 0.5), 1.0, (0.9, 0.3)))
-    assert "has stopped moving" in v["stacks"] and "**0.500 ± 0.020**" in v["stacks"]
+    assert "has stopped moving" in v["stacks"] and "**0.500 ± 0.020**" in v["stacks"] and "30/60" in v["stacks"]
+    assert v["answer"].startswith("**Fewer cells than regions**") and "0.500 ± 0.020 at 32³" in v["answer"]
     assert "repeats with period vectors (0.1000 ± 0.0010, 0.0200 ± 0.0010)" in v["periods"]
     assert "the cell has sub-cells" in v["topology"]
     v = verdicts(_results((0.2, 0.3, 0.5), 0.3, (0.95, 0.9)))
     assert "**undetermined**" in v["stacks"] and "last two levels agree" not in v["stacks"]
+    assert v["answer"].startswith("**Undetermined**") and "still moving" in v["answer"]
     assert "no period vector that survives the bootstrap" in v["periods"]
     assert "**not** topologically the same" in v["topology"]
 

@@ -58,7 +58,7 @@ INDEPENDENT = {"preset": "physical", "integrator": "contact-dop853", "tol": 1e-1
 WIDTH = 3e-3
 CORNERS = ((0.05, 0.05), (0.02, 0.02), (0.08, 0.03))
 #: Nodes per axis of the stacks (full, quick).
-LEVELS, QUICK_LEVELS = (16, 24, 32, 48), (6, 8, 10)
+LEVELS, QUICK_LEVELS = (16, 24, 32, 48, 64), (6, 8, 10)
 #: The 2-D cells counted: at least this share of the slice's nodes.
 MIN_AREA = 0.005
 #: Stack nodes per window and level re-integrated for the certificates (full, quick).

@@ -194,9 +194,14 @@ def verdicts(R: dict) -> dict:
     cert = (f"The stacks' certificate is at least {st['certificate_min']:.4f} at every level: "
             f"**{st['certificate_word']}**.")
     if st["verdict"] == "converged":
+        per = ", ".join(f"{w['n_joined']}/{w['n_cells']}" for w in lv[-1]["windows"])
         s = (f"*Verdict.* The join fraction has stopped moving: {series}. At {lv[-1]['res']}³, "
              f"**{_pm(lv[-1]['fraction'], lv[-1]['stderr'])}** of the 2-D cells share a 3-D cell with another 2-D cell "
-             "of their slice: for those, several regions of the picture are one cell of the stack. " + cert)
+             f"of their slice (per window {per}: the share varies from window to window). A path in a stack is a path "
+             "in IC space, so this is a lower bound: on the converged die, at least that share of the same-face "
+             "regions a slice shows are parts of a larger cell, and the others may still join through the three "
+             "directions not stacked. The writeup's question has its answer for these regions: fewer cells than "
+             "regions, not one cell for all. " + cert)
     else:
         a, b = lv[-1], lv[-2] if len(lv) > 1 else lv[-1]
         close = abs(a["fraction"] - b["fraction"]) <= 2 * (a["stderr"] ** 2 + b["stderr"] ** 2) ** 0.5
@@ -209,6 +214,16 @@ def verdicts(R: dict) -> dict:
              "what the stacks show is that a third IC direction joins "
              f"{_pm(lv[-1]['fraction'], lv[-1]['stderr'])} of them at {lv[-1]['res']}³, so 'many regions in the "
              "slice' does not mean 'many cells'. " + cert)
+    head = (f"section p; {R['model']}, certificate ≥ {st['certificate_min']:.4f} against tol/10 and `contact-dop853`: "
+            f"{st['certificate_word']}")
+    span = (f"the 3-D join fraction of three 3·10⁻³ windows of home is {_pm(lv[0]['fraction'], lv[0]['stderr'])} at "
+            f"{lv[0]['res']}³ and {_pm(lv[-1]['fraction'], lv[-1]['stderr'])} at {lv[-1]['res']}³")
+    if st["verdict"] == "converged":
+        answer = (f"**Fewer cells than regions** ({head}): {span}, stopped moving by k5's rule (the last three levels "
+                  "within 2σ); a path in a stack is one in IC space, so at least that share of a slice's same-face "
+                  "regions belong to a larger cell.")
+    else:
+        answer = f"**Undetermined** ({head}): {span}, still moving by k5's rule (the last three levels within 2σ)."
     word = p["certificate"]["word"]
     stable = [r for r in p["periods"] if r["interior_fraction"] >= STABLE_PEAK]
     if p["periods"] and not stable:
@@ -260,4 +275,4 @@ def verdicts(R: dict) -> dict:
              f"{e['by_min_set'][0]['mean_sets']:.1f}), and runs at the program's 1 ms step for "
              f"{e['by_min_set'][0]['same_at_program_dt']:.2f} (same outcome: {e['same_outcome_program_dt']:.2f}). "
              "Sequences sampled every 1 ms are not the die's sequences.")
-    return {"stacks": s, "periods": q, "topology": "*Verdict.* " + exact + " " + sub + tail}
+    return {"stacks": s, "periods": q, "topology": "*Verdict.* " + exact + " " + sub + tail, "answer": answer}
