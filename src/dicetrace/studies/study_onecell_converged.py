@@ -6,7 +6,7 @@ tolerance of 2·10⁻⁹ (no loosening over the throw: these are outcome maps, b
 
 1. **One cell or many** (:func:`~dicetrace.analysis.onecell.join_counts`): 3-D stacks of the seed3 slice over three
    small windows of home (side 3·10⁻³, chosen before any map was drawn, equal spacing on the three axes), in a
-   resolution series 16³ → 24³ → 32³ → 48³; the 2-D cells of the z = 0 slice covering at least 0.5 % of it, and the
+   resolution series 16³ → 24³ → 32³ → 48³ → 64³; the 2-D cells of the z = 0 slice covering at least 0.5 % of it, and the
    fraction of them that share a 3-D cell with another 2-D cell of the slice, pooled over the windows, with a
    binomial error; :func:`~dicetrace.analysis.onecell.resolution_verdict` says whether it has stopped moving.
 2. **Certificates**: at every level a random subset of the stacks' nodes is integrated again at a tenth of the
