@@ -224,8 +224,7 @@ def _measure(ctx: Context, cond: str, window: str, index: int) -> dict:
 
 
 def compute(ctx: Context) -> Computed:
-    conds = QUICK_CONDITIONS if ctx.quick else tuple(CONDITIONS)
-    wins = QUICK_WINDOWS if ctx.quick else WINDOWS
+    conds, wins = (QUICK_CONDITIONS, QUICK_WINDOWS) if ctx.quick else (tuple(CONDITIONS), WINDOWS)
     rows = [_measure(ctx, c, w, i * len(wins) + j) for i, c in enumerate(conds) for j, w in enumerate(wins)]
     finer = [_finer(ctx, c, w, i) for i, (c, w) in enumerate(FINER_QUICK if ctx.quick else FINER)]
     by: dict = {}

@@ -83,62 +83,60 @@ def _eps_alpha_figure(rows, out: Output) -> None:
                  "(γ at the preset's), per window; uniform tolerance 1e-10.")
 
 
-def _hazard_figure(rows, windows, out: Output) -> None:
+def _per_window(rows, windows, draw, labels: tuple[str, str], out: Output, name: str, caption: str) -> None:
+    """One panel per window, titled with it: ``draw(ax, row, k, n)`` for each of its rows (``k``: the index of the
+    row's condition, its colour, of ``n``), axes labelled ``labels`` (x, y), a legend; saved as figure ``name``."""
     import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
     conds = list(dict.fromkeys(r["condition"] for r in rows))
     fig, axes = plt.subplots(1, len(windows), figsize=(5 * len(windows), 4.2), squeeze=False)
     for ax, w in zip(axes[0], windows):
         for r in rows:
-            hz = r["pairs"]["hazard"]
-            if r["window"] != w or hz is None:
-                continue
-            hc = hz["commit"]["curve"]
-            t = (np.array(hc["t0"]) + np.array(hc["t1"])) / 2
-            h = np.array([_num(v) for v in hc["h"]])
-            se = np.array([_num(v) for v in hc["stderr"]])
-            ok = np.array(hc["events"]) >= 5
-            conv = r["map"]["converged"]
-            ax.errorbar(t[ok], h[ok], yerr=se[ok], fmt="o-" if conv else "o--", ms=3, capsize=2,
-                        color=f"C{conds.index(r['condition'])}",
-                        label=r["condition"] + ("" if conv else " (statistics only)"))
-        ax.set_yscale("log")
-        ax.set_xlabel("t / s")
-        ax.set_ylabel("commit hazard h(t) / (1/s)")
-        ax.set_title(w)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    out.save_fig(fig, "q_hazard", caption="Hazard of committing to the final face against time, per window and "
-                 "condition (piecewise-constant maximum likelihood, bins with at least 5 events, 1σ Poisson bars); "
-                 "uniform tolerance 1e-10; dashed: the window's map is statistics only (certificate < 0.99).")
-
-
-def _faces_figure(rows, windows, out: Output) -> None:
-    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
-
-    conds = list(dict.fromkeys(r["condition"] for r in rows))
-    fig, axes = plt.subplots(1, len(windows), figsize=(5 * len(windows), 4.2), squeeze=False)
-    for ax, w in zip(axes[0], windows):
-        for r in rows:
-            if r["window"] != w:
-                continue
-            k = conds.index(r["condition"])
-            f = r["map"]["faces"]["faces"]
-            x = np.arange(1, 7) + 0.12 * (k - (len(conds) - 1) / 2)
-            ax.errorbar(x, [f[str(i)]["fraction"] for i in range(1, 7)],
-                        yerr=[f[str(i)]["stderr"] for i in range(1, 7)],
-                        fmt="o" if r["map"]["converged"] else "s", mfc=None if r["map"]["converged"] else "none",
-                        color=f"C{k}", capsize=2, label=f"{r['condition']} ({r['map']['status']})")
-        ax.axhline(1 / 6, color="k", lw=0.6, ls=":")
-        ax.set_xticks(range(1, 7))
-        ax.set_xlabel("face up")
-        ax.set_ylabel("fraction of the map")
+            if r["window"] == w:
+                draw(ax, r, conds.index(r["condition"]), len(conds))
+        ax.set_xlabel(labels[0])
+        ax.set_ylabel(labels[1])
         ax.set_title(w)
         ax.legend(fontsize=6)
     fig.tight_layout()
-    out.save_fig(fig, "q_faces", caption="Face fractions of each map with moving-block bootstrap errors (1σ, the "
-                 "larger of blocks of 1/8 and 1/4 of the map's side); filled: converged map (certificate ≥ 0.99), "
-                 "hollow: statistics only; dotted: 1/6.")
+    out.save_fig(fig, name, caption=caption)
+
+
+def _hazard_figure(rows, windows, out: Output) -> None:
+    def draw(ax, r, k, _n):
+        ax.set_yscale("log")
+        hz = r["pairs"]["hazard"]
+        if hz is None:
+            return
+        hc = hz["commit"]["curve"]
+        t = (np.array(hc["t0"]) + np.array(hc["t1"])) / 2
+        h = np.array([_num(v) for v in hc["h"]])
+        se = np.array([_num(v) for v in hc["stderr"]])
+        ok = np.array(hc["events"]) >= 5
+        conv = r["map"]["converged"]
+        ax.errorbar(t[ok], h[ok], yerr=se[ok], fmt="o-" if conv else "o--", ms=3, capsize=2, color=f"C{k}",
+                    label=r["condition"] + ("" if conv else " (statistics only)"))
+
+    _per_window(rows, windows, draw, ("t / s", "commit hazard h(t) / (1/s)"), out, "q_hazard",
+                caption="Hazard of committing to the final face against time, per window and condition "
+                "(piecewise-constant maximum likelihood, bins with at least 5 events, 1σ Poisson bars); uniform "
+                "tolerance 1e-10; dashed: the window's map is statistics only (certificate < 0.99).")
+
+
+def _faces_figure(rows, windows, out: Output) -> None:
+    def draw(ax, r, k, n):
+        f = r["map"]["faces"]["faces"]
+        x = np.arange(1, 7) + 0.12 * (k - (n - 1) / 2)
+        ax.errorbar(x, [f[str(i)]["fraction"] for i in range(1, 7)], yerr=[f[str(i)]["stderr"] for i in range(1, 7)],
+                    fmt="o" if r["map"]["converged"] else "s", mfc=None if r["map"]["converged"] else "none",
+                    color=f"C{k}", capsize=2, label=f"{r['condition']} ({r['map']['status']})")
+        ax.axhline(1 / 6, color="k", lw=0.6, ls=":")
+        ax.set_xticks(range(1, 7))
+
+    _per_window(rows, windows, draw, ("face up", "fraction of the map"), out, "q_faces",
+                caption="Face fractions of each map with moving-block bootstrap errors (1σ, the larger of "
+                "blocks of 1/8 and 1/4 of the map's side); filled: converged map (certificate ≥ 0.99), hollow: "
+                "statistics only; dotted: 1/6.")
 
 
 def render(c: Computed, out: Output) -> None:
