@@ -126,3 +126,28 @@ def test_a_gpu_chunk_on_a_worker_without_a_gpu_is_refused_saying_why():
     defn = ScanDefinition(Grid("seed", "home", 2), make_config("seed"), 4, device="cuda: Some GPU")
     with pytest.raises(DeviceError, match="device 'cuda': "):
         _gpu_chunk_task(defn.to_dict(), 0, 1, {})
+
+
+def test_a_local_cluster_for_a_gpu_scan_starts_one_worker_per_gpu(monkeypatch):
+    """Without --workers, a local cluster has a worker per GPU for a GPU scan (each on its own GPU), a worker per
+    core for a CPU scan; --workers wins either way; cuda on a machine without a GPU is the device error."""
+    import dicetrace.core.gpu as gpu
+    import dicetrace.scan.dask as sd
+    from dicetrace.devices import DeviceError
+
+    monkeypatch.setattr(gpu, "device_count", lambda: 3)
+    monkeypatch.setattr(sd, "resolve_device", lambda d: "cuda")
+    assert sd.local_worker_count(None, "cuda") == 3
+    assert sd.local_worker_count(None, "cuda:0 (NVIDIA H200)") == 3
+    assert sd.local_worker_count(None, "auto") == 3
+    assert sd.local_worker_count(2, "cuda") == 2
+    assert sd.local_worker_count(None, "cpu") == (os.cpu_count() or 1)
+    monkeypatch.setattr(sd, "resolve_device", lambda d: "cpu")  # auto on a machine without a GPU
+    assert sd.local_worker_count(None, "auto") == (os.cpu_count() or 1)
+
+    def no_gpu(d):
+        raise DeviceError("--device cuda: no CUDA GPU")
+
+    monkeypatch.setattr(sd, "resolve_device", no_gpu)
+    with pytest.raises(DeviceError):
+        sd.local_worker_count(None, "cuda")

@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 import sys
 from dataclasses import fields, replace
 from pathlib import Path
@@ -307,7 +306,7 @@ def register(app: typer.Typer) -> None:
         device: str = typer.Option("cpu", "--device", help=DEVICE_HELP + " A scan resumes only on the device it started on."),
         dask: bool = typer.Option(False, "--dask", help="Run the chunks on a local Dask cluster."),
         scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the chunks on the Dask scheduler at ADDRESS."),
-        workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes of the --dask cluster (default: cores)."),
+        workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes of the --dask cluster (default: one per GPU for a GPU scan, else one per core)."),
         max_chunks: Optional[int] = typer.Option(None, "--max-chunks", help="Stop after this many new chunks (resumable)."),
         rrd: Optional[Path] = typer.Option(None, "--rrd", help="Also write the scan map for the Rerun viewer (.rrd; "
                                            "a device or FIFO directly; '-': stdout)."),
@@ -321,7 +320,7 @@ def register(app: typer.Typer) -> None:
         """Scan a slice (grid), a sample or a list of points of IC space; one row per IC."""
         # lazy: keeps `dicetrace --help` fast (imports numba)
         from dicetrace.scan import DEFAULT_CHUNK, GPU_DEFAULT_CHUNK, DeviceMismatchError, ScanDefinition, ScanMismatchError, scan
-        from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address, worker_device
+        from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address, local_worker_count, worker_device
         from dicetrace.scan.folder import ScanBusyError
         from dicetrace.scan.folder import _check_space_finite
 
@@ -375,7 +374,7 @@ def register(app: typer.Typer) -> None:
         if label is not None:
             _check_out(out_dir, defn)
         maps = [opt for opt, dest in (("--png", png_dest), ("--rrd", rrd_dest)) if dest is not None]
-        local = (workers or os.cpu_count() or 1) if dask else None
+        local = local_worker_count(workers, defn.device) if dask else None
         client, closers = None, []
         if scheduler is not None:  # reached (within DASK_CONNECT_TIMEOUT_S) before anything is computed
             try:

@@ -24,7 +24,7 @@ from collections.abc import Iterable, Iterator
 import pyarrow as pa
 
 from dicetrace.devices import device_label, gpu_unavailable_reason, resolve_device
-from dicetrace.scan.definition import ScanDefinition
+from dicetrace.scan.definition import ScanDefinition, device_kind
 
 from dicetrace.scan.folder import _chunk_task
 
@@ -144,9 +144,22 @@ def _client_within(Client, address: str, left: float, timeout: float):
     return box["client"]
 
 
-def _open_dask(dask, n_workers, timeout: float | None = None):
-    """(client, closers) for ``dask``: True (a LocalCluster), an address (within ``timeout``, default
-    ``DASK_CONNECT_TIMEOUT_S``), or a Client."""
+def local_worker_count(n_workers: int | None, device: str = "cpu") -> int:
+    """The worker processes of a local cluster: ``n_workers`` where given, else one per GPU for a scan on a GPU
+    (``device``: cpu, cuda, auto or a device label such as ``cuda:0 (…)``, as it resolves on this machine), else
+    one per CPU core."""
+    if n_workers:
+        return n_workers
+    if device != "cpu" and resolve_device(device_kind(device) if device != "auto" else device) == "cuda":
+        from dicetrace.core import gpu  # numba-cuda: imported only for a GPU scan
+
+        return max(1, gpu.device_count())
+    return os.cpu_count() or 1
+
+
+def _open_dask(dask, n_workers, timeout: float | None = None, device: str = "cpu"):
+    """(client, closers) for ``dask``: True (a LocalCluster of :func:`local_worker_count` workers for ``device``),
+    an address (within ``timeout``, default ``DASK_CONNECT_TIMEOUT_S``), or a Client."""
     from dask.distributed import Client, LocalCluster  # dask.distributed is slow to import: only for a Dask run
 
     if isinstance(dask, Client):
@@ -156,7 +169,8 @@ def _open_dask(dask, n_workers, timeout: float | None = None):
         return client, [client]
     try:
         cluster = LocalCluster(
-            n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True, dashboard_address=":0"
+            n_workers=local_worker_count(n_workers, device), threads_per_worker=1, processes=True,
+            dashboard_address=":0"
         )
     except Exception as e:  # noqa: BLE001
         raise SchedulerError(f"could not start a local Dask cluster: {type(e).__name__}: {' '.join(str(e).split())[:160]}") from None

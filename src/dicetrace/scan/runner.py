@@ -173,7 +173,7 @@ def iter_scan(
     _check_int(n_workers, "n_workers", 1)
     _check_dask(dask)
     todo = range(defn.n_chunks) if chunks is None else chunks
-    client, closers = _open_dask(dask, n_workers) if dask else (None, [])
+    client, closers = _open_dask(dask, n_workers, device=device or defn.device) if dask else (None, [])
     try:
         defn = _on_device(defn, device, client)
         yield from _chunks(defn, todo, client, threads)
@@ -299,7 +299,7 @@ def scan(
         defn = _on_device(defn, device)
         if folder is not None:
             check_folder(folder, defn)  # refuse at once, without waiting for a lock (read only)
-    client, closers = _open_dask(dask, n_workers) if dask else (None, [])
+    client, closers = _open_dask(dask, n_workers, device=device or defn.device) if dask else (None, [])
     try:
         if client is not None:
             defn = _on_device(defn, device, client)
