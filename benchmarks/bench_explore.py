@@ -17,7 +17,12 @@ is printed beside the wall time: on a shared machine it varies much less.
 For ``--preset physical`` the preset's own integrator and tolerance (``contact-tsit5``,
 2e-8 loosening at 10 /s) are used unless ``--integrator`` says otherwise.
 
-Usage: ``python benchmarks/bench_explore.py [--preset seed] [--res 256] [--integrator NAME] [--threads N] [--no-fine]``.
+``--device cuda`` runs the explorer's maps on a GPU (``--device auto``: a GPU where there is one);
+``--write FILE`` also writes the figures, the device and the machine as JSON (the committed ones
+are under ``benchmarks/results/``, rewritten only by naming them).
+
+Usage: ``python benchmarks/bench_explore.py [--preset seed] [--res 256] [--integrator NAME] [--threads N]
+[--device cpu|cuda|auto] [--no-fine] [--write FILE]``.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import platform
 import time
 import urllib.request
 from urllib.parse import urlencode
@@ -44,9 +50,13 @@ def main() -> None:
     ap.add_argument("--integrator", default=None)
     ap.add_argument("--res", type=int, default=256)
     ap.add_argument("--threads", type=int, default=None)
+    ap.add_argument("--device", default="cpu", choices=("cpu", "cuda", "auto"))
     ap.add_argument("--no-fine", action="store_true", help="time the preview and coarse passes only (slow presets)")
+    ap.add_argument("--write", default=None, help="also write the figures as JSON to this file")
     a = ap.parse_args()
-    with Explorer(window="red-sea", res=a.res, preset=a.preset, integrator=a.integrator, threads=a.threads) as ex:
+    record: dict = {"preset": a.preset, "integrator": a.integrator, "res": a.res, "windows": {}}
+    with Explorer(window="red-sea", res=a.res, preset=a.preset, integrator=a.integrator, threads=a.threads,
+                  device=a.device) as ex:
         base = f"http://127.0.0.1:{ex.port}"
 
         def query(window: str, **extra) -> str:
@@ -82,7 +92,10 @@ def main() -> None:
             if a.integrator:
                 q["integrator"] = a.integrator
             urllib.request.urlopen(f"{base}/api/map.png?{urlencode(q)}", timeout=3600).read()
-        print(f"preset {a.preset}, {os.cpu_count()} CPUs; kernel compile or cache load {time.perf_counter() - t0:.2f} s")
+        record["device"] = ex.device
+        record["warm_s"] = time.perf_counter() - t0
+        print(f"preset {a.preset}, {os.cpu_count()} CPUs, device {record['device']}; kernel compile or cache load "
+              f"{record['warm_s']:.2f} s")
         out = []
         for name in ("red-sea", "red-sea-2"):
             p = fetch(_window(name), "preview")
@@ -90,6 +103,8 @@ def main() -> None:
             f1, f = (0.0, 0.0) if a.no_fine else refine(_window(name))
             refined = "" if a.no_fine else f", first refined strip {p + c + f1:.3f} s, refined {a.res}×{a.res} {p + c + f:.3f} s"
             out.append(f"first image {p:.3f} s, coarse {p + c:.3f} s{refined}")
+            record["windows"][name] = {"first_image_s": p, "coarse_s": p + c,
+                                       **({} if a.no_fine else {"first_strip_s": p + c + f1, "refined_s": p + c + f})}
         print(f"red sea: {out[0]} after the request; after a zoom to red-sea-2: {out[1]} (the page asks for the passes in turn)")
     if not a.no_fine:
         from dicetrace.simulate import simulate_batch
@@ -99,8 +114,18 @@ def main() -> None:
         ics = grid.block(0, grid.size).ics
         t0, c0 = time.perf_counter(), time.process_time()
         simulate_batch(ics, config=cfg, l_convention=grid.slice.l_convention, threads=a.threads)
-        print(f"the batch kernel alone on red sea's {grid.size} refined ICs, one call: {time.perf_counter() - t0:.3f} s "
+        record["batch_alone_s"] = time.perf_counter() - t0
+        print(f"the batch kernel alone on red sea's {grid.size} refined ICs, one call: {record['batch_alone_s']:.3f} s "
               f"(CPU {time.process_time() - c0:.3f} s)")
+    if a.write:
+        cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")),
+                   platform.processor()) if os.path.exists("/proc/cpuinfo") else platform.processor()
+        record["machine"] = {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version()}
+        record["load_average"] = list(os.getloadavg()[:2])
+        record["measured"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+        with open(a.write, "w") as f:
+            json.dump(record, f, indent=1)
+        print(f"wrote {a.write}")
 
 
 if __name__ == "__main__":

@@ -3,11 +3,12 @@
 # benchmarks/bench_gpu.py at the sizes the GPU issue asks for (10^5 ICs of agreement per preset, 10^6 for the
 # GPU's rate, the 1000 x 1000 scan on each device; on the GPU with one CUDA stream and with two, which gives the
 # gain of overlapping a chunk's transfers and host work with the next chunk's kernel), and a 300 x 300 GPU scan
-# on two Dask workers against the same scan in one process (their rows must be identical).
+# on two Dask workers against the same scan in one process (their rows must be identical), and the explorer's
+# 256 x 256 view of `physical` (its map worker, without the web server) on the GPU and on the CPU.
 #
 # For a machine with numba-cuda, numpy, scipy, pyarrow and pandas and nothing else of dicetrace's dependencies
 # (no rerun-sdk, no internet): it runs the working tree as it is (PYTHONPATH=src, nothing installed), from the
-# repository root.  Sized for about 6 minutes on an H200 beside a 16-core CPU, at most 9 min 20 s (the sum of
+# repository root.  Sized for about 6 minutes on an H200 beside a 16-core CPU, at most 9 min 40 s (the sum of
 # the parts' limits), where the numba cache starts cold (the CPU's kernels compile in the tests' run and load
 # from the cache after); each part has a time limit, and
 # the benchmark prints as it goes, so a part cut short still leaves what it measured.  dicetrace scan needs
@@ -45,13 +46,13 @@ say "### machine"
 say "git: $(git rev-parse --short HEAD 2>/dev/null || echo 'not a git checkout') $(git status --short 2>/dev/null | wc -l | tr -d ' ') changed files"
 
 if "$PY" -c 'import pytest' 2>/dev/null; then
-    part 200 "tests marked gpu" "$PY" -m pytest -q -m gpu tests/core/test_gpu.py -p no:cacheprovider
+    part 180 "tests marked gpu" "$PY" -m pytest -q -m gpu tests/core/test_gpu.py -p no:cacheprovider
 else
     say "### tests marked gpu: not run (pytest is not installed)"
 fi
 # seed first, with the scan (quick; the GPU's scan with one stream and with two: the overlap); then physical
 part 120 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
-part 170 "bench_gpu: physical" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 --rate-n 1000000 --skip-scan
+part 150 "bench_gpu: physical" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 --rate-n 1000000 --skip-scan
 # two Dask workers on the GPU(s) (sharing one where there is one): the rows of the one-process GPU scan
 if "$PY" -c 'import dask.distributed, typer' 2>/dev/null; then
     part 70 "scan on Dask, --device cuda, 2 workers, against one process" "$PY" - <<'PYEOF'
@@ -74,5 +75,20 @@ PYEOF
 else
     say "### scan on Dask: not run (dask.distributed or typer is not installed)"
 fi
+# the live converged explorer: a 256 x 256 view of physical, as the explorer's map worker computes it
+part 60 "explorer: a 256 x 256 view of physical, GPU and CPU" "$PY" - <<'PYEOF'
+import os, time
+from dicetrace.explore import View, Worker
+for device in ("cuda", "cpu"):
+    w = Worker(device=device)
+    try:
+        w.submit_map(View(window=((1.0, 1.1), (3.5, 3.6)), res=(16, 16), preset="physical"), client="warm").result()
+        t = time.perf_counter()
+        m = w.submit_map(View(window="red-sea", res=(256, 256), preset="physical"), client="bench").result()
+        print(f"{device}: a 256 x 256 red-sea view of physical in {time.perf_counter() - t:.2f} s "
+              f"({m.outcome.size} throws; {os.cpu_count()} CPU cores)", flush=True)
+    finally:
+        w.shutdown()
+PYEOF
 say ""
 say "### done after ${SECONDS} s"

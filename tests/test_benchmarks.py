@@ -17,6 +17,7 @@ says why in one line and exits 2.
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -164,3 +165,17 @@ def test_gpu_bench_nudge_is_a_few_ulps_and_the_floor_verdict():
     assert np.array_equal(moved, mod.nudged(ics, 4))
     assert mod.within_floor(0, 0) and mod.within_floor(12, 10) and mod.within_floor(3, 10)
     assert not mod.within_floor(40, 10)
+
+
+def test_explore_bench_writes_its_figures_for_the_device_it_ran_on(tmp_path):
+    """bench_explore.py --write: the passes of both windows, the batch kernel alone, the device and the machine."""
+    out = tmp_path / "explore.json"
+    r = subprocess.run([sys.executable, str(BENCHMARKS / "bench_explore.py"), "--res", "16", "--write", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    got = json.loads(out.read_text())
+    assert got["device"] == "cpu" and got["res"] == 16 and got["preset"] == "seed"
+    for w in ("red-sea", "red-sea-2"):
+        t = got["windows"][w]
+        assert 0 < t["first_image_s"] <= t["coarse_s"] <= t["first_strip_s"] <= t["refined_s"]
+    assert got["batch_alone_s"] > 0 and got["machine"]["cores"] >= 1
