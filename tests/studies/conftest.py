@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -36,3 +37,19 @@ def quick_run(tmp_path_factory):
     out = here / "dicetrace-results" / "analysis"  # the default output folder
     results = {p.stem: json.loads(p.read_text()) for p in (out / "results").glob("*.json")}
     return out, results
+
+
+@pytest.fixture(scope="session")
+def copy_of_study(quick_run, tmp_path_factory):
+    """``copy_of_study(name)``: (a folder, its results) holding one study's part of the shared quick run, its
+    results JSON and the figures, copied so that a test may rerender into it without touching what others read."""
+    shared, results = quick_run
+
+    def copy(name: str):
+        out = tmp_path_factory.mktemp(name) / "out"
+        (out / "results").mkdir(parents=True)
+        shutil.copy(shared / "results" / f"{name}.json", out / "results")
+        shutil.copytree(shared / "figures", out / "figures")
+        return out, results[name]
+
+    return copy

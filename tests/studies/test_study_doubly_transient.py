@@ -7,9 +7,7 @@ is ``dicetrace analyze doubly-transient --out analysis``.
 
 from __future__ import annotations
 
-import json
 import math
-import shutil
 
 import numpy as np
 import pytest
@@ -36,14 +34,9 @@ def test_every_condition_is_a_uniform_tight_tolerance():
 
 
 @pytest.fixture(scope="module")
-def quick(quick_run, tmp_path_factory):
+def quick(copy_of_study):
     """Study n's part of the shared ``dicetrace analyze all --quick`` run, copied (its rerender writes into the copy)."""
-    shared, results = quick_run
-    out = tmp_path_factory.mktemp("dt") / "out"
-    (out / "results").mkdir(parents=True)
-    shutil.copy(shared / "results" / "doubly_transient.json", out / "results")
-    shutil.copytree(shared / "figures", out / "figures")
-    return out, results["doubly_transient"]
+    return copy_of_study("doubly_transient")
 
 
 @pytest.mark.slow

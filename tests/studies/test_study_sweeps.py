@@ -9,7 +9,6 @@ and error bar.  The full run is ``dicetrace analyze sweeps --out analysis``.
 from __future__ import annotations
 
 import math
-import shutil
 
 import numpy as np
 import pytest
@@ -65,14 +64,9 @@ def test_face_changes_use_the_block_errors_and_the_series_hold_one_parameter():
 
 
 @pytest.fixture(scope="module")
-def quick(quick_run, tmp_path_factory):
+def quick(copy_of_study):
     """Study q's part of the shared ``dicetrace analyze all --quick`` run, copied (its rerender writes into it)."""
-    shared, results = quick_run
-    out = tmp_path_factory.mktemp("sw") / "out"
-    (out / "results").mkdir(parents=True)
-    shutil.copy(shared / "results" / "sweeps.json", out / "results")
-    shutil.copytree(shared / "figures", out / "figures")
-    return out, results["sweeps"]
+    return copy_of_study("sweeps")
 
 
 @pytest.mark.slow
