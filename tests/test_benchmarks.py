@@ -167,6 +167,7 @@ def test_gpu_bench_nudge_is_a_few_ulps_and_the_floor_verdict():
     assert not mod.within_floor(40, 10)
 
 
+@pytest.mark.slow
 def test_explore_bench_writes_its_figures_for_the_device_it_ran_on(tmp_path):
     """bench_explore.py --write: the passes of both windows, the batch kernel alone, the device and the machine."""
     out = tmp_path / "explore.json"

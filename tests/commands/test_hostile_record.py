@@ -438,6 +438,7 @@ def run_bounded(args, cwd, env=None):
                           text=True, timeout=REFUSAL_WAIT_S + 2 * _startup_s())
 
 
+@pytest.mark.slow  # waits on a network peer for seconds: CI runs it, the quick loop does not
 @pytest.mark.parametrize("kind", ["refused", "silent", "garbage"])
 def test_connect_to_a_peer_that_is_no_grpc_server_is_one_line_exit_2(tmp_path, peer, kind):
     port = peer(kind)
@@ -449,6 +450,7 @@ def test_connect_to_a_peer_that_is_no_grpc_server_is_one_line_exit_2(tmp_path, p
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # waits on a network peer for seconds: CI runs it, the quick loop does not
 @pytest.mark.parametrize("display", [None, ":93"])
 def test_spawn_without_a_display_is_one_line_exit_2(tmp_path, peer, display):
     """No display at all, or a DISPLAY where no X server answers: refused before any work, in one line."""
@@ -465,6 +467,7 @@ def test_spawn_without_a_display_is_one_line_exit_2(tmp_path, peer, display):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow  # waits on a network peer for seconds: CI runs it, the quick loop does not
 def test_spawn_onto_a_port_held_by_something_else_is_one_line_exit_2(tmp_path, peer):
     """A port that answers but not as a viewer is not "reused": refused in bounded time."""
     port = peer("silent")

@@ -20,6 +20,14 @@ import pytest
 from filelock import FileLock
 
 
+@pytest.hookimpl(tryfirst=True)  # before ``-m "not slow"`` deselects
+def pytest_collection_modifyitems(items):
+    """Every test that reads the shared quick run (a minute of studies) is ``slow``, whether or not it says so."""
+    for item in items:
+        if "quick_run" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.slow)
+
+
 @pytest.fixture(scope="session")
 def quick_run(tmp_path_factory):
     """(output folder, {study: results JSON}) of ``dicetrace analyze all --quick``, run from a folder
