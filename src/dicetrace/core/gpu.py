@@ -290,7 +290,8 @@ _GATHER = cuda.jit(_gather_kernel, cache=CACHE)
 def uses_seed_kernel(kp, off0, integ: int) -> bool:
     """Whether throws of this configuration run the seed kernel (the CPU's specialised kernel applies)."""
     scheme = scheme_of(integ)
-    return hasattr(scheme, "summary") and scheme.summary is fast.roll_summary_sie and bool(fast.applies(kp, off0))
+    # the seed kernel wraps the seed path's specialised summary: the one scheme whose ``summary`` that is
+    return getattr(scheme, "summary", None) is fast.roll_summary_sie and bool(scheme.summary_applies(kp, off0))
 
 
 def bytes_per_throw(integ: int, cap: int, kp=None, off0=None) -> int:
