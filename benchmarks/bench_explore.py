@@ -38,6 +38,8 @@ from urllib.parse import urlencode
 from dicetrace.explore import Explorer
 from dicetrace.ics import WINDOWS
 
+from machine import cpu_model  # benchmarks/machine.py
+
 
 def _window(name: str) -> str:
     (x0, x1), (y0, y1) = WINDOWS[name]
@@ -118,9 +120,7 @@ def main() -> None:
         print(f"the batch kernel alone on red sea's {grid.size} refined ICs, one call: {record['batch_alone_s']:.3f} s "
               f"(CPU {time.process_time() - c0:.3f} s)")
     if a.write:
-        cpu = next((ln.split(":", 1)[1].strip() for ln in open("/proc/cpuinfo") if ln.startswith("model name")),
-                   platform.processor()) if os.path.exists("/proc/cpuinfo") else platform.processor()
-        record["machine"] = {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version()}
+        record["machine"] = {"cpu": cpu_model(), "cores": os.cpu_count(), "python": platform.python_version()}
         record["load_average"] = list(os.getloadavg()[:2])
         record["measured"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
         with open(a.write, "w") as f:

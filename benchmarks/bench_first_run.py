@@ -27,17 +27,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from machine import cpu_model  # benchmarks/machine.py
+
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def main() -> int:
@@ -70,7 +62,7 @@ def main() -> int:
             "kernels_cold_s": float(kernels[-1]) if kernels else None,
             "pytest_s": float(summary[-1][1]) if summary else None,
             "pytest_summary": summary[-1][0] if summary else None,
-            "machine": {"cpu": _cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
+            "machine": {"cpu": cpu_model(), "cores": os.cpu_count(), "python": platform.python_version(),
                         "system": platform.platform()},
             # other work on the machine slows the run: the 1-minute load average before and after it
             "load_average": [round(load_before, 2), round(os.getloadavg()[0], 2)],

@@ -69,6 +69,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from machine import cpu_model  # benchmarks/machine.py
+
 if os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0"):
     # the simulator runs the kernels as Python, which calls the physics: as plain Python too (before numba loads)
     os.environ.setdefault("NUMBA_DISABLE_JIT", "1")
@@ -135,16 +137,6 @@ def _cpu_worker(folder: str, preset: str) -> int:
     r = simulate_batch(np.load(Path(folder) / "ics.npy"), config=preset, device="cpu")
     np.savez(Path(folder) / "out.npz", **{k: getattr(r, k) for k in _FIELDS})
     return 0
-
-
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine() or "unknown CPU"
 
 
 def _version(dist: str) -> str:
@@ -390,7 +382,7 @@ def main(argv=None) -> int:
 
     import numba
 
-    print(f"machine: {_cpu_model()}, {os.cpu_count()} CPUs, {numba.get_num_threads()} numba threads; "
+    print(f"machine: {cpu_model()}, {os.cpu_count()} CPUs, {numba.get_num_threads()} numba threads; "
           f"GPU {device_label('cuda')}")
     print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
           f"numba-cuda {_version('numba-cuda')}; load average {os.getloadavg()[0]:.2f}")
