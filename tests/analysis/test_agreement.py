@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import numpy as np
 import pytest
 
@@ -89,3 +90,11 @@ def test_compare_presets_on_the_same_throws():
     assert c["median_settle_time_ratio"] == pytest.approx(2.0)
     assert c["mean_contact_changes_seed"] == pytest.approx(6.0)
     assert c["mean_first_contact_s"] == pytest.approx(0.2)  # finite first contacts only
+
+
+def test_as_dict_gives_the_numbers_a_results_file_keeps():
+    a = agreement([1, 2, 3, 1, 2, 3, 1, 1], [1, 2, 3, 1, 2, 1, 1, 2])
+    d = a.as_dict()
+    assert d == {"fraction": 0.75, "ci": list(a.ci), "chance": a.chance, "kappa": a.kappa,
+                 "kappa_stderr": a.kappa_stderr, "n": 8}
+    assert json.loads(json.dumps(d)) == d

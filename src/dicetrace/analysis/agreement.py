@@ -49,6 +49,11 @@ class Agreement:
     n: int
     confidence: float
 
+    def as_dict(self) -> dict:
+        """Its numbers for a results file (JSON): fraction, ci, chance, kappa, kappa_stderr, n."""
+        return {"fraction": self.fraction, "ci": list(self.ci), "chance": self.chance, "kappa": self.kappa,
+                "kappa_stderr": self.kappa_stderr, "n": self.n}
+
 
 def agreement(a, b, *, confidence: float = 0.95) -> Agreement:
     """Agreement of the labels ``a`` and ``b`` (same shape, any hashable labels)."""

@@ -129,22 +129,17 @@ def measure_map(ctx: Context, window: str, model: str, opts: dict, res: int, ref
         dt_s=cfg.numerics.dt_s,
         tight_integrator=cert.tight_config.numerics.integrator, tight_tol=cert.tight_config.numerics.tol,
         tight_dt_s=cert.tight_config.numerics.dt_s,
-        certificate=_agreement_dict(cert.tightened), floor=_agreement_dict(cert.floor),
+        certificate=cert.tightened.as_dict(), floor=cert.floor.as_dict(),
         above_floor=cert.converged, converged=converged_verdict(cert),
         cells=cs, settle=settle_stats(s), repetition=repetition_stats(s), divergence=settle_divergence(ctx, s, cfg),
         **face_stats(g, None if ref is None else ref.labels),
     )
     if ref is not None:
-        row["agreement_with_discrete"] = _agreement_dict(agreement(g, ref.labels))
+        row["agreement_with_discrete"] = agreement(g, ref.labels).as_dict()
     ctx.log(f"{window} {model}: certificate {cert.tightened.fraction:.3f} (floor {cert.floor.fraction:.3f}, "
             f"{verdict_text(row)}), {cs['n_cells']} cells, "
             f"α pert {row.get('alpha_pert', math.nan):.3f}, Sbb {row['Sbb']:.3f}")
     return row, s
-
-
-def _agreement_dict(a) -> dict:
-    return {"fraction": a.fraction, "ci": list(a.ci), "chance": a.chance, "kappa": a.kappa,
-            "kappa_stderr": a.kappa_stderr, "n": a.n}
 
 
 def compute(ctx: Context) -> Computed:

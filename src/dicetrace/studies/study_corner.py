@@ -263,17 +263,13 @@ def triple_points(ctx: Context) -> tuple[dict, dict]:
         borders = [throw(*p) for p in _border_points(classify, s, ctx, ctx.pick(12, 2))]
         maps.append({"window": w, "res": res, "width": width, "n_candidates": int(len(cand)), "radius": radius,
                      "min_share": share,
-                     "n_hunted": int(len(pick)), "certificate": _agr(cert.tightened), "floor": _agr(cert.floor),
+                     "n_hunted": int(len(pick)), "certificate": cert.tightened.as_dict(), "floor": cert.floor.as_dict(),
                      "converged": converged_verdict(cert), "hunt_evals": classify.n_evals - n0,
                      "random": rnd, "border": borders})
         plot[w] = s
     ctx.n_throws += classify.n_evals
     return {"map_model": _model_text(MAP_MODEL), "hunt_model": _model_text(HUNT_MODEL), "tol": tol,
             "radii": list(radii), "rate": cb.rate, "maps": maps, "points": points}, plot
-
-
-def _agr(a) -> dict:
-    return {"fraction": a.fraction, "ci": list(a.ci), "kappa": a.kappa, "kappa_stderr": a.kappa_stderr, "n": a.n}
 
 
 def _border_points(classify, s, ctx: Context, n: int) -> list[tuple[float, float]]:

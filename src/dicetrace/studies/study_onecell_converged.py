@@ -83,10 +83,6 @@ def model_text(opts: dict) -> str:
     return f"physical, {c.integrator} tol {c.tol:g} uniform"
 
 
-def _agr(a) -> dict:
-    return {"fraction": a.fraction, "ci": list(a.ci), "kappa": a.kappa, "kappa_stderr": a.kappa_stderr, "n": a.n}
-
-
 def _certify(ctx: Context, slice_spec, points: np.ndarray, labels: np.ndarray, n: int) -> dict:
     """The map's labels at ``n`` random points against the tightened and the independent integrators."""
     pick = ctx.rng.choice(len(points), size=min(n, len(points)), replace=False)
@@ -103,7 +99,7 @@ def _certificate(parts: list[dict]) -> dict:
     t = agreement(base, np.concatenate([p["tightened"] for p in parts]))
     i = agreement(base, np.concatenate([p["independent"] for p in parts]))
     cert = min(t.fraction, i.fraction)
-    return {"tightened": _agr(t), "independent": _agr(i), "certificate": cert,
+    return {"tightened": t.as_dict(), "independent": i.as_dict(), "certificate": cert,
             "word": "converged" if cert >= CONVERGED_MIN else "statistics only"}
 
 

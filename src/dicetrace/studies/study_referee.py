@@ -75,11 +75,6 @@ def config(model: str, **overrides):
     return make_config(opts.pop("preset"), **opts, **overrides)
 
 
-def _agreement_row(a) -> dict:
-    return {"fraction": a.fraction, "ci": list(a.ci), "kappa": a.kappa, "kappa_stderr": a.kappa_stderr,
-            "chance": a.chance, "n": a.n}
-
-
 def _outside(v: float, deltas) -> float | str:
     """An equivalent δ, or text when it is outside the measured range (JSON has no inf)."""
     if v == math.inf:
@@ -136,8 +131,8 @@ def chaos_floors(ctx: Context) -> dict:
         fr = [f.agreement.fraction for f in floors]
         out[w] = {
             "n": n, "reference": ref_model, "deltas": list(deltas),
-            "floor": [{"delta": f.delta, **_agreement_row(f.agreement)} for f in floors],
-            "discrete_vs_converged": _agreement_row(a_disc),
+            "floor": [{"delta": f.delta, **f.agreement.as_dict()} for f in floors],
+            "discrete_vs_converged": a_disc.as_dict(),
             "equivalent_delta": _outside(equivalent_perturbation(deltas, fr, a_disc.fraction), deltas),
             "equivalent_delta_ci": [_outside(equivalent_perturbation(deltas, fr, a_disc.ci[1]), deltas),
                                     _outside(equivalent_perturbation(deltas, fr, a_disc.ci[0]), deltas)],
@@ -406,7 +401,7 @@ def stiffness(ctx: Context) -> dict:
                      "pen_q90_cm": float(np.quantile(pen, 0.9)),
                      "alpha": a, "alpha_stderr": a_se, "alpha_all": ue.alpha, "alpha_all_stderr": ue.alpha_stderr,
                      "f": list(ue.f), "eps_rel": list(eps / width)})
-        rows[-1]["agreement_with_softest"] = _agreement_row(agreement(lab, maps[0]))
+        rows[-1]["agreement_with_softest"] = agreement(lab, maps[0]).as_dict()
         ctx.log(f"k {k:.1e}: settle {t.mean():.3f} s, peak penetration median {np.median(pen):.4f} cm, α {a}")
     counts = np.array([[int((m == f).sum()) for f in range(1, 7)] for m in maps])
     chi2, p, dof, _ = stats.chi2_contingency(counts)

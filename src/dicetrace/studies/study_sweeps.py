@@ -94,11 +94,6 @@ def _numerics(cfg) -> dict:
     return {"integrator": n.integrator, "tol": n.tol, "tol_growth": n.tol_growth, "dt_s": n.dt_s}
 
 
-def _agr(a) -> dict:
-    return {"fraction": a.fraction, "ci": list(a.ci), "chance": a.chance, "kappa": a.kappa,
-            "kappa_stderr": a.kappa_stderr, "n": a.n}
-
-
 def _puy(g, eps: float, balls: int, rng) -> dict:
     try:
         pt = basins_fractal_test(g, eps=eps, n_balls=balls, rng=rng)
@@ -127,8 +122,8 @@ def _certificate(ctx: Context, cond: str, window: str, res: int, g, rng) -> dict
     chk = run_on_slice(pts[idx[:n_check]], "seed", config=_config(cond, **REFERENCE_CHECK)).outcome
     ctx.n_throws += len(idx) + n_check
     cert = agreement(g.ravel()[idx], ref)
-    return {"certificate": _agr(cert), "reference": _numerics(_config(cond, **REFERENCE)),
-            "reference_check": _agr(agreement(ref[:n_check], chk)),
+    return {"certificate": cert.as_dict(), "reference": _numerics(_config(cond, **REFERENCE)),
+            "reference_check": agreement(ref[:n_check], chk).as_dict(),
             "reference_check_numerics": _numerics(_config(cond, **REFERENCE_CHECK)),
             "converged": bool(cert.fraction >= CERTIFIED),
             "status": "converged" if cert.fraction >= CERTIFIED else "statistics only"}
