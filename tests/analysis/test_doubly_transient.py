@@ -212,3 +212,18 @@ def test_throw_floor_bounds_the_pair_floor():
     tf = dt.throw_floor(a, b)
     assert tf["flips"] == 3 and tf["n"] == 300 and tf["fraction"] == pytest.approx(3 / 300)
     assert tf["lo"] < 3 / 300 < tf["hi"]
+
+
+def test_pair_verdicts_compare_each_perturbed_face_with_the_unperturbed_one():
+    # row 0: the unperturbed faces of 3 throws; rows 1-2: two scales (0: unsettled, -1: blown up)
+    out = np.array([[1, 2, 0], [1, 3, 0], [4, 2, 5]])
+    changed, valid = dt.pair_verdicts(out)
+    assert changed.tolist() == [[False, True], [True, False], [False, True]]
+    assert valid.tolist() == [[True, True], [True, True], [False, False]]
+
+
+def test_a_hazards_record_is_its_curve():
+    t = np.array([0.1, 0.2, 0.2, 0.5, 0.9, 1.0])
+    h = dt.hazard_curve(t, np.array([0.0, 0.3, 1.1]))
+    d = h.as_dict()
+    assert d["events"] == h.events.tolist() == [3, 3] and d["h"] == h.h.tolist() and d["t0"] == [0.0, 0.3]

@@ -31,11 +31,11 @@ import warnings
 
 import numpy as np
 
-from dicetrace.simulate import Record, simulate
+from dicetrace.simulate import Record, simulate, simulate_batch
 
 __all__ = ["LocalSlopes", "local_slopes", "Crossover", "crossover_fit", "Hazard", "hazard_curve", "hazard_windows",
            "discrete_hazard", "covariate_hazard", "FACE_NODE_MASK", "commit_steps", "perturbed", "floor_test", "throw_floor",
-           "pair_divergence", "compare"]
+           "pair_divergence", "compare", "pair_outcomes", "pair_verdicts", "hazard_summary"]
 
 #: Bit mask of the four nodes of each face (face 1..6; bit k-1 is node k; docs/model.md §3).
 FACE_NODE_MASK = {1: 0b00001111, 2: 0b00110011, 3: 0b01010101, 4: 0b10101010, 5: 0b11001100, 6: 0b11110000}
@@ -184,6 +184,11 @@ class Hazard:
     events: np.ndarray
     exposure: np.ndarray
     at_risk: np.ndarray
+
+    def as_dict(self) -> dict:
+        """The curve for a results file (JSON): bins, rates, their errors, events and numbers at risk."""
+        return {"t0": self.t0.tolist(), "t1": self.t1.tolist(), "h": self.h.tolist(), "stderr": self.stderr.tolist(),
+                "events": self.events.tolist(), "at_risk": self.at_risk.tolist()}
 
 
 def _lifetimes(lifetimes, censored):
@@ -382,3 +387,40 @@ def compare(x: float, x_err: float, y: float, y_err: float) -> dict:
     z = diff / err if err > 0 else (0.0 if diff == 0 else math.inf)
     verdict = "consistent" if abs(z) < 2 else ("inconsistent" if abs(z) > 3 else "undetermined")
     return {"x": x, "x_err": x_err, "y": y, "y_err": y_err, "diff": diff, "diff_err": err, "z": z, "verdict": verdict}
+
+
+def pair_outcomes(ics, moved, config):
+    """The throws of ``ics`` and of each perturbed copy in ``moved`` (:func:`perturbed`), in one batch at
+    ``config``: (the batch, its outcomes as a (len(moved) + 1, len(ics)) int64 array, row 0 the unperturbed)."""
+    b = simulate_batch(np.concatenate([ics, *moved]), config=config)
+    return b, b.outcome.reshape(len(moved) + 1, len(ics)).astype(np.int64)
+
+
+def pair_verdicts(out):
+    """From :func:`pair_outcomes`' outcomes: (changed, valid), (n, scales) each: the perturbed throw's face differs
+    from the unperturbed one's, and both settled on a face."""
+    return (out[1:] != out[0]).T, ((out[1:] >= 1) & (out[0] >= 1)).T
+
+
+def hazard_summary(t_settle, t_commit, landings, t_cap) -> dict:
+    """The hazards of settling and of committing to the final face against time (throws past ``t_cap`` censored):
+    each one's curve, its windows, κ over the middle of the lifetimes, the late κ and whether it rises from the
+    first window (:func:`compare`); and the hazard per landing (:func:`discrete_hazard`)."""
+    res = {}
+    for key, t in (("settle", t_settle), ("commit", t_commit)):
+        cen = t >= t_cap
+        edges = np.linspace(0.0, float(np.quantile(t, 0.995)), 25)
+        hc, hw = hazard_curve(t, edges, censored=cen), hazard_windows(t, censored=cen)
+        mid = hazard_curve(t, np.quantile(t, [0.5, 0.9]), censored=cen)
+        rising = compare(float(hw.h[-1]), float(hw.stderr[-1]), float(hw.h[0]), float(hw.stderr[0])) if len(hw.h) > 1 \
+            else compare(math.nan, math.nan, math.nan, math.nan)
+        res[key] = {"median_s": float(np.median(t)), "curve": hc.as_dict(), "windows": hw.as_dict(),
+                    "kappa_mid": float(mid.h[0]), "kappa_mid_stderr": float(mid.stderr[0]),
+                    "kappa_mid_range_s": [float(mid.t0[0]), float(mid.t1[0])],
+                    "kappa_late": float(hw.h[-1]) if len(hw.h) else math.nan,
+                    "kappa_late_stderr": float(hw.stderr[-1]) if len(hw.h) else math.nan,
+                    "kappa_late_from_s": float(hw.t0[-1]) if len(hw.h) else math.nan,
+                    "late_minus_first": rising}
+    bh = discrete_hazard(landings)
+    res["bounce"] = {k: v.tolist() for k, v in bh.items()}
+    return res

@@ -31,15 +31,14 @@ from pathlib import Path
 
 import numpy as np
 
-from dicetrace.analysis.doubly_transient import (commit_steps, compare, covariate_hazard, crossover_fit,
-                                                 discrete_hazard, floor_test, hazard_curve, hazard_windows,
-                                                 local_slopes, pair_divergence, perturbed, throw_floor)
+from dicetrace.analysis.doubly_transient import (commit_steps, compare, covariate_hazard, crossover_fit, floor_test,
+                                                 hazard_summary, local_slopes, pair_divergence, pair_outcomes,
+                                                 pair_verdicts, perturbed, throw_floor)
 from dicetrace.analysis.edge import edge_release_rate
 from dicetrace.analysis.lyapunov import finite_time_lyapunov
 from dicetrace.analysis.settle import edge_balance_rate
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.simulate import simulate_batch
 from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
 from dicetrace.studies.study_doubly_transient_render import render as _render
 
@@ -93,41 +92,6 @@ def _numerics(cfg) -> dict:
             "tol_growth": n.tol_growth, "dt_s": n.dt_s}
 
 
-def _pair_outcomes(ics, moved, cfg):
-    b = simulate_batch(np.concatenate([ics, *moved]), config=cfg)
-    return b, b.outcome.reshape(len(moved) + 1, len(ics)).astype(np.int64)
-
-
-def _verdicts(out):
-    return (out[1:] != out[0]).T, ((out[1:] >= 1) & (out[0] >= 1)).T
-
-
-def _hazards(t_settle, t_commit, landings, t_cap) -> dict:
-    res = {}
-    for key, t in (("settle", t_settle), ("commit", t_commit)):
-        cen = t >= t_cap
-        edges = np.linspace(0.0, float(np.quantile(t, 0.995)), 25)
-        hc, hw = hazard_curve(t, edges, censored=cen), hazard_windows(t, censored=cen)
-        mid = hazard_curve(t, np.quantile(t, [0.5, 0.9]), censored=cen)
-        rising = compare(float(hw.h[-1]), float(hw.stderr[-1]), float(hw.h[0]), float(hw.stderr[0])) if len(hw.h) > 1 \
-            else compare(math.nan, math.nan, math.nan, math.nan)
-        res[key] = {"median_s": float(np.median(t)), "curve": _hz(hc), "windows": _hz(hw),
-                    "kappa_mid": float(mid.h[0]), "kappa_mid_stderr": float(mid.stderr[0]),
-                    "kappa_mid_range_s": [float(mid.t0[0]), float(mid.t1[0])],
-                    "kappa_late": float(hw.h[-1]) if len(hw.h) else math.nan,
-                    "kappa_late_stderr": float(hw.stderr[-1]) if len(hw.h) else math.nan,
-                    "kappa_late_from_s": float(hw.t0[-1]) if len(hw.h) else math.nan,
-                    "late_minus_first": rising}
-    bh = discrete_hazard(landings)
-    res["bounce"] = {k: v.tolist() for k, v in bh.items()}
-    return res
-
-
-def _hz(h) -> dict:
-    return {"t0": h.t0.tolist(), "t1": h.t1.tolist(), "h": h.h.tolist(), "stderr": h.stderr.tolist(),
-            "events": h.events.tolist(), "at_risk": h.at_risk.tolist()}
-
-
 def _traced(ctx: Context, cfg, ics, t_settle, rng, n_surv: int, n_rand: int) -> dict:
     """λ₁ on throws that outlive the median settle time and on random throws; the energy hazard (random throws)."""
     settled = np.flatnonzero(np.isfinite(t_settle))
@@ -159,7 +123,7 @@ def _traced(ctx: Context, cfg, ics, t_settle, rng, n_surv: int, n_rand: int) -> 
                     "q25": float(np.quantile(lam, 0.25)) if len(lam) else math.nan,
                     "q75": float(np.quantile(lam, 0.75)) if len(lam) else math.nan, "values": lam.tolist()}
     edges = np.geomspace(0.7, 50.0, 15)
-    out["energy_hazard"] = _hz(covariate_hazard(e_series[0], e_series[1], e_events, edges))
+    out["energy_hazard"] = covariate_hazard(e_series[0], e_series[1], e_events, edges).as_dict()
     return out
 
 
@@ -172,12 +136,12 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
     (x0, x1), (y0, y1) = window_ranges(WINDOW)
     ics = cfg.to_preset_convention(np.asarray(seed_slice(rng.uniform(x0, x1, n), rng.uniform(y0, y1, n))), "program")
     moved = [perturbed(ics, e, rng) for e in eps]
-    b, out = _pair_outcomes(ics, moved, cfg)
+    b, out = pair_outcomes(ics, moved, cfg)
     ctx.n_throws += out.size
-    changed, valid = _verdicts(out)
-    _, out_t = _pair_outcomes(ics[:n_floor], [m[:n_floor] for m in moved], tight)
+    changed, valid = pair_verdicts(out)
+    _, out_t = pair_outcomes(ics[:n_floor], [m[:n_floor] for m in moved], tight)
     ctx.n_throws += out_t.size
-    changed_t, valid_t = _verdicts(out_t)
+    changed_t, valid_t = pair_verdicts(out_t)
     floor = floor_test(changed[:n_floor], changed_t, valid=valid[:n_floor] & valid_t)
     tf = throw_floor(out[:, :n_floor], out_t)
     single_flips = int(tf["flips"])
@@ -196,7 +160,7 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
     sl = slice(0, n)
     commit, landings = commit_steps(b.sets, b.set_steps, b.set_offsets[: n + 1], b.outcome[sl], b.steps[sl])
     t_settle = np.where(base, b.t_settle_s[sl], np.nan)
-    hz = _hazards(t_settle[base], commit[base] * dt, landings[base], t_cap)
+    hz = hazard_summary(t_settle[base], commit[base] * dt, landings[base], t_cap)
     n_s, n_r = ctx.pick(100 if cond in ("physical", "seed") else 50, 6), ctx.pick(200 if cond == "physical" else 60, 8)
     tr = _traced(ctx, cfg, ics, t_settle, rng, n_s, n_r)
     try:

@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from dicetrace.analysis.agreement import agreement
-from dicetrace.analysis.doubly_transient import (commit_steps, compare, crossover_fit, local_slopes, perturbed,
-                                                 throw_floor)
+from dicetrace.analysis.doubly_transient import (commit_steps, compare, crossover_fit, hazard_summary, local_slopes,
+                                                 pair_outcomes, pair_verdicts, perturbed, throw_floor)
 from dicetrace.analysis.face_fractions import face_fractions
 from dicetrace.analysis.fractality import basins_fractal_test
 from dicetrace.analysis.simulator import run_on_slice, window_points
@@ -45,8 +45,7 @@ from dicetrace.analysis.wada import wada_merge_test
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
-from dicetrace.studies.study_doubly_transient import (FLOOR_SHARE, MIN_CHANGED, TOL, TOL_FLOOR, _hazards,
-                                                      _pair_outcomes, _verdicts)
+from dicetrace.studies.study_doubly_transient import FLOOR_SHARE, MIN_CHANGED, TOL, TOL_FLOOR
 from dicetrace.studies.study_sweeps_render import render as _render
 
 NAME = "sweeps"
@@ -171,10 +170,10 @@ def _pairs(ctx: Context, cond: str, window: str, rng) -> dict:
     (x0, x1), (y0, y1) = window_ranges(window)
     ics = cfg.to_preset_convention(np.asarray(seed_slice(rng.uniform(x0, x1, n), rng.uniform(y0, y1, n))), "program")
     moved = [perturbed(ics, e, rng) for e in eps]
-    b, out = _pair_outcomes(ics, moved, cfg)
-    _, out_t = _pair_outcomes(ics[:n_floor], [m[:n_floor] for m in moved], tight)
+    b, out = pair_outcomes(ics, moved, cfg)
+    _, out_t = pair_outcomes(ics[:n_floor], [m[:n_floor] for m in moved], tight)
     ctx.n_throws += out.size + out_t.size
-    changed, valid = _verdicts(out)
+    changed, valid = pair_verdicts(out)
     tf = throw_floor(out[:, :n_floor], out_t)
     ls = local_slopes(changed, eps, valid=valid, n_boot=ctx.pick(400, 50), rng=rng)
     p = np.bincount(out[0][out[0] >= 1], minlength=7)[1:] / max((out[0] >= 1).sum(), 1)
@@ -186,7 +185,7 @@ def _pairs(ctx: Context, cond: str, window: str, rng) -> dict:
     fine = int(np.flatnonzero(both)[0]) if both.any() else -1
     base = out[0] >= 1
     commit, landings = commit_steps(b.sets, b.set_steps, b.set_offsets[: n + 1], b.outcome[:n], b.steps[:n])
-    hz = _hazards(b.t_settle_s[:n][base], commit[base] * cfg.numerics.dt_s, landings[base], cfg.numerics.t_max_s) \
+    hz = hazard_summary(b.t_settle_s[:n][base], commit[base] * cfg.numerics.dt_s, landings[base], cfg.numerics.t_max_s) \
         if base.sum() >= 20 else None
     return {
         "numerics": _numerics(cfg), "floor_tol": TOL_FLOOR, "n_pairs": n, "n_floor_pairs": n_floor,
