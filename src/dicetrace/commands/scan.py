@@ -392,7 +392,7 @@ def register(app: typer.Typer) -> None:
                             local_workers=local)
             report = scan(
                 defn, out_dir, threads=threads, progress=not quiet and sys.stderr.isatty(),
-                dask=client if client is not None else (True if dask else None), n_workers=workers,
+                dask=client if client is not None else (True if dask else None), n_workers=local if dask else workers,
                 max_chunks=max_chunks, wait=wait,
             )
         except DeviceMismatchError as e:  # the folder changed since the check above
