@@ -47,6 +47,7 @@ from dicetrace.params import make_config
 from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
 from dicetrace.studies.study_doubly_transient import FLOOR_SHARE, MIN_CHANGED, TOL, TOL_FLOOR
 from dicetrace.studies.study_sweeps_render import render as _render
+from dicetrace.studies.text import CONVERGED_MIN
 
 NAME = "sweeps"
 WINDOWS = ("home", "zoom-out", "red-sea")
@@ -65,8 +66,8 @@ MAP_INTEGRATOR, MAP_TOL, MAP_GROWTH = "contact-tsit5", 2e-10, 5.0
 #: The independent reference of the certificate and the third integrator that checks it.
 REFERENCE = {"integrator": "contact-substep", "dt_s": 1e-4}
 REFERENCE_CHECK = {"integrator": "contact-adaptive", "tol": 1e-10, "tol_growth": 0.0}
-#: A map is converged where its agreement with the reference is at least this.
-CERTIFIED = 0.99
+#: A map is converged where its agreement with the reference is at least this: the report's rule.
+CERTIFIED = CONVERGED_MIN
 #: Relative IC perturbations of f(ε) (whole decades) and of the quick run.
 EPS = 10.0 ** np.arange(-10.0, -2.5)
 EPS_QUICK = 10.0 ** np.arange(-8.0, -1.0, 2.0)
