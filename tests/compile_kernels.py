@@ -13,7 +13,8 @@ Nothing is asserted here: a kernel that fails to compile or run fails its tests,
 One task per scheme of the integrator table.  Phase 1: the step with the test stepping driver around
 it (``tests/core/test_integrators.py``) and the tracing run loop (``simulate``).  Phase 2, in the same
 task once its step is cached: the summary and batch loops of the schemes the suite runs batches or
-summaries with (``SUMMARY_INTEGRATORS``).
+summaries with (``SUMMARY_INTEGRATORS``), and the events loop and batch of the schemes whose exact contact events
+the suite records (``EVENT_INTEGRATORS``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ HERE = Path(__file__).resolve().parent
 #: others' only through their tracing loop): contact-substep (the accuracy study's reference),
 #: contact-dop853, rk4 and verlet (tests/test_simulate.py, tests/core/test_kernel_speed_equivalence.py).
 SUMMARY_INTEGRATORS = ("rk4", "contact-substep", "contact-dop853", "verlet")
+#: Integrators whose events loop and batch kernel the suite runs (tests/core/test_events.py, study p's quick run);
+#: contact-adaptive shares contact-substep's scheme module.
+EVENT_INTEGRATORS = ("contact-tsit5", "contact-substep")
 
 
 def _summary_integrators():
@@ -75,12 +79,30 @@ def _phase2(task: str) -> str:
     return task
 
 
+def _phase3(task: str) -> str:
+    """Integrator ``task``'s events loop and batch kernel (exact contact events)."""
+    import numpy as np
+
+    from dicetrace.core.loop import BATCH_BLOCK
+    from dicetrace.simulate import simulate_batch
+
+    simulate_batch(np.tile(_ic(), (BATCH_BLOCK + 1, 1)), preset="physical", integrator=task, t_max_s=0.05,
+                   threads=1, events=True)
+    return task
+
+
 def _scheme(task: tuple[str, bool]) -> str:
-    """Every kernel of one scheme the suite runs: phase 1, then phase 2 where ``task[1]`` says so."""
+    """Every kernel of one scheme the suite runs: phase 1, then phase 2 where ``task[1]`` says so, then the
+    events kernels where the suite runs them."""
     name, summary = task
     _phase1(name)
     if summary:
         _phase2(name)
+    from dicetrace.integrators import INTEGRATORS
+
+    for ev in EVENT_INTEGRATORS:
+        if INTEGRATORS[ev].scheme == INTEGRATORS[name].scheme:
+            _phase3(ev)
     return name
 
 

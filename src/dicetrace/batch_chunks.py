@@ -17,7 +17,7 @@ import numpy as np
 
 import numba
 
-from dicetrace.core.kernels import run_batch, run_roll
+from dicetrace.core.kernels import run_batch, run_batch_events, run_events, run_roll
 from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.memory import available_memory
 from dicetrace.status import Status
@@ -44,9 +44,12 @@ class _Threads:
         numba.set_num_threads(self.old)
 
 
-def _run_batch(kin, cap: int, threads, device: str = "cpu"):
+def _run_batch(kin, cap: int, threads, device: str = "cpu", events: bool = False):
     """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC, on ``device`` ("cpu" or "cuda"):
-    (status, steps, outcome, nsets, sets, set_steps, starts), throw i's sets from ``starts[i]``.
+    (status, steps, outcome, nsets, sets, set_steps, times, starts), throw i's sets from ``starts[i]``.
+
+    ``events``: the events kernels (exact contact events; CPU only), whose
+    event times are ``times`` (laid out as ``sets``); None without.
 
     On the CPU the sets are the kernel's buffers (``cap`` per throw,
     ``starts[i] = i * cap``); on the GPU they come back packed, without the
@@ -61,10 +64,11 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu"):
     if device == "cuda":
         from dicetrace.core.gpu import run_batch_cuda  # numba-cuda: optional, imported only for a GPU run
 
-        return run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap)
+        *out, starts = run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap)
+        return (*out, None, starts)
     starts = np.arange(m, dtype=np.int64) * cap
     if m <= BATCH_BLOCK:
-        return (*_run_serial(kin, cap), starts)
+        return (*_run_serial(kin, cap, events), starts)
     out = (
         np.zeros(m, dtype=np.int8),
         np.zeros(m, dtype=np.int64),
@@ -74,23 +78,31 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu"):
         np.zeros(m * cap, dtype=np.int32),
     )
     status, steps, outcome, nsets, sets, set_steps = out
+    times = np.zeros(m * cap) if events else None
     with _Threads(threads), numba.parallel_chunksize(1):
-        run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, status, steps, outcome, nsets, sets, set_steps)
-    return (*out, starts)
+        if events:
+            run_batch_events(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, *out, times)
+        else:
+            run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, *out)
+    return (*out, times, starts)
 
 
-def _run_serial(kin, cap: int):
-    """``_run_batch``'s outputs from ``run_roll`` called IC by IC."""
+def _run_serial(kin, cap: int, events: bool = False):
+    """``_run_batch``'s outputs from ``run_roll`` (``run_events``) called IC by IC."""
     m = len(kin.ics)
     status, steps, outcome, nsets = (np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64))
     sets, set_steps = np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32)
+    times = np.zeros(m * cap) if events else None
     empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     for i in range(m):
-        status[i], steps[i], outcome[i], nsets[i] = run_roll(
-            kin.ics[i], kin.off0, kin.params, kin.integrator_id,
-            sets[i * cap : (i + 1) * cap], set_steps[i * cap : (i + 1) * cap], *empty,
-        )
-    return status, steps, outcome, nsets, sets, set_steps
+        part = slice(i * cap, (i + 1) * cap)
+        if events:
+            status[i], steps[i], outcome[i], nsets[i] = run_events(
+                kin.ics[i], kin.off0, kin.params, kin.integrator_id, sets[part], set_steps[part], times[part])
+        else:
+            status[i], steps[i], outcome[i], nsets[i] = run_roll(
+                kin.ics[i], kin.off0, kin.params, kin.integrator_id, sets[part], set_steps[part], *empty)
+    return status, steps, outcome, nsets, sets, set_steps, times
 
 
 #: Bytes a batch's result holds per IC whatever its throws: status and outcome (1 each);
@@ -103,13 +115,13 @@ CHUNK_BYTES_PER_IC = 48 + 18 + 18
 CHUNK_BYTES = 64 * 2**20
 
 
-def chunk_bytes_per_ic(cap: int) -> int:
-    return CHUNK_BYTES_PER_IC + 6 * cap
+def chunk_bytes_per_ic(cap: int, events: bool = False) -> int:
+    return CHUNK_BYTES_PER_IC + (14 if events else 6) * cap
 
 
-def batch_chunk(cap: int = DEFAULT_CAP) -> int:
+def batch_chunk(cap: int = DEFAULT_CAP, events: bool = False) -> int:
     """ICs per chunk of :func:`simulate_batch` by default: about ``CHUNK_BYTES`` of buffers, whole kernel blocks."""
-    n = CHUNK_BYTES // chunk_bytes_per_ic(cap)
+    n = CHUNK_BYTES // chunk_bytes_per_ic(cap, events)
     return max(BATCH_BLOCK, n // BATCH_BLOCK * BATCH_BLOCK)
 
 
@@ -133,7 +145,8 @@ def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP) -> int:
     return max(BATCH_BLOCK, n)
 
 
-def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, what: str = "simulate_batch") -> None:
+def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, what: str = "simulate_batch",
+                       events: bool = False) -> None:
     """Refuse (ValueError naming ``what``, the size and the limit) a batch that cannot fit in the available memory.
 
     Counts what the result must hold whatever the throws (``RESULT_BYTES_PER_IC``,
@@ -142,7 +155,7 @@ def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, 
     5 bytes each, 20–70 a throw) come on top, so this is a lower bound.
     """
     result = m * (RESULT_BYTES_PER_IC + (48 if ics_copy else 0))
-    flight = min(m, chunk) * chunk_bytes_per_ic(cap)
+    flight = min(m, chunk) * chunk_bytes_per_ic(cap, events)
     avail = available_memory()
     if avail is not None and result + flight > avail:
         gib = 2**30
@@ -155,39 +168,45 @@ def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, 
         )
 
 
-def run_chunk(kin, cap: int, threads, device: str = "cpu"):
-    """Summaries of the ICs of ``kin``: (status, steps, outcome, nsets, sets, set_steps), sets compacted.
+def run_chunk(kin, cap: int, threads, device: str = "cpu", events: bool = False):
+    """Summaries of the ICs of ``kin``: (status, steps, outcome, nsets, sets, set_steps, times), sets compacted.
 
     Throws that fill their ``cap`` sets are re-run, all together, with
     ``CAP_GROWTH`` times more until they fit, on the same ``device``.
+    ``events``: the exact contact events (``_run_batch``), their times in
+    ``times`` (None without).
     """
     m = len(kin.ics)
-    status, steps, outcome, nsets, sets, set_steps, starts = _run_batch(kin, cap, threads, device)
-    extra: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    status, steps, outcome, nsets, sets, set_steps, times, starts = _run_batch(kin, cap, threads, device, events)
+    arrays = (sets, set_steps) if times is None else (sets, set_steps, times)
+    extra: dict[int, tuple] = {}
     todo = np.nonzero(status == Status.BUFFER_FULL)[0]
     big = cap
     while todo.size:
         big *= CAP_GROWTH
-        st, sp, oc, ns, ss, sst, at = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads, device)
+        st, sp, oc, ns, *more, at = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads, device, events)
+        more = [a for a in more if a is not None]
         done = st != Status.BUFFER_FULL
         for r in np.nonzero(done)[0]:
             i = todo[r]
             status[i], steps[i], outcome[i], nsets[i] = st[r], sp[r], oc[r], ns[r]
-            extra[int(i)] = (ss[at[r] : at[r] + ns[r]].copy(), sst[at[r] : at[r] + ns[r]].copy())
+            extra[int(i)] = tuple(a[at[r] : at[r] + ns[r]].copy() for a in more)
         todo = todo[~done]
     if not extra:
         if len(sets) == int(nsets.sum()):  # packed already (the GPU's)
-            return status, steps, outcome, nsets, sets, set_steps
+            return status, steps, outcome, nsets, sets, set_steps, times
         full = np.arange(cap)[None, :] < nsets[:, None]
-        return status, steps, outcome, nsets, sets.reshape(m, cap)[full], set_steps.reshape(m, cap)[full]
+        packed = [a.reshape(m, cap)[full] for a in arrays]
+        return (status, steps, outcome, nsets, *packed[:2], packed[2] if times is not None else None)
     ends = np.cumsum(nsets)
-    flat_sets = np.empty(int(ends[-1]), dtype=np.uint8)
-    flat_steps = np.empty(int(ends[-1]), dtype=np.int32)
+    flat = [np.empty(int(ends[-1]), dtype=a.dtype) for a in arrays]
     for i in range(m):
         a, b = ends[i] - nsets[i], ends[i]
         s0 = starts[i]
-        flat_sets[a:b], flat_steps[a:b] = extra[i] if i in extra else (sets[s0 : s0 + nsets[i]], set_steps[s0 : s0 + nsets[i]])
-    return status, steps, outcome, nsets, flat_sets, flat_steps
+        parts = extra[i] if i in extra else tuple(x[s0 : s0 + nsets[i]] for x in arrays)
+        for f, part in zip(flat, parts):
+            f[a:b] = part
+    return (status, steps, outcome, nsets, *flat[:2], flat[2] if times is not None else None)
 
 
 #: Least ICs of a piece that :func:`chunk_results` cuts a GPU chunk into (so that each GPU has chunks in flight).
@@ -208,7 +227,7 @@ def _joined(results: list):
     """One chunk's summaries from those of its pieces, in order."""
     if len(results) == 1:
         return results[0]
-    return tuple(np.concatenate(parts) for parts in zip(*results))
+    return tuple(None if parts[0] is None else np.concatenate(parts) for parts in zip(*results))
 
 
 #: Per GPU: the host threads that run its chunks, each with its own CUDA stream (made once per process).

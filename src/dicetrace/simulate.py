@@ -24,10 +24,11 @@ from dicetrace.batch_chunks import (
     run_chunk,
 )
 from dicetrace.core.contacts import contact_sets_from_heights
-from dicetrace.core.kernels import run_roll
+from dicetrace.core.kernels import has_events, run_events, run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
 from dicetrace.devices import check_device, default_device, device_label, resolve_device
+from dicetrace.integrators import INTEGRATORS
 from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
 from dicetrace.memory import available_memory
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
@@ -144,7 +145,10 @@ class Roll:
     status : a :class:`~dicetrace.Status` (compares equal to its label, e.g. ``"settled"``).
     steps : steps integrated; ``t_settle_s = steps·dt``.
     contact_sets : uint8 bitmasks (bit k = node k+1 at or below the ground).
-    contact_steps : step at which each set was first seen (0 for the initial empty set).
+    contact_steps : step at which each set was first seen (0 for the initial empty set); with
+        ``events=True``, the step it began in.
+    contact_times : with ``simulate(..., events=True)``, the time (s) each set began, exactly
+        (docs/model.md §8.1: the set inside every sub-step of a contact scheme); None otherwise.
     substeps : the contact schemes' sub-steps by what ended them: accepted
         sub-steps whose length the error control chose (``error``), at the
         longest sub-step dt / substeps (``cap``), shortened by the friction
@@ -165,6 +169,7 @@ class Roll:
     config: Config
     trace: Trace | None = field(default=None, repr=False)
     substeps: dict = field(default_factory=dict, repr=False)
+    contact_times: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def settled(self) -> bool:
@@ -180,13 +185,20 @@ class Roll:
         return int(len(self.contact_sets) - 1)
 
     def contact_events(self):
-        """Per-node events as a DataFrame: step, t_s, node (1..8), kind ("enter"/"leave")."""
+        """Per-node events as a DataFrame: step, t_s, node (1..8), kind ("enter"/"leave").
+
+        ``t_s`` is step·dt, or the exact time of the event where the throw
+        recorded them (``events=True``).
+        """
         import pandas as pd  # pandas is slow to import: only when used
 
         steps, nodes, kinds = contact_events(self.contact_sets, self.contact_steps)
-        return pd.DataFrame(
-            {"step": steps, "t_s": steps * self.dt_s, "node": nodes, "kind": np.where(kinds, "enter", "leave")}
-        )
+        if self.contact_times is None:
+            t = steps * self.dt_s
+        else:
+            idx, _, _ = contact_events(self.contact_sets, np.arange(len(self.contact_sets)))
+            t = self.contact_times[idx]
+        return pd.DataFrame({"step": steps, "t_s": t, "node": nodes, "kind": np.where(kinds, "enter", "leave")})
 
 
 def set_to_text(mask: int) -> str:
@@ -244,7 +256,21 @@ def contact_sequence_from_heights(z_steps) -> tuple[np.ndarray, np.ndarray]:
     return sets[:n].copy(), steps[:n].copy()
 
 
-def simulate(ic, *, config: Config | str | None = None, record: Record | None = None, orientation=None, **options) -> Roll:
+def check_events(cfg: Config, events) -> bool:
+    """``events`` as a bool, refused (ValueError) where the integrator has no exact contact events."""
+    if not isinstance(events, (bool, np.bool_)):
+        raise ValueError(f"events must be True or False, not {events!r}")
+    if events and not has_events(INTEGRATORS[cfg.numerics.integrator].kernel_id):
+        raise ValueError(
+            f"events=True: integrator {cfg.numerics.integrator!r} has no exact contact events; the contact integrators "
+            "(contact-substep, contact-adaptive, contact-tsit5, contact-dop853) have them (a fixed-step scheme sees "
+            "contacts only at step ends, which the contact sequence records)"
+        )
+    return bool(events)
+
+
+def simulate(ic, *, config: Config | str | None = None, record: Record | None = None, orientation=None,
+             events: bool = False, **options) -> Roll:
     """Throw the die once.
 
     Parameters
@@ -265,6 +291,12 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
     orientation
         Initial world-from-body rotation matrix (3, 3); None: the program's
         start (identity: face 3 down).
+    events
+        Record the exact contact events (contact integrators only; docs/model.md
+        §8.1): the contact sets are then the sets inside the scheme's sub-steps,
+        located where nodes enter or leave the ground, with their times
+        (``Roll.contact_times``), instead of the sets at output-step ends.
+        The motion, the outcome and the settle time are the same either way.
 
     Returns
     -------
@@ -275,6 +307,7 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         raise TypeError(f"record must be a dicetrace.Record or None, not {type(record).__name__}")
     ic = validate_ic(ic)
     _check_orientation(orientation)
+    events = check_events(cfg, events)
     kin = cfg.kernel_inputs(ic, orientation=orientation)
     empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     cap = DEFAULT_CAP
@@ -282,7 +315,11 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
     while True:
         sets = np.zeros(cap, dtype=np.uint8)
         set_steps = np.zeros(cap, dtype=np.int32)
-        summary = run_roll(*kin, sets, set_steps, *empty, states=S)
+        times = np.zeros(cap) if events else None
+        if events:
+            summary = run_events(*kin, sets, set_steps, times, states=S)
+        else:
+            summary = run_roll(*kin, sets, set_steps, *empty, states=S)
         if summary[0] != Status.BUFFER_FULL:
             break
         cap *= CAP_GROWTH
@@ -299,7 +336,8 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         tr_force = np.zeros((rows if record.forces else 0, FORCE_COLS))
         tr_energy = np.zeros((rows if record.energy else 0, ENERGY_COLS))
         traced = run_roll(*kin, np.zeros(cap, np.uint8), np.zeros(cap, np.int32), tr_state, tr_force, tr_energy)
-        if tuple(int(v) for v in traced) != tuple(int(v) for v in summary):
+        same = 3 if events else 4  # (status, steps, outcome): the sets are the events'
+        if tuple(int(v) for v in traced)[:same] != tuple(int(v) for v in summary)[:same]:
             raise RuntimeError(
                 f"the trace run ended as (status, steps, outcome, sets) = {tuple(map(int, traced))}, "
                 f"the summary run as {tuple(map(int, summary))}: kernel paths disagree (a bug; please report it)"
@@ -321,6 +359,7 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         config=cfg,
         trace=trace,
         substeps=substeps,
+        contact_times=times[:nsets].copy() if events else None,
     )
 
 
@@ -401,6 +440,10 @@ class BatchResult:
     :class:`~dicetrace.ics.SliceICs`, e.g. from :func:`~dicetrace.ics.seed_slice`),
     else None; the tables fill their ``x, y, z`` columns from them.
     ``device``: where the throws ran (``dicetrace.devices.device_label``).
+    ``set_times``: with ``simulate_batch(..., events=True)``, the exact time
+    (s) each set began (the sets are then the exact contact events,
+    docs/model.md §8.1, and ``set_steps`` the steps they began in); None
+    otherwise.
     """
 
     ics: np.ndarray  # (m, 6) float64
@@ -414,6 +457,7 @@ class BatchResult:
     config: Config
     coords: np.ndarray | None = None  # (m, 3) float64 slice coordinates, NaN where none
     device: str = "cpu"  # where the throws ran: "cpu" or "cuda: <GPU name>" (also in the tables' metadata)
+    set_times: np.ndarray | None = None  # float64 like ``sets``: each set's exact start time (s), with events=True
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -454,6 +498,7 @@ def simulate_batch(
     cap: int = DEFAULT_CAP,
     chunk: int | None = None,
     device: str | None = None,
+    events: bool = False,
     **options,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads, or a GPU).
@@ -498,6 +543,11 @@ def simulate_batch(
         (docs/gpu.md).  The result records it (``BatchResult.device``).
         None (default): :func:`~dicetrace.devices.default_device`, the CPU
         unless a :func:`~dicetrace.devices.use_device` block says otherwise.
+    events
+        Record the exact contact events, as :func:`simulate` does
+        (``BatchResult.set_times``); contact integrators only, on the CPU
+        (a ValueError otherwise).  The outcomes, statuses and steps are those
+        of ``events=False``, bit for bit.
 
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are
@@ -508,6 +558,7 @@ def simulate_batch(
     threads = _integer(threads, "threads", 1, none_ok=True)
     chunk = _integer(chunk, "chunk", 1, none_ok=True)
     device = check_device(default_device() if device is None else device)
+    events = check_events(cfg, events)
     conv = cfg.preset.l_convention if l_convention is None else l_convention
     coords = ics.coords if isinstance(ics, SliceICs) else None
     ics = validate_ics(ics)
@@ -516,30 +567,38 @@ def simulate_batch(
         coords = np.array(coords, dtype=np.float64).reshape(m, 3)
     cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
     device = resolve_device(device)
+    if events and device == "cuda":
+        raise ValueError("events=True runs on the CPU only (device='cpu'): the GPU kernels record the sets at output-step ends")
     if chunk is None:
-        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap) if device == "cuda" else batch_chunk(cap)
-    check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention)
+        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap) if device == "cuda" else batch_chunk(cap, events)
+    check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention, events=events)
     status, outcome = np.zeros(m, dtype=np.int8), np.zeros(m, dtype=np.int8)
     steps, nsets = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
     set_parts: list[np.ndarray] = []
     step_parts: list[np.ndarray] = []
+    time_parts: list[np.ndarray] = []
     bounds = [(a, min(m, a + chunk)) for a in range(0, m, chunk)]
 
     def one_chunk(a: int, b: int):
-        return run_chunk(cfg.kernel_inputs(ics[a:b], l_convention=conv), cap, threads, device)
+        return run_chunk(cfg.kernel_inputs(ics[a:b], l_convention=conv), cap, threads, device, events)
 
     # chunk by chunk (on several GPUs, a few at a time): one chunk's buffers in memory, its sets compacted
-    for (a, b), (st, sp, oc, ns, sets, set_steps) in zip(bounds, chunk_results(bounds, one_chunk, device)):
+    for (a, b), (st, sp, oc, ns, sets, set_steps, times) in zip(bounds, chunk_results(bounds, one_chunk, device)):
         status[a:b], steps[a:b], outcome[a:b], nsets[a:b] = st, sp, oc, ns
         set_parts.append(sets)
         step_parts.append(set_steps)
-        del sets, set_steps
+        if times is not None:
+            time_parts.append(times)
+        del sets, set_steps, times
     offsets = np.zeros(m + 1, dtype=np.int64)
     np.cumsum(nsets, out=offsets[1:])
     del nsets
     total = int(offsets[-1])
     flat_sets = join_parts(set_parts, np.uint8, total) if set_parts else np.zeros(0, dtype=np.uint8)
     flat_steps = join_parts(step_parts, np.int32, total) if step_parts else np.zeros(0, dtype=np.int32)
+    flat_times = None
+    if events:
+        flat_times = join_parts(time_parts, np.float64, total) if time_parts else np.zeros(0, dtype=np.float64)
     return BatchResult(
         ics=cfg.to_preset_convention(ics, conv),
         outcome=outcome,
@@ -552,4 +611,5 @@ def simulate_batch(
         config=cfg,
         coords=coords,
         device=device_label(device),
+        set_times=flat_times,
     )

@@ -9,9 +9,19 @@ set is appended when it differs from the last recorded one (docs/model.md §8).
 The same ``record_set`` serves the run loop, the specialised seed kernel
 (``core.fast``) and ``contact_sets_from_heights`` (used on hand-built
 height series in tests).
+
+Exact contact events (docs/model.md §8.1): a contact scheme's sub-steps end
+where a node enters or leaves the ground, so the set that holds *inside*
+each sub-step is known exactly, with the time it began.  An events loop
+(``loop.make_roll(events=True)``) records that sequence with
+:func:`note_event` instead of the sets at output-step ends.
 """
 
 from __future__ import annotations
+
+import math
+
+import numpy as np
 
 from dicetrace.core._jit import jit
 
@@ -60,3 +70,173 @@ def contact_sets_from_heights(z_steps, sets, set_steps):
         if not ok:
             return -1
     return nsets
+
+
+@jit
+def hermite_crossings(z0, v0, z1, v1, h, cmin, roots):
+    """The sign changes of the cubic Hermite interpolant of a height over a sub-step, and its side at the start.
+
+    z0, z1: the height at the ends of a sub-step of length h; v0, v1: its
+    time derivatives.  Writes the fractions θ in (cmin, 1 − cmin) where the
+    cubic changes sign, ascending, into ``roots`` (3,) and returns (count,
+    below): ``below``, whether the height is negative just after ``cmin``.
+    A crossing closer to the start than that is a node left on the ground
+    to rounding by the cut before, no crossing (the sub-step driver ignores
+    it too); one closer to the end is the cut itself, or a node crossing
+    with it to rounding, and the next sub-step's start says where it went.
+    The cubic is split at its turning points into monotone pieces; each piece
+    with a sign change holds one root, found by bisection to rounding.  This
+    finds a node that enters *and* leaves the ground inside one sub-step (both
+    ends above it), which no sign change between the ends shows.
+    """
+    hv0 = h * v0
+    hv1 = h * v1
+    a1 = hv0
+    a2 = 3.0 * (z1 - z0) - 2.0 * hv0 - hv1
+    a3 = 2.0 * (z0 - z1) + hv0 + hv1
+    # the turning points in (cmin, 1): roots of p'(θ) = a1 + 2·a2·θ + 3·a3·θ²
+    br0 = cmin
+    br1 = 1.0
+    br2 = 1.0
+    nb = 0
+    qa = 3.0 * a3
+    qb = 2.0 * a2
+    if qa != 0.0:
+        disc = qb * qb - 4.0 * qa * a1
+        if disc > 0.0:
+            sq = math.sqrt(disc)
+            # the numerically stable pair of roots
+            q = -0.5 * (qb + math.copysign(sq, qb))
+            r1 = q / qa
+            r2 = a1 / q if q != 0.0 else r1
+            if r1 > r2:
+                r1, r2 = r2, r1
+            if cmin < r1 < 1.0:
+                br1 = r1
+                nb = 1
+            if cmin < r2 < 1.0:
+                if nb == 0:
+                    br1 = r2
+                else:
+                    br2 = r2
+                nb += 1
+    elif qb != 0.0:
+        r1 = -a1 / qb
+        if cmin < r1 < 1.0:
+            br1 = r1
+            nb = 1
+    # pieces [cmin, br1], [br1, br2], [br2, 1] (the last ones empty when there are fewer turning points)
+    edges = (br0, br1, br2 if nb == 2 else 1.0, 1.0)
+    n = 0
+    p_lo = z0 + cmin * (a1 + cmin * (a2 + cmin * a3))
+    below = p_lo < 0.0
+    if p_lo == 0.0:  # on the ground exactly at the cut-off: the side is the one it moves to
+        below = a1 + cmin * (2.0 * a2 + 3.0 * cmin * a3) < 0.0
+    for j in range(nb + 1):
+        lo = edges[j]
+        hi = edges[j + 1]
+        if hi <= lo:
+            continue
+        plo = z0 + lo * (a1 + lo * (a2 + lo * a3))
+        phi = z0 + hi * (a1 + hi * (a2 + hi * a3))
+        if (plo < 0.0) == (phi < 0.0):
+            continue
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if mid <= lo or mid >= hi:
+                break
+            pm = z0 + mid * (a1 + mid * (a2 + mid * a3))
+            if (pm < 0.0) == (plo < 0.0):
+                lo = mid
+                plo = pm
+            else:
+                hi = mid
+        if n < 3 and cmin < hi < 1.0 - cmin:
+            roots[n] = hi
+            n += 1
+    return n, below
+
+
+#: The most a cubic Hermite interpolant leaves the chord of its end values by its end slopes: |h10|, |h11| ≤ 4/27.
+HERMITE_SLOPE_BOUND = 4.0 / 27.0
+
+
+@jit
+def note_substep_events(st, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, inertia, cmin, sets, set_steps, ev_times,
+                        roots):
+    """Record the contact sets of one accepted sub-step of length hs that starts ``t`` s into the step.
+
+    From its two ends (X, U, L and the offsets at the start ``*s`` and the
+    end ``*e``): each node's height and vertical velocity give its cubic
+    Hermite interpolant, whose crossings (:func:`hermite_crossings`) are the
+    times at which it enters or leaves the ground.  The set just after the
+    start is noted at ``t``, then every crossing in time order
+    (``note_event``; nothing for a sub-step under twice the cut-off
+    ``cmin``, as a free piece that ends where a node is found to reach the
+    ground right after it starts), crossings less than ``cmin`` of the
+    sub-step apart as one (nodes that cross together to rounding, as the
+    four of a face landing flat).  A sub-step cut at a crossing has none
+    inside it; one where a node enters and leaves again (a dip the cuts do
+    not see: both ends lie above the ground) has two.  A node whose cubic
+    cannot reach the ground (its end heights clear it by more than
+    ``HERMITE_SLOPE_BOUND`` times its end slopes) is not searched.
+    ``roots`` (8, 3): scratch (the events loop's, one per throw).
+    """
+    if cmin >= 0.5:
+        # shorter than twice the cut-off: nothing inside it can be resolved (the
+        # start of the next sub-step says which set holds)
+        return
+    mask = 0
+    crossing = False
+    for k in range(8):
+        zs = Xs[2] + offs[k, 2]
+        ze = Xe[2] + offe[k, 2]
+        vs = Us[2] + (offs[k, 0] * (Ls[1] / inertia) - offs[k, 1] * (Ls[0] / inertia))
+        ve = Ue[2] + (offe[k, 0] * (Le[1] / inertia) - offe[k, 1] * (Le[0] / inertia))
+        reach = HERMITE_SLOPE_BOUND * hs * (abs(vs) + abs(ve))
+        nk = 0
+        if min(zs, ze) > reach:
+            below = False
+        elif max(zs, ze) < -reach:
+            below = True
+        else:
+            nk, below = hermite_crossings(zs, vs, ze, ve, hs, cmin, roots[k])
+        for j in range(nk, 3):
+            roots[k, j] = 2.0  # none (past the sub-step's end)
+        crossing = crossing or nk > 0
+        if below:
+            mask |= 1 << k
+    note_event(st, t, h, mask, sets, set_steps, ev_times)
+    while crossing:
+        best = 2.0
+        for k in range(8):
+            if roots[k, 0] < best:
+                best = roots[k, 0]
+        if best >= 1.0:
+            break
+        for k in range(8):  # every crossing within cmin of the first: one event (each node's roots ascend)
+            while roots[k, 0] <= best + cmin:
+                roots[k, 0] = roots[k, 1]
+                roots[k, 1] = roots[k, 2]
+                roots[k, 2] = 2.0
+                mask ^= 1 << k
+        note_event(st, t + best * hs, h, mask, sets, set_steps, ev_times)
+
+
+@jit(inline="always")
+def note_event(st, t, h, mask, sets, set_steps, ev_times):
+    """Record that the contact set ``mask`` holds from ``t`` s into the step being taken (``st.ev_t``, ``st.ev_step``), if it is new.
+
+    Appends the set, the step it began in (1-based: ``ev_step`` + 1 for t in
+    [0, h), more for a sub-step that a dense-output scheme runs past the
+    step's end) and its time (s) at ``st.ev_n``; past the buffer's end only
+    the count grows (the loop reports BUFFER_FULL).
+    """
+    if mask != st.ev_last:
+        k = st.ev_n
+        if k < sets.shape[0]:
+            sets[k] = mask
+            set_steps[k] = st.ev_step + 1 + int(t / h)
+            ev_times[k] = st.ev_t + t
+        st.ev_n = k + 1
+        st.ev_last = mask

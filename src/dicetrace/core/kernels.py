@@ -15,6 +15,11 @@ share a scheme share its kernels.
     ``run_batch`` runs per IC (tests and benchmarks call it one by one).
 ``run_batch``
     many throws in parallel (``prange``), summaries only.
+``run_events``, ``run_batch_events``
+    one throw, or many in parallel, through a contact scheme's events loop:
+    the exact contact events instead of the sets at output-step ends
+    (``core.loop.event_kernels``; :func:`has_events` says which integrators
+    have one).
 """
 
 from __future__ import annotations
@@ -90,3 +95,32 @@ def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, se
     """
     states = new_states(max(1, (len(ics) + BATCH_BLOCK - 1) // BATCH_BLOCK))
     batch_kernel(integ)(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps)
+
+
+def has_events(integ: int) -> bool:
+    """Whether integrator ``integ`` (kernel id) has an events loop (the contact schemes: their sub-steps end at the crossings)."""
+    return hasattr(scheme_of(integ), "roll_events")
+
+
+def _events_scheme(integ: int):
+    mod = scheme_of(integ)
+    if not hasattr(mod, "roll_events"):
+        raise ValueError(f"integrator {spec_of(integ).name!r} has no exact contact events (only the contact schemes do)")
+    return mod
+
+
+def run_events(ic, off0, kp, integ, sets, set_steps, ev_times, states=None):
+    """One throw through integrator ``integ``'s events loop: (status, steps, outcome, nevents).
+
+    ``sets``, ``set_steps``, ``ev_times`` (cap,) get the exact contact
+    events (``core.loop.make_roll`` with ``events``).
+    """
+    S = new_states(1) if states is None else states
+    return _events_scheme(integ).roll_events(ic, off0, kp, S, sets, set_steps, *_NO_ROWS, ev_times)
+
+
+def run_batch_events(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps, ev_times):
+    """:func:`run_batch` through the events loop: ``ev_times`` (m·cap,) float64 laid out as ``sets``."""
+    states = new_states(max(1, (len(ics) + BATCH_BLOCK - 1) // BATCH_BLOCK))
+    _events_scheme(integ).batch_events(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps,
+                                       ev_times)

@@ -34,6 +34,7 @@ import numpy as np
 from numba import prange
 
 from dicetrace.core._jit import jit, jit_parallel
+from dicetrace.core.contacts import note_event
 from dicetrace.core.free_flight import flight_steps, free_advance
 from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_heights, node_velocities
 from dicetrace.core.state import STATE, after_step, age_tolerance, copy_motion, init_state, new_states, state_finite
@@ -83,6 +84,33 @@ def _write_trace(n, st, kp, tr_state, tr_force, tr_energy):
 
 
 @jit(inline="always")
+def events_after_step(finite, st, mask, sets):
+    """An events loop's checks after a step (what ``state.after_step`` does for the sampled sets):
+    (ended, status, last_mask), ended with NON_FINITE, or BUFFER_FULL when the events overflowed ``sets``."""
+    if not finite:
+        return True, Status.NON_FINITE, mask
+    if st.ev_n > sets.shape[0]:
+        return True, Status.BUFFER_FULL, mask
+    return False, Status.TIME_CAP, mask
+
+
+@jit(inline="always")
+def events_kept(st, n, status, set_steps):
+    """The events an events loop returns when it stopped after step n: those that began up to that step.
+
+    A dense-output scheme integrates ahead of the state, so events past the
+    stop may have been recorded; they are dropped.  A full buffer keeps its
+    count (more than it holds).
+    """
+    k = st.ev_n
+    if status == Status.BUFFER_FULL:
+        return k
+    while k > 1 and set_steps[k - 1] > n:
+        k -= 1
+    return k
+
+
+@jit(inline="always")
 def _clears(e, kp):
     """The stop-test energy e (``rigid``: ``energy_dynamic`` − e_rest) clears the stop threshold by far more than rounding.
 
@@ -119,7 +147,7 @@ def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
 
 
 def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = None,
-              use_summary: bool = False, name: str | None = None, cache: bool = True):
+              use_summary: bool = False, events: bool = False, name: str | None = None, cache: bool = True):
     """The run loop of a throw on the step of the scheme module ``scheme`` (``core.schemes``), compiled.
 
     ``trace``: the tracing loop (it writes the trace arrays that have rows)
@@ -136,6 +164,15 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     which numba's disk cache keys on by name; a module made at run time (a
     benchmark's variant of a scheme) is keyed by its contents, which change
     from one process to the next: build those with ``cache=False``.
+
+    ``events``: an events loop (:func:`event_kernels`; a contact scheme's,
+    whose module defines ``step_events``).  It takes one more argument,
+    ``ev_times`` (cap,) float64, and records the exact contact events
+    (docs/model.md §8.1) in ``sets``, ``set_steps`` and ``ev_times``
+    instead of the sets at output-step ends: the set inside every sub-step
+    of the scheme, the step it began in (1-based) and its time (s), up to
+    the step the stop test fires on.  A throw with more events than the
+    buffer holds ends as BUFFER_FULL, as one with more sets does.
 
     The loop, ``roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)``:
 
@@ -163,9 +200,10 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     """
     trace = bool(trace)
     flight = bool(getattr(scheme, "EXACT_FLIGHT", False) if exact_flight is None else exact_flight)
-    use_summary = bool(use_summary) and not trace and hasattr(scheme, "summary")
+    events = bool(events)
+    use_summary = bool(use_summary) and not trace and not events and hasattr(scheme, "summary")
 
-    def roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy):
+    def roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, *ev):
         st = S[0]
         if use_summary and scheme.summary_applies(kp, off0):
             return scheme.summary(ic, off0, kp, sets, set_steps)
@@ -181,6 +219,10 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         set_steps[0] = 0
         nsets = 1
         last_mask = 0
+        if events:
+            roots = np.empty((8, 3))  # the events' root scratch (an events loop runs on the CPU: it may allocate)
+            ev[0][0] = 0.0
+            st.ev_n = 1
         # The program starts out of contact (forces are zero before the first
         # step): the start's recorded set is empty.  Read from the array, not
         # written as the constant False, so that the step compiles for a plain
@@ -207,19 +249,30 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         clear = not point_mass and _clears(e0, kp)
         while n < maxn:
             m = 0
+            if events:  # the step about to be taken: its index and start time
+                st.ev_step = n
+                st.ev_t = n * h
             if flight and clear and last_mask == 0 and st.ahead == 0.0:
                 # A free flight conserves the stop-test energy: while it lasts the
                 # stop test cannot fire and no contact set changes.  Cross it in
                 # one exact piece.
                 m = flight_steps(X, U, W, off, kp, h, maxn - n)
             if m > 1:
+                if events:
+                    note_event(st, 0.0, h, 0, sets, set_steps, ev[0])
                 contact, mask = _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy)
                 n += m
             else:
                 n += 1
-                contact, mask = scheme.step(st, kp, h, contact)
+                if events:
+                    contact, mask = scheme.step_events(st, kp, h, contact, sets, set_steps, ev[0], roots)
+                else:
+                    contact, mask = scheme.step(st, kp, h, contact)
             finite = state_finite(X[2], U[0], U[1], U[2], L[0], L[1], L[2], off[0, 0], off[7, 2])
-            ended, status, nsets, last_mask = after_step(finite, n, mask, last_mask, sets, set_steps, nsets)
+            if events:
+                ended, status, last_mask = events_after_step(finite, st, mask, sets)
+            else:
+                ended, status, nsets, last_mask = after_step(finite, n, mask, last_mask, sets, set_steps, nsets)
             if ended:
                 break
             e_dyn = math.nan
@@ -267,15 +320,18 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                 status = Status.SETTLED
                 break
         outcome = face_up(z) if status == Status.SETTLED else -1
+        if events:
+            nsets = events_kept(st, n, status, set_steps)
         return status, n, outcome, nsets
 
     short = scheme.__name__.rsplit(".", 1)[-1]
-    roll.__name__ = roll.__qualname__ = name or f"roll_{short}_{'trace' if trace else 'summary'}"
-    roll.__doc__ = f"The {'tracing' if trace else 'summary'} run loop on ``{scheme.__name__}.step`` (``loop.make_roll``)."
+    kind = "events" if events else "trace" if trace else "summary"
+    roll.__name__ = roll.__qualname__ = name or f"roll_{short}_{kind}"
+    roll.__doc__ = f"The {kind} run loop on ``{scheme.__name__}.step`` (``loop.make_roll``)."
     return jit(roll, cache=cache)
 
 
-def make_batch(scheme: ModuleType, *, name: str | None = None):
+def make_batch(scheme: ModuleType, *, events: bool = False, name: str | None = None):
     """The parallel batch kernel of the scheme module ``scheme``: summaries of many throws (``prange``).
 
     It runs ``scheme.roll_summary`` (the scheme's summary loop, from
@@ -288,10 +344,14 @@ def make_batch(scheme: ModuleType, *, name: str | None = None):
     same serial code from a fresh state, so results are bit-identical to a
     loop of ``run_roll`` whatever the number of threads, the scheduling or
     the caller's chunking.
-    """
-    use_summary = hasattr(scheme, "summary")
 
-    def batch(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps):
+    ``events``: the batch of the events loop (``scheme.roll_events``), with
+    one more argument, ``ev_times`` (m·cap,) float64, laid out as ``sets``.
+    """
+    events = bool(events)
+    use_summary = hasattr(scheme, "summary") and not events
+
+    def batch(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, *ev):
         m = ics.shape[0]
         nblk = (m + BATCH_BLOCK - 1) // BATCH_BLOCK
         fast = use_summary and scheme.summary_applies(kp, off0)
@@ -305,7 +365,10 @@ def make_batch(scheme: ModuleType, *, name: str | None = None):
             for i in range(i0, i1):
                 lo = i * cap
                 hi = lo + cap
-                if fast:  # what the summary loop would do, without the call through it
+                if events:
+                    s, n, o, ns = scheme.roll_events(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2,
+                                                     ev[0][lo:hi])
+                elif fast:  # what the summary loop would do, without the call through it
                     s, n, o, ns = scheme.summary(ics[i], off0, kp, sets[lo:hi], set_steps[lo:hi])
                 else:
                     s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2)
@@ -315,7 +378,7 @@ def make_batch(scheme: ModuleType, *, name: str | None = None):
                 nsets[i] = ns
 
     short = scheme.__name__.rsplit(".", 1)[-1]
-    batch.__name__ = batch.__qualname__ = name or f"batch_{short}"
+    batch.__name__ = batch.__qualname__ = name or f"batch_{short}{'_events' if events else ''}"
     return jit_parallel(batch)
 
 
@@ -326,3 +389,12 @@ def scheme_kernels(scheme: ModuleType):
     kernel on its first call.
     """
     return make_roll(scheme, trace=True), make_roll(scheme, trace=False), make_batch(scheme)
+
+
+def event_kernels(scheme: ModuleType):
+    """The events loop and batch of a contact scheme module (one that defines ``step_events``), ``(roll_events, batch_events)``.
+
+    What its last line binds after :func:`scheme_kernels`; nothing compiles
+    here.  Exact contact events: docs/model.md §8.1.
+    """
+    return make_roll(scheme, trace=False, events=True), make_batch(scheme, events=True)

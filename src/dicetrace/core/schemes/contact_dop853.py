@@ -34,7 +34,10 @@ H0 = 0.3
 DENSE = False
 
 step = make_drive(sys.modules[__name__], "step_dop853")
+step_events = make_drive(sys.modules[__name__], "step_dop853_events", events=True)
 
 
 #: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
 roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])
+#: Its events loop and batch (exact contact events, ``loop.event_kernels``).
+roll_events, batch_events = loop.event_kernels(sys.modules[__name__])

@@ -33,6 +33,7 @@ import sys
 from types import ModuleType
 
 from dicetrace.core import loop
+from dicetrace.core.contacts import note_event, note_substep_events
 from dicetrace.core._jit import jit, jit_fused
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
 from dicetrace.core.model import node_heights
@@ -44,7 +45,7 @@ from dicetrace.core.free_flight import (
     locate_entry,
 )
 from dicetrace.core.schemes.rk4 import accept_substep, begin_substeps, cf4, cf4_error, end_substeps
-from dicetrace.core.state import SUBSTEP_CAUSES, age_tolerance
+from dicetrace.core.state import SUBSTEP_CAUSES, age_tolerance, copy_motion
 from dicetrace.params import FRICTION_SPECTRAL
 
 #: Largest RK4 sub-step for the friction law, in units of 1/λ_f (λ_f the
@@ -217,10 +218,32 @@ def friction_rate(z, uk, P, kp):
     return lam
 
 
-def make_drive(method: ModuleType, name: str, *, cache: bool = True):
+@jit(inline="always")
+def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times, roots):
+    """An events step's exact free flight of a piece of length tau from the sub-step start ``st.sub_*``, ``t`` s into
+    the step, with its contact events.
+
+    A node can dip below the ground and out again inside a piece (the driver
+    checks a piece's end only): that is the geometry of the flight, with no
+    force, and it is recorded (``contacts.note_substep_events``).  The
+    piece's start is kept in RK4 stage scratch, free between sub-steps.
+    Inlined, so that the flight's arithmetic is the driver's, contraction
+    included (``_jit.jit_fused``): the motion is the same as without events.
+    """
+    copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off)
+    free_advance(st.sub_X, st.sub_U, st.W, st.sub_off, kp, tau)
+    note_substep_events(st, t, tau, h, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off, st.sub_X, st.sub_U,
+                        st.sub_L, st.sub_off, kp.inertia, MIN_CUT * hmax / tau, sets, set_steps, ev_times, roots)
+
+
+def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bool = True):
     """The contact-aware step (the contract of ``core.schemes``) on the sub-step method ``method``, compiled as ``name``.
 
     ``cache=False`` for a method module made at run time (see ``loop.make_roll``).
+    ``events``: the step of an events loop, ``drive(st, kp, h, contact, sets,
+    set_steps, ev_times, roots)`` (``roots`` (8, 3) scratch), which records the exact contact events
+    (``contacts.note_event``): the set inside every accepted sub-step (whose
+    ends are the crossings), the empty set where a free flight starts.
 
     ``method`` is a module that defines the sub-step method: ``substep(st,
     kp, h, f0, f1, f2, t0, t1, t2)`` (one explicit step from the sub-step
@@ -254,7 +277,9 @@ def make_drive(method: ModuleType, name: str, *, cache: bool = True):
     ``kp.tol > 0``.  Every sub-step is counted in ``st.substeps`` by what
     ended it (``state.SUBSTEP_CAUSES``).
     """
-    def drive(st, kp, h, contact):
+    events_on = bool(events)
+
+    def drive(st, kp, h, contact, *ev):
         W = st.W
         # the weight of this step's error estimates (the tolerance loosened by tol_growth)
         grade = age_tolerance(st, kp, h, 1)
@@ -265,6 +290,8 @@ def make_drive(method: ModuleType, name: str, *, cache: bool = True):
                 method.dense_state(st, kp, 1.0 - st.ahead / st.dn_h)
                 return dense_end(st, kp)
         elif not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
+            if events_on:
+                note_event(st, 0.0, h, 0, ev[0], ev[1], ev[2])
             free_flight(st, kp, h)
             return eval_forces(st, kp)
         I = kp.inertia
@@ -331,6 +358,8 @@ def make_drive(method: ModuleType, name: str, *, cache: bool = True):
                 below, f0, f1, f2, t0, t1, t2 = wrench_at(Xw[2], Uw[0], Uw[1], Uw[2], W[0], W[1], W[2], offw, kp, F, uk, z, P)
             if not below and not entering:
                 # free flight, exact, until the end of the step or the next entry
+                if events_on:
+                    note_event(st, t, h, 0, ev[0], ev[1], ev[2])
                 if free_flight_safe(Xw, Uw, W, offw, kp, rest):
                     free_advance(Xw, Uw, W, offw, kp, rest)
                     t = h
@@ -342,11 +371,17 @@ def make_drive(method: ModuleType, name: str, *, cache: bool = True):
                     last = True
                 m1 = free_min_height(Xw, Uw, W, offw, kp, hs)
                 if m1 >= 0.0:
-                    free_advance(Xw, Uw, W, offw, kp, hs)
+                    if events_on:
+                        free_piece_events(st, t, hs, h, hmax, kp, ev[0], ev[1], ev[2], ev[3])
+                    else:
+                        free_advance(Xw, Uw, W, offw, kp, hs)
                     t = h if last else t + hs
                     continue
                 tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)
-                free_advance(Xw, Uw, W, offw, kp, tau)
+                if events_on:
+                    free_piece_events(st, t, tau, h, hmax, kp, ev[0], ev[1], ev[2], ev[3])
+                else:
+                    free_advance(Xw, Uw, W, offw, kp, tau)
                 t = t + tau
                 entering = True
                 if adaptive and (st.h_next <= 0.0 or st.h_next > h0):
@@ -434,6 +469,10 @@ def make_drive(method: ModuleType, name: str, *, cache: bool = True):
                 # past the end of the step: keep this sub-step for the step ends inside it
                 method.dense_keep(st, hs)
                 ahead = True
+            if events_on:
+                # the sets inside the sub-step, from its start: the nodes below the ground there and
+                # every crossing inside (a node that enters and leaves within it: the cuts see none)
+                note_substep_events(st, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, cmin, ev[0], ev[1], ev[2], ev[3])
             accept_substep(st, kp)
             st.substeps[cause] += 1
             if ahead:
@@ -478,9 +517,12 @@ DENSE = False
 dense_keep = no_dense_keep
 dense_state = no_dense_state
 
-#: contact-substep / contact-adaptive: the driver on this module's RK4 sub-step method.
+#: contact-substep / contact-adaptive: the driver on this module's RK4 sub-step method, and its events form.
 step = make_drive(sys.modules[__name__], "step_rk4")
+step_events = make_drive(sys.modules[__name__], "step_rk4_events", events=True)
 
 
 #: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
 roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])
+#: Its events loop and batch (exact contact events, ``loop.event_kernels``).
+roll_events, batch_events = loop.event_kernels(sys.modules[__name__])

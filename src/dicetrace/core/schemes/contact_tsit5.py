@@ -39,7 +39,10 @@ H0 = 0.4
 DENSE = True
 
 step = make_drive(sys.modules[__name__], "step_tsit5")
+step_events = make_drive(sys.modules[__name__], "step_tsit5_events", events=True)
 
 
 #: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
 roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])
+#: Its events loop and batch (exact contact events, ``loop.event_kernels``).
+roll_events, batch_events = loop.event_kernels(sys.modules[__name__])
