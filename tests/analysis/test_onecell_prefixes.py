@@ -61,6 +61,15 @@ def test_coarse_grain_drops_micro_bounces():
     assert coarse_grain(sets, steps, 200, min_steps=3) == (0, 32, 160, 128)  # the 1-step air gap goes, 32s merge
 
 
+def test_coarse_grain_of_exact_event_times_keeps_sub_step_durations():
+    """Exact contact events carry times in seconds: a set of 0.4 µs is shorter than 1 µs, one of 1.5 µs is not,
+    although both begin and end inside one 1 ms output step."""
+    sets = [0, 32, 0, 32, 160, 128]
+    times = [0.0, 0.1000000, 0.1000004, 0.1000010, 0.1000025, 0.2]
+    assert coarse_grain(sets, times, 0.3, min_steps=1e-6) == (0, 32, 160, 128)
+    assert coarse_grain(sets, times, 0.3, min_steps=1e-7) == (0, 32, 0, 32, 160, 128)
+
+
 def test_prefix_entropy_of_the_golden_mean_shift():
     # Known answer: binary sequences with no two consecutive 1s have φ^n words of length n asymptotically:
     # topological entropy ln φ = 0.4812 nats/symbol (Lind & Marcus 1995, ex. 4.1.4). 40 000 Markov samples with

@@ -44,8 +44,22 @@ def test_quick_run_results(quick_run):
     e = t["exact"]
     assert e["dt_s"] == 1e-5 and e["exact_dt_s"] == 1e-6 and e["program_dt_s"] == 1e-3
     assert all(0.0 <= s["same_at_exact_dt"] <= 1.0 for s in e["by_min_set"])
-    for key in ("stacks", "subcells", "exact", "periods"):
+    # exact contact events: the same maps and throws, with the events' own cells
+    ev = e["events"]
+    assert ev["dt_s"] == 1e-3 and ev["fine_dt_s"] == 1e-5
+    assert [s["min_set_s"] for s in ev["by_min_set"]] == list(t["min_set_s"])
+    for s in ev["by_min_set"]:
+        assert all(0.0 <= s[k] <= 1.0 for k in ("same_events_at_fine_dt", "same_as_sampled_seq_dt",
+                                               "same_as_sampled_exact_dt", "fine_same_as_sampled_exact_dt"))
+    # the raw events have at least the sets of every coarse-grained sequence
+    assert ev["by_min_set"][0]["mean_events"] >= ev["by_min_set"][-1]["mean_events"]
+    for lv in t["levels"]:
+        raw = lv["events"]["by_min_set"][0]
+        assert raw["n_nodes"] == lv["events"]["cell_nodes"] and 1 <= raw["n_labels"] <= raw["n_subcells"]
+    for key in ("stacks", "subcells", "exact", "periods", "exact_events", "subcells_events"):
         assert R["tables"][key]
+    assert "exact contact events" in R["verdict"]["topology"]
+    assert "exact contact events" in R["verdict"]["topology_answer"] and "section p" in R["verdict"]["topology_answer"]
 
 
 class _Batch:
@@ -83,7 +97,8 @@ def _results(fractions, interior, singletons) -> dict:
             "periods": {"window": "zoom-out", "periods": [per], "certificate": {"certificate": 0.995, "word": "converged"},
                         "frac_nodes_in_singletons": 0.1, "texture_offcentre_max_corr": 0.4,
                         "outcome_offcentre_max_corr": 0.1},
-            "topology": {"exact": exact, "levels": [{"res": n, "cell_label": 5, "cell_nodes": 100, "by_min_set": [s] * 3}
+            "topology": {"exact": exact, "dt_s": 1e-5, "levels": [{"res": n, "cell_label": 5, "cell_nodes": 100,
+                                                             "by_min_set": [s] * 3}
                                                     for n, s in zip((32, 96), sub)]}}
 
 
@@ -95,11 +110,13 @@ def test_the_verdicts_follow_the_numbers():
     assert v["answer"].startswith("**Fewer cells than regions**") and "0.500 ± 0.020 at 32³" in v["answer"]
     assert "repeats with period vectors (0.1000 ± 0.0010, 0.0200 ± 0.0010)" in v["periods"]
     assert "the cell has sub-cells" in v["topology"]
+    assert v["topology_answer"].startswith("**Sub-cells emerge**") and "0.300 of the face-" in v["topology_answer"]
     v = verdicts(_results((0.2, 0.3, 0.5), 0.3, (0.95, 0.9)))
     assert "**undetermined**" in v["stacks"] and "last two levels agree" not in v["stacks"]
     assert v["answer"].startswith("**Undetermined**") and "still moving" in v["answer"]
     assert "no period vector that survives the bootstrap" in v["periods"]
     assert "**not** topologically the same" in v["topology"]
+    assert v["topology_answer"].startswith("**No**") and "exact contact events" not in v["topology_answer"]
 
 
 def test_rerender_changes_no_number(quick_run, tmp_path):

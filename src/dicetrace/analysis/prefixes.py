@@ -35,10 +35,12 @@ def coarse_grain(sets, steps, end_step: int, *, min_steps: int) -> tuple:
 
     ``sets[i]`` is first seen at ``steps[i]`` and lasts until ``steps[i+1]``
     (the last one until ``end_step``).  The first set (in the air, before the
-    first contact) is always kept.
+    first contact) is always kept.  The times may be steps (integers) or, for
+    exact contact events (``simulate_batch(..., events=True)``), seconds:
+    ``end_step`` and ``min_steps`` in the same unit.
     """
     s = np.asarray(sets)
-    st = np.append(np.asarray(steps, dtype=np.int64), int(end_step))
+    st = np.append(np.asarray(steps, dtype=np.float64), float(end_step))
     dur = np.diff(st)
     out: list[int] = []
     for i, v in enumerate(s.tolist()):

@@ -20,7 +20,11 @@ tolerance of 2·10⁻⁹ (no loosening over the throw: these are outcome maps, b
    the contact set at the end of every output step, so the output step is taken 100 times shorter than the
    program's (10 µs): contact events are then located to 10 µs, and the sequences are compared with the same throws
    at 1 µs (exactness) and at the 1 ms steps (the sampling of sections d and k6).  Sub-cells are counted for the raw
-   sequence and for sequences without the sets shorter than 0.1 ms and 1 ms (penalty micro-bounces).
+   sequence and for sequences without the sets shorter than 0.1 ms and 1 ms (penalty micro-bounces).  The same maps
+   are also run with **exact contact events** (``simulate_batch(..., events=True)``: every set inside the
+   integrator's sub-steps, located where nodes cross the ground, at the program's 1 ms output step), their sub-cells
+   counted alike, and the events of the checked throws compared with the sampled sequences and with the events at a
+   10 µs output step.
 
 The figures and tables are drawn by :mod:`dicetrace.studies.study_onecell_converged_render`.
 """
@@ -70,6 +74,8 @@ PERIOD_WINDOW, PERIOD_RES = "zoom-out", (251, 25)
 SEQ_RES, QUICK_SEQ_RES = (32, 64, 96), (8, 10)
 SEQ_DT, EXACT_DT, PROGRAM_DT = 1e-5, 1e-6, 1e-3
 MIN_SET_S = (0.0, 1e-4, 1e-3)
+#: Output step of the exact-event runs (the program's: the events are exact whatever it is).
+EVENTS_DT = PROGRAM_DT
 N_EXACT = (100, 3)
 
 
@@ -212,11 +218,40 @@ def _sampled(b, factor: int) -> np.ndarray:
     return np.array(out, dtype=object)
 
 
-def _batch(ctx: Context, pts: np.ndarray, dt: float):
+def _batch(ctx: Context, pts: np.ndarray, dt: float, *, events: bool = False):
     sl = resolve_slice("seed")
-    b = simulate_batch(sl.to_ics(pts), config=_cfg(MODEL, dt_s=dt), l_convention=sl.l_convention)
+    b = simulate_batch(sl.to_ics(pts), config=_cfg(MODEL, dt_s=dt), l_convention=sl.l_convention, events=events)
     ctx.n_throws += len(pts)
     return b
+
+
+def _event_texts(b) -> dict:
+    """Every throw's exact-event sequence (``b`` run with ``events=True``), raw and without the sets shorter than each
+    of :data:`MIN_SET_S` (durations from the events' times)."""
+    out = {}
+    dt = b.config.numerics.dt_s
+    for m in MIN_SET_S:
+        if m == 0.0:
+            out[m] = np.array(b.contact_sequences(), dtype=object)
+            continue
+        seqs = []
+        for i in range(len(b)):
+            a, e = b.set_offsets[i], b.set_offsets[i + 1]
+            cg = coarse_grain(b.sets[a:e], b.set_times[a:e], float(b.steps[i]) * dt, min_steps=m)
+            seqs.append("-".join(set_to_text(v) for v in cg))
+        out[m] = np.array(seqs, dtype=object)
+    return out
+
+
+def _labels(b, shape) -> np.ndarray:
+    return np.where(b.status_code == Status.SETTLED, b.outcome, -1).astype(np.int64).reshape(shape)
+
+
+def _largest_cell(lab: np.ndarray):
+    ids, _ = label_cells(lab)
+    t = cells_table(lab)
+    big = t.loc[t["size"].idxmax()]
+    return big, ids == int(big["cell_id"])
 
 
 def topology(ctx: Context) -> tuple[dict, dict]:
@@ -227,23 +262,33 @@ def topology(ctx: Context) -> tuple[dict, dict]:
         t0 = time.perf_counter()
         pts, shape, _ = window_points(win, res)
         b = _batch(ctx, pts, SEQ_DT)
-        lab = np.where(b.status_code == Status.SETTLED, b.outcome, -1).astype(np.int64).reshape(shape)
-        ids, _ = label_cells(lab)
-        t = cells_table(lab)
-        big = t.loc[t["size"].idxmax()]
-        mask = ids == int(big["cell_id"])
+        lab = _labels(b, shape)
+        big, mask = _largest_cell(lab)
         texts = _texts(b, SEQ_DT)
         row = {"res": res, "cell_label": int(big["label"]), "cell_nodes": int(big["size"]),
                "cell_frac": float(big["size"] / lab.size), "by_min_set": []}
         for m in MIN_SET_S:
             st = subcell_stats(texts[m].reshape(shape), mask)
             row["by_min_set"].append({"min_set_s": m, **st})
+        # the same map with exact contact events (its own outcome labels: the events run is its own integration)
+        be = _batch(ctx, pts, EVENTS_DT, events=True)
+        lab_e = _labels(be, shape)
+        big_e, mask_e = _largest_cell(lab_e)
+        texts_e = _event_texts(be)
+        row["events"] = {"dt_s": EVENTS_DT, "cell_label": int(big_e["label"]), "cell_nodes": int(big_e["size"]),
+                         "cell_frac": float(big_e["size"] / lab_e.size),
+                         "same_outcome_as_sampled": float(np.mean(lab_e == lab)),
+                         "mean_events": float(np.mean(np.diff(be.set_offsets))),
+                         "by_min_set": [{"min_set_s": m, **subcell_stats(texts_e[m].reshape(shape), mask_e)}
+                                        for m in MIN_SET_S]}
         row["wall_s"] = time.perf_counter() - t0
         rows.append(row)
         plot[res] = (lab, mask, texts[0.0].reshape(shape))
         ctx.log(f"topology {res}²: cell of face {row['cell_label']} ({row['cell_frac']:.2f} of the window), "
                 + ", ".join(f"≥{r['min_set_s']:g} s: {r['n_labels']} sequences, {r['n_subcells']} sub-cells"
-                            for r in row["by_min_set"]))
+                            for r in row["by_min_set"])
+                + "; exact events: " + ", ".join(f"≥{r['min_set_s']:g} s: {r['n_subcells']} sub-cells"
+                                                 for r in row["events"]["by_min_set"]))
     # exactness: throws of the finest cell at the 1 µs and at the program's 1 ms output step
     res = rows[-1]["res"]
     pts, shape, _ = window_points(win, res)
@@ -267,6 +312,21 @@ def topology(ctx: Context) -> tuple[dict, dict]:
     exact["same_outcome_exact_dt"] = float(np.mean(ref.outcome == finer.outcome))
     exact["same_outcome_program_dt"] = float(np.mean(ref.outcome == coarser.outcome))
     exact["exact_dt_s"], exact["program_dt_s"] = EXACT_DT, PROGRAM_DT
+    # exact contact events of the same throws: at the program's output step and at 10 µs (the events do not depend on
+    # the output step but through the sub-steps it bounds), against the sequences sampled at 10 µs and 1 µs
+    ev, ev_fine = _batch(ctx, pts[pick], EVENTS_DT, events=True), _batch(ctx, pts[pick], SEQ_DT, events=True)
+    te, tef = _event_texts(ev), _event_texts(ev_fine)
+    exact["events"] = {"dt_s": EVENTS_DT, "fine_dt_s": SEQ_DT, "by_min_set": [
+        {"min_set_s": m, "same_events_at_fine_dt": float(np.mean(te[m] == tef[m])),
+         "same_as_sampled_seq_dt": float(np.mean(te[m] == base[m])),
+         "same_as_sampled_exact_dt": float(np.mean(te[m] == tf[m])),
+         "fine_same_as_sampled_exact_dt": float(np.mean(tef[m] == tf[m])),
+         "mean_events": float(np.mean([len(q.split("-")) for q in te[m]]))} for m in MIN_SET_S],
+        "same_outcome_fine_dt": float(np.mean(ev.outcome == ev_fine.outcome)),
+        "same_outcome_as_sampled_seq_dt": float(np.mean(ev.outcome == ref.outcome))}
+    ctx.log("exact events: " + ", ".join(
+        f"≥{r['min_set_s']:g} s: {r['same_events_at_fine_dt']:.2f} same at 10 µs output, "
+        f"{r['same_as_sampled_exact_dt']:.2f} as sampled at 1 µs" for r in exact["events"]["by_min_set"]))
     ctx.log("exactness: " + ", ".join(f"≥{r['min_set_s']:g} s: {r['same_at_exact_dt']:.2f} at 1 µs, "
                                       f"{r['same_at_program_dt']:.2f} at 1 ms" for r in exact["by_min_set"]))
     return {"window": [list(w) for w in win], "dt_s": SEQ_DT, "min_set_s": list(MIN_SET_S), "levels": rows,
