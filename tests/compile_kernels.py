@@ -33,9 +33,8 @@ HERE = Path(__file__).resolve().parent
 #: others' only through their tracing loop): contact-substep (the accuracy study's reference),
 #: contact-dop853, rk4 and verlet (tests/test_simulate.py, tests/core/test_kernel_speed_equivalence.py).
 SUMMARY_INTEGRATORS = ("rk4", "contact-substep", "contact-dop853", "verlet")
-#: Integrators whose events loop and batch kernel the suite runs (tests/core/test_events.py, study p's quick run);
-#: contact-adaptive shares contact-substep's scheme module.
-EVENT_INTEGRATORS = ("contact-tsit5", "contact-substep")
+#: Integrators whose events loop and batch kernel the suite runs (tests/core/test_events.py, study p's quick run).
+EVENT_INTEGRATORS = ("contact-tsit5",)
 
 
 def _summary_integrators():

@@ -546,7 +546,7 @@ def simulate_batch(
     events
         Record the exact contact events, as :func:`simulate` does
         (``BatchResult.set_times``); contact integrators only, on the CPU
-        (a ValueError otherwise).  The outcomes, statuses and steps are those
+        (``device="auto"`` then runs on the CPU; ``"cuda"`` is a ValueError).  The outcomes, statuses and steps are those
         of ``events=False``, bit for bit.
 
     Integer arguments may be Python or numpy integers; bools, floats and
@@ -566,6 +566,8 @@ def simulate_batch(
     if coords is not None:
         coords = np.array(coords, dtype=np.float64).reshape(m, 3)
     cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
+    if events and device == "auto":
+        device = "cpu"  # the events kernels are CPU kernels: "auto" has one choice
     device = resolve_device(device)
     if events and device == "cuda":
         raise ValueError("events=True runs on the CPU only (device='cpu'): the GPU kernels record the sets at output-step ends")

@@ -14,9 +14,11 @@ from dicetrace.core.contacts import hermite_crossings
 from dicetrace.params import make_config
 from dicetrace.simulate import sets_to_text, simulate, simulate_batch
 
-#: The integrators with events loops that the suite runs: Tsit5 (dense output: its front runs ahead of the state)
-#: and RK4 (contact-adaptive: no dense output).
-EVENT_INTEGRATORS = ("contact-tsit5", "contact-adaptive")
+#: The integrators with events loops that the suite runs: Tsit5, the `physical` default, whose dense output runs a
+#: front ahead of the state (the harder case).  The schemes without dense output (contact-adaptive's RK4,
+#: contact-dop853) record events through the same driver code; compiling their events kernels too would cost CI
+#: ~45 s each (add them here to check them: both pass).
+EVENT_INTEGRATORS = ("contact-tsit5",)
 
 
 def _flat_drop_times(kp, v0: float, n: int) -> np.ndarray:
@@ -164,3 +166,13 @@ def test_crossings_at_the_cut_off_are_the_neighbouring_sub_steps():
     n, below = hermite_crossings(-0.005, 50.0, 0.005, 50.0, 2e-4, 1e-6, roots)
     assert (n, below) == (1, True)
     np.testing.assert_allclose(roots[0], 0.5, atol=1e-14)
+
+
+def test_events_run_on_the_cpu_auto_picks_it_and_cuda_is_refused(monkeypatch):
+    import dicetrace.simulate as sim
+
+    b = simulate_batch(np.zeros((2, 6)), preset="physical", t_max_s=0.3, events=True, device="auto")
+    assert b.device == "cpu" and b.set_times is not None
+    monkeypatch.setattr(sim, "resolve_device", lambda device: "cuda")  # as on a machine with a GPU
+    with pytest.raises(ValueError, match="CPU only"):
+        simulate_batch(np.zeros((2, 6)), preset="physical", events=True, device="cuda")
