@@ -37,8 +37,9 @@ def _general_loop(roll, ics, off0, kp, S, steps, e0, e1, e2):
     """``roll`` (the tracing loop, what ``kernels.run_roll`` calls) on every IC, with no trace rows."""
     sets = np.zeros(4096, np.uint8)
     set_steps = np.zeros(4096, np.int32)
+    e3 = np.zeros(0)
     for i in range(ics.shape[0]):
-        s, n, o, ns = roll(ics[i], off0, kp, S, sets, set_steps, e0, e1, e2)
+        s, n, o, ns = roll(ics[i], off0, kp, S, sets, set_steps, e0, e1, e2, e3)
         steps[i] = n
 
 

@@ -191,7 +191,7 @@ def test_kernels_compile_for_the_device():
                  np.zeros(16, np.uint8), np.zeros(16, np.int32)]
             args = (kin.ics, kin.off0, kin.params, 8, *o) if seed else (
                 kin.ics, kin.off0, kin.params, 8, new_states(2), *o, np.zeros((0, 33)), np.zeros((0, 24)),
-                np.zeros((0, 6)))
+                np.zeros((0, 6)), np.zeros(0))
             sig = tuple(typeof(a) for a in args)
             counts = []
             for s in ((True, False) if strict else (False,)):

@@ -211,12 +211,12 @@ def _make_seed_kernel(tag: int):
 def _make_general_kernel(scheme, tag: int):
     """The one-thread-per-throw kernel around ``scheme.roll_summary`` (``loop.make_roll``); ``tag`` as above."""
 
-    def general_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2):
+    def general_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2, e3):
         i = cuda.grid(1)
         if i < ics.shape[0] and tag >= 0:
             lo = i * cap
             s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, states[i : i + 1], sets[lo : lo + cap],
-                                              set_steps[lo : lo + cap], e0, e1, e2)
+                                              set_steps[lo : lo + cap], e0, e1, e2, e3)
             status[i] = s
             steps[i] = n
             outcome[i] = o
@@ -390,7 +390,7 @@ def _run_batch_cuda(ics, off0, kp, integ, cap):
         args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps)
     else:
         empty = (buf.dev("tr_state", 0, np.float64, loop.STATE_COLS), buf.dev("tr_force", 0, np.float64, loop.FORCE_COLS),
-                 buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS))
+                 buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS), buf.dev("ev_times", 0, np.float64))
         args = (d_ics, d_off0, kp, cap, buf.dev("states", m, None), *outs, d_sets, d_set_steps, *empty)
     _launch(kernel, strict, m, args, stream)
     # out: the summaries first, then only the contact sets the throws used

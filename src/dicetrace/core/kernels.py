@@ -32,7 +32,8 @@ from dicetrace.core.state import new_states
 from dicetrace.integrators import INTEGRATORS
 
 _SPECS_BY_ID = {s.kernel_id: s for s in INTEGRATORS.values()}
-_NO_ROWS = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
+#: A summary loop's trace arrays (no rows) and event times (none): what it takes and ignores.
+_NO_ROWS = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)), np.zeros(0))
 
 
 def spec_of(integ: int):
@@ -51,7 +52,7 @@ def scheme_of(integ: int):
 def roll_kernel(integ: int, trace: bool):
     """The run loop of integrator ``integ`` (kernel id), tracing or summary only.
 
-    Called as ``kernel(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)``
+    Called as ``kernel(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, ev_times)``
     (see ``core.loop.make_roll``).
     """
     mod = scheme_of(integ)
@@ -73,7 +74,7 @@ def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy
     can then be read); a fresh one by default.
     """
     S = new_states(1) if states is None else states
-    return roll_kernel(integ, True)(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)
+    return roll_kernel(integ, True)(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, _NO_ROWS[3])
 
 
 def run_summary(ic, off0, kp, integ, sets, set_steps):
@@ -116,7 +117,7 @@ def run_events(ic, off0, kp, integ, sets, set_steps, ev_times, states=None):
     events (``core.loop.make_roll`` with ``events``).
     """
     S = new_states(1) if states is None else states
-    return _events_scheme(integ).roll_events(ic, off0, kp, S, sets, set_steps, *_NO_ROWS, ev_times)
+    return _events_scheme(integ).roll_events(ic, off0, kp, S, sets, set_steps, *_NO_ROWS[:3], ev_times)
 
 
 def run_batch_events(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps, ev_times):

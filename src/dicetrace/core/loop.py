@@ -166,15 +166,14 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     from one process to the next: build those with ``cache=False``.
 
     ``events``: an events loop (:func:`event_kernels`; a contact scheme's,
-    whose module defines ``step_events``).  It takes one more argument,
-    ``ev_times`` (cap,) float64, and records the exact contact events
+    whose module defines ``step_events``).  It records the exact contact events
     (docs/model.md §8.1) in ``sets``, ``set_steps`` and ``ev_times``
     instead of the sets at output-step ends: the set inside every sub-step
     of the scheme, the step it began in (1-based) and its time (s), up to
     the step the stop test fires on.  A throw with more events than the
     buffer holds ends as BUFFER_FULL, as one with more sets does.
 
-    The loop, ``roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy)``:
+    The loop, ``roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, ev_times)``:
 
     Parameters
     ----------
@@ -191,6 +190,11 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         ground) and the step at which each set was first seen.
     tr_state, tr_force, tr_energy : float64 arrays with 0 or n+1 rows
         (ignored by a summary loop).
+    ev_times : (cap,) float64
+        Output of an events loop: the time each event began (s); any
+        float64 array, of length 0 too, for the other loops, which ignore
+        it.  (Every loop takes the same arguments, so that a call from
+        Python and one from another kernel compile the same signature.)
 
     Returns
     -------
@@ -203,7 +207,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     events = bool(events)
     use_summary = bool(use_summary) and not trace and not events and hasattr(scheme, "summary")
 
-    def roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, *ev):
+    def roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, ev_times):
         st = S[0]
         if use_summary and scheme.summary_applies(kp, off0):
             return scheme.summary(ic, off0, kp, sets, set_steps)
@@ -221,7 +225,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         last_mask = 0
         if events:
             roots = np.empty((8, 3))  # the events' root scratch (an events loop runs on the CPU: it may allocate)
-            ev[0][0] = 0.0
+            ev_times[0] = 0.0
             st.ev_n = 1
         # The program starts out of contact (forces are zero before the first
         # step): the start's recorded set is empty.  Read from the array, not
@@ -259,13 +263,13 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                 m = flight_steps(X, U, W, off, kp, h, maxn - n)
             if m > 1:
                 if events:
-                    note_event(st, 0.0, h, 0, sets, set_steps, ev[0])
+                    note_event(st, 0.0, h, 0, sets, set_steps, ev_times)
                 contact, mask = _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy)
                 n += m
             else:
                 n += 1
                 if events:
-                    contact, mask = scheme.step_events(st, kp, h, contact, sets, set_steps, ev[0], roots)
+                    contact, mask = scheme.step_events(st, kp, h, contact, sets, set_steps, ev_times, roots)
                 else:
                     contact, mask = scheme.step(st, kp, h, contact)
             finite = state_finite(X[2], U[0], U[1], U[2], L[0], L[1], L[2], off[0, 0], off[7, 2])
@@ -358,6 +362,7 @@ def make_batch(scheme: ModuleType, *, events: bool = False, name: str | None = N
         e0 = np.zeros((0, STATE_COLS))
         e1 = np.zeros((0, FORCE_COLS))
         e2 = np.zeros((0, ENERGY_COLS))
+        e3 = np.zeros(0)
         for b in prange(nblk):
             i0 = b * BATCH_BLOCK
             i1 = min(m, i0 + BATCH_BLOCK)
@@ -371,7 +376,7 @@ def make_batch(scheme: ModuleType, *, events: bool = False, name: str | None = N
                 elif fast:  # what the summary loop would do, without the call through it
                     s, n, o, ns = scheme.summary(ics[i], off0, kp, sets[lo:hi], set_steps[lo:hi])
                 else:
-                    s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2)
+                    s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2, e3)
                 status[i] = s
                 steps[i] = n
                 outcome[i] = o
