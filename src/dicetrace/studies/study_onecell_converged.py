@@ -184,18 +184,25 @@ def periods(ctx: Context) -> tuple[dict, dict]:
 # --------------------------------------------------------------------------- 4. topology within a cell
 
 
-def _texts(b, dt: float) -> dict:
-    """Every throw's contact sequence, raw and without the sets shorter than each of :data:`MIN_SET_S`."""
+def _texts(b) -> dict:
+    """Every throw's contact sequence, raw and without the sets shorter than each of :data:`MIN_SET_S`.
+
+    Durations in whole output steps for sampled sequences (at least one step), in seconds for exact contact events
+    (``b`` run with ``events=True``: its ``set_times``)."""
+    dt = b.config.numerics.dt_s
+    exact = b.set_times is not None
     out = {}
     for m in MIN_SET_S:
         if m == 0.0:
             out[m] = np.array(b.contact_sequences(), dtype=object)
             continue
-        k = max(1, int(round(m / dt)))
+        starts = b.set_times if exact else b.set_steps
+        shortest = m if exact else max(1, int(round(m / dt)))
         seqs = []
         for i in range(len(b)):
             a, e = b.set_offsets[i], b.set_offsets[i + 1]
-            cg = coarse_grain(b.sets[a:e], b.set_steps[a:e], int(b.steps[i]), min_steps=k)
+            end_at = float(b.steps[i]) * dt if exact else int(b.steps[i])
+            cg = coarse_grain(b.sets[a:e], starts[a:e], end_at, min_steps=shortest)
             seqs.append("-".join(set_to_text(v) for v in cg))
         out[m] = np.array(seqs, dtype=object)
     return out
@@ -225,24 +232,6 @@ def _batch(ctx: Context, pts: np.ndarray, dt: float, *, events: bool = False):
     return b
 
 
-def _event_texts(b) -> dict:
-    """Every throw's exact-event sequence (``b`` run with ``events=True``), raw and without the sets shorter than each
-    of :data:`MIN_SET_S` (durations from the events' times)."""
-    out = {}
-    dt = b.config.numerics.dt_s
-    for m in MIN_SET_S:
-        if m == 0.0:
-            out[m] = np.array(b.contact_sequences(), dtype=object)
-            continue
-        seqs = []
-        for i in range(len(b)):
-            a, e = b.set_offsets[i], b.set_offsets[i + 1]
-            cg = coarse_grain(b.sets[a:e], b.set_times[a:e], float(b.steps[i]) * dt, min_steps=m)
-            seqs.append("-".join(set_to_text(v) for v in cg))
-        out[m] = np.array(seqs, dtype=object)
-    return out
-
-
 def _labels(b, shape) -> np.ndarray:
     return np.where(b.status_code == Status.SETTLED, b.outcome, -1).astype(np.int64).reshape(shape)
 
@@ -264,7 +253,7 @@ def topology(ctx: Context) -> tuple[dict, dict]:
         b = _batch(ctx, pts, SEQ_DT)
         lab = _labels(b, shape)
         big, mask = _largest_cell(lab)
-        texts = _texts(b, SEQ_DT)
+        texts = _texts(b)
         row = {"res": res, "cell_label": int(big["label"]), "cell_nodes": int(big["size"]),
                "cell_frac": float(big["size"] / lab.size), "by_min_set": []}
         for m in MIN_SET_S:
@@ -274,7 +263,7 @@ def topology(ctx: Context) -> tuple[dict, dict]:
         be = _batch(ctx, pts, EVENTS_DT, events=True)
         lab_e = _labels(be, shape)
         big_e, mask_e = _largest_cell(lab_e)
-        texts_e = _event_texts(be)
+        texts_e = _texts(be)
         row["events"] = {"dt_s": EVENTS_DT, "cell_label": int(big_e["label"]), "cell_nodes": int(big_e["size"]),
                          "cell_frac": float(big_e["size"] / lab_e.size),
                          "same_outcome_as_sampled": float(np.mean(lab_e == lab)),
@@ -296,10 +285,10 @@ def topology(ctx: Context) -> tuple[dict, dict]:
     inside = np.flatnonzero(mask.ravel())
     pick = np.sort(ctx.rng.choice(inside, size=min(ctx.pick(N_EXACT[0], N_EXACT[1]), len(inside)), replace=False))
     ref = _batch(ctx, pts[pick], SEQ_DT)
-    base = _texts(ref, SEQ_DT)
+    base = _texts(ref)
     exact = {"n": int(len(pick)), "dt_s": SEQ_DT, "by_min_set": []}
     finer, coarser = _batch(ctx, pts[pick], EXACT_DT), _batch(ctx, pts[pick], PROGRAM_DT)
-    tf, tc = _texts(finer, EXACT_DT), _texts(coarser, PROGRAM_DT)
+    tf, tc = _texts(finer), _texts(coarser)
     sampled = _sampled(ref, int(round(PROGRAM_DT / SEQ_DT)))
     exact["same_when_sampled_at_program_dt"] = float(np.mean(base[0.0] == sampled))
     exact["mean_sets_sampled_at_program_dt"] = float(np.mean([len(q.split("-")) for q in sampled]))
@@ -315,7 +304,7 @@ def topology(ctx: Context) -> tuple[dict, dict]:
     # exact contact events of the same throws: at the program's output step and at 10 µs (the events do not depend on
     # the output step but through the sub-steps it bounds), against the sequences sampled at 10 µs and 1 µs
     ev, ev_fine = _batch(ctx, pts[pick], EVENTS_DT, events=True), _batch(ctx, pts[pick], SEQ_DT, events=True)
-    te, tef = _event_texts(ev), _event_texts(ev_fine)
+    te, tef = _texts(ev), _texts(ev_fine)
     exact["events"] = {"dt_s": EVENTS_DT, "fine_dt_s": SEQ_DT, "by_min_set": [
         {"min_set_s": m, "same_events_at_fine_dt": float(np.mean(te[m] == tef[m])),
          "same_as_sampled_seq_dt": float(np.mean(te[m] == base[m])),
