@@ -52,7 +52,7 @@ import numba
 import numpy as np
 
 from dicetrace.core import loop
-from dicetrace.core._jit import jit, jit_fused
+from dicetrace.core._jit import jit
 from dicetrace.core.schemes import contact_tsit5, erk
 from dicetrace.core.schemes.contact_substep import make_drive
 from dicetrace.core.state import new_states
@@ -74,16 +74,11 @@ def _jit(fn):
     return jit(fn, cache=False)
 
 
-def _jit_scheme(fn):
-    """A variant of a contact scheme's kernel, compiled as the scheme's own are (``jit_fused``), uncached."""
-    return jit_fused(fn, cache=False)
-
-
 def _named_uncached(fn, name: str, doc: str):
     """``erk._named`` without the disk cache (a variant's factory is this run's only)."""
     fn.__name__ = fn.__qualname__ = name
     fn.__doc__ = doc
-    return _jit_scheme(fn)
+    return _jit(fn)
 
 
 def _edited(fn, name: str, old: str, new: str, *more: str, env: dict | None = None):
@@ -144,13 +139,13 @@ def variants() -> dict:
     tsub = erk.tsit5_substep
     terr = erk.tsit5_error
 
-    @_jit_scheme
+    @_jit
     def substep_twice(st, kp, h, f0, f1, f2, t0, t1, t2):
         tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
         st.dn_w[6] += st.new_X[2]
         tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
 
-    @_jit_scheme
+    @_jit
     def error_twice(st, kp, h, g0, g1, g2, q0, q1, q2):
         st.dn_w[6] += terr(st, kp, h, g0, g1, g2, q0, q1, q2)
         return terr(st, kp, h, g0, g1, g2, q0, q1, q2)

@@ -21,7 +21,7 @@ import pytest
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
-from dicetrace.core._jit import _core_digest, jit, jit_fused
+from dicetrace.core._jit import _core_digest, jit
 from dicetrace.core.forces import eval_forces
 from dicetrace.core.model import energy_dynamic, init_offsets
 from dicetrace.core.schemes import scheme_module, step_of
@@ -820,13 +820,8 @@ def _eval_into(S, kp):
     return eval_forces(S[0], kp)
 
 
-def _eval_into_fused(S, kp):
-    return eval_forces(S[0], kp)
-
-
-#: ``eval_forces`` compiled with strict arithmetic and as the fused schemes' kernels are (``_jit.jit_fused``).
+#: ``eval_forces`` compiled on its own, as every kernel is (strict arithmetic).
 _STRICT_EVAL = jit(_eval_into)
-_FUSED_EVAL = jit_fused(_eval_into_fused)
 
 
 @pytest.mark.parametrize("integ", ["contact-dop853", "contact-tsit5"])
@@ -835,20 +830,18 @@ def test_contact_step_ends_with_the_forces_of_its_state(preset, integ):
     """A contact step reuses forces it already has (the previous step's end, its last
     sub-step's error evaluation, the forces kept at contact-tsit5's front) instead of
     evaluating them again: after every step of a throw, the forces, heights and contact mask
-    it leaves are exactly what ``eval_forces`` computes afresh at its state (in the scheme's own
-    arithmetic: ``eval_forces`` compiled as its kernels are, fused or strict)."""
+    it leaves are exactly what ``eval_forces`` computes afresh at its state."""
     cfg = make_config(preset, integrator=integ, tol=1e-6)
     kp = cfg.kernel_params()
     ic = np.array([80.0, -40.0, 0.0, 300.0, -500.0, 150.0])
     S = state(kp, [0.0, 0.0, 2.0], ic[:3], ic[3:] if preset == "seed" else -ic[3:], cfg.initial_offsets())
     step = step_of(INTEGRATORS[integ])
-    fresh_forces = _FUSED_EVAL if step.targetoptions.get("fastmath") else _STRICT_EVAL
     contact, mask = eval_forces(S[0], kp)
     in_contact = 0
     for _ in range(600):
         contact, mask = step(S[0], kp, 1e-3, contact)
         fresh = S.copy()
-        want = fresh_forces(fresh, kp)
+        want = _STRICT_EVAL(fresh, kp)
         assert (contact, mask) == want
         for name in ("F", "P", "z") + (("uk",) if contact else ()):
             assert np.array_equal(S[0][name], fresh[0][name], equal_nan=True), name

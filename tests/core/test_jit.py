@@ -142,3 +142,24 @@ def test_only_the_most_recently_used_digests_are_kept(tmp_path):
     gone = _jit.prune_digests(tmp_path, "digest0", keep=4)
     assert sorted(p.name for p in gone) == [f"digest{i}" for i in range(1, 6)]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["digest0", "digest6", "digest7", "digest8"]
+
+
+def test_every_kernel_compiles_with_strict_arithmetic():
+    """No kernel of ``dicetrace.core`` carries a fast-math flag (``contract`` fused multiply-adds, ``arcp``
+    reciprocals, ...): where the compiler places them depends on what it inlines, and contact-scheme kernels
+    that had them rounded differently freshly compiled and loaded from the disk cache (docs/model.md §9)."""
+    import importlib
+    import pkgutil
+
+    from numba.core.dispatcher import Dispatcher
+
+    seen = 0
+    for info in pkgutil.walk_packages(dicetrace.core.__path__, "dicetrace.core."):
+        if info.name == "dicetrace.core.gpu":  # imports numba-cuda; its kernels are compiled with -fma=0 (test_gpu)
+            continue
+        module = importlib.import_module(info.name)
+        for name, value in vars(module).items():
+            if isinstance(value, Dispatcher):
+                assert not value.targetoptions.get("fastmath"), f"{info.name}.{name}: {value.targetoptions}"
+                seen += 1
+    assert seen > 100

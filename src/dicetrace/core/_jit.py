@@ -2,13 +2,15 @@
 
 Every compiler option of dicetrace lives here.  ``DICETRACE_CACHE=0`` turns
 numba's on-disk cache off (it is on by default: a new process then loads
-compiled kernels in ~0.05 s instead of compiling).  No fast-math by
-default: the `seed` preset must reproduce the 2019 program bit for bit
-(docs/model.md §5.5), so contraction into fused multiply-adds and
-re-association are not allowed in :func:`jit`.  The contact schemes' own
-kernels, which reproduce no program, compile with :func:`jit_fused`: two
-fast-math flags that keep IEEE semantics for NaN, infinities and signed
-zeros and change only rounding (``FUSED``, docs/model.md §9).
+compiled kernels in ~0.05 s instead of compiling).  No fast-math flag
+anywhere: every kernel compiles with strict IEEE arithmetic, with no
+contraction into fused multiply-adds and no re-association.  The `seed`
+preset must reproduce the 2019 program bit for bit (docs/model.md §5.5);
+and a kernel's results must not depend on how it was compiled.  With
+LLVM's ``contract`` flag they did: where a fused multiply-add falls
+depends on which callees the compiler inlines, and a contact scheme's
+kernel compiled in the running process and the same kernel loaded from
+the disk cache rounded differently (docs/model.md §9).
 
 numba's cache checks only the source file of the cached function, so a
 kernel in ``loop.py`` would keep running old code after ``fast.py`` or
@@ -231,19 +233,6 @@ def jit(fn=None, **extra):
     if fn is None:
         return lambda f: _njit(f, opts)
     return _njit(fn, opts)
-
-
-#: The fast-math flags of :func:`jit_fused`: ``contract`` (x·y + z may be one fused multiply-add,
-#: rounded once) and ``arcp`` (x / y may be x · (1/y), with one reciprocal shared by several
-#: divisions by y).  Each is at most an ulp or so from the strict result, and both shorten the
-#: chains of dependent operations a sub-step waits on.  Never ``nnan``/``ninf`` (a blow-up must stay
-#: a NaN or an infinity that the run loop reports) nor ``reassoc`` (sums keep their order).
-FUSED = frozenset({"contract", "arcp"})
-
-
-def jit_fused(fn=None, **extra):
-    """:func:`jit` with the fast-math flags ``FUSED``: for the contact schemes' kernels only, never the program's."""
-    return jit(fn, fastmath=set(FUSED), **extra)
 
 
 def jit_parallel(fn):

@@ -20,14 +20,11 @@ cache where that cannot be written), keyed on the kernel digest of
 ``core/**`` as the CPU's kernels are: a first run compiles them (tens of
 seconds for a contact scheme), later ones load them.
 
-Arithmetic.  The seed path's kernels are compiled as on the CPU, without
-contraction into fused multiply-adds (NVVM contracts by default; its
-``-fma=0`` option is set for those kernels): only libdevice's sin, cos, exp
-and sqrt can then differ from the host's, in the last ulp.  The contact
-schemes, which the CPU compiles with contraction (``_jit.jit_fused``), are
-compiled with NVVM's default contraction: the same model, rounded
-differently, so their throws agree with the CPU's to rounding and, through
-the chaos, in outcome wherever a throw is not within rounding of a border.
+Arithmetic.  Every kernel is compiled as on the CPU, without contraction
+into fused multiply-adds (NVVM contracts by default; its ``-fma=0`` option
+is set for every kernel here): the arithmetic is the CPU's, operation for
+operation, and only libdevice's sin, cos, exp and sqrt can differ from the
+host's, in the last ulp.
 
 Memory and transfers.  Each thread owns ``cap`` contact sets in device
 memory and, on the general kernel, one state record (``core.state.STATE``,
@@ -161,7 +158,7 @@ def free_memory() -> int:
 
 @contextlib.contextmanager
 def _nvvm_without_fma():
-    """NVVM compiles with ``-fma=0`` inside: no contraction of a·b + c, as the CPU compiles the seed path.
+    """NVVM compiles with ``-fma=0`` inside: no contraction of a·b + c, as the CPU compiles every kernel.
 
     numba-cuda passes its code library's options to ``nvvm.compile_ir``
     when it makes PTX; it has no public switch for this one, so the option
@@ -225,17 +222,12 @@ def _make_general_kernel(scheme, tag: int):
     return general_kernel
 
 
-def _fused(scheme) -> bool:
-    """Whether the CPU compiles this scheme's step with contraction (``_jit.jit_fused``)."""
-    return bool(getattr(scheme.step, "targetoptions", {}).get("fastmath"))
-
-
 _KERNELS: dict = {}
 _KERNELS_LOCK = threading.Lock()
 
 
 def _kernel(integ: int, seed_path: bool):
-    """The CUDA dispatcher for integrator ``integ`` (kernel id), the seed kernel or the general one, and whether strict."""
+    """The CUDA dispatcher for integrator ``integ`` (kernel id), the seed kernel or the general one."""
     scheme = scheme_of(integ)
     key = "seed" if seed_path else scheme.__name__
     with _KERNELS_LOCK:  # the threads of a GPU (or of several) share one dispatcher, compiled once
@@ -245,29 +237,26 @@ def _kernel(integ: int, seed_path: bool):
 def _kernel_locked(key: str, scheme, seed_path: bool):
     if key not in _KERNELS:
         tag = int(kernel_digest()[:15], 16)
-        if seed_path:
-            fn, strict = _make_seed_kernel(tag), True
-        else:
-            fn, strict = _make_general_kernel(scheme, tag), not _fused(scheme)
+        fn = _make_seed_kernel(tag) if seed_path else _make_general_kernel(scheme, tag)
         fn.__qualname__ = fn.__name__ = f"{fn.__name__}_{key.rsplit('.', 1)[-1]}"
-        _KERNELS[key] = (cuda.jit(fn, cache=CACHE), strict)
+        _KERNELS[key] = cuda.jit(fn, cache=CACHE)
     return _KERNELS[key]
 
 
-#: Held while a strict kernel compiles: its ``-fma=0`` option is set module-wide (``_nvvm_without_fma``), and a
+#: Held while a kernel compiles: its ``-fma=0`` option is set module-wide (``_nvvm_without_fma``), and a
 #: thread running another GPU must neither restore it too early nor compile under it.
 _COMPILE_LOCK = threading.Lock()
 
 
-def _launch(kernel, strict: bool, m: int, args, stream) -> None:
-    """Launch ``kernel`` over m threads on ``stream``; compile it first, with ``-fma=0`` where ``strict`` (or load
+def _launch(kernel, m: int, args, stream) -> None:
+    """Launch ``kernel`` over m threads on ``stream``; compile it first, with ``-fma=0`` (or load
     it from the cache).  Every array argument is a device array: the launch copies nothing and returns at once."""
     blocks = (m + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
     sig = tuple(typeof(a) for a in args)
     if not simulated() and sig not in kernel.overloads:
         with _COMPILE_LOCK:
             if sig not in kernel.overloads:
-                with _nvvm_without_fma() if strict else contextlib.nullcontext():
+                with _nvvm_without_fma():
                     kernel.compile(sig)
     kernel[blocks, THREADS_PER_BLOCK, stream](*args)
 
@@ -373,7 +362,7 @@ def _run_batch_cuda(ics, off0, kp, integ, cap):
         return (np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int8), np.zeros(0, np.int64),
                 np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0, np.int64))
     seed_path = uses_seed_kernel(kp, off0, integ)
-    kernel, strict = _kernel(integ, seed_path)
+    kernel = _kernel(integ, seed_path)
     buf = _buffers()
     stream = buf.stream
     # in: the ICs and the offsets, through pinned buffers (asynchronous copies on this thread's stream)
@@ -392,7 +381,7 @@ def _run_batch_cuda(ics, off0, kp, integ, cap):
         empty = (buf.dev("tr_state", 0, np.float64, loop.STATE_COLS), buf.dev("tr_force", 0, np.float64, loop.FORCE_COLS),
                  buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS), buf.dev("ev_times", 0, np.float64))
         args = (d_ics, d_off0, kp, cap, buf.dev("states", m, None), *outs, d_sets, d_set_steps, *empty)
-    _launch(kernel, strict, m, args, stream)
+    _launch(kernel, m, args, stream)
     # out: the summaries first, then only the contact sets the throws used
     hosts = [buf.host(name, m, dt) for name, dt in kinds]
     for dev, host in zip(outs, hosts):
@@ -410,7 +399,7 @@ def _run_batch_cuda(ics, off0, kp, integ, cap):
         d_starts = buf.dev("starts", m + 1, np.int64)
         d_starts.copy_to_device(h_starts, stream=stream)
         d_out = (buf.dev("packed_sets", total, np.uint8), buf.dev("packed_steps", total, np.int32))
-        _launch(_GATHER, False, m, (d_sets, d_set_steps, cap, d_starts, *d_out), stream)
+        _launch(_GATHER, m, (d_sets, d_set_steps, cap, d_starts, *d_out), stream)
         h_out = (buf.host("packed_sets", total, np.uint8), buf.host("packed_steps", total, np.int32))
         for dev, host in zip(d_out, h_out):
             dev.copy_to_host(host, stream=stream)

@@ -34,7 +34,7 @@ from types import ModuleType
 
 from dicetrace.core import loop
 from dicetrace.core.contacts import note_event, note_substep_events
-from dicetrace.core._jit import jit, jit_fused
+from dicetrace.core._jit import jit
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
 from dicetrace.core.model import node_heights
 from dicetrace.core.free_flight import (
@@ -227,8 +227,9 @@ def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times, roots)
     checks a piece's end only): that is the geometry of the flight, with no
     force, and it is recorded (``contacts.note_substep_events``).  The
     piece's start is kept in RK4 stage scratch, free between sub-steps.
-    Inlined, so that the flight's arithmetic is the driver's, contraction
-    included (``_jit.jit_fused``): the motion is the same as without events.
+    The flight is the driver's own free piece (``free_advance``) and the
+    events are read off beside it, so the motion is the same as without
+    events, bit for bit (strict arithmetic, ``core._jit``).
     """
     copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off)
     free_advance(st.sub_X, st.sub_U, st.W, st.sub_off, kp, tau)
@@ -501,7 +502,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
 
     drive.__name__ = drive.__qualname__ = name
     drive.__doc__ = f"One contact-aware step on the sub-step method of ``{method.__name__}`` (``make_drive``)."
-    return jit_fused(drive, cache=cache)
+    return jit(drive, cache=cache)
 
 
 #: The sub-step method of contact-substep and contact-adaptive (the contract of

@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from dicetrace.core._jit import jit, jit_fused
+from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
 from dicetrace.core.model import offset_cross_omega
 from dicetrace.core.schemes.rk4 import error_norm, error_speed
@@ -291,7 +291,7 @@ def state_error_norm(e, vs, kp):
 def _named(fn, name: str, doc: str):
     fn.__name__ = fn.__qualname__ = name
     fn.__doc__ = doc
-    return jit_fused(fn)
+    return jit(fn)
 
 
 def erk_substep(name: str, ns: int, a: np.ndarray, b: np.ndarray):
