@@ -3,9 +3,8 @@
 Runs the same random ``physical`` throws (``contact-tsit5``, its default tolerance schedule) through the batch
 kernel with and without events on one thread, interleaved, best of ``--repeat``, and prints the process CPU time
 per throw of each and their ratio, with the mean number of contact sets each records (events find the contacts
-shorter than an output step, which sampling misses).  The two runs integrate the same model with the same
-integrator, compiled separately (docs/model.md §8.1), so a throw's settle time can differ by rounding; the ratio is
-of CPU time per throw.
+shorter than an output step, which sampling misses).  The two runs are the same integration bit for bit
+(docs/model.md §8.1: the events are read off beside it); the ratio is of CPU time per throw.
 
 Usage: ``python benchmarks/bench_events.py [--n 200] [--repeat 3]``.
 """

@@ -19,9 +19,9 @@ prints
 * the chaos floor: the CPU against itself from the same ICs nudged by
   1e-15 relative (every component times 1 ± 1e-15, random signs), the
   outcome agreement a change of a few ulps of the ICs gives.  The GPU
-  rounds differently from the CPU (the device's sin and cos on the seed
-  path, fused multiply-adds placed by another compiler on the contact
-  schemes), and the chaos amplifies that near the basins' borders as it
+  rounds differently from the CPU only in the device's sin, cos and exp
+  (every kernel is compiled without fused multiply-adds on both), and the
+  chaos amplifies that near the basins' borders as it
   amplifies the nudge: the GPU's differences are within the floor when
   they are no more frequent than the nudge's (the line says which, with a
   2-σ allowance for the counts).

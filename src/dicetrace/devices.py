@@ -6,10 +6,9 @@ does for every batch its studies run),
 ``"cuda"`` (a GPU; refused with :class:`DeviceError` where there is none) or
 ``"auto"`` (a GPU where numba-cuda finds one, else the CPU; one line on
 standard error says which, once per process).  The GPU runs the CPU's own
-kernels, compiled for the device (``dicetrace.core.gpu``): the `seed`
-preset's throws as on the CPU up to the last-ulp rounding of the device's
-sin and cos, the contact schemes' to rounding (they are compiled with fused
-multiply-adds on both, placed by different compilers).
+kernels, compiled for the device (``dicetrace.core.gpu``) with the CPU's
+arithmetic (no fused multiply-adds on either): every preset's throws as on
+the CPU up to the last-ulp rounding of the device's sin, cos and exp.
 
 numba-cuda is an optional dependency (``pip install 'dicetrace[cuda]'``);
 nothing here imports it unless a GPU is asked for.

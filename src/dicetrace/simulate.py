@@ -294,11 +294,9 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         §8.1): the contact sets are then the sets inside the scheme's sub-steps,
         located where nodes enter or leave the ground, with their times
         (``Roll.contact_times``), instead of the sets at output-step ends.
-        The model and the integrator are the same either way, but the events
-        kernels are compiled separately and round differently (the contact
-        schemes compile with fused multiply-adds), so a throw agrees with
-        ``events=False`` to rounding, not bit for bit: near a border it can
-        settle differently.
+        The events are read off beside the integration: the throw is the
+        same as with ``events=False``, bit for bit (status, steps, outcome).
+        They cost CPU time (docs/model.md §8.1).
 
     Returns
     -------
@@ -540,17 +538,16 @@ def simulate_batch(
         install 'dicetrace[cuda]'``; a :class:`~dicetrace.devices.DeviceError`
         where there is none) or ``"auto"`` (the GPU where there is one; one
         line on standard error says which).  The GPU runs the same kernels
-        compiled for the device: `seed` throws as on the CPU up to the last
-        ulp of the device's sin and cos, the contact schemes' to rounding
-        (docs/gpu.md).  The result records it (``BatchResult.device``).
+        compiled for the device with the CPU's arithmetic: throws as on the
+        CPU up to the last ulp of the device's sin, cos and exp (docs/gpu.md).  The result records it (``BatchResult.device``).
         None (default): :func:`~dicetrace.devices.default_device`, the CPU
         unless a :func:`~dicetrace.devices.use_device` block says otherwise.
     events
         Record the exact contact events, as :func:`simulate` does
         (``BatchResult.set_times``); contact integrators only, on the CPU
-        (``device="auto"`` then runs on the CPU; ``"cuda"`` is a ValueError).  The throws agree with
-        ``events=False`` to rounding, not bit for bit (see :func:`simulate`); with events the batch is
-        bit-identical to :func:`simulate` with events, row by row.
+        (``device="auto"`` then runs on the CPU; ``"cuda"`` is a ValueError).  The throws are those of
+        ``events=False`` bit for bit, and the batch is bit-identical to :func:`simulate` with events,
+        row by row.
 
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are

@@ -23,8 +23,8 @@ seconds for a contact scheme), later ones load them.
 Arithmetic.  Every kernel is compiled as on the CPU, without contraction
 into fused multiply-adds (NVVM contracts by default; its ``-fma=0`` option
 is set for every kernel here): the arithmetic is the CPU's, operation for
-operation, and only libdevice's sin, cos, exp and sqrt can differ from the
-host's, in the last ulp.
+operation, and only libdevice's sin, cos and exp can differ from the
+host's, in the last ulp (sqrt is correctly rounded on both).
 
 Memory and transfers.  Each thread owns ``cap`` contact sets in device
 memory and, on the general kernel, one state record (``core.state.STATE``,
