@@ -259,7 +259,7 @@ def topology(ctx: Context) -> tuple[dict, dict]:
         for m in MIN_SET_S:
             st = subcell_stats(texts[m].reshape(shape), mask)
             row["by_min_set"].append({"min_set_s": m, **st})
-        # the same map with exact contact events (its own outcome labels: the events run is its own integration)
+        # the same map with exact contact events (its own outcome labels: a 1 ms output step bounds the sub-steps otherwise)
         be = _batch(ctx, pts, EVENTS_DT, events=True)
         lab_e = _labels(be, shape)
         big_e, mask_e = _largest_cell(lab_e)
