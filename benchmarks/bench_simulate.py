@@ -25,7 +25,7 @@ import time
 import numba
 import numpy as np
 
-from dicetrace.core.kernels import _NO_ROWS, roll_kernel, run_batch
+from dicetrace.core.kernels import NO_TRACE, roll_kernel, run_batch
 from dicetrace.core.state import new_states
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
@@ -85,8 +85,8 @@ def main() -> None:
     g = ics[: args.general]
     gsteps = np.zeros(len(g), np.int64)
     roll, S = roll_kernel(integ, True), new_states(1)
-    _general_loop(roll, g[:2], off0, kp, S, gsteps[:2], *_NO_ROWS)
-    wall, cpu = _timed(lambda: _general_loop(roll, g, off0, kp, S, gsteps, *_NO_ROWS), 1)
+    _general_loop(roll, g[:2], off0, kp, S, gsteps[:2], *NO_TRACE)
+    wall, cpu = _timed(lambda: _general_loop(roll, g, off0, kp, S, gsteps, *NO_TRACE), 1)
     _line(f"run loop on the step, {len(g)} ICs", len(g), gsteps.sum(), wall, cpu, 1)
 
     out = dict(

@@ -17,8 +17,8 @@ import numpy as np
 
 import numba
 
-from dicetrace.core.kernels import run_batch, run_batch_events, run_events, run_roll
-from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS
+from dicetrace.core.kernels import NO_TRACE, run_batch, run_batch_events, run_events, run_roll
+from dicetrace.core.loop import BATCH_BLOCK
 from dicetrace.memory import available_memory
 from dicetrace.status import Status
 
@@ -93,7 +93,6 @@ def _run_serial(kin, cap: int, events: bool = False):
     status, steps, outcome, nsets = (np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64))
     sets, set_steps = np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32)
     times = np.zeros(m * cap) if events else None
-    empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     for i in range(m):
         part = slice(i * cap, (i + 1) * cap)
         if events:
@@ -101,7 +100,7 @@ def _run_serial(kin, cap: int, events: bool = False):
                 kin.ics[i], kin.off0, kin.params, kin.integrator_id, sets[part], set_steps[part], times[part])
         else:
             status[i], steps[i], outcome[i], nsets[i] = run_roll(
-                kin.ics[i], kin.off0, kin.params, kin.integrator_id, sets[part], set_steps[part], *empty)
+                kin.ics[i], kin.off0, kin.params, kin.integrator_id, sets[part], set_steps[part], *NO_TRACE)
     return status, steps, outcome, nsets, sets, set_steps, times
 
 

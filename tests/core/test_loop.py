@@ -66,7 +66,7 @@ def _roll(kernel, ic, kin, states=None):
     sets = np.zeros(cap, np.uint8)
     set_steps = np.zeros(cap, np.int32)
     S = new_states(1) if states is None else states
-    status, steps, outcome, nsets = kernel(ic, kin.off0, kin.params, S, sets, set_steps, *kernels._NO_ROWS)
+    status, steps, outcome, nsets = kernel(ic, kin.off0, kin.params, S, sets, set_steps, *kernels.NO_TRACE, np.zeros(0))
     return (int(status), int(steps), int(outcome)), sets[:nsets].copy(), set_steps[:nsets].copy(), S
 
 

@@ -225,7 +225,7 @@ def note_substep_events(st, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, inerti
 
 @jit(inline="always")
 def note_event(st, t, h, mask, sets, set_steps, ev_times):
-    """Record that the contact set ``mask`` holds from ``t`` s into the step being taken (``st.ev_t``, ``st.ev_step``), if it is new.
+    """Record that the contact set ``mask`` holds from ``t`` s into the step being taken (``st.ev_step``), if it is new.
 
     Appends the set, the step it began in (1-based: ``ev_step`` + 1 for t in
     [0, h), more for a sub-step that a dense-output scheme runs past the
@@ -237,6 +237,6 @@ def note_event(st, t, h, mask, sets, set_steps, ev_times):
         if k < sets.shape[0]:
             sets[k] = mask
             set_steps[k] = st.ev_step + 1 + int(t / h)
-            ev_times[k] = st.ev_t + t
+            ev_times[k] = st.ev_step * h + t
         st.ev_n = k + 1
         st.ev_last = mask

@@ -32,8 +32,10 @@ from dicetrace.core.state import new_states
 from dicetrace.integrators import INTEGRATORS
 
 _SPECS_BY_ID = {s.kernel_id: s for s in INTEGRATORS.values()}
-#: A summary loop's trace arrays (no rows) and event times (none): what it takes and ignores.
-_NO_ROWS = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)), np.zeros(0))
+#: The trace arrays of a run that traces nothing (state, forces, energy: no rows), as a run loop takes them.
+NO_TRACE = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
+#: The event times of a loop that records no events (which takes and ignores them).
+_NO_EVENTS = np.zeros(0)
 
 
 def spec_of(integ: int):
@@ -74,7 +76,7 @@ def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy
     can then be read); a fresh one by default.
     """
     S = new_states(1) if states is None else states
-    return roll_kernel(integ, True)(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, _NO_ROWS[3])
+    return roll_kernel(integ, True)(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, _NO_EVENTS)
 
 
 def run_summary(ic, off0, kp, integ, sets, set_steps):
@@ -85,7 +87,7 @@ def run_summary(ic, off0, kp, integ, sets, set_steps):
     mod = scheme_of(integ)
     if hasattr(mod, "summary") and mod.summary_applies(kp, off0):
         return mod.summary(ic, off0, kp, sets, set_steps)
-    return mod.roll_summary(ic, off0, kp, new_states(1), sets, set_steps, *_NO_ROWS)
+    return mod.roll_summary(ic, off0, kp, new_states(1), sets, set_steps, *NO_TRACE, _NO_EVENTS)
 
 
 def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
@@ -94,8 +96,12 @@ def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, se
     ``off0`` (8, 3) are the initial node offsets shared by all ICs; outputs
     are written in place.
     """
-    states = new_states(max(1, (len(ics) + BATCH_BLOCK - 1) // BATCH_BLOCK))
-    batch_kernel(integ)(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps)
+    batch_kernel(integ)(ics, off0, kp, cap, _block_states(len(ics)), status, steps, outcome, nsets, sets, set_steps)
+
+
+def _block_states(m: int):
+    """The state records a batch kernel of m throws runs in: one per block of ``BATCH_BLOCK`` throws."""
+    return new_states(max(1, (m + BATCH_BLOCK - 1) // BATCH_BLOCK))
 
 
 def has_events(integ: int) -> bool:
@@ -104,10 +110,10 @@ def has_events(integ: int) -> bool:
 
 
 def _events_scheme(integ: int):
-    mod = scheme_of(integ)
-    if not hasattr(mod, "roll_events"):
+    """The scheme module of integrator ``integ``, refused (ValueError) where it has no events loop."""
+    if not has_events(integ):
         raise ValueError(f"integrator {spec_of(integ).name!r} has no exact contact events (only the contact schemes do)")
-    return mod
+    return scheme_of(integ)
 
 
 def run_events(ic, off0, kp, integ, sets, set_steps, ev_times, states=None):
@@ -117,11 +123,10 @@ def run_events(ic, off0, kp, integ, sets, set_steps, ev_times, states=None):
     events (``core.loop.make_roll`` with ``events``).
     """
     S = new_states(1) if states is None else states
-    return _events_scheme(integ).roll_events(ic, off0, kp, S, sets, set_steps, *_NO_ROWS[:3], ev_times)
+    return _events_scheme(integ).roll_events(ic, off0, kp, S, sets, set_steps, *NO_TRACE, ev_times)
 
 
 def run_batch_events(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps, ev_times):
     """:func:`run_batch` through the events loop: ``ev_times`` (m·cap,) float64 laid out as ``sets``."""
-    states = new_states(max(1, (len(ics) + BATCH_BLOCK - 1) // BATCH_BLOCK))
-    _events_scheme(integ).batch_events(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps,
-                                       ev_times)
+    _events_scheme(integ).batch_events(ics, off0, kp, cap, _block_states(len(ics)), status, steps, outcome, nsets,
+                                       sets, set_steps, ev_times)

@@ -84,14 +84,14 @@ def _write_trace(n, st, kp, tr_state, tr_force, tr_energy):
 
 
 @jit(inline="always")
-def events_after_step(finite, st, mask, sets):
+def events_after_step(finite, st, sets):
     """An events loop's checks after a step (what ``state.after_step`` does for the sampled sets):
-    (ended, status, last_mask), ended with NON_FINITE, or BUFFER_FULL when the events overflowed ``sets``."""
+    (ended, status), ended with NON_FINITE, or BUFFER_FULL when the events overflowed ``sets``."""
     if not finite:
-        return True, Status.NON_FINITE, mask
+        return True, Status.NON_FINITE
     if st.ev_n > sets.shape[0]:
-        return True, Status.BUFFER_FULL, mask
-    return False, Status.TIME_CAP, mask
+        return True, Status.BUFFER_FULL
+    return False, Status.TIME_CAP
 
 
 @jit(inline="always")
@@ -253,9 +253,8 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         clear = not point_mass and _clears(e0, kp)
         while n < maxn:
             m = 0
-            if events:  # the step about to be taken: its index and start time
+            if events:  # the step about to be taken
                 st.ev_step = n
-                st.ev_t = n * h
             if flight and clear and last_mask == 0 and st.ahead == 0.0:
                 # A free flight conserves the stop-test energy: while it lasts the
                 # stop test cannot fire and no contact set changes.  Cross it in
@@ -274,7 +273,8 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                     contact, mask = scheme.step(st, kp, h, contact)
             finite = state_finite(X[2], U[0], U[1], U[2], L[0], L[1], L[2], off[0, 0], off[7, 2])
             if events:
-                ended, status, last_mask = events_after_step(finite, st, mask, sets)
+                ended, status = events_after_step(finite, st, sets)
+                last_mask = mask
             else:
                 ended, status, nsets, last_mask = after_step(finite, n, mask, last_mask, sets, set_steps, nsets)
             if ended:

@@ -39,9 +39,10 @@ scheme keeps from one step to the next:
     start), kept as a product of exp(−tol_growth·h) per step of length h
     (``tol_decay``, computed again when the step's length ``tol_h``
     changes): one multiplication a step instead of an exponential.
-``ev_t``, ``ev_step``, ``ev_n``, ``ev_last``
+``ev_step``, ``ev_n``, ``ev_last``
     exact contact events (an events loop, ``loop.make_roll(events=True)``):
-    the time (s) and index of the step being taken (the time of the state),
+    the index n of the step being taken (its start, the time of the state,
+    is n·h),
     the events recorded so far (more than the buffer holds: it is full)
     and the contact set of the last one (``contacts.note_event``).
 ``lazy``
@@ -123,7 +124,6 @@ STATE = np.dtype(
         ("tol_weight", _F8),
         ("tol_h", _F8),
         ("tol_decay", _F8),
-        ("ev_t", _F8),
         ("ev_step", np.int64),
         ("ev_n", np.int64),
         ("ev_last", np.int64),
@@ -207,7 +207,6 @@ def init_state(st, ic, off0, kp):
     st.tol_h = -1.0
     st.tol_decay = 1.0
     st.lazy = False
-    st.ev_t = 0.0
     st.ev_step = 0
     st.ev_n = 0
     st.ev_last = 0
