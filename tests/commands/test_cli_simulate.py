@@ -108,6 +108,35 @@ def test_thousands_of_ics_in_one_process(tmp_path):
     assert wall < 30, f"2000 ICs took {wall:.1f} s"
 
 
+def test_events_give_the_apis_contact_times_in_json_and_csv_and_the_same_throws(tmp_path, dicetrace_cli):
+    """``--events`` on `physical`: the exact contact events of ``simulate(..., events=True)`` (sets and times, bit
+    for bit through JSON and CSV), one IC alone or two in a batch; outcome and steps those of the run without."""
+    ics = np.array([[10.0, 0.0, 0.0, 300.0, 0.0, 0.0], [-40.0, 25.0, 30.0, 900.0, -1500.0, 400.0]])
+    (tmp_path / "ics.csv").write_text("vx,vy,vz,Lx,Ly,Lz\n" + "".join(",".join(map(repr, r.tolist())) + "\n" for r in ics))
+    common = ["--preset", "physical", "--t-max", "1"]
+    one = dicetrace_cli("simulate", "--ic", ",".join(map(repr, ics[0].tolist())), *common, "--events", "--format", "json",
+                        cwd=tmp_path)
+    both = dicetrace_cli("simulate", "--ics", "ics.csv", *common, "--events", "--format", "csv", cwd=tmp_path)
+    plain = dicetrace_cli("simulate", "--ics", "ics.csv", *common, "--format", "csv", cwd=tmp_path)
+    for res in (one, both, plain):
+        assert res.returncode == 0, res.stderr
+    doc = json.loads(one.stdout)
+    assert doc["columns"][-2:] == ["contact_sequence", "contact_times_s"]
+    rows = read_csv(both.stdout)
+    for i, ic in enumerate(ics):
+        want = simulate(ic, preset="physical", t_max_s=1.0, events=True)
+        assert len(want.contact_sets) > 5
+        seq = want.contact_sequence
+        times = [float(t) for t in rows[i]["contact_times_s"].split()]
+        assert (rows[i]["contact_sequence"], times) == (seq, want.contact_times.tolist())
+        assert (rows[i]["outcome"], rows[i]["steps"]) == (read_csv(plain.stdout)[i]["outcome"],
+                                                          read_csv(plain.stdout)[i]["steps"])
+        if i == 0:
+            got = doc["rolls"][0]
+            assert (got["contact_sequence"], got["contact_times_s"]) == (seq, want.contact_times.tolist())
+    assert "contact_times_s" not in read_csv(plain.stdout)[0]
+
+
 def test_numerical_failure_exits_1_with_rows_printed(tmp_path, dicetrace_cli):
     res = dicetrace_cli("simulate", "--slice", "seed", "--at", "1.65,3.9", "--dt", "0.01", "--format", "csv", cwd=tmp_path)
     assert res.returncode == 1
@@ -161,6 +190,8 @@ BAD = [
     case(["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n1,2,3,4,5,nan\n"], "{csv}", "line 3", "not finite"),
     case(["--ics", "CSV:x,y\n1,\n", "--slice", "seed"], "{csv}", "column y", "not a number"),
     case(["--ics", "CSV:vx,vy,vz,Lx,Ly,Lz\n1,2,3,4,5,6\n", *IC], "--ics", "--ic", "one source"),
+    case([*IC, "--events"], "--events", "'semi-implicit-euler'", "no exact contact events"),
+    case([*IC, "--preset", "physical", "--integrator", "rk4", "--events"], "--events", "'rk4'"),
 ]
 
 

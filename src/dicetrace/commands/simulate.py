@@ -4,7 +4,10 @@ ICs come from ``--ic VX,VY,VZ,LX,LY,LZ``, from ``--slice seed --at X,Y[,Z]``,
 or from ``--ics FILE.csv`` (columns ``vx,vy,vz,Lx,Ly,Lz``, or ``x,y[,z]``
 with ``--slice seed``).  All ICs run in one parallel batch
 (``simulate_batch``).  Output: ``--format table`` (default), ``csv`` or
-``json``, on stdout or atomically into ``--out FILE``.  A file or pipe gets
+``json``, on stdout or atomically into ``--out FILE``.  ``--events`` (the
+contact integrators) records the exact contact events: the contact sequence
+is then the sets inside the integrator's sub-steps, and a column
+``contact_times_s`` says when each began.  A file or pipe gets
 every row; a terminal gets the table drawn to fit it, and beyond ``TTY_ROWS``
 rows only the first ``TTY_HEAD``, the outcomes of all, and how to get them.
 
@@ -110,17 +113,18 @@ def read_ics_csv(path: Path, slice_name: str | None, l_convention: str):
     return slice_ics(slice_name, coords, l_convention, what=f"IC file {str(path)!r}, a row at"), coords
 
 
-def run_ics(ics: np.ndarray, cfg):
+def run_ics(ics: np.ndarray, cfg, events: bool = False):
     """Summaries of every IC as a BatchResult: one parallel batch, or a plain ``simulate`` for a single IC.
 
-    (Both are bit-identical; the single throw skips the batch's thread start-up.)
+    (Both are bit-identical; the single throw skips the batch's thread start-up.)  ``events``: with the exact
+    contact events and their times (``BatchResult.set_times``).
     """
     # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.simulate import BatchResult, simulate, simulate_batch
 
     if len(ics) != 1:
-        return simulate_batch(ics, config=cfg)
-    r = simulate(ics[0], config=cfg)
+        return simulate_batch(ics, config=cfg, events=events)
+    r = simulate(ics[0], config=cfg, events=events)
     return BatchResult(
         ics=ics.copy(),
         outcome=np.array([r.outcome], dtype=np.int8),
@@ -131,6 +135,7 @@ def run_ics(ics: np.ndarray, cfg):
         sets=r.contact_sets,
         set_steps=r.contact_steps,
         config=cfg,
+        set_times=r.contact_times,
     )
 
 
@@ -143,6 +148,9 @@ def result_rows(batch, coords) -> tuple[list[str], list[list]]:
     ncoord = 0 if coords is None else coords.shape[1]
     names += list(_XYZ[:ncoord])
     names += ["vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps", "t_settle_s", "status", "contact_sequence"]
+    times = batch.set_times
+    if times is not None:
+        names.append("contact_times_s")
     seqs = batch.contact_sequences()
     rows = []
     for i in range(len(batch)):
@@ -157,6 +165,8 @@ def result_rows(batch, coords) -> tuple[list[str], list[list]]:
             Status(int(batch.status_code[i])).label,
             seqs[i],
         ]
+        if times is not None:
+            row.append(Times(times[batch.set_offsets[i]:batch.set_offsets[i + 1]].tolist()))
         rows.append(row)
     return names, rows
 
@@ -169,8 +179,16 @@ TTY_ROWS = 60
 TTY_HEAD = 20
 
 
+class Times(list):
+    """The times (s) at which a throw's contact sets began: a list in JSON, space-separated in a table or CSV."""
+
+    def text(self, num=repr) -> str:
+        return " ".join(num(t) for t in self)
+
+
 def _cells(rows) -> list[list[str]]:
-    return [[fmt_num(v) if isinstance(v, float) else str(v) for v in r] for r in rows]
+    return [[fmt_num(v) if isinstance(v, float) else v.text(fmt_num) if isinstance(v, Times) else str(v) for v in r]
+            for r in rows]
 
 
 def plain_table(names, rows) -> str:
@@ -220,7 +238,7 @@ def render(names, rows, fmt: str, stream, *, meta: dict) -> None:
         w = csv.writer(stream, lineterminator="\n")
         w.writerow(names)
         for r in rows:
-            w.writerow([repr(v) if isinstance(v, float) else v for v in r])
+            w.writerow([repr(v) if isinstance(v, float) else v.text() if isinstance(v, Times) else v for v in r])
     elif fmt == "json":
         doc = {**meta, "columns": names, "rolls": [dict(zip(names, r)) for r in rows]}
         json.dump(doc, stream, indent=1)
@@ -282,6 +300,11 @@ def register(app: typer.Typer) -> None:
             None, "--out", help="Write the output to this file (atomically; a device or FIFO directly; '-': stdout) "
             "instead of stdout."
         ),
+        events: bool = typer.Option(
+            False, "--events", help="Record the exact contact events (the contact integrators only, e.g. the physical "
+            "preset's): the contact sequence is then the sets inside the integrator's sub-steps, located where nodes "
+            "enter or leave the ground, and a column contact_times_s gives the time (s) each began. The throws are the "
+            "same as without it; it costs CPU time (docs/model.md 8.1)."),
     ) -> None:
         """Throw the die from one or many ICs; print outcome, steps, t_settle_s, status and contact sequence per IC.
 
@@ -305,8 +328,14 @@ def register(app: typer.Typer) -> None:
             coords = None if c is None else c[None, :]
             source = desc
         cfg = build_config(model, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth)
+        from dicetrace.simulate import check_events  # lazy, as in run_ics
 
-        batch = run_ics(ic_arr, cfg)
+        try:
+            check_events(cfg, events)
+        except ValueError as exc:
+            fail(f"--events: {str(exc).removeprefix('events=True: ')}")
+
+        batch = run_ics(ic_arr, cfg, events)
         names, rows = result_rows(batch, coords)
         meta = {
             "dicetrace_version": dicetrace.__version__,
