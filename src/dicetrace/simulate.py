@@ -478,7 +478,8 @@ class BatchResult:
 
         ``coords``: slice coordinates for the ``x, y, z`` columns (see
         :func:`~dicetrace.tables.rolls_table`); default: the batch's own
-        (``self.coords``, from ICs that carried them), else null.
+        (``self.coords``, from ICs that carried them), else null.  With exact
+        contact events (``set_times``) it has a column ``contact_times_s``.
         """
         from dicetrace.tables import rolls_table  # lazy: pyarrow (through dicetrace.tables) only for this export
 

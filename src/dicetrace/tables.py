@@ -14,10 +14,13 @@ Three Arrow tables with explicit schemas, readable with plain
     settled), ``status``, ``steps``, ``t_settle_s``, ``contact_sets``
     (list<uint8>: bit k = node k+1 at or below the ground), its text form
     ``contact_sequence`` (the program's, e.g. ``0-6-68-8``) and
-    ``n_contact_changes``.
+    ``n_contact_changes``; with exact contact events
+    (``simulate(..., events=True)``, docs/model.md §8.1) also
+    ``contact_times_s`` (list<float64>: the time each set began).
 ``contacts``
     one row per node event: ``ic_id, step, t_s, node`` (1..8), ``kind``
-    (``"enter"`` / ``"leave"``).
+    (``"enter"`` / ``"leave"``); ``t_s`` is the end of the step at which the
+    change was seen, or with exact contact events the event's own time.
 ``trajectory``
     one row per step of one throw: ``ic_id, step, t_s``, centre of mass
     ``cm_{x,y,z}_cm``, its velocity ``vcm_{x,y,z}_cm_s``, the orientation
@@ -93,6 +96,11 @@ ROLLS_SCHEMA = pa.schema(
         _f("n_contact_changes", pa.int32()),
     ]
 )
+
+#: The column a ``rolls`` table of exact contact events adds at its end: when each contact set began.
+EVENT_TIMES_FIELD = _f("contact_times_s", pa.list_(pa.float64()), "s")
+#: ``ROLLS_SCHEMA`` with ``contact_times_s``: the rows of throws with exact contact events.
+ROLLS_EVENTS_SCHEMA = ROLLS_SCHEMA.append(EVENT_TIMES_FIELD)
 
 #: ``ROLLS_SCHEMA`` with the grid indices after ``ic_id``: the rows of a scan dataset.
 GRID_ROLLS_SCHEMA = pa.schema([ROLLS_SCHEMA.field(0), *GRID_FIELDS, *list(ROLLS_SCHEMA)[1:]])
@@ -239,6 +247,8 @@ class _Summaries:
             self.set_offsets = np.asarray(source.set_offsets, dtype=np.int64)
             self.sets = np.asarray(source.sets, dtype=np.uint8)
             self.set_steps = np.asarray(source.set_steps, dtype=np.int64)
+            times = getattr(source, "set_times", None)
+            self.set_times = None if times is None else np.asarray(times, dtype=np.float64)
             self.coords = source.coords
             return
         rolls = [source] if _is_roll(source) else list(source)
@@ -260,13 +270,20 @@ class _Summaries:
         self.set_offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         self.sets = np.concatenate([np.asarray(r.contact_sets, dtype=np.uint8) for r in rolls])
         self.set_steps = np.concatenate([np.asarray(r.contact_steps, dtype=np.int64) for r in rolls])
+        with_times = [r.contact_times is not None for r in rolls]
+        if any(with_times) and not all(with_times):
+            raise ValueError("rolls with and without exact contact events cannot share one table")
+        self.set_times = np.concatenate([r.contact_times for r in rolls]) if all(with_times) else None
         self.coords = None
 
     def __len__(self) -> int:
         return len(self.outcome)
 
     def events(self):
-        """Per-node contact events of all ICs: (row, step, node 1..8, entered), by row, step, node."""
+        """Per-node contact events of all ICs: (row, step, t_s, node 1..8, entered), by row, step, node.
+
+        ``t_s``: the end of the step at which the change was seen (step·dt), or the event's exact time.
+        """
         m = len(self)
         counts = np.diff(self.set_offsets)
         owner = np.repeat(np.arange(m), counts)
@@ -279,7 +296,9 @@ class _Summaries:
         bits = (changed[:, None] >> np.arange(8)) & 1  # (nsets, 8)
         i_set, k = np.nonzero(bits)  # row-major: by set (hence IC and step), then node
         entered = ((sets[i_set] >> k) & 1).astype(bool)
-        return owner[i_set], self.set_steps[i_set], (k + 1).astype(np.int8), entered
+        step = self.set_steps[i_set]
+        t_s = step * self.config.numerics.dt_s if self.set_times is None else self.set_times[i_set]
+        return owner[i_set], step, t_s, (k + 1).astype(np.int8), entered
 
 
 def _ids(ic_ids, m: int) -> np.ndarray:
@@ -378,6 +397,10 @@ def rolls_table(source, *, coords=None, ic_ids=None, index=None, metadata: Mappi
         idx = np.asarray(index, dtype=np.int32).reshape(m, 3)
         cols.update({name: pa.array(np.ascontiguousarray(idx[:, j])) for j, name in enumerate("ijk")})
         schema = GRID_ROLLS_SCHEMA
+    if s.set_times is not None:
+        cols["contact_times_s"] = pa.ListArray.from_arrays(
+            pa.array(s.set_offsets.astype(np.int32), type=pa.int32()), pa.array(s.set_times, type=pa.float64()))
+        schema = schema.append(EVENT_TIMES_FIELD)
     table = pa.Table.from_arrays([cols[f.name] for f in schema], schema=schema)
     device = getattr(source, "device", None)  # where a batch ran (BatchResult.device)
     extra = {"device": device, **dict(metadata or {})} if device is not None else metadata
@@ -391,11 +414,11 @@ def contacts_table(source, *, ic_ids=None, metadata: Mapping | None = None) -> p
     """
     s = _Summaries(source)
     ids = _ids(ic_ids, len(s))
-    row, step, node, entered = s.events()
+    row, step, t_s, node, entered = s.events()
     cols = [
         pa.array(ids[row], type=pa.int64()),
         pa.array(step, type=pa.int64()),
-        pa.array(step * s.config.numerics.dt_s, type=pa.float64()),
+        pa.array(t_s, type=pa.float64()),
         pa.array(node, type=pa.int8()),
         pa.array(np.where(entered, "enter", "leave").tolist(), type=pa.string()),
     ]

@@ -222,3 +222,35 @@ def test_failed_run_trajectory_has_only_written_rows(tmp_path):
     assert 1 <= len(traj) <= r.steps + 1
     nodes = traj[[f"n{k}_{a}_cm" for k in range(1, 9) for a in "xyz"]].to_numpy()
     assert not (nodes == 0).all(axis=1).any()  # no unwritten (all-zero) state row
+
+
+def test_exact_contact_events_round_trip_through_the_parquet_files(tmp_path):
+    """With exact contact events the ``rolls`` file carries ``contact_times_s`` (the Roll's and the batch's times,
+    bit for bit) and the ``contacts`` file's ``t_s`` are the events' own times, not step ends; read back with
+    plain pandas.  Without events neither changes; rolls with and without events are refused in one table."""
+    ics = np.array([[10.0, 0.0, 0.0, 300.0, 0.0, 0.0], [-40.0, 25.0, 30.0, 900.0, -1500.0, 400.0]])
+    kw = dict(preset="physical", t_max_s=1.0)
+    rolls = [simulate(ic, events=True, **kw) for ic in ics]
+    batch = simulate_batch(ics, events=True, **kw)
+    sink.write_tables(tmp_path / "one", rolls[1])
+    sink.write_tables(tmp_path / "batch", batch)
+    one = pd.read_parquet(tmp_path / "one" / "rolls.parquet")
+    assert list(one["contact_times_s"][0]) == rolls[1].contact_times.tolist()
+    got = pd.read_parquet(tmp_path / "batch" / "rolls.parquet")
+    for i, r in enumerate(rolls):
+        assert list(got["contact_times_s"][i]) == r.contact_times.tolist()
+        assert got["contact_sequence"][i] == r.contact_sequence
+    contacts = pd.read_parquet(tmp_path / "batch" / "contacts.parquet")
+    first = contacts[contacts["ic_id"] == 0]
+    starts = rolls[0].contact_times[1:]  # every set after the first empty one begins with an enter or a leave
+    assert set(first["t_s"]) == set(starts.tolist())
+    ev = rolls[0].contact_events()  # the Roll's own per-node events, exact times included
+    np.testing.assert_array_equal(first["t_s"].to_numpy(), ev["t_s"].to_numpy())
+    np.testing.assert_array_equal(first["node"].to_numpy(), ev["node"].to_numpy())
+    dt = batch.config.numerics.dt_s
+    assert not np.allclose(first["t_s"], first["step"] * dt)  # exact times, not the ends of the steps
+    assert np.all((first["t_s"] > (first["step"] - 1) * dt) & (first["t_s"] < first["step"] * dt + dt))
+    plain = sink.tables_for(simulate(ics[0], **kw))
+    assert "contact_times_s" not in plain["rolls"].column_names
+    with pytest.raises(ValueError, match="with and without exact contact events"):
+        sink.tables_for([rolls[0], simulate(ics[1], **kw)])
