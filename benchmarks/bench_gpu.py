@@ -28,15 +28,17 @@ prints
 
 The ICs are the seed slice (``dicetrace.ics.seed_slice``), x, y uniform in
 [0, 20]² (rng ``--seed``).  Then, unless ``--skip-scan``, the wall time of
-``dicetrace scan --window 0,20,0,20 --res 1000`` (the seed preset, the same
-window; the whole command in a new process, numba-cuda loading its kernel
+``dicetrace scan --window 0,20,0,20 --res 1000`` (the seed preset, or
+``--scan-preset physical``; the same window; the whole command in a new
+process, numba-cuda loading its kernel
 from its cache there (or compiling it) and the Parquet written to a
 temporary folder) with ``--device cpu``
-and ``--device cuda``, where the CLI has ``--device``: the GPU three times,
-the first loading (or compiling) the kernel, then with one CUDA stream a GPU
-(``DICETRACE_GPU_STREAMS=1``: no overlap of a chunk's copies and host work
-with the next chunk's kernel) and with the default again, from a warm cache,
-and the gain of the overlap on the wall time (the two scans' rows compared).
+and ``--device cuda`` (``--scan-devices``), where the CLI has ``--device``:
+the GPU three times, the first loading (or compiling) the kernel, then with
+one CUDA stream a GPU (``DICETRACE_GPU_STREAMS=1``: no overlap of a chunk's
+copies and host work with the next chunk's kernel; not with
+``--no-scan-overlap``) and with the default again, from a warm cache, and
+the gain of the overlap on the wall time (the two scans' rows compared).
 The throughput lines likewise give the GPU's rate with one stream beside the
 default, and whether the results are identical (they must be).
 
@@ -48,7 +50,8 @@ both devices), and its figures mean nothing (a check that the script and
 the device path run).
 
 Usage: ``python benchmarks/bench_gpu.py [--n 100000] [--rate-n 1000000]
-[--presets seed,physical] [--repeat 1] [--skip-scan] [--quick]``.
+[--presets seed,physical] [--repeat 1] [--skip-scan] [--scan-preset seed] [--scan-devices cpu,cuda]
+[--no-scan-overlap] [--quick]``.
 """
 
 from __future__ import annotations
@@ -281,9 +284,9 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else "no output"
 
 
-def bench_scan(res: int, window: str) -> None:
+def bench_scan(res: int, window: str, preset: str = "seed", devices=("cpu", "cuda"), overlap: bool = True) -> None:
     env = {**os.environ, "COLUMNS": "250", "TERM": "dumb", "NO_COLOR": "1"}
-    print(f"\n== dicetrace scan --window {window} --res {res} (seed preset) ==", flush=True)
+    print(f"\n== dicetrace scan --window {window} --res {res} ({preset} preset) ==", flush=True)
     try:
         helped = subprocess.run([*_cli(), "scan", "--help"], capture_output=True, text=True, timeout=300, env=env)
     except (OSError, subprocess.TimeoutExpired) as exc:
@@ -299,11 +302,16 @@ def bench_scan(res: int, window: str) -> None:
     # the GPU three times: the first loads (or compiles) the kernel; then one stream a GPU (no overlap of one
     # chunk's copies and host work with the next one's kernel) and the default again, from a warm cache
     runs = [("cpu", "cpu", None), ("cuda", "cuda", None), ("cuda", "cuda, 1 stream", 1), ("cuda", "cuda, again", None)]
+    runs = [r if (r[0] in devices and (overlap or r[2] is None)) else None for r in runs]  # kept in place: 2 vs 3
     walls: dict = {}
     try:
-        for i, (device, label, streams) in enumerate(runs):
+        for i, run in enumerate(runs):
+            if run is None:
+                continue
+            device, label, streams = run
             out = tmp / str(i)
-            cmd = [*_cli(), "scan", "--window", window, "--res", str(res), "--out", str(out), "--device", device, "--yes"]
+            cmd = [*_cli(), "scan", "--window", window, "--res", str(res), "--preset", preset, "--out", str(out),
+                   "--device", device, "--yes"]
             run_env = {k: v for k, v in env.items() if k != "DICETRACE_GPU_STREAMS"}
             if streams is not None:
                 run_env["DICETRACE_GPU_STREAMS"] = str(streams)
@@ -348,6 +356,10 @@ def main(argv=None) -> int:
     ap.add_argument("--scan-window", default="0,20,0,20",
                     help="window of the timed scan, as dicetrace scan --window takes it (default 0,20,0,20)")
     ap.add_argument("--skip-scan", action="store_true", help="do not time dicetrace scan")
+    ap.add_argument("--scan-preset", default="seed", help="the timed scan's preset (default seed)")
+    ap.add_argument("--scan-devices", default="cpu,cuda", help="the devices of the timed scan (default cpu,cuda)")
+    ap.add_argument("--scan-overlap", action=argparse.BooleanOptionalAction, default=True,
+                    help="also time the GPU's scan on one CUDA stream, for the gain of the overlap (default: yes)")
     ap.add_argument("--seed", type=int, default=7, help="rng seed of the ICs (default 7)")
     ap.add_argument("--repeat", type=int, default=1, help="the rates are the best of this many runs (default 1)")
     ap.add_argument("--quick", action="store_true", help="tiny sizes, to check that the script runs (for tests)")
@@ -362,6 +374,11 @@ def main(argv=None) -> int:
     unknown = [p for p in presets if p not in PRESETS]
     if unknown or not presets:
         _fail(f"--presets: unknown preset(s) {', '.join(unknown) or '(none given)'} (choose from {', '.join(PRESETS)})")
+    if args.scan_preset not in PRESETS:
+        _fail(f"--scan-preset: unknown preset {args.scan_preset!r} (choose from {', '.join(PRESETS)})")
+    scan_devices = tuple(d.strip() for d in args.scan_devices.split(",") if d.strip())
+    if not scan_devices or set(scan_devices) - {"cpu", "cuda"}:
+        _fail(f"--scan-devices: choose from cpu, cuda (comma-separated), got {args.scan_devices!r}")
     for name, v, lo in (("--n", args.n, 1), ("--rate-n", args.rate_n, 1), ("--scan-res", args.scan_res, 2),
                         ("--repeat", args.repeat, 1)):
         if v < lo:
@@ -398,7 +415,7 @@ def main(argv=None) -> int:
     if args.skip_scan:
         print("\nscan: skipped (--skip-scan)")
     else:
-        bench_scan(scan_res, args.scan_window)
+        bench_scan(scan_res, args.scan_window, args.scan_preset, scan_devices, args.scan_overlap)
     return 0
 
 

@@ -1,15 +1,16 @@
 #!/usr/bin/env bash
 # The GPU check, in one run, on a machine with a CUDA GPU: the tests marked gpu (tests/core/test_gpu.py), then
 # benchmarks/bench_gpu.py at the sizes the GPU issue asks for (10^5 ICs of agreement per preset, 10^6 for the
-# GPU's rate, the 1000 x 1000 scan on each device; on the GPU with one CUDA stream and with two, which gives the
-# gain of overlapping a chunk's transfers and host work with the next chunk's kernel), and a 300 x 300 GPU scan
+# GPU's rate, the 1000 x 1000 seed scan on each device; on the GPU with one CUDA stream and with two, which gives
+# the gain of overlapping a chunk's transfers and host work with the next chunk's kernel; the 1000 x 1000 physical
+# scan on the GPU, loading its kernel and again from a warm cache), and a 300 x 300 GPU scan
 # on two Dask workers against the same scan in one process (their rows must be identical), and the explorer's
 # 256 x 256 view of `physical` (its map worker, without the web server) on the GPU and on the CPU.
 #
 # For a machine with numba-cuda, numpy, scipy, pyarrow and pandas and nothing else of dicetrace's dependencies
 # (no rerun-sdk, no internet): it runs the working tree as it is (PYTHONPATH=src, nothing installed), from the
 # repository root.  Sized for about 6 minutes on an H200 beside a 16-core CPU, at most 9 min 40 s (the sum of
-# the parts' limits), where the numba cache starts cold (the CPU's kernels compile in the tests' run and load
+# the parts' limits, 580 s), where the numba cache starts cold (the CPU's kernels compile in the tests' run and load
 # from the cache after); each part has a time limit, and
 # the benchmark prints as it goes, so a part cut short still leaves what it measured.  dicetrace scan needs
 # typer as well: without it bench_gpu.py says the scan is not available.
@@ -46,13 +47,15 @@ say "### machine"
 say "git: $(git rev-parse --short HEAD 2>/dev/null || echo 'not a git checkout') $(git status --short 2>/dev/null | wc -l | tr -d ' ') changed files"
 
 if "$PY" -c 'import pytest' 2>/dev/null; then
-    part 180 "tests marked gpu" "$PY" -m pytest -q -m gpu tests/core/test_gpu.py -p no:cacheprovider
+    part 170 "tests marked gpu" "$PY" -m pytest -q -m gpu tests/core/test_gpu.py -p no:cacheprovider
 else
     say "### tests marked gpu: not run (pytest is not installed)"
 fi
-# seed first, with the scan (quick; the GPU's scan with one stream and with two: the overlap); then physical
-part 120 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
-part 150 "bench_gpu: physical" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 --rate-n 1000000 --skip-scan
+# seed first, with the scan (quick; the GPU's scan with one stream and with two: the overlap); then physical, with
+# its 1000 x 1000 scan on the GPU only (the CPU's would take about 30 s of 16 cores; its rate is measured above)
+part 115 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
+part 165 "bench_gpu: physical, and its scan on the GPU" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 \
+    --rate-n 1000000 --scan-preset physical --scan-devices cuda --no-scan-overlap
 # two Dask workers on the GPU(s) (sharing one where there is one): the rows of the one-process GPU scan
 if "$PY" -c 'import dask.distributed, typer' 2>/dev/null; then
     part 70 "scan on Dask, --device cuda, 2 workers, against one process" "$PY" - <<'PYEOF'

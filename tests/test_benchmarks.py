@@ -105,8 +105,7 @@ def test_gpu_bench_runs_on_the_simulator_and_prints_the_agreement():
             line = next(ln for ln in lines if ln.strip().startswith(name))
             got[name] = line.split("(")[1].rstrip(")")  # "k of n"
         assert all(v.endswith(" of 8") for v in got.values()), got
-        if preset == "seed":  # the simulator's seed path is the CPU's, bit for bit
-            assert set(got.values()) == {"8 of 8"}, got
+        assert set(got.values()) == {"8 of 8"}, got  # on the simulator every preset is the CPU's, bit for bit
         assert any("chaos floor, CPU vs CPU from the ICs nudged by 1e-15" in ln for ln in lines), block
         assert any(ln.strip().startswith(f"{preset} within its chaos floor") or
                    ln.strip().startswith(f"{preset} ABOVE its chaos floor") for ln in lines), block
@@ -125,6 +124,8 @@ def test_gpu_bench_without_a_gpu_says_why_in_one_line_and_exits_2():
     (("--presets", "seed,nope"), ("--presets", "nope")),
     (("--n", "0"), ("--n",)),
     (("--rate-n", "many"), ("--rate-n",)),
+    (("--scan-preset", "moon"), ("--scan-preset", "moon")),
+    (("--scan-devices", "cpu,tpu"), ("--scan-devices", "tpu")),
 ])
 def test_gpu_bench_bad_options_are_one_line_exit_2(args, names):
     res = _bench_gpu(*args, env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
