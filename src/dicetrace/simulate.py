@@ -192,11 +192,10 @@ class Roll:
         """
         import pandas as pd  # pandas is slow to import: only when used
 
-        # each event's set, by its index in the sequence: its step, and its time where the throw has them
-        idx, nodes, kinds = contact_events(self.contact_sets, np.arange(len(self.contact_sets)))
-        steps = np.asarray(self.contact_steps, dtype=np.int64)[idx]
-        t = steps * self.dt_s if self.contact_times is None else self.contact_times[idx]
-        return pd.DataFrame({"step": steps, "t_s": t, "node": nodes, "kind": np.where(kinds, "enter", "leave")})
+        from dicetrace.tables import node_events  # the contacts table's events (lazy: pyarrow, through dicetrace.tables)
+
+        _, steps, t, nodes, entered = node_events(self)
+        return pd.DataFrame({"step": steps, "t_s": t, "node": nodes, "kind": np.where(entered, "enter", "leave")})
 
 
 def set_to_text(mask: int) -> str:

@@ -301,6 +301,13 @@ class _Summaries:
         return owner[i_set], step, t_s, (k + 1).astype(np.int8), entered
 
 
+def node_events(source):
+    """Per-node contact events of a Roll, Rolls or a BatchResult: (row, step, t_s, node 1..8, entered), by row,
+    step, node; ``t_s`` the end of the step at which the change was seen, or the event's exact time where the
+    throws recorded exact contact events.  What the ``contacts`` table and ``Roll.contact_events`` hold."""
+    return _Summaries(source).events()
+
+
 def _ids(ic_ids, m: int) -> np.ndarray:
     if ic_ids is None:
         return np.arange(m, dtype=np.int64)
