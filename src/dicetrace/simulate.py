@@ -24,7 +24,7 @@ from dicetrace.batch_chunks import (
     run_chunk,
 )
 from dicetrace.core.contacts import contact_sets_from_heights
-from dicetrace.core.kernels import has_events, run_events, run_roll
+from dicetrace.core.kernels import NO_TRACE, has_events, run_events, run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES, new_states
 from dicetrace.devices import check_device, default_device, device_label, resolve_device
@@ -308,7 +308,6 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
     _check_orientation(orientation)
     events = check_events(cfg, events)
     kin = cfg.kernel_inputs(ic, orientation=orientation)
-    empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     cap = DEFAULT_CAP
     S = new_states(1)
     while True:
@@ -318,7 +317,7 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         if events:
             summary = run_events(*kin, sets, set_steps, times, states=S)
         else:
-            summary = run_roll(*kin, sets, set_steps, *empty, states=S)
+            summary = run_roll(*kin, sets, set_steps, *NO_TRACE, states=S)
         if summary[0] != Status.BUFFER_FULL:
             break
         cap *= CAP_GROWTH
@@ -539,15 +538,16 @@ def simulate_batch(
         where there is none) or ``"auto"`` (the GPU where there is one; one
         line on standard error says which).  The GPU runs the same kernels
         compiled for the device with the CPU's arithmetic: throws as on the
-        CPU up to the last ulp of the device's sin, cos and exp (docs/gpu.md).  The result records it (``BatchResult.device``).
+        CPU up to the last ulp of the device's sin, cos and exp (docs/gpu.md).
+        The result records it (``BatchResult.device``).
         None (default): :func:`~dicetrace.devices.default_device`, the CPU
         unless a :func:`~dicetrace.devices.use_device` block says otherwise.
     events
         Record the exact contact events, as :func:`simulate` does
         (``BatchResult.set_times``); contact integrators only, on the CPU
-        (``device="auto"`` then runs on the CPU; ``"cuda"`` is a ValueError).  The throws are those of
-        ``events=False`` bit for bit, and the batch is bit-identical to :func:`simulate` with events,
-        row by row.
+        (``device="auto"`` then runs on the CPU; ``"cuda"`` is a ValueError).
+        The throws are those of ``events=False`` bit for bit, and the batch
+        is bit-identical to :func:`simulate` with events, row by row.
 
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are

@@ -41,10 +41,9 @@ scheme keeps from one step to the next:
     changes): one multiplication a step instead of an exponential.
 ``ev_step``, ``ev_n``, ``ev_last``
     exact contact events (an events loop, ``loop.make_roll(events=True)``):
-    the index n of the step being taken (its start, the time of the state,
-    is n·h),
-    the events recorded so far (more than the buffer holds: it is full)
-    and the contact set of the last one (``contacts.note_event``).
+    the index n of the step being taken (it starts at n·h, the time of the
+    state), the events recorded so far (more than the buffer holds: it is
+    full) and the contact set of the last one (``contacts.note_event``).
 ``lazy``
     set by a run loop that reads neither the forces nor the node
     velocities at a step's end (a summary loop with the ``rigid`` stop-test
