@@ -224,24 +224,6 @@ def text_to_sets(text: str) -> np.ndarray:
     return np.array(out, dtype=np.uint8)
 
 
-def contact_events(sets, set_steps):
-    """Per-node events between consecutive contact sets.
-
-    Returns arrays (step, node 1..8, entered: bool), ordered by step then node.
-    """
-    steps, nodes, kinds = [], [], []
-    prev = 0
-    for mask, st in zip(np.asarray(sets, dtype=np.int64), np.asarray(set_steps, dtype=np.int64)):
-        changed = prev ^ mask
-        for k in range(8):
-            if changed >> k & 1:
-                steps.append(st)
-                nodes.append(k + 1)
-                kinds.append(bool(mask >> k & 1))
-        prev = mask
-    return np.array(steps, dtype=np.int64), np.array(nodes, dtype=np.int8), np.array(kinds, dtype=bool)
-
-
 def contact_sequence_from_heights(z_steps) -> tuple[np.ndarray, np.ndarray]:
     """Contact sets and their steps from a height series (nstep+1, 8), cm."""
     z = np.ascontiguousarray(z_steps, dtype=np.float64)

@@ -304,7 +304,8 @@ class _Summaries:
 def node_events(source):
     """Per-node contact events of a Roll, Rolls or a BatchResult: (row, step, t_s, node 1..8, entered), by row,
     step, node; ``t_s`` the end of the step at which the change was seen, or the event's exact time where the
-    throws recorded exact contact events.  What the ``contacts`` table and ``Roll.contact_events`` hold."""
+    throws recorded exact contact events.  What the ``contacts`` table, the Rerun sink's contact log and
+    ``Roll.contact_events`` hold."""
     return _Summaries(source).events()
 
 

@@ -10,7 +10,6 @@ import pytest
 from dicetrace.params import make_config
 from dicetrace.simulate import (
     Record,
-    contact_events,
     contact_sequence_from_heights,
     sets_to_text,
     simulate,
@@ -152,23 +151,6 @@ def test_contact_sets_from_heights(rows, text, steps):
     assert list(set_steps) == steps
     # never two equal neighbours
     assert all(a != b for a, b in zip(sets[:-1], sets[1:]))
-
-
-def test_contact_events_enter_leave():
-    sets = text_to_sets("0-6-68-8-0-1357")
-    steps = np.array([0, 10, 12, 15, 20, 30])
-    st, node, entered = contact_events(sets, steps)
-    got = list(zip(st.tolist(), node.tolist(), entered.tolist()))
-    assert got == [
-        (10, 6, True),
-        (12, 8, True),
-        (15, 6, False),
-        (20, 8, False),
-        (30, 1, True),
-        (30, 3, True),
-        (30, 5, True),
-        (30, 7, True),
-    ]
 
 
 def test_text_round_trip():

@@ -15,7 +15,7 @@ import pytest
 rr = pytest.importorskip("rerun")
 
 from dicetrace.ics import seed_slice  # noqa: E402
-from dicetrace.simulate import Record, contact_events, sets_to_text, simulate  # noqa: E402
+from dicetrace.simulate import Record, sets_to_text, simulate  # noqa: E402
 from dicetrace.sinks.rerun import FACE_COLORS, default_blueprint, read_rrd, read_rrd_metadata, write_rrd  # noqa: E402
 
 # Writeup's first topology IC (seed slice x = 1.65, y = 3.9) and its contact sequence in the program's text form.
@@ -230,13 +230,33 @@ def test_contact_log_has_exactly_the_roll_events(roll, temporal):
 
 def test_event_markers_sit_at_the_nodes_on_the_event_steps(roll, temporal):
     markers = temporal["/world/contact_events"]
-    ev_steps, ev_nodes, entered = contact_events(roll.contact_sets, roll.contact_steps)
+    ev = roll.contact_events()
+    ev_steps, ev_nodes, entered = ev["step"].to_numpy(), ev["node"].to_numpy(), (ev["kind"] == "enter").to_numpy()
     np.testing.assert_array_equal(markers.column("step").to_numpy(), np.unique(ev_steps))
     pos = values(markers, "Points3D:positions", 3)
     expected = roll.trace.node_pos[ev_steps, ev_nodes.astype(int) - 1].astype(np.float32)
     np.testing.assert_array_equal(pos.reshape(-1, 3), expected)
     # an entering node is at or below the ground at its event step, a leaving one above it
     np.testing.assert_array_equal(roll.trace.node_pos[ev_steps, ev_nodes.astype(int) - 1, 2] <= 0.0, entered)
+
+
+def test_exact_contact_events_are_logged_at_their_times(tmp_path):
+    """A throw with exact contact events (events=True): the contact log's sim_time is each event's own time,
+    inside the step at whose end the change shows (not that step's end), and its step that step."""
+    ev_roll = simulate(seed_slice(1.65, 3.9), preset="physical", events=True, record=Record(states=True))
+    path = tmp_path / "events.rrd"
+    write_rrd(ev_roll, path)
+    log = read_rrd(path)["/contacts"]
+    ev = ev_roll.contact_events()
+    steps, nodes, kinds = logged_events({"/contacts": log})
+    np.testing.assert_array_equal(steps, ev["step"].to_numpy())
+    np.testing.assert_array_equal(nodes, ev["node"].to_numpy())
+    np.testing.assert_array_equal(kinds, ev["kind"].to_numpy())
+    t = log.column("sim_time").cast(pa.int64()).to_numpy() * 1e-9
+    np.testing.assert_allclose(t, ev["t_s"].to_numpy(), rtol=0, atol=1e-9)  # rerun keeps durations in ns
+    end = steps * ev_roll.dt_s
+    assert np.all((t > end - ev_roll.dt_s) & (t <= end + 1e-9))
+    assert np.mean(end - t > 1e-6) > 0.5  # most events fall well inside their step, not on its end
 
 
 def test_cm_path_grows_to_the_final_position(roll, temporal):

@@ -26,7 +26,9 @@ Entities (world frame: z up, cm):
                             rotational kinetic, gravitational, elastic, total)
 ``stop_test/energy``        the program's stop-test energy, with its threshold
 ``stop_margin``             log10 of the stop-test energy above the threshold (the crossing)
-``contacts``                text log: one row per event, "step 176: node 6 enters"
+``contacts``                text log: one row per event, "step 176: node 6 enters", on
+                            ``sim_time`` at the event's exact time where the throw
+                            recorded exact contact events (``events=True``)
 ``summary``                 text document: IC, configuration, outcome, status,
                             contact sequence
 
@@ -53,7 +55,7 @@ import numpy as np
 
 import dicetrace
 from dicetrace.ic_arrays import IC_FIELDS
-from dicetrace.simulate import contact_events
+from dicetrace.tables import node_events
 from dicetrace.sinks._common import Destination, destination, write_bytes
 from dicetrace.sinks.rerun_channels import arrow_scales, log_channels
 from dicetrace.sinks.rerun_pips import log_pips
@@ -377,9 +379,10 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     rec.send_columns("stop_margin", indexes=index, columns=rr.Scalars.columns(scalars=margin))
 
     # -- contact events: text log and markers --------------------------------------------------
-    ev_steps, ev_nodes, ev_enter = contact_events(roll.contact_sets, roll.contact_steps)
+    # the contacts table's events: on sim_time at the end of their step, or at their exact time where the throw
+    # recorded exact contact events (the markers stay on their step: they show the nodes there)
+    _, ev_steps, ev_t, ev_nodes, ev_enter = node_events(roll)
     if len(ev_steps):
-        ev_t = ev_steps * roll.dt_s
         texts = event_texts(ev_steps, ev_nodes, ev_enter)
         rec.send_columns(
             "contacts",
