@@ -70,6 +70,35 @@ def test_record_seed_slice_writes_rrd_and_parquet(tmp_path, dicetrace_cli):
     ]
 
 
+def test_events_log_the_exact_contact_times_and_write_them_to_parquet(tmp_path, dicetrace_cli):
+    """``--events`` on `physical`: the recording and the tables hold ``simulate(..., events=True)``'s events, bit
+    for bit where the file keeps float64 (Parquet) and to the nanosecond on the viewer's timeline; the default
+    name says so, and the throw is the one without --events."""
+    at = ("--preset", "physical", "--slice", "seed", "--at", "1.65,3.9")
+    res = dicetrace_cli("record", *at, "--events", "--parquet", "pq", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    rrd = tmp_path / "recordings" / "seed_x1.65_y3.9_physical_contact-tsit5_tol2e-08_tolgrowth10_events.rrd"
+    assert f"wrote recordings/{rrd.name}" in res.stdout
+    from dicetrace.params import convert_l
+    from dicetrace.simulate import simulate
+
+    ic = convert_l(np.asarray(seed_slice(1.65, 3.9), dtype=float)[None, :], "program", "physical")[0]
+    want = simulate(ic, preset="physical", events=True)
+    plain = simulate(ic, preset="physical")
+    assert (want.status, want.steps, want.outcome) == (plain.status, plain.steps, plain.outcome)
+    assert want.status.label == "settled"
+    assert f"steps {want.steps} " in res.stdout and want.contact_sequence in res.stdout
+    ev = want.contact_events()
+    log = read_rrd(rrd)["/contacts"]
+    np.testing.assert_array_equal(log.column("step").to_numpy(), ev["step"].to_numpy())
+    t_ns = log.column("sim_time").cast("int64").to_numpy()
+    np.testing.assert_allclose(t_ns * 1e-9, ev["t_s"].to_numpy(), rtol=0, atol=1e-9)
+    rolls = pd.read_parquet(tmp_path / "pq" / "rolls.parquet")
+    np.testing.assert_array_equal(rolls["contact_times_s"][0], want.contact_times)
+    contacts = pd.read_parquet(tmp_path / "pq" / "contacts.parquet")
+    np.testing.assert_array_equal(contacts["t_s"].to_numpy(), ev["t_s"].to_numpy())
+
+
 def test_default_output_name_encodes_the_ic(tmp_path, dicetrace_cli):
     res = dicetrace_cli("record", "--slice", "seed", "--at", "1.5,4,0.25", "--t-max", "0.2", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
@@ -91,6 +120,8 @@ def test_default_name_of_a_direct_ic_and_non_default_numerics():
     assert default_name(seed_slice(1.65, 3.9), np.array([1.65, 3.9]), {"kind": "slice", "slice": "seed"}, make_config()) == (
         "seed_x1.65_y3.9"
     )
+    assert default_name(seed_slice(1.65, 3.9), np.array([1.65, 3.9]), {"kind": "slice", "slice": "seed"}, cfg,
+                        events=True) == "seed_x1.65_y3.9_physical_forward-euler_dt0.0005_events"
 
 
 @pytest.mark.slow
@@ -180,6 +211,8 @@ BAD = [
     case(["--scan", "adir.rrd", "--at", "1,2"], "--scan", "'adir.rrd'", "_scan.parquet"),
     case(["--scan", "adir.rrd"], "--at", "--scan needs"),
     case(["--scan", "adir.rrd", "--ic", "1,2,3,4,5,6"], "--scan", "--ic"),
+    case([*AT, "--events"], "--events", "'semi-implicit-euler'", "no exact contact events"),
+    case([*AT, "--preset", "physical", "--integrator", "verlet", "--events", "--out", "existing.rrd"], "--events", "'verlet'"),
 ]
 
 

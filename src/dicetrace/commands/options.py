@@ -89,6 +89,16 @@ TolOption = Annotated[Optional[str], typer.Option("--tol", help=TOL_HELP)]
 TolGrowthOption = Annotated[Optional[str], typer.Option("--tol-growth", help=TOL_GROWTH_HELP)]
 SliceOption = Annotated[Optional[str], typer.Option("--slice", help=SLICE_HELP)]
 
+EVENTS_HELP = ("Record the exact contact events (the contact integrators only, e.g. the physical preset's): the contact "
+               "sequence is then the sets inside the integrator's sub-steps, located where nodes enter or leave the "
+               "ground, each with the time it began. The throws are the same as without it; it costs CPU time "
+               "(docs/model.md 8.1).")
+#: ``--events``, as ``simulate`` declares it (the times as a column) and as ``record`` does (the times on the log).
+SimulateEventsOption = Annotated[bool, typer.Option(
+    "--events", help=EVENTS_HELP + " A column contact_times_s gives the times (s).")]
+RecordEventsOption = Annotated[bool, typer.Option(
+    "--events", help=EVENTS_HELP + " The contact log puts each event on sim_time at its own time.")]
+
 #: The option that sets each field the configuration layer names in a ConfigError (``dicetrace.params``,
 #: ``dicetrace.windows``, ``dicetrace.ics``, ``dicetrace.scan``).  A Preset field not here comes from the
 #: preset itself, or from ``--set`` where a command has it.
@@ -141,6 +151,16 @@ def device_or_fail(device: str) -> str:
     one-line failure naming ``--device`` (``cuda`` without a GPU).  ``auto`` says which it took, in one line."""
     with config_errors():
         return device_label(resolve_device(device))
+
+
+def events_or_fail(cfg, events: bool) -> bool:
+    """``--events`` checked against the configuration's integrator: one line naming it, exit 2, where it has none."""
+    from dicetrace.simulate import check_events  # lazy: keeps `dicetrace --help` fast (imports numba)
+
+    try:
+        return check_events(cfg, events)
+    except ValueError as exc:
+        fail(f"--events: {str(exc).removeprefix('events=True: ')}")
 
 
 def preset_or_fail(name: str):

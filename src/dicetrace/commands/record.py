@@ -7,9 +7,11 @@ The recording goes to ``--out PATH.rrd``, by default
 ``recordings/<name>.rrd`` where the name says what is in it: the IC
 (``seed_x1.65_y3.9.rrd``, ``ic_1_2_3_4_5_6.rrd``), plus the preset,
 integrator, time step, time cap and tolerances when they are not the
-defaults, the optional channels and the comparison (:func:`default_name`).  ``--parquet DIR``
-also writes ``rolls.parquet``, ``contacts.parquet`` and
-``trajectory.parquet`` there.  Prints one summary line.
+defaults, the optional channels, exact contact events and the comparison (:func:`default_name`).
+``--parquet DIR`` also writes ``rolls.parquet``, ``contacts.parquet`` and
+``trajectory.parquet`` there.  ``--events`` (the contact integrators) records
+the exact contact events: the contact log puts each on ``sim_time`` at its
+own time, and the Parquet tables carry the times.  Prints one summary line.
 
 Sinks as in rerun's example scripts (``rr.script_add_args``): ``--out`` /
 ``--save FILE`` (the default when no other is given), ``--spawn`` (open a
@@ -60,11 +62,12 @@ from dicetrace.sinks.rerun_stream import (
 DEFAULT_FOLDER = Path("recordings")
 
 
-def default_name(ic, coords, desc: dict, cfg, channels=frozenset()) -> str:
+def default_name(ic, coords, desc: dict, cfg, channels=frozenset(), events: bool = False) -> str:
     """File stem saying what is in the recording: the IC, then whatever is not the default.
 
     The preset, integrator, time step, time cap, tolerance (and its growth), sub-steps when they
-    are not the defaults, and the optional channels (``_forces-penetration``): two recordings with
+    are not the defaults, the optional channels (``_forces-penetration``) and ``_events`` for exact
+    contact events (their contact sequence is another one): two recordings with
     different content never get the same default name, so a default-named file is only ever
     replaced by a recording of the same throw with the same content.
     """
@@ -91,6 +94,8 @@ def default_name(ic, coords, desc: dict, cfg, channels=frozenset()) -> str:
         parts.append(f"substeps{num.substeps}")
     if channels:
         parts.append("-".join(c for c in CHANNELS if c in channels))
+    if events:
+        parts.append("events")
     return "_".join(parts)
 
 
@@ -298,6 +303,7 @@ def register(app: typer.Typer) -> None:
         parquet: Optional[Path] = typer.Option(
             None, "--parquet", help="Also write rolls.parquet, contacts.parquet and trajectory.parquet into this folder."
         ),
+        events: opts.RecordEventsOption = False,
     ) -> None:
         """Simulate one throw (or several, to compare them) and record it for the Rerun viewer, with a default blueprint.
 
@@ -350,7 +356,8 @@ def register(app: typer.Typer) -> None:
         if scan is None:
             cfg = build_config(model, integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
                                tol_growth=tol_growth)
-        name = default_name(the_ic, coords, desc, cfg, chans)
+        events = opts.events_or_fail(cfg, events)
+        name = default_name(the_ic, coords, desc, cfg, chans, events)
         if comparing:
             name = compare_name(name, all_ics, eps, layout or "overlay")
         if out is None and mode is None:
@@ -376,7 +383,7 @@ def register(app: typer.Typer) -> None:
         from dicetrace.simulate import Record, simulate  # lazy: keeps `dicetrace --help` fast (imports numba)
 
         rec_what = Record(states=True, energy=True, forces="forces" in chans)
-        rolls = [simulate(v, config=cfg, record=rec_what) for v in all_ics]
+        rolls = [simulate(v, config=cfg, record=rec_what, events=events) for v in all_ics]
         roll = rolls[0]
         label = labels[0]
 

@@ -27,7 +27,7 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Optional
 
 import numpy as np
 import typer
@@ -278,13 +278,6 @@ def report_failures(statuses, what: str = "IC") -> bool:
 # -- the command ----------------------------------------------------------------------------
 
 
-EVENTS_HELP = ("Record the exact contact events (the contact integrators only, e.g. the physical preset's): the contact "
-               "sequence is then the sets inside the integrator's sub-steps, located where nodes enter or leave the "
-               "ground, and a column contact_times_s gives the time (s) each began. The throws are the same as without "
-               "it; it costs CPU time (docs/model.md 8.1).")
-EventsOption = Annotated[bool, typer.Option("--events", help=EVENTS_HELP)]
-
-
 def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
@@ -307,7 +300,7 @@ def register(app: typer.Typer) -> None:
             None, "--out", help="Write the output to this file (atomically; a device or FIFO directly; '-': stdout) "
             "instead of stdout."
         ),
-        events: EventsOption = False,
+        events: opts.SimulateEventsOption = False,
     ) -> None:
         """Throw the die from one or many ICs; print outcome, steps, t_settle_s, status and contact sequence per IC.
 
@@ -331,13 +324,7 @@ def register(app: typer.Typer) -> None:
             coords = None if c is None else c[None, :]
             source = desc
         cfg = build_config(model, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth)
-        from dicetrace.simulate import check_events  # lazy, as in run_ics
-
-        try:
-            check_events(cfg, events)
-        except ValueError as exc:
-            fail(f"--events: {str(exc).removeprefix('events=True: ')}")
-
+        opts.events_or_fail(cfg, events)
         batch = run_ics(ic_arr, cfg, events)
         names, rows = result_rows(batch, coords)
         meta = {

@@ -267,7 +267,9 @@ def summary_markdown(roll, ic_label: str | None = None) -> str:
         f"- **outcome**: {roll.outcome} ({_outcome_text(roll.outcome)})",
         f"- **status**: {roll.status}",
         f"- **steps**: {roll.steps}, t_settle_s = {roll.t_settle_s:.6g}",
-        f"- **contact sequence**: `{roll.contact_sequence}` ({roll.n_contact_changes} changes)",
+        f"- **contact sequence**: `{roll.contact_sequence}` ({roll.n_contact_changes} changes"
+        + ("; exact contact events: the sets inside the sub-steps, logged at their times)"
+           if roll.contact_times is not None else ")"),
         f"- **preset**: {cfg.preset.name}, integrator {cfg.numerics.integrator}, dt = {cfg.numerics.dt_s:g} s, "
         f"t_max = {cfg.numerics.t_max_s:g} s",
         f"- **dicetrace** {dicetrace.__version__}",
