@@ -104,6 +104,8 @@ ROLLS_EVENTS_SCHEMA = ROLLS_SCHEMA.append(EVENT_TIMES_FIELD)
 
 #: ``ROLLS_SCHEMA`` with the grid indices after ``ic_id``: the rows of a scan dataset.
 GRID_ROLLS_SCHEMA = pa.schema([ROLLS_SCHEMA.field(0), *GRID_FIELDS, *list(ROLLS_SCHEMA)[1:]])
+#: ``GRID_ROLLS_SCHEMA`` with ``contact_times_s``: the rows of a scan with exact contact events.
+GRID_ROLLS_EVENTS_SCHEMA = GRID_ROLLS_SCHEMA.append(EVENT_TIMES_FIELD)
 
 CONTACTS_SCHEMA = pa.schema(
     [

@@ -386,6 +386,8 @@ SCAN_BAD = [
     bad([*HOME5, "--threads", "0"], "--threads", ">= 1"),
     bad([*HOME5, "--png", "{file}/map.png"], "--png", "{file}"),
     bad([*HOME5, "--rrd", "{file}/map.rrd"], "--rrd", "{file}"),
+    bad([*HOME5, "--events"], "--events", "'semi-implicit-euler'", "no exact contact events"),
+    bad([*HOME5, "--preset", "physical", "--events", "--device", "cuda"], "--events", "CPU only"),
 ]
 
 

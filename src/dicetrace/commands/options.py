@@ -97,7 +97,11 @@ EVENTS_HELP = ("Record the exact contact events (the contact integrators only, e
 SimulateEventsOption = Annotated[bool, typer.Option(
     "--events", help=EVENTS_HELP + " A column contact_times_s gives the times (s).")]
 RecordEventsOption = Annotated[bool, typer.Option(
-    "--events", help=EVENTS_HELP + " The contact log puts each event on sim_time at its own time.")]
+    "--events", help=EVENTS_HELP + " The contact log puts each event on sim_time at its own time. With --scan: "
+    "implied by a scan of exact events (the row is reproduced).")]
+ScanEventsOption = Annotated[bool, typer.Option(
+    "--events", help=EVENTS_HELP + " A column contact_times_s gives the times (s): a float64 per set, several times "
+    "the disk of a row without. On the CPU only (--device auto runs on the CPU). Part of the scan's definition.")]
 
 #: The option that sets each field the configuration layer names in a ConfigError (``dicetrace.params``,
 #: ``dicetrace.windows``, ``dicetrace.ics``, ``dicetrace.scan``).  A Preset field not here comes from the
@@ -106,6 +110,7 @@ FIELD_OPTIONS = {
     "preset": "--preset", "integrator": "--integrator", "dt_s": "--dt", "t_max_s": "--t-max", "tol": "--tol",
     "tol_growth": "--tol-growth", "window": "--window", "z": "--z", "res": "--res", "chunk": "--chunk",
     "n": "--n", "seed": "--seed", "method": "--sample", "points": "--points", "device": "--device",
+    "events": "--events",
 }
 #: How an error naming several options shows one the user did not give.
 DEFAULT_TEXT = {"--dt": f"{Numerics.dt_s:g} (the default)", "--t-max": f"{Numerics.t_max_s:g} (the default)"}

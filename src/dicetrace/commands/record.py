@@ -157,7 +157,8 @@ def check_record_size(cfg, n_throws: int = 1, forces: bool = False) -> None:
 def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
     """The IC of a scanned point (nearest grid point to ``--at``) and the scan's configuration.
 
-    Returns (ic, config, coords, description dict).
+    Returns (ic, config, coords, description dict; its ``events``: whether the scan recorded exact contact
+    events, which the recording then records too, to reproduce the row).
     """
     if at is None:
         fail("--scan needs --at X,Y (the slice coordinates of a scanned point)")
@@ -172,12 +173,13 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
         from dicetrace.scan import ic_at, scan_definition  # lazy: keeps `dicetrace --help` fast (imports numba)
 
         the_ic, cfg, row = ic_at(folder, coords)
-        slice_name = scan_definition(folder).space.slice.name
+        defn = scan_definition(folder)
     except (ValueError, KeyError, OSError) as e:
         fail(f"--scan {str(folder)!r} --at {at}: {e}")
     ndim = len(coords)
     exact = np.array([row[a] for a in "xyz"[:ndim]], dtype=np.float64)
-    desc = {"kind": "scan", "slice": slice_name, "scan": str(folder), "ic_id": int(row["ic_id"])}
+    desc = {"kind": "scan", "slice": defn.space.slice.name, "scan": str(folder), "ic_id": int(row["ic_id"]),
+            "events": defn.events}
     if not np.array_equal(exact, np.asarray(coords, dtype=np.float64)):  # snapped: say to which point
         point = ",".join(f"{v:.10g}" for v in exact)
         print(f"dicetrace: --scan: recording the scanned point nearest to --at {at}: {point} (ic_id {int(row['ic_id'])})",
@@ -340,6 +342,7 @@ def register(app: typer.Typer) -> None:
             conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol,
                            "--tol-growth": tol_growth}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
+            events = events or desc["events"]  # the scan's rows hold exact events: so does their replay
             all_ics = [the_ic]
             labels = [ic_label(the_ic, coords, desc)]
         else:

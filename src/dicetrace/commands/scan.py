@@ -10,6 +10,7 @@ Examples::
     dicetrace scan ... --dask                      # a local Dask cluster
     dicetrace scan ... --scheduler tcp://host:8786 # an existing one
     dicetrace scan ... --device cuda               # on a CUDA GPU (numba-cuda)
+    dicetrace scan --preset physical ... --events  # exact contact events (a contact_times_s column)
 
 The output folder holds the rolls table ``rolls/part-*.parquet``, written
 chunk by chunk, and the manifest ``_scan.parquet`` (no rows; the scan's
@@ -53,9 +54,11 @@ from dicetrace.commands.options import (
     PRESET_HELP,
     TOL_GROWTH_HELP,
     TOL_HELP,
+    ScanEventsOption,
     build_config,
     config_errors,
     device_or_fail,
+    events_or_fail,
     fmt_num,
     preset_or_fail,
 )
@@ -316,6 +319,7 @@ def register(app: typer.Typer) -> None:
         yes: bool = typer.Option(False, "--yes", "-y", help=f"Run even when estimated to take over {MAX_UNCONFIRMED_S / 3600:g} h."),
         strict: bool = typer.Option(False, "--strict", help="Exit 1 when any IC ends in a numerical failure (non_finite, blow_up)."),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
+        events: ScanEventsOption = False,
     ) -> None:
         """Scan a slice (grid), a sample or a list of points of IC space; one row per IC."""
         # lazy: keeps `dicetrace --help` fast (imports numba)
@@ -348,6 +352,12 @@ def register(app: typer.Typer) -> None:
                 check_scheduler_address(scheduler)
             except ValueError as e:
                 fail(f"--scheduler: {e}")
+        events = events_or_fail(cfg, events)
+        if events and device == "cuda":
+            fail("--events: exact contact events run on the CPU only: give --device cpu (or auto), not cuda")
+        if events and device == "auto":
+            print("dicetrace: device auto: running on the CPU (exact contact events run on the CPU only)", file=sys.stderr)
+            device = "cpu"
         if png is not None and (space.kind != "grid" or space.ndim < 2):
             fail("--png draws 2-D and 3-D grid scans only (use --rrd for samples, points and 1-D slices)")
         if scheduler is None:  # here (and a local --dask cluster's workers): resolved now, before any work
@@ -365,7 +375,7 @@ def register(app: typer.Typer) -> None:
             on_gpu = (label or "").startswith("cuda") or (label is None and device == "cuda")
             chunk = _existing_chunk(out) or (GPU_DEFAULT_CHUNK if on_gpu else DEFAULT_CHUNK)
         with config_errors():
-            defn = ScanDefinition(space, cfg, chunk, device=label or "cpu")
+            defn = ScanDefinition(space, cfg, chunk, device=label or "cpu", events=events)
         try:
             _check_space_finite(defn)
         except ValueError as e:

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from dicetrace.scan.definition import ScanDefinition, with_device
+from dicetrace.scan.definition import ScanDefinition, as_written_now
 
 #: The manifest beside ``rolls/`` (see :mod:`dicetrace.scan.folder`); the messages here name it.
 MANIFEST = "_scan.parquet"
@@ -198,6 +198,6 @@ def verify_unlogged(path: Path, defn: ScanDefinition, c: int) -> str | None:
         return "its dicetrace metadata is unreadable"
     if meta.get("chunk_index", c) != c:
         return f"it is chunk {meta.get('chunk_index')} (its metadata says), not chunk {c}"
-    if "scan" in meta and json.dumps(with_device(meta["scan"]), sort_keys=True) != defn.canonical():
+    if "scan" in meta and json.dumps(as_written_now(meta["scan"]), sort_keys=True) != defn.canonical():
         return "it belongs to a scan of another definition (its metadata says)"
     return None

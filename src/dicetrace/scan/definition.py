@@ -1,4 +1,5 @@
-"""What a scan is: an IC space, a configuration, a chunk size and the device its throws run on.
+"""What a scan is: an IC space, a configuration, a chunk size, the device its throws run on, and whether its rows
+hold exact contact events.
 
 A :class:`ScanDefinition` fully determines a scan's rows (the device to
 rounding: a GPU's throws of the contact schemes may differ from the CPU's in
@@ -30,6 +31,8 @@ MAX_CHUNK = 1 << 24
 
 #: The device of a definition stored without one (every scan before GPUs ran on the CPU).
 DEFAULT_DEVICE = "cpu"
+#: What a definition stored without a word on events records (every scan before events: the sets at step ends).
+DEFAULT_EVENTS = False
 
 
 def device_kind(label: str) -> str:
@@ -51,12 +54,16 @@ class ScanDefinition:
     ``device``: where the throws run, as :func:`dicetrace.devices.device_label`
     says it: ``"cpu"`` or ``"cuda: <GPU name>"`` (a resolved device, never
     ``"auto"``: :func:`~dicetrace.scan.scan` resolves its ``device`` argument).
+    ``events``: the rows hold the exact contact events (``simulate_batch(...,
+    events=True)``: the contact sets inside the sub-steps and a column
+    ``contact_times_s``); the contact integrators only, on the CPU.
     """
 
     space: IcSpace
     config: Config
     chunk: int = DEFAULT_CHUNK
     device: str = DEFAULT_DEVICE
+    events: bool = DEFAULT_EVENTS
 
     def __post_init__(self) -> None:
         if not isinstance(self.space, (Grid, Sample, Points)):
@@ -73,6 +80,19 @@ class ScanDefinition:
         d = self.device
         if not isinstance(d, str) or not (d == "cpu" or (d.startswith("cuda: ") and d[6:].strip())):
             raise ConfigError("device", f"device must be 'cpu' or 'cuda: <GPU name>' (a resolved device), got {_show(d)}")
+        if not isinstance(self.events, (bool, np.bool_)):
+            raise ConfigError("events", f"events must be True or False, got {_show(self.events)}")
+        object.__setattr__(self, "events", bool(self.events))
+        if self.events:
+            from dicetrace.simulate import check_events  # lazy: numba; only a scan with events asks
+
+            try:
+                check_events(self.config, True)
+            except ValueError as e:
+                raise ConfigError("events", str(e)) from None
+            if d != "cpu":
+                raise ConfigError("events", f"events=True runs on the CPU only, and this scan runs on {d!r}: the GPU "
+                                  "kernels record the sets at output-step ends")
         size = self.space.size
         what = {"grid": "res", "sample": "n"}.get(self.space.kind, "points")  # what sets the size
         if size > MAX_ICS:
@@ -101,26 +121,36 @@ class ScanDefinition:
 
     def to_dict(self) -> dict:
         return {"format": FORMAT, "space": self.space.to_dict(), "config": self.config.as_dict(), "chunk": self.chunk,
-                "device": self.device}
+                "device": self.device, "events": self.events}
 
     @classmethod
     def from_dict(cls, d: dict) -> "ScanDefinition":
-        """Inverse of :meth:`to_dict` (a definition stored before scans recorded their device ran on the CPU)."""
+        """Inverse of :meth:`to_dict` (a definition stored before scans recorded their device ran on the CPU, and
+        one stored before scans could hold events holds none)."""
         if d.get("format") != FORMAT:
             raise ValueError(f"not a {FORMAT} scan definition (format {d.get('format')!r})")
         return cls(space_from_dict(d["space"]), config_from_dict(d["config"]), d["chunk"],
-                   d.get("device", DEFAULT_DEVICE))
+                   d.get("device", DEFAULT_DEVICE), d.get("events", DEFAULT_EVENTS))
+
+    @property
+    def schema(self):
+        """The Arrow schema of the scan's rows: ``GRID_ROLLS_SCHEMA``, with ``contact_times_s`` where it holds
+        exact contact events."""
+        from dicetrace.tables import GRID_ROLLS_EVENTS_SCHEMA, GRID_ROLLS_SCHEMA  # lazy: pyarrow
+
+        return GRID_ROLLS_EVENTS_SCHEMA if self.events else GRID_ROLLS_SCHEMA
 
     def canonical(self) -> str:
         """Canonical JSON (what resuming compares)."""
         return json.dumps(self.to_dict(), sort_keys=True)
 
 
-def with_device(d):
-    """A stored definition dict as this version writes it: one stored before scans recorded their device gets
-    ``"device": "cpu"`` (what compares on resume); anything else as it is."""
-    if isinstance(d, dict) and d.get("format") == FORMAT and "device" not in d:
-        return {**d, "device": DEFAULT_DEVICE}
+def as_written_now(d):
+    """A stored definition dict as this version writes it (what compares on resume): one stored before scans
+    recorded their device gets ``"device": "cpu"``, one stored before scans could hold events ``"events":
+    False``; anything else as it is."""
+    if isinstance(d, dict) and d.get("format") == FORMAT:
+        return {"device": DEFAULT_DEVICE, "events": DEFAULT_EVENTS, **d}
     return d
 
 

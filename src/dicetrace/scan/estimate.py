@@ -19,10 +19,15 @@ from dicetrace.scan.folder import _check_int, has_manifest
 
 #: Bytes on disk per IC, a round upper estimate (measured 80–110 on the writeup's windows).
 BYTES_PER_IC = 128
+#: The same with exact contact events (``contact_times_s``: a float64 per set; measured 450–470 on three windows
+#: of `physical` at 128²).
+BYTES_PER_IC_EVENTS = 640
 #: Bytes on disk per chunk file beyond its rows (Parquet footer, the definition in its metadata; measured ~11 KiB).
 BYTES_PER_CHUNK = 16 * 1024
 #: Memory per IC of a chunk in flight, bytes (contact-set buffers, summaries, the Arrow table).
 MEMORY_PER_IC = 1024
+#: The same with exact contact events (a float64 time beside each of the ``cap`` buffered sets).
+MEMORY_PER_IC_EVENTS = 2048
 #: Memory to draw a scan's map (``--png``, ``--rrd``: the whole scan is read), bytes: per IC (measured 120 for the
 #: PNG and 230 for the recording at 600², rounded up) and beyond the ICs (measured ~60 MiB).
 MAP_MEMORY_PER_IC = 512
@@ -30,6 +35,8 @@ MAP_MEMORY_BASE = 128 << 20
 #: Memory of the whole rolls table held in memory (``scan(space)`` without a folder), bytes per IC (measured 260 for
 #: the table; the chunks and their concatenation are held at once).
 TABLE_MEMORY_PER_IC = 640
+#: The same with exact contact events (measured 730 for the table).
+TABLE_MEMORY_PER_IC_EVENTS = 2048
 #: Memory of one worker process of a local Dask cluster beyond its chunk (an interpreter with numba, pyarrow and
 #: the kernels loaded), bytes.
 DASK_WORKER_MEMORY = 256 << 20
@@ -132,9 +139,11 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     max_steps = defn.config.numerics.max_steps
     bound = ics_todo * max_steps * SLOWEST_STEP_S / nthreads
     free = free_bytes(_existing_parent(Path(out) if out is not None else Path.cwd()))
+    disk_per_ic, memory_per_ic = (BYTES_PER_IC_EVENTS, MEMORY_PER_IC_EVENTS) if defn.events else (BYTES_PER_IC, MEMORY_PER_IC)
     est = ScanEstimate(
         n_ics=defn.size, n_chunks=defn.n_chunks, chunks_todo=chunks_todo, ics_todo=ics_todo,
-        bytes=ics_todo * BYTES_PER_IC + chunks_todo * BYTES_PER_CHUNK, free_bytes=free, chunk_memory=min(defn.chunk, defn.size) * MEMORY_PER_IC,
+        bytes=ics_todo * disk_per_ic + chunks_todo * BYTES_PER_CHUNK, free_bytes=free,
+        chunk_memory=min(defn.chunk, defn.size) * memory_per_ic,
         threads=nthreads, seconds=None, seconds_bound=bound, device=defn.device,
     )
     if not calibrate or bound <= 30.0 or ics_todo == 0 or defn.device != "cpu":
@@ -148,7 +157,7 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     conv = defn.space.slice.l_convention
 
     def probe():
-        return simulate_batch(ics, config=cal, l_convention=conv, threads=1)
+        return simulate_batch(ics, config=cal, l_convention=conv, threads=1, events=defn.events)
 
     # Warm throughput only: the first run compiles (or loads from the cache) every kernel these throws reach --
     # numba compiles some only when a throw first needs them -- and is not timed.  Then the probe is timed over

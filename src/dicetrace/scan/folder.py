@@ -78,10 +78,10 @@ from dicetrace.scan.chunk_files import (
 )
 from dicetrace.scan.chunk_files import ForeignFileError, rolls_dir  # noqa: F401 (re-exported: users import them from here)
 from dicetrace.devices import DeviceError
-from dicetrace.scan.definition import ScanDefinition, describe_differences, device_kind, with_device
+from dicetrace.scan.definition import ScanDefinition, describe_differences, device_kind, as_written_now
 from dicetrace.simulate import simulate_batch
 from dicetrace.sinks._common import OutputError, make_folders, remove_quietly
-from dicetrace.tables import GRID_ROLLS_SCHEMA, rolls_table
+from dicetrace.tables import rolls_table
 
 #: The manifest (MANIFEST): a Parquet file of the rolls table's schema with no rows; its key-value metadata holds
 #: the scan definition (MANIFEST_KEY) and the chunk log (CHUNK_LOG_KEY).
@@ -167,7 +167,7 @@ def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, c
     blk = defn.space.block(start, stop)
     batch = simulate_batch(
         blk.ics, config=defn.config, l_convention=defn.space.slice.l_convention, threads=threads, cap=cap,
-        device=device_kind(defn.device),
+        device=device_kind(defn.device), events=defn.events,
     )
     if batch.device != defn.device:
         raise DeviceError(f"chunk {c} ran on {batch.device}, the scan runs on {defn.device}: "
@@ -236,7 +236,8 @@ def _write_manifest(folder: Path, manifest: dict, log: dict[int, dict]) -> None:
     }
     try:
         with open(tmp, "wb") as f:
-            pq.write_table(GRID_ROLLS_SCHEMA.empty_table().replace_schema_metadata(meta), f, compression="zstd")
+            schema = ScanDefinition.from_dict(manifest["definition"]).schema
+            pq.write_table(schema.empty_table().replace_schema_metadata(meta), f, compression="zstd")
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -321,7 +322,7 @@ def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
     if not has_manifest(folder):
         return False
     try:
-        have = with_device(read_manifest(folder)["definition"])
+        have = as_written_now(read_manifest(folder)["definition"])
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest ({e})") from None
     want = defn.to_dict()

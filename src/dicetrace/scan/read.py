@@ -21,7 +21,6 @@ from dicetrace.ics import Grid
 from dicetrace.scan.chunk_files import METADATA_KEY, chunk_files, verify_chunk
 from dicetrace.scan.definition import ScanDefinition
 from dicetrace.scan.folder import CorruptChunkError, has_chunk_log, read_chunk_log, read_manifest
-from dicetrace.tables import GRID_ROLLS_SCHEMA
 
 #: Fill value of label_grid cells that the (partial) scan has not computed yet.
 MISSING = -2
@@ -77,14 +76,17 @@ def verified_chunk_files(folder, manifest: dict | None = None) -> list[str]:
     return files
 
 
-def _check_columns(columns) -> None:
+def _check_columns(columns, schema=None) -> None:
+    """``columns`` (None: all) refused unless a list of names (of ``schema``, the scan's rows, where given)."""
     if columns is None:
         return
     if isinstance(columns, str) or not all(isinstance(c, str) for c in columns):
         raise TypeError(f"columns must be a list of column names, got {columns!r}")
-    unknown = [c for c in columns if c not in GRID_ROLLS_SCHEMA.names]
+    if schema is None:
+        return
+    unknown = [c for c in columns if c not in schema.names]
     if unknown:
-        raise ValueError(f"unknown column(s) {', '.join(map(repr, unknown))} (a scan has {', '.join(GRID_ROLLS_SCHEMA.names)})")
+        raise ValueError(f"unknown column(s) {', '.join(map(repr, unknown))} (this scan has {', '.join(schema.names)})")
 
 
 def _dataset_table(files: list[str], columns, filter=None) -> pa.Table:
@@ -110,12 +112,14 @@ def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
     :class:`CorruptChunkError` naming the file.
     """
     folder = _folder_of(folder)
-    _check_columns(columns)
+    _check_columns(columns)  # a bad argument before the folder is read
     manifest = read_manifest(folder)
+    schema = ScanDefinition.from_dict(manifest["definition"]).schema
+    _check_columns(columns, schema)
     files = verified_chunk_files(folder, manifest)
     cols = None if columns is None else list(dict.fromkeys(["ic_id", *columns]))
     if not files:
-        table = GRID_ROLLS_SCHEMA.empty_table()
+        table = schema.empty_table()
         if cols is not None:
             table = table.select(cols)
     else:

@@ -33,10 +33,10 @@ from rich.progress import (
 from dicetrace.devices import check_device, device_label, resolve_device
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.memory import available_memory
-from dicetrace.params import Config, resolve_config
+from dicetrace.params import Config, ConfigError, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, device_kind
 from dicetrace.sinks._common import human_bytes, output_folder
-from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC
+from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC, TABLE_MEMORY_PER_IC_EVENTS
 from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask, worker_device
 from dicetrace.scan.folder import (
     _check_int,
@@ -121,26 +121,40 @@ class ScanReport:
 _SPACES = (Grid, Sample, Points)
 
 
-def _definition(space, config, chunk, options, device=None) -> ScanDefinition:
+def _definition(space, config, chunk, options, device=None, events=None) -> ScanDefinition:
     if device is not None:
         check_device(device)
     if isinstance(space, ScanDefinition):
-        if config is not None or device is not None or any(v is not None for v in options.values()):
-            raise ValueError("give a ScanDefinition (its device included) or a space with its configuration, not both")
+        if (config is not None or device is not None or events is not None
+                or any(v is not None for v in options.values())):
+            raise ValueError("give a ScanDefinition (its device and events included) or a space with its "
+                             "configuration, not both")
         return space
     if not isinstance(space, _SPACES):
         raise TypeError(
             f"space must be a Grid, Sample or Points (dicetrace.ics) or a ScanDefinition, not {type(space).__name__}"
         )
-    return ScanDefinition(space, resolve_config(config, **options), chunk)
+    events = False if events is None else events
+    if events is True and device == "cuda":
+        raise ConfigError("events", "events=True runs on the CPU only (device='cpu' or 'auto'): the GPU kernels "
+                          "record the sets at output-step ends")
+    return ScanDefinition(space, resolve_config(config, **options), chunk, events=events)
 
 
 def _on_device(defn: ScanDefinition, device: str | None, client=None) -> ScanDefinition:
     """``defn`` on the device ``device`` (cpu, cuda, auto; None: the definition's own) as it resolves here, or on
-    a worker of the Dask ``client`` (a :class:`~dicetrace.devices.DeviceError` where there is no GPU for cuda)."""
+    a worker of the Dask ``client`` (a :class:`~dicetrace.devices.DeviceError` where there is no GPU for cuda).
+    A scan with exact contact events runs on the CPU: ``auto`` is then the CPU."""
     want = device_kind(defn.device) if device is None else device
+    if defn.events and want == "auto":
+        want = "cpu"
     label = worker_device(client, want) if client is not None else device_label(resolve_device(want))
     return defn if label == defn.device else replace(defn, device=label)
+
+
+def _dask_device(defn: ScanDefinition, device: str | None) -> str:
+    """The device a local Dask cluster for ``defn`` is made for (its workers per GPU): the CPU for exact events."""
+    return "cpu" if defn.events else (device or defn.device)
 
 
 def _chunks(defn: ScanDefinition, todo: Iterable[int], client, threads) -> Iterator[tuple[int, pa.Table]]:
@@ -160,6 +174,7 @@ def iter_scan(
     dask=None,
     n_workers: int | None = None,
     device: str | None = None,
+    events: bool | None = None,
     **options,
 ) -> Iterator[tuple[int, pa.Table]]:
     """Stream a scan: yields ``(chunk_index, rolls_table)`` as chunks finish.
@@ -168,12 +183,12 @@ def iter_scan(
     cluster, an address, or a ``Client``) as they complete.  ``chunks``
     restricts the run to those chunk indices.  Arguments as :func:`scan`.
     """
-    defn = _definition(space, config, chunk, options, device)
+    defn = _definition(space, config, chunk, options, device, events)
     _check_int(threads, "threads", 1)
     _check_int(n_workers, "n_workers", 1)
     _check_dask(dask)
     todo = range(defn.n_chunks) if chunks is None else chunks
-    client, closers = _open_dask(dask, n_workers, device=device or defn.device) if dask else (None, [])
+    client, closers = _open_dask(dask, n_workers, device=_dask_device(defn, device)) if dask else (None, [])
     try:
         defn = _on_device(defn, device, client)
         yield from _chunks(defn, todo, client, threads)
@@ -197,7 +212,7 @@ def _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask) 
 
 def _check_table_memory(defn: ScanDefinition) -> None:
     """Refuse (ValueError) a scan whose whole rolls table, held in memory, would not fit: a folder streams it."""
-    need = defn.size * TABLE_MEMORY_PER_IC
+    need = defn.size * (TABLE_MEMORY_PER_IC_EVENTS if defn.events else TABLE_MEMORY_PER_IC)
     avail = available_memory()
     if avail is not None and need > avail:
         raise ValueError(f"out: the rolls table of {defn.size:,} ICs held in memory needs about {human_bytes(need)}, "
@@ -217,6 +232,7 @@ def scan(
     max_chunks: int | None = None,
     wait: float = 0.0,
     device: str | None = None,
+    events: bool | None = None,
     **options,
 ):
     """Throw the die from every IC of an IC space (summaries only).
@@ -263,6 +279,13 @@ def scan(
         metadata.  A folder holding the same scan run on another device is
         refused (:class:`~dicetrace.scan.folder.DeviceMismatchError`): a
         GPU's throws may differ from the CPU's by rounding.
+    events
+        Record the exact contact events (the contact integrators, on the
+        CPU: ``device="auto"`` then runs on the CPU, ``"cuda"`` is refused),
+        as ``simulate_batch(..., events=True)``: each row's contact sets are
+        then those inside the sub-steps and a column ``contact_times_s`` says
+        when each began.  Part of the definition (None: False, or a
+        ScanDefinition's own).
 
     Returns
     -------
@@ -288,7 +311,7 @@ def scan(
         ``out`` cannot be created or written (the message names it); on a
         full disk the chunks finished so far are kept.
     """
-    defn = _definition(space, config, chunk, options, device)
+    defn = _definition(space, config, chunk, options, device, events)
     _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask)
     _check_space_finite(defn)
     t0 = time.perf_counter()
@@ -299,7 +322,7 @@ def scan(
         defn = _on_device(defn, device)
         if folder is not None:
             check_folder(folder, defn)  # refuse at once, without waiting for a lock (read only)
-    client, closers = _open_dask(dask, n_workers, device=device or defn.device) if dask else (None, [])
+    client, closers = _open_dask(dask, n_workers, device=_dask_device(defn, device)) if dask else (None, [])
     try:
         if client is not None:
             defn = _on_device(defn, device, client)
