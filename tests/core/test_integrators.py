@@ -850,11 +850,11 @@ def test_contact_step_ends_with_the_forces_of_its_state(preset, integ):
 
 
 def test_hermite_root_is_the_first_crossing():
-    """``contact_substep.hermite_root`` (where a sub-step is cut): on random cubic Hermite
+    """``contacts.hermite_root`` (where a sub-step is cut): on random cubic Hermite
     height data it returns a root of the cubic to rounding (one of numpy's roots of the same
     cubic) in the first eighth of (0, 1) where the cubic changes sign, and −1 exactly when it
     changes sign in none."""
-    from dicetrace.core.schemes.contact_substep import hermite_root
+    from dicetrace.core.contacts import hermite_root
 
     rng = np.random.default_rng(5)
     found = 0

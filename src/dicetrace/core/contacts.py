@@ -72,6 +72,34 @@ def contact_sets_from_heights(z_steps, sets, set_steps):
     return nsets
 
 
+@jit(inline="always")
+def hermite_coefficients(z0, v0, z1, v1, h):
+    """(a1, a2, a3): the cubic Hermite interpolant of a height over a (sub-)step of length h is
+    p(θ) = z0 + a1·θ + a2·θ² + a3·θ³ for θ in [0, 1], with p(0) = z0, p(1) = z1 and slopes h·v0, h·v1
+    (z0, z1: the heights at the ends; v0, v1: their time derivatives)."""
+    hv0 = h * v0
+    hv1 = h * v1
+    return hv0, 3.0 * (z1 - z0) - 2.0 * hv0 - hv1, 2.0 * (z0 - z1) + hv0 + hv1
+
+
+@jit(inline="always")
+def hermite_value(z0, a1, a2, a3, t):
+    """p(t) of the interpolant :func:`hermite_coefficients` describes (Horner's scheme)."""
+    return z0 + t * (a1 + t * (a2 + t * a3))
+
+
+@jit(inline="always")
+def hermite_slope(a1, a2, a3, t):
+    """p'(t) of the interpolant :func:`hermite_coefficients` describes."""
+    return a1 + t * (2.0 * a2 + 3.0 * t * a3)
+
+
+@jit(inline="always")
+def node_vz(U, L, off, k, inertia):
+    """The vertical velocity of node k: u_z = U_z + (x × ω)_z, with x its offset and ω = L / inertia."""
+    return U[2] + (off[k, 0] * (L[1] / inertia) - off[k, 1] * (L[0] / inertia))
+
+
 @jit
 def hermite_crossings(z0, v0, z1, v1, h, cmin, roots):
     """The sign changes of the cubic Hermite interpolant of a height over a sub-step, and its side at the start.
@@ -89,11 +117,7 @@ def hermite_crossings(z0, v0, z1, v1, h, cmin, roots):
     finds a node that enters *and* leaves the ground inside one sub-step (both
     ends above it), which no sign change between the ends shows.
     """
-    hv0 = h * v0
-    hv1 = h * v1
-    a1 = hv0
-    a2 = 3.0 * (z1 - z0) - 2.0 * hv0 - hv1
-    a3 = 2.0 * (z0 - z1) + hv0 + hv1
+    a1, a2, a3 = hermite_coefficients(z0, v0, z1, v1, h)
     # the turning points in (cmin, 1): roots of p'(θ) = a1 + 2·a2·θ + 3·a3·θ²
     br0 = cmin
     br1 = 1.0
@@ -128,24 +152,24 @@ def hermite_crossings(z0, v0, z1, v1, h, cmin, roots):
     # pieces [cmin, br1], [br1, br2], [br2, 1] (the last ones empty when there are fewer turning points)
     edges = (br0, br1, br2 if nb == 2 else 1.0, 1.0)
     n = 0
-    p_lo = z0 + cmin * (a1 + cmin * (a2 + cmin * a3))
+    p_lo = hermite_value(z0, a1, a2, a3, cmin)
     below = p_lo < 0.0
     if p_lo == 0.0:  # on the ground exactly at the cut-off: the side is the one it moves to
-        below = a1 + cmin * (2.0 * a2 + 3.0 * cmin * a3) < 0.0
+        below = hermite_slope(a1, a2, a3, cmin) < 0.0
     for j in range(nb + 1):
         lo = edges[j]
         hi = edges[j + 1]
         if hi <= lo:
             continue
-        plo = z0 + lo * (a1 + lo * (a2 + lo * a3))
-        phi = z0 + hi * (a1 + hi * (a2 + hi * a3))
+        plo = hermite_value(z0, a1, a2, a3, lo)
+        phi = hermite_value(z0, a1, a2, a3, hi)
         if (plo < 0.0) == (phi < 0.0):
             continue
         for _ in range(60):
             mid = 0.5 * (lo + hi)
             if mid <= lo or mid >= hi:
                 break
-            pm = z0 + mid * (a1 + mid * (a2 + mid * a3))
+            pm = hermite_value(z0, a1, a2, a3, mid)
             if (pm < 0.0) == (plo < 0.0):
                 lo = mid
                 plo = pm
@@ -155,6 +179,65 @@ def hermite_crossings(z0, v0, z1, v1, h, cmin, roots):
             roots[n] = hi
             n += 1
     return n, below
+
+
+@jit
+def hermite_root(z0, v0, z1, v1, h):
+    """First root in (0, 1) of the cubic Hermite interpolant of a height: where the sub-step driver cuts.
+
+    z0, z1: heights at the ends of a step of length h; v0, v1: their time
+    derivatives.  (:func:`hermite_crossings` finds every crossing of the same
+    cubic, for the exact events; this one only the first, as the cuts always
+    have, so that a run with events is the same throw as one without.)  Returns the fraction θ, or -1 when the interpolant has no
+    sign change (then the caller cuts at the linear estimate).  A coarse grid
+    of eighths brackets the first sign change (the cubic may dip and
+    return); Newton's method, kept inside the bracket (bisection when it
+    would leave it), converges there to rounding in a few iterations.
+    """
+    if z0 == 0.0:
+        return 0.0
+    a1, a2, a3 = hermite_coefficients(z0, v0, z1, v1, h)
+    lo = 0.0
+    hi = 1.0
+    plo = z0
+    prev_t = 0.0
+    prev_p = z0
+    found = False
+    for i in range(1, 9):
+        t = i / 8.0
+        p = hermite_value(z0, a1, a2, a3, t)
+        if (p < 0.0) != (prev_p < 0.0):
+            lo = prev_t
+            hi = t
+            plo = prev_p
+            phi = p
+            found = True
+            break
+        prev_t = t
+        prev_p = p
+    if not found:
+        return -1.0
+    # regula falsi start, then bracketed Newton
+    t = lo + (hi - lo) * (plo / (plo - phi))
+    for it in range(60):
+        p = hermite_value(z0, a1, a2, a3, t)
+        if p == 0.0:
+            return t
+        if (p < 0.0) == (plo < 0.0):
+            lo = t
+            plo = p
+        else:
+            hi = t
+        dp = hermite_slope(a1, a2, a3, t)
+        tn = 0.5 * (lo + hi)
+        if dp != 0.0:
+            tn = t - p / dp
+            if not (lo < tn < hi):
+                tn = 0.5 * (lo + hi)
+        if abs(tn - t) <= 1e-15 or hi - lo < 1e-15:
+            return tn
+        t = tn
+    return t
 
 
 #: The most a cubic Hermite interpolant leaves the chord of its end values by its end slopes: |h10|, |h11| ≤ 4/27.
@@ -191,8 +274,8 @@ def note_substep_events(st, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, inerti
     for k in range(8):
         zs = Xs[2] + offs[k, 2]
         ze = Xe[2] + offe[k, 2]
-        vs = Us[2] + (offs[k, 0] * (Ls[1] / inertia) - offs[k, 1] * (Ls[0] / inertia))
-        ve = Ue[2] + (offe[k, 0] * (Le[1] / inertia) - offe[k, 1] * (Le[0] / inertia))
+        vs = node_vz(Us, Ls, offs, k, inertia)
+        ve = node_vz(Ue, Le, offe, k, inertia)
         reach = HERMITE_SLOPE_BOUND * hs * (abs(vs) + abs(ve))
         nk = 0
         if min(zs, ze) > reach:

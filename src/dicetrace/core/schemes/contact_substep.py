@@ -33,7 +33,7 @@ import sys
 from types import ModuleType
 
 from dicetrace.core import loop
-from dicetrace.core.contacts import note_event, note_substep_events
+from dicetrace.core.contacts import hermite_root, node_vz, note_event, note_substep_events
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
 from dicetrace.core.model import node_heights
@@ -105,69 +105,6 @@ EXACT_FLIGHT = True
 #: Most sub-steps in one macro step (a safety valve: beyond it the state is
 #: set to NaN, which the loop reports as ``non_finite``).
 MAX_SUBSTEPS = 100000
-
-
-@jit
-def hermite_root(z0, v0, z1, v1, h):
-    """First root in (0, 1) of the cubic Hermite interpolant of a height.
-
-    z0, z1: heights at the ends of a step of length h; v0, v1: their time
-    derivatives.  Returns the fraction θ, or -1 when the interpolant has no
-    sign change (then the caller cuts at the linear estimate).  A coarse grid
-    of eighths brackets the first sign change (the cubic may dip and
-    return); Newton's method, kept inside the bracket (bisection when it
-    would leave it), converges there to rounding in a few iterations.
-    """
-    if z0 == 0.0:
-        return 0.0
-    # p(θ) = z0·h00 + h·v0·h10 + z1·h01 + h·v1·h11 = a0 + a1·θ + a2·θ² + a3·θ³
-    hv0 = h * v0
-    hv1 = h * v1
-    a0 = z0
-    a1 = hv0
-    a2 = 3.0 * (z1 - z0) - 2.0 * hv0 - hv1
-    a3 = 2.0 * (z0 - z1) + hv0 + hv1
-    lo = 0.0
-    hi = 1.0
-    plo = z0
-    prev_t = 0.0
-    prev_p = z0
-    found = False
-    for i in range(1, 9):
-        t = i / 8.0
-        p = a0 + t * (a1 + t * (a2 + t * a3))
-        if (p < 0.0) != (prev_p < 0.0):
-            lo = prev_t
-            hi = t
-            plo = prev_p
-            phi = p
-            found = True
-            break
-        prev_t = t
-        prev_p = p
-    if not found:
-        return -1.0
-    # regula falsi start, then bracketed Newton
-    t = lo + (hi - lo) * (plo / (plo - phi))
-    for it in range(60):
-        p = a0 + t * (a1 + t * (a2 + t * a3))
-        if p == 0.0:
-            return t
-        if (p < 0.0) == (plo < 0.0):
-            lo = t
-            plo = p
-        else:
-            hi = t
-        dp = a1 + t * (2.0 * a2 + t * 3.0 * a3)
-        tn = 0.5 * (lo + hi)
-        if dp != 0.0:
-            tn = t - p / dp
-            if not (lo < tn < hi):
-                tn = 0.5 * (lo + hi)
-        if abs(tn - t) <= 1e-15 or hi - lo < 1e-15:
-            return tn
-        t = tn
-    return t
 
 
 @jit(inline="always")
@@ -428,8 +365,8 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
                 ze = Xn[2] + offn[k, 2]
                 if (zs < 0.0) != (ze < 0.0) and zs != 0.0:
                     # u_z = U_z + (x × ω)_z at both ends
-                    vs = Uw[2] + (offw[k, 0] * (Lw[1] / I) - offw[k, 1] * (Lw[0] / I))
-                    ve = Un[2] + (offn[k, 0] * (Ln[1] / I) - offn[k, 1] * (Ln[0] / I))
+                    vs = node_vz(Uw, Lw, offw, k, I)
+                    ve = node_vz(Un, Ln, offn, k, I)
                     th = hermite_root(zs, vs, ze, ve, hs)
                     if th < 0.0:
                         th = zs / (zs - ze)
