@@ -49,15 +49,20 @@ script sets there unless given: the physics then runs as plain Python on
 both devices), and its figures mean nothing (a check that the script and
 the device path run).
 
+``--write FILE.json`` also writes every figure printed, with the machine and
+the versions, to a JSON file (rewritten after each part, so a run cut short
+keeps what it measured): the results file a README figure is quoted from.
+
 Usage: ``python benchmarks/bench_gpu.py [--n 100000] [--rate-n 1000000]
 [--presets seed,physical] [--repeat 1] [--skip-scan] [--scan-preset seed] [--scan-devices cpu,cuda]
-[--no-scan-overlap] [--quick]``.
+[--no-scan-overlap] [--quick] [--write FILE.json]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.metadata
+import json
 import math
 import os
 import platform
@@ -204,7 +209,13 @@ def _timed(fn, repeat: int = 1):
     return out, best
 
 
-def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int, repeat: int = 1) -> None:
+def _count(mask: np.ndarray) -> list[int]:
+    """[k, n]: how many of the n throws of ``mask`` hold."""
+    return [int(mask.sum()), int(len(mask))]
+
+
+def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int, repeat: int = 1) -> dict:
+    """Print the preset's figures (see the module docstring) and return them, as ``--write`` stores them."""
     import numba
 
     from dicetrace.simulate import simulate_batch
@@ -233,7 +244,8 @@ def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int, repea
           f"the overlap of {_streams_default()} streams gains ×{t_one / t_gpu:.2f}; results "
           + ("identical" if same else "DIFFERENT (a defect)"), flush=True)
     print(f"  GPU vs CPU, {n:,} ICs of the seed slice, x, y uniform in [0, 20]² (rng {seed}):")
-    for name, mask in agreement(gpu, cpu, n).items():
+    agree = agreement(gpu, cpu, n)
+    for name, mask in agree.items():
         print(f"    {name:<26} {_frac(mask)}")
     floor = cpu_batch(nudged(agree_ics, seed + 1), preset)
     floor_mask = agreement(floor, cpu, n)["outcomes equal"]
@@ -247,6 +259,22 @@ def bench_preset(preset: str, n: int, rate_n: int, warm_n: int, seed: int, repea
     failed = int(((cpu.status_code == 0) & (gpu.status_code[:n] != 0)).sum())
     if failed:
         print(f"  {failed:,} throws settle on the CPU but not on the GPU")
+    return {
+        "ics": f"seed slice, x, y uniform in [0, 20]^2, rng {seed}",
+        "first_call": {"n": warm_n, "gpu_s": t_gpu0, "cpu_s": t_cpu0},
+        "gpu": {"device": gpu.device, "n": rate_n, "seconds": t_gpu, "throws_per_s": rate_n / t_gpu,
+                "steps_per_throw": float(gpu.steps.mean()), "best_of": repeat},
+        "cpu": {"numba_threads": threads, "n": n, "seconds": t_cpu, "throws_per_s": n / t_cpu,
+                "steps_per_throw": float(cpu.steps.mean()), "best_of": repeat},
+        "gpu_over_cpu_throughput": (rate_n / t_gpu) / (n / t_cpu),
+        "gpu_one_stream": {"streams_default": _streams_default(), "throws_per_s": rate_n / t_one,
+                           "overlap_gain": t_one / t_gpu, "results_identical": bool(same)},
+        "agreement": {name: _count(mask) for name, mask in agree.items()},
+        "chaos_floor": {"nudge": NUDGE, "outcomes equal": _count(floor_mask)},
+        "outcomes_differing": {"gpu_vs_cpu": d_gpu, "cpu_vs_nudged_cpu": d_floor},
+        "within_chaos_floor": verdict == "within",
+        "settle_on_cpu_not_gpu": failed,
+    }
 
 
 class _streams:
@@ -284,20 +312,22 @@ def _last_line(text: str) -> str:
     return lines[-1] if lines else "no output"
 
 
-def bench_scan(res: int, window: str, preset: str = "seed", devices=("cpu", "cuda"), overlap: bool = True) -> None:
+def bench_scan(res: int, window: str, preset: str = "seed", devices=("cpu", "cuda"), overlap: bool = True) -> dict:
+    """Print the timed scans' wall times (see the module docstring) and return them, as ``--write`` stores them."""
     env = {**os.environ, "COLUMNS": "250", "TERM": "dumb", "NO_COLOR": "1"}
     print(f"\n== dicetrace scan --window {window} --res {res} ({preset} preset) ==", flush=True)
+    found: dict = {"window": window, "res": res, "preset": preset, "wall_s": {}}
     try:
         helped = subprocess.run([*_cli(), "scan", "--help"], capture_output=True, text=True, timeout=300, env=env)
     except (OSError, subprocess.TimeoutExpired) as exc:
         print(f"  scan: not available ({type(exc).__name__}: {exc})")
-        return
+        return {**found, "not_available": f"{type(exc).__name__}: {exc}"}
     if helped.returncode != 0:
         print(f"  scan: not available (the CLI does not start: {_last_line(helped.stderr)})")
-        return
+        return {**found, "not_available": _last_line(helped.stderr)}
     if "--device" not in helped.stdout:
         print("  scan --device: not available (this CLI's scan has no --device)")
-        return
+        return {**found, "not_available": "no --device"}
     tmp = Path(tempfile.mkdtemp(prefix="bench_gpu_scan_"))
     # the GPU three times: the first loads (or compiles) the kernel; then one stream a GPU (no overlap of one
     # chunk's copies and host work with the next one's kernel) and the default again, from a warm cache
@@ -326,6 +356,7 @@ def bench_scan(res: int, window: str, preset: str = "seed", devices=("cpu", "cud
                 print(f"  {label:<15} failed (exit {r.returncode}): {_last_line(r.stderr)}")
                 continue
             walls[i] = wall
+            found["wall_s"][label] = wall
             print(f"  {label:<15} {wall:8.2f} s wall, {res * res:,} ICs (the whole command: start-up, "
                   + ("loading or compiling the GPU kernel, " if device == "cuda" else "loading the kernels, ")
                   + "throws, Parquet)", flush=True)
@@ -334,8 +365,11 @@ def bench_scan(res: int, window: str, preset: str = "seed", devices=("cpu", "cud
             print(f"  overlap (DICETRACE_GPU_STREAMS default {_streams_default()} against 1, warm cache): "
                   f"×{walls[2] / walls[3]:.2f} on the scan's wall time; rows "
                   + ("identical" if same else "DIFFERENT (a defect)"), flush=True)
+            found["overlap_gain"] = walls[2] / walls[3]
+            found["overlap_rows_identical"] = bool(same)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    return found
 
 
 def _same_rows(a: Path, b: Path) -> bool:
@@ -363,6 +397,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=7, help="rng seed of the ICs (default 7)")
     ap.add_argument("--repeat", type=int, default=1, help="the rates are the best of this many runs (default 1)")
     ap.add_argument("--quick", action="store_true", help="tiny sizes, to check that the script runs (for tests)")
+    ap.add_argument("--write", metavar="FILE.json", help="also write the figures to this JSON file (after each part)")
     ap.add_argument("--cpu-worker", metavar="DIR", help=argparse.SUPPRESS)  # see cpu_batch
     args = ap.parse_args(argv)
     if args.cpu_worker:
@@ -399,6 +434,16 @@ def main(argv=None) -> int:
 
     import numba
 
+    found = {
+        "machine": {"cpu": cpu_model(), "cpus": os.cpu_count(), "numba_threads": numba.get_num_threads(),
+                    "gpu": device_label("cuda"), "python": platform.python_version(), "numpy": np.__version__,
+                    "numba": numba.__version__, "numba_cuda": _version("numba-cuda"),
+                    "load_average": os.getloadavg()[0]},
+        "simulator": sim, "quick": bool(args.quick or sim), "argv": sys.argv[1:],
+        "started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "presets": {},
+    }
+    write = (lambda: _write_json(args.write, found)) if args.write else (lambda: None)
+    write()  # a bad path fails now, before the run
     print(f"machine: {cpu_model()}, {os.cpu_count()} CPUs, {numba.get_num_threads()} numba threads; "
           f"GPU {device_label('cuda')}")
     print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
@@ -411,12 +456,28 @@ def main(argv=None) -> int:
     elif args.quick:
         print("--quick sizes: the figures below mean little")
     for preset in presets:
-        bench_preset(preset, n, rate_n, warm_n, args.seed, 1 if (args.quick or sim) else args.repeat)
+        found["presets"][preset] = bench_preset(preset, n, rate_n, warm_n, args.seed,
+                                                1 if (args.quick or sim) else args.repeat)
+        write()
     if args.skip_scan:
         print("\nscan: skipped (--skip-scan)")
     else:
-        bench_scan(scan_res, args.scan_window, args.scan_preset, scan_devices, args.scan_overlap)
+        found["scan"] = bench_scan(scan_res, args.scan_window, args.scan_preset, scan_devices, args.scan_overlap)
+    found["finished"] = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    write()
     return 0
+
+
+def _write_json(path: str, found: dict) -> None:
+    """``found`` into ``path`` atomically (a temporary beside it, renamed): one line and exit 2 where it cannot."""
+    target = Path(path)
+    tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(json.dumps(found, indent=1) + "\n")
+        os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        _fail(f"--write {path!r}: {exc.strerror or exc}")
 
 
 if __name__ == "__main__":

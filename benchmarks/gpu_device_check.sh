@@ -15,7 +15,10 @@
 # the benchmark prints as it goes, so a part cut short still leaves what it measured.  dicetrace scan needs
 # typer as well: without it bench_gpu.py says the scan is not available.
 #
-# Output: on standard output and, where OUT is set, in $OUT/gpu_check.txt.
+# Output: on standard output and, where OUT is set, in $OUT/gpu_check.txt, with the benchmark's figures as JSON in
+# $OUT/bench_gpu_seed.json, $OUT/bench_gpu_physical.json (bench_gpu.py --write), $OUT/scan_dask_gpu.json and
+# $OUT/explore_gpu.json: the results files the README's GPU figures are to be quoted from (copy them to
+# benchmarks/results/).
 #
 # Usage: bash benchmarks/gpu_device_check.sh    (PYTHON=... to choose the interpreter)
 set -u
@@ -53,13 +56,18 @@ else
 fi
 # seed first, with the scan (quick; the GPU's scan with one stream and with two: the overlap); then physical, with
 # its 1000 x 1000 scan on the GPU only (the CPU's would take about 30 s of 16 cores; its rate is measured above)
-part 115 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3
+W_SEED=() W_PHYSICAL=()
+if [ -n "${OUT:-}" ]; then
+    W_SEED=(--write "$OUT/bench_gpu_seed.json") W_PHYSICAL=(--write "$OUT/bench_gpu_physical.json")
+fi
+part 115 "bench_gpu: seed, and the scan" "$PY" benchmarks/bench_gpu.py --presets seed --n 100000 --rate-n 1000000 --repeat 3 \
+    ${W_SEED[@]+"${W_SEED[@]}"}
 part 165 "bench_gpu: physical, and its scan on the GPU" "$PY" benchmarks/bench_gpu.py --presets physical --n 100000 \
-    --rate-n 1000000 --scan-preset physical --scan-devices cuda --no-scan-overlap
+    --rate-n 1000000 --scan-preset physical --scan-devices cuda --no-scan-overlap ${W_PHYSICAL[@]+"${W_PHYSICAL[@]}"}
 # two Dask workers on the GPU(s) (sharing one where there is one): the rows of the one-process GPU scan
 if "$PY" -c 'import dask.distributed, typer' 2>/dev/null; then
     part 70 "scan on Dask, --device cuda, 2 workers, against one process" "$PY" - <<'PYEOF'
-import subprocess, sys, tempfile, time
+import json, os, subprocess, sys, tempfile, time
 from pathlib import Path
 from dicetrace.scan import read_scan
 tmp = Path(tempfile.mkdtemp(prefix="gpu_check_dask_"))
@@ -73,23 +81,33 @@ for name, extra in (("one", []), ("dask", ["--dask", "--workers", "2"])):
     print(f"{name}: exit {r.returncode} in {walls[name]:.1f} s {r.stderr.strip()[-300:]}", flush=True)
 a, b = read_scan(tmp / "one"), read_scan(tmp / "dask")
 cols = ["ic_id", "outcome", "status", "steps", "contact_sequence"]
-print("rows identical to the one-process GPU scan:", len(a) == len(b) == 90000 and a[cols].equals(b[cols]))
+same = len(a) == len(b) == 90000 and a[cols].equals(b[cols])
+print("rows identical to the one-process GPU scan:", same)
+if os.environ.get("OUT"):
+    Path(os.environ["OUT"], "scan_dask_gpu.json").write_text(json.dumps(
+        {"scan": " ".join(base[3:]), "wall_s": walls, "rows_identical": bool(same)}, indent=1) + "\n")
 PYEOF
 else
     say "### scan on Dask: not run (dask.distributed or typer is not installed)"
 fi
 # the live converged explorer: a 256 x 256 view of physical, as the explorer's map worker computes it
 part 60 "explorer: a 256 x 256 view of physical, GPU and CPU" "$PY" - <<'PYEOF'
-import os, time
+import json, os, time
+from pathlib import Path
 from dicetrace.explore import View, Worker
+found = {"view": "red-sea, 256 x 256, physical", "cpu_cores": os.cpu_count(), "refined_s": {}}
 for device in ("cuda", "cpu"):
     w = Worker(device=device)
     try:
         w.submit_map(View(window=((1.0, 1.1), (3.5, 3.6)), res=(16, 16), preset="physical"), client="warm").result()
         t = time.perf_counter()
         m = w.submit_map(View(window="red-sea", res=(256, 256), preset="physical"), client="bench").result()
-        print(f"{device}: a 256 x 256 red-sea view of physical in {time.perf_counter() - t:.2f} s "
+        wall = time.perf_counter() - t
+        print(f"{device}: a 256 x 256 red-sea view of physical in {wall:.2f} s "
               f"({m.outcome.size} throws; {os.cpu_count()} CPU cores)", flush=True)
+        found["refined_s"][device] = wall
+        if os.environ.get("OUT"):
+            Path(os.environ["OUT"], "explore_gpu.json").write_text(json.dumps(found, indent=1) + "\n")
     finally:
         w.shutdown()
 PYEOF

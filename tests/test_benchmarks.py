@@ -88,9 +88,20 @@ AGREEMENT_LINES = ("outcomes equal", "steps equal", "contact sequences equal", "
 
 
 @pytest.mark.slow
-def test_gpu_bench_runs_on_the_simulator_and_prints_the_agreement():
-    res = _bench_gpu("--quick", "--skip-scan", env={"NUMBA_ENABLE_CUDASIM": "1", "NUMBA_DISABLE_JIT": "1"})
+def test_gpu_bench_runs_on_the_simulator_and_prints_the_agreement(tmp_path):
+    written = tmp_path / "gpu.json"
+    res = _bench_gpu("--quick", "--skip-scan", "--write", str(written),
+                     env={"NUMBA_ENABLE_CUDASIM": "1", "NUMBA_DISABLE_JIT": "1"})
     assert res.returncode == 0, res.stderr[-3000:]
+    # --write: what was printed, as numbers, with the machine it ran on
+    found = json.loads(written.read_text())
+    assert found["simulator"] is True and found["machine"]["gpu"] == "cuda: numba-cuda simulator"
+    assert list(found["presets"]) == ["seed", "physical"] and "finished" in found
+    for fig in found["presets"].values():
+        assert fig["agreement"] == {name: [8, 8] for name in AGREEMENT_LINES}
+        assert fig["gpu"]["n"] == fig["cpu"]["n"] == 8 and fig["gpu"]["throws_per_s"] > 0
+        assert fig["gpu_one_stream"]["results_identical"] is True
+        assert f"{fig['gpu']['throws_per_s']:>12,.0f} throws/s" in res.stdout
     out = res.stdout
     assert "GPU cuda: numba-cuda simulator" in out and "meaningless" in out
     blocks = out.split("\n== ")[1:]
