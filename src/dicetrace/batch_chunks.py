@@ -48,8 +48,8 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu", events: bool = False
     """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC, on ``device`` ("cpu" or "cuda"):
     (status, steps, outcome, nsets, sets, set_steps, times, starts), throw i's sets from ``starts[i]``.
 
-    ``events``: the events kernels (exact contact events; CPU only), whose
-    event times are ``times`` (laid out as ``sets``); None without.
+    ``events``: the events kernels (exact contact events), whose event
+    times are ``times`` (laid out as ``sets``); None without.
 
     On the CPU the sets are the kernel's buffers (``cap`` per throw,
     ``starts[i] = i * cap``); on the GPU they come back packed, without the
@@ -64,8 +64,7 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu", events: bool = False
     if device == "cuda":
         from dicetrace.core.gpu import run_batch_cuda  # numba-cuda: optional, imported only for a GPU run
 
-        *out, starts = run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap)
-        return (*out, None, starts)
+        return run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, events)
     starts = np.arange(m, dtype=np.int64) * cap
     if m <= BATCH_BLOCK:
         return (*_run_serial(kin, cap, events), starts)
@@ -130,17 +129,17 @@ GPU_CHUNK_MAX = 2**20
 GPU_MEMORY_SHARE = 0.8
 
 
-def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP) -> int:
+def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP, events: bool = False) -> int:
     """ICs per chunk on the GPU by default: at most ``GPU_CHUNK_MAX``, one stream's part of
     ``GPU_MEMORY_SHARE`` of the free memory of the GPU it runs on (of this Dask worker's part of it, where
     workers share one: ``core.gpu.memory_share``), and 16 times the CPU's chunk of host buffers."""
     from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
 
     streams = gpu.streams_per_device()
-    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0) * streams
+    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0, events) * streams
     # asked in a thread of that GPU's pool: a thread has one CUDA device, and this one may never have had one
     free = _gpu_pool(gpu.device_ids()[0], streams).submit(gpu.free_memory).result() * gpu.memory_share()
-    n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * free) // per, 16 * batch_chunk(cap))
+    n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * free) // per, 16 * batch_chunk(cap, events))
     return max(BATCH_BLOCK, n)
 
 

@@ -526,9 +526,9 @@ def simulate_batch(
         unless a :func:`~dicetrace.devices.use_device` block says otherwise.
     events
         Record the exact contact events, as :func:`simulate` does
-        (``BatchResult.set_times``); contact integrators only, on the CPU
-        (``device="auto"`` then runs on the CPU; ``"cuda"`` is a ValueError).
-        The throws are those of ``events=False`` bit for bit, and the batch
+        (``BatchResult.set_times``); contact integrators only, on either
+        device (the GPU runs the same events loop, docs/gpu.md).  The throws
+        are those of ``events=False`` bit for bit, and on the CPU the batch
         is bit-identical to :func:`simulate` with events, row by row.
 
     Integer arguments may be Python or numpy integers; bools, floats and
@@ -548,13 +548,9 @@ def simulate_batch(
     if coords is not None:
         coords = np.array(coords, dtype=np.float64).reshape(m, 3)
     cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
-    if events and device == "auto":
-        device = "cpu"  # the events kernels are CPU kernels: "auto" has one choice
     device = resolve_device(device)
-    if events and device == "cuda":
-        raise ValueError("events=True runs on the CPU only (device='cpu'): the GPU kernels record the sets at output-step ends")
     if chunk is None:
-        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap) if device == "cuda" else batch_chunk(cap, events)
+        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap, events) if device == "cuda" else batch_chunk(cap, events)
     check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention, events=events)
     status, outcome = np.zeros(m, dtype=np.int8), np.zeros(m, dtype=np.int8)
     steps, nsets = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)

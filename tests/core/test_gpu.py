@@ -43,14 +43,16 @@ _RUN = textwrap.dedent(
     r = simulate_batch(ics, config=a["preset"], device=a["device"], cap=a["cap"], **a["options"])
     print(json.dumps(dict(device=r.device, outcome=r.outcome.tolist(), steps=r.steps.tolist(),
                           status=r.status_code.tolist(), offsets=r.set_offsets.tolist(), sets=r.sets.tolist(),
-                          set_steps=r.set_steps.tolist())))
+                          set_steps=r.set_steps.tolist(),
+                          set_times=None if r.set_times is None else r.set_times.tolist())))
     """
 )
 
 
 def _summaries(r) -> dict:
     return dict(outcome=r.outcome.tolist(), steps=r.steps.tolist(), status=r.status_code.tolist(),
-                offsets=r.set_offsets.tolist(), sets=r.sets.tolist(), set_steps=r.set_steps.tolist())
+                offsets=r.set_offsets.tolist(), sets=r.sets.tolist(), set_steps=r.set_steps.tolist(),
+                set_times=None if r.set_times is None else r.set_times.tolist())  # JSON keeps a float64 exactly
 
 
 def _run(device: str, preset: str, xs, ys, *, cap: int = 128, env: dict | None = None, **options):
@@ -115,6 +117,23 @@ def test_physical_default_on_the_simulator_agrees_with_the_cpu():
     assert set(want["status"]) == {0}
 
 
+@pytest.mark.slow
+def test_events_kernel_on_the_simulator_is_the_cpu_bit_for_bit():
+    """Exact contact events on the device (the events kernel: ``scheme.roll_events`` per thread, the events'
+    root scratch in the state record, the times packed beside the sets): `physical`'s 3 throws give the CPU's
+    summaries, event sets, steps and times bit for bit, with 16 sets a throw, so that every throw fills its
+    buffer first and is re-run with more on the device, times included."""
+    res = _run("cuda", "physical", XS[:3], YS[:3], cap=16, env=SIM, events=True)
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    assert got.pop("device") == "cuda: numba-cuda simulator"
+    want = _cpu("physical", XS[:3], YS[:3], events=True)
+    assert got == want
+    assert min(np.diff(want["offsets"])) > 16 and len(want["set_times"]) == len(want["sets"])
+    plain = _cpu("physical", XS[:3], YS[:3])
+    assert (want["steps"], want["outcome"]) == (plain["steps"], plain["outcome"])  # the same throws
+
+
 def test_auto_without_a_gpu_runs_on_the_cpu_and_says_so_once():
     res = _run("auto", "seed", XS[:2], YS[:2], env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
     assert res.returncode == 0, res.stderr
@@ -161,8 +180,8 @@ def _nvvm_missing() -> str | None:
 
 @pytest.mark.slow
 def test_kernels_compile_for_the_device():
-    """Both kernels (and the one that packs the contact sets) compile to PTX for an H200 (sm_90) with NVIDIA's
-    compiler, without contraction: their only fused multiply-adds are libdevice's own (sin, cos, exp), so far fewer
+    """The seed, general and events kernels (and the ones that pack the contact sets and the events' times)
+    compile to PTX for an H200 (sm_90) with NVIDIA's compiler, without contraction: their only fused multiply-adds are libdevice's own (sin, cos, exp), so far fewer
     than NVVM's default makes of the same kernel."""
     why = _nvvm_missing()
     if why:
@@ -181,26 +200,30 @@ def test_kernels_compile_for_the_device():
         from dicetrace.core.state import new_states
         from dicetrace.params import make_config
         out = {}
-        for preset in ("seed", "physical"):
+        for name, preset, events in (("seed", "seed", False), ("physical", "physical", False),
+                                     ("physical events", "physical", True)):
             kin = make_config(preset).kernel_inputs(np.zeros((2, 6)))
-            seed = gpu.uses_seed_kernel(kin.params, kin.off0, kin.integrator_id)
-            kernel = gpu._kernel(kin.integrator_id, seed)
+            seed = not events and gpu.uses_seed_kernel(kin.params, kin.off0, kin.integrator_id)
+            kernel = gpu._kernel(kin.integrator_id, seed, events)
             o = [np.zeros(2, np.int8), np.zeros(2, np.int64), np.zeros(2, np.int8), np.zeros(2, np.int64),
                  np.zeros(16, np.uint8), np.zeros(16, np.int32)]
             args = (kin.ics, kin.off0, kin.params, 8, *o) if seed else (
                 kin.ics, kin.off0, kin.params, 8, new_states(2), *o, np.zeros((0, 33)), np.zeros((0, 24)),
-                np.zeros((0, 6)), np.zeros(0))
+                np.zeros((0, 6)), np.zeros(16 if events else 0))
             sig = tuple(typeof(a) for a in args)
             counts = []
             for s in (True, False):
                 with gpu._nvvm_without_fma() if s else contextlib.nullcontext():
                     ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
                 counts.append(ptx.count("fma.rn.f64"))
-            out[preset] = dict(seed_kernel=seed, fma=counts)
+            out[name] = dict(seed_kernel=seed, fma=counts)
         gather = tuple(typeof(a) for a in (np.zeros(16, np.uint8), np.zeros(16, np.int32), 8, np.zeros(3, np.int64),
                                            np.zeros(4, np.uint8), np.zeros(4, np.int32)))
         ptx, _ = cuda.compile_ptx(gpu._GATHER.py_func, gather, cc=(9, 0))
         out["gather"] = ".entry" in ptx
+        times = tuple(typeof(a) for a in (np.zeros(16), 8, np.zeros(3, np.int64), np.zeros(4)))
+        ptx, _ = cuda.compile_ptx(gpu._GATHER_TIMES.py_func, times, cc=(9, 0))
+        out["gather_times"] = ".entry" in ptx
         print(json.dumps(out))
         """
     )
@@ -210,10 +233,10 @@ def test_kernels_compile_for_the_device():
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout)
     assert out["seed"]["seed_kernel"] and not out["physical"]["seed_kernel"]
-    for preset in ("seed", "physical"):
-        strict_fma, default_fma = out[preset]["fma"]
+    for name in ("seed", "physical", "physical events"):
+        strict_fma, default_fma = out[name]["fma"]
         assert strict_fma < default_fma / 3, out
-    assert out["gather"]  # the kernel that packs the used contact sets for the copy back
+    assert out["gather"] and out["gather_times"]  # the kernels that pack the used sets (and times) for the copy back
 
 
 def _gpu_missing() -> str | None:
@@ -241,6 +264,31 @@ def test_real_gpu_agrees_with_the_cpu(preset):
     same = np.mean(a.outcome == b.outcome)
     assert same >= (0.999 if preset == "seed" else 0.99), same
     assert not np.any((a.status_code == 0) & (b.status_code != 0))
+
+
+@pytest.mark.gpu
+def test_real_gpu_events_agree_with_the_cpu():
+    """On a real GPU, 1000 `physical` throws with exact contact events: outcomes equal to the CPU's on at least
+    99 % (as without events), every settled throw's event times increasing from 0, and where a throw's event
+    sets and steps are the CPU's, its times within 1e-9 s of the CPU's (the device's last-ulp sin and cos)."""
+    why = _gpu_missing()
+    if why:
+        pytest.skip(why)
+    rng = np.random.default_rng(8)
+    ics = seed_slice(rng.uniform(0, 20, 1000), rng.uniform(0, 20, 1000))
+    a = simulate_batch(ics, config="physical", events=True)
+    b = simulate_batch(ics, config="physical", device="cuda", events=True)
+    assert b.device.startswith("cuda: ") and b.set_times is not None
+    assert np.mean(a.outcome == b.outcome) >= 0.99
+    same = 0
+    for i in range(len(ics)):
+        ta, tb = (r.set_times[r.set_offsets[i] : r.set_offsets[i + 1]] for r in (a, b))
+        sa, sb = (r.sets[r.set_offsets[i] : r.set_offsets[i + 1]] for r in (a, b))
+        assert tb[0] == 0.0 and np.all(np.diff(tb) > 0)
+        if len(sa) == len(sb) and np.array_equal(sa, sb):
+            same += 1
+            np.testing.assert_allclose(tb, ta, rtol=0, atol=1e-9)
+    assert same >= 500
 
 
 @pytest.mark.gpu
@@ -286,7 +334,7 @@ def test_several_gpus_share_the_chunks_and_give_one_gpus_results(streams):
         bc.GPU_PIECE_MIN = 2
         run_batch_cuda = gpu.run_batch_cuda
         def spy(ics, *args):
-            pieces.append((len(ics), args[-1]))
+            pieces.append((len(ics), args[3]))  # (off0, kp, integ, cap, events)
             return run_batch_cuda(ics, *args)
         gpu.run_batch_cuda = spy
         a = json.loads(__import__("sys").argv[1])
@@ -294,7 +342,7 @@ def test_several_gpus_share_the_chunks_and_give_one_gpus_results(streams):
                            cap=30)
         print(json.dumps(dict(outcome=r.outcome.tolist(), steps=r.steps.tolist(), status=r.status_code.tolist(),
                               offsets=r.set_offsets.tolist(), sets=r.sets.tolist(), set_steps=r.set_steps.tolist(),
-                              devices=sorted({k for k, _ in chosen}), pieces=pieces,
+                              set_times=r.set_times, devices=sorted({k for k, _ in chosen}), pieces=pieces,
                               threads={k: len({t for j, t in chosen if j == k}) for k, _ in chosen})))
         """
     )

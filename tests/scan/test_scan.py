@@ -387,7 +387,6 @@ SCAN_BAD = [
     bad([*HOME5, "--png", "{file}/map.png"], "--png", "{file}"),
     bad([*HOME5, "--rrd", "{file}/map.rrd"], "--rrd", "{file}"),
     bad([*HOME5, "--events"], "--events", "'semi-implicit-euler'", "no exact contact events"),
-    bad([*HOME5, "--preset", "physical", "--events", "--device", "cuda"], "--events", "CPU only"),
 ]
 
 

@@ -104,6 +104,21 @@ def test_cuda_scan_on_the_simulator_is_the_cpu_scan_and_resumes_only_on_its_devi
     assert line.startswith("dicetrace: error: --device: ") and "'cpu'" in line and "'cuda: numba-cuda simulator'" in line
 
 
+@pytest.mark.slow
+def test_an_events_scan_on_the_simulator_is_the_cpu_events_scan(tmp_path, dicetrace_cli):
+    """``scan --events --device cuda`` (the events kernel) on numba-cuda's simulator, 2×2 ICs of `physical`: the
+    CPU events scan's rows, their event sets and times bit for bit."""
+    args = ("scan", "--preset", "physical", *HOME, "--res", "2", "--events", "-q")
+    res = cli(*args, "--out", "gpu", "--device", "cuda", cwd=tmp_path, env=SIM)
+    assert res.returncode == 0, res.stderr
+    assert dicetrace_cli(*args, "--out", "cpu", cwd=tmp_path).returncode == 0
+    got, want = read_scan(tmp_path / "gpu"), read_scan(tmp_path / "cpu")
+    assert read_manifest(tmp_path / "gpu")["definition"]["device"] == "cuda: numba-cuda simulator"
+    assert len(got) == 4 and got[ROW_COLUMNS].equals(want[ROW_COLUMNS])
+    for col in ("contact_sets", "contact_times_s"):
+        assert all(np.array_equal(a, b) for a, b in zip(got[col], want[col])), col
+
+
 def test_resuming_on_another_device_is_refused_naming_both(tmp_path):
     space, cfg = Grid("seed", "home", 3), make_config("seed")
     scan(space, tmp_path / "s", config=cfg, chunk=4, max_chunks=1)

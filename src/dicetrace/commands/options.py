@@ -101,7 +101,7 @@ RecordEventsOption = Annotated[bool, typer.Option(
     "implied by a scan of exact events (the row is reproduced).")]
 ScanEventsOption = Annotated[bool, typer.Option(
     "--events", help=EVENTS_HELP + " A column contact_times_s gives the times (s): a float64 per set, several times "
-    "the disk of a row without. On the CPU only (--device auto runs on the CPU). Part of the scan's definition.")]
+    "the disk of a row without. Part of the scan's definition.")]
 
 #: The option that sets each field the configuration layer names in a ConfigError (``dicetrace.params``,
 #: ``dicetrace.windows``, ``dicetrace.ics``, ``dicetrace.scan``).  A Preset field not here comes from the

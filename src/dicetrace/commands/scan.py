@@ -353,11 +353,6 @@ def register(app: typer.Typer) -> None:
             except ValueError as e:
                 fail(f"--scheduler: {e}")
         events = events_or_fail(cfg, events)
-        if events and device == "cuda":
-            fail("--events: exact contact events run on the CPU only: give --device cpu (or auto), not cuda")
-        if events and device == "auto":
-            print("dicetrace: device auto: running on the CPU (exact contact events run on the CPU only)", file=sys.stderr)
-            device = "cpu"
         if png is not None and (space.kind != "grid" or space.ndim < 2):
             fail("--png draws 2-D and 3-D grid scans only (use --rrd for samples, points and 1-D slices)")
         if scheduler is None:  # here (and a local --dask cluster's workers): resolved now, before any work

@@ -4,8 +4,8 @@ There is no second copy of the physics here.  numba-cuda compiles a
 function that numba's CPU ``jit`` made (``core._jit``) as a device function
 when device code calls it, so the force law, the steps, the sub-step
 drivers and the run loop are the very functions the CPU runs.  This module
-only adds the two kernels that give each thread its throw (and a third that
-packs the contact sets the throws used, for the copy back):
+only adds the kernels that give each thread its throw (and two that pack
+the contact sets, and the events' times, the throws used, for the copy back):
 
 ``seed kernel``
     the `seed` preset's specialised summary kernel
@@ -13,9 +13,13 @@ packs the contact sets the throws used, for the copy back):
     applies on the CPU (``fast.applies``);
 ``general kernel``
     a scheme's summary run loop (``scheme.roll_summary``, ``loop.make_roll``),
-    in a per-thread state record in device memory.
+    in a per-thread state record in device memory;
+``events kernel``
+    a contact scheme's events loop (``scheme.roll_events``: exact contact
+    events, docs/model.md §8.1), likewise, with each thread's event times
+    beside its sets.
 
-Both are cached on disk by numba-cuda (beside this file, or in the user's
+All are cached on disk by numba-cuda (beside this file, or in the user's
 cache where that cannot be written), keyed on the kernel digest of
 ``core/**`` as the CPU's kernels are: a first run compiles them (tens of
 seconds for a contact scheme), later ones load them.
@@ -28,7 +32,7 @@ host's, in the last ulp (sqrt is correctly rounded on both).
 
 Memory and transfers.  Each thread owns ``cap`` contact sets in device
 memory and, on the general kernel, one state record (``core.state.STATE``,
-3.8 kB, scratch that ``init_state`` overwrites, so uploaded once and reused
+4.0 kB, scratch that ``init_state`` overwrites, so uploaded once and reused
 as on the CPU).  ``run_batch_cuda`` runs one chunk on the calling host
 thread's own CUDA stream, with that thread's pinned host buffers and device
 buffers (grown as needed, kept for its next chunk): the ICs go in, the
@@ -205,6 +209,25 @@ def _make_seed_kernel(tag: int):
     return seed_kernel
 
 
+def _make_events_kernel(scheme, tag: int):
+    """The one-thread-per-throw kernel around ``scheme.roll_events`` (``loop.make_roll(events=True)``); ``tag``
+    as above.  ``ev_times`` is laid out as ``sets``: thread i owns ``[i·cap, (i+1)·cap)``."""
+
+    def events_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2,
+                      ev_times):
+        i = cuda.grid(1)
+        if i < ics.shape[0] and tag >= 0:
+            lo = i * cap
+            s, n, o, ns = scheme.roll_events(ics[i], off0, kp, states[i : i + 1], sets[lo : lo + cap],
+                                             set_steps[lo : lo + cap], e0, e1, e2, ev_times[lo : lo + cap])
+            status[i] = s
+            steps[i] = n
+            outcome[i] = o
+            nsets[i] = ns
+
+    return events_kernel
+
+
 def _make_general_kernel(scheme, tag: int):
     """The one-thread-per-throw kernel around ``scheme.roll_summary`` (``loop.make_roll``); ``tag`` as above."""
 
@@ -226,19 +249,22 @@ _KERNELS: dict = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def _kernel(integ: int, seed_path: bool):
-    """The CUDA dispatcher for integrator ``integ`` (kernel id), the seed kernel or the general one."""
+def _kernel(integ: int, seed_path: bool, events: bool = False):
+    """The CUDA dispatcher for integrator ``integ`` (kernel id): the seed kernel, the general one, or (``events``)
+    the events kernel."""
     scheme = scheme_of(integ)
-    key = "seed" if seed_path else scheme.__name__
+    key = "seed" if seed_path else scheme.__name__ + (".events" if events else "")
     with _KERNELS_LOCK:  # the threads of a GPU (or of several) share one dispatcher, compiled once
-        return _kernel_locked(key, scheme, seed_path)
+        return _kernel_locked(key, scheme, seed_path, events)
 
 
-def _kernel_locked(key: str, scheme, seed_path: bool):
+def _kernel_locked(key: str, scheme, seed_path: bool, events: bool = False):
     if key not in _KERNELS:
         tag = int(kernel_digest()[:15], 16)
-        fn = _make_seed_kernel(tag) if seed_path else _make_general_kernel(scheme, tag)
-        fn.__qualname__ = fn.__name__ = f"{fn.__name__}_{key.rsplit('.', 1)[-1]}"
+        make = _make_seed_kernel if seed_path else _make_events_kernel if events else _make_general_kernel
+        fn = make(tag) if seed_path else make(scheme, tag)
+        short = scheme.__name__.rsplit(".", 1)[-1] if not seed_path else "seed"
+        fn.__qualname__ = fn.__name__ = f"{fn.__name__}_{short}"
         _KERNELS[key] = cuda.jit(fn, cache=CACHE)
     return _KERNELS[key]
 
@@ -276,6 +302,19 @@ def _gather_kernel(sets, set_steps, cap, starts, out_sets, out_steps):
 _GATHER = cuda.jit(_gather_kernel, cache=CACHE)
 
 
+def _gather_times_kernel(times, cap, starts, out_times):
+    """``_gather_kernel`` for the events' times (laid out as the sets)."""
+    i = cuda.grid(1)
+    if i < starts.shape[0] - 1:
+        a = starts[i]
+        lo = i * cap
+        for j in range(starts[i + 1] - a):
+            out_times[a + j] = times[lo + j]
+
+
+_GATHER_TIMES = cuda.jit(_gather_times_kernel, cache=CACHE)
+
+
 def uses_seed_kernel(kp, off0, integ: int) -> bool:
     """Whether throws of this configuration run the seed kernel (the CPU's specialised kernel applies)."""
     scheme = scheme_of(integ)
@@ -283,11 +322,12 @@ def uses_seed_kernel(kp, off0, integ: int) -> bool:
     return getattr(scheme, "summary", None) is fast.roll_summary_sie and bool(scheme.summary_applies(kp, off0))
 
 
-def bytes_per_throw(integ: int, cap: int, kp=None, off0=None) -> int:
+def bytes_per_throw(integ: int, cap: int, kp=None, off0=None, events: bool = False) -> int:
     """Device memory one throw of a chunk takes: IC, summaries, ``cap`` contact sets, as many packed for the
-    host (at most), its offset there and (general kernel) its state record."""
-    state = 0 if (kp is not None and uses_seed_kernel(kp, off0, integ)) else new_states(1).itemsize
-    return 6 * 8 + 1 + 8 + 1 + 8 + 2 * 5 * cap + 8 + state
+    host (at most), its offset there, (general and events kernels) its state record and (``events``) the
+    times of its sets, likewise twice."""
+    state = 0 if (kp is not None and not events and uses_seed_kernel(kp, off0, integ)) else new_states(1).itemsize
+    return 6 * 8 + 1 + 8 + 1 + 8 + 2 * (5 + (8 if events else 0)) * cap + 8 + state
 
 
 class _Buffers:
@@ -336,9 +376,10 @@ def _buffers() -> _Buffers:
     return bufs
 
 
-def run_batch_cuda(ics, off0, kp, integ, cap):
-    """``core.kernels.run_batch`` on the GPU, its contact sets packed: (status, steps, outcome, nsets, sets,
-    set_steps, starts).
+def run_batch_cuda(ics, off0, kp, integ, cap, events: bool = False):
+    """``core.kernels.run_batch`` (``events``: ``run_batch_events``) on the GPU, its contact sets packed:
+    (status, steps, outcome, nsets, sets, set_steps, times, starts), ``times`` the events' times packed as the
+    sets (None without ``events``).
 
     One chunk, on this host thread's stream (:class:`_Buffers`); the caller
     sizes it to the device's memory (:func:`bytes_per_throw`,
@@ -350,19 +391,19 @@ def run_batch_cuda(ics, off0, kp, integ, cap):
     while a kernel runs, one at a time.
     """
     with _SIMULATOR_LOCK if simulated() else contextlib.nullcontext():
-        return _run_batch_cuda(ics, off0, kp, integ, cap)
+        return _run_batch_cuda(ics, off0, kp, integ, cap, bool(events))
 
 
 _SIMULATOR_LOCK = threading.Lock()
 
 
-def _run_batch_cuda(ics, off0, kp, integ, cap):
+def _run_batch_cuda(ics, off0, kp, integ, cap, events):
     m = len(ics)
     if m == 0:
         return (np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int8), np.zeros(0, np.int64),
-                np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0, np.int64))
-    seed_path = uses_seed_kernel(kp, off0, integ)
-    kernel = _kernel(integ, seed_path)
+                np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0) if events else None, np.zeros(0, np.int64))
+    seed_path = not events and uses_seed_kernel(kp, off0, integ)
+    kernel = _kernel(integ, seed_path, events)
     buf = _buffers()
     stream = buf.stream
     # in: the ICs and the offsets, through pinned buffers (asynchronous copies on this thread's stream)
@@ -379,8 +420,9 @@ def _run_batch_cuda(ics, off0, kp, integ, cap):
         args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps)
     else:
         empty = (buf.dev("tr_state", 0, np.float64, loop.STATE_COLS), buf.dev("tr_force", 0, np.float64, loop.FORCE_COLS),
-                 buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS), buf.dev("ev_times", 0, np.float64))
-        args = (d_ics, d_off0, kp, cap, buf.dev("states", m, None), *outs, d_sets, d_set_steps, *empty)
+                 buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS))
+        d_times = buf.dev("times", m * cap, np.float64) if events else buf.dev("ev_times", 0, np.float64)
+        args = (d_ics, d_off0, kp, cap, buf.dev("states", m, None), *outs, d_sets, d_set_steps, *empty, d_times)
     _launch(kernel, m, args, stream)
     # out: the summaries first, then only the contact sets the throws used
     hosts = [buf.host(name, m, dt) for name, dt in kinds]
@@ -393,6 +435,7 @@ def _run_batch_cuda(ics, off0, kp, integ, cap):
     np.cumsum(used, out=starts[1:])
     total = int(starts[-1])
     sets, set_steps = np.empty(total, np.uint8), np.empty(total, np.int32)
+    times = np.empty(total) if events else None
     if total:
         h_starts = buf.host("starts", m + 1, np.int64)
         h_starts[:] = starts
@@ -403,6 +446,13 @@ def _run_batch_cuda(ics, off0, kp, integ, cap):
         h_out = (buf.host("packed_sets", total, np.uint8), buf.host("packed_steps", total, np.int32))
         for dev, host in zip(d_out, h_out):
             dev.copy_to_host(host, stream=stream)
+        if events:
+            d_packed_times = buf.dev("packed_times", total, np.float64)
+            _launch(_GATHER_TIMES, m, (d_times, cap, d_starts, d_packed_times), stream)
+            h_times = buf.host("packed_times", total, np.float64)
+            d_packed_times.copy_to_host(h_times, stream=stream)
         stream.synchronize()
         sets[:], set_steps[:] = h_out
-    return status, steps, outcome, nsets, sets, set_steps, starts[:-1]
+        if events:
+            times[:] = h_times
+    return status, steps, outcome, nsets, sets, set_steps, times, starts[:-1]

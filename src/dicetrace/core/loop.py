@@ -224,7 +224,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         nsets = 1
         last_mask = 0
         if events:
-            roots = np.empty((8, 3))  # the events' root scratch (an events loop runs on the CPU: it may allocate)
+            roots = st.ev_roots  # the events' root scratch
             ev_times[0] = 0.0
             st.ev_n = 1
         # The program starts out of contact (forces are zero before the first

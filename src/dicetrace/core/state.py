@@ -39,11 +39,14 @@ scheme keeps from one step to the next:
     start), kept as a product of exp(−tol_growth·h) per step of length h
     (``tol_decay``, computed again when the step's length ``tol_h``
     changes): one multiplication a step instead of an exponential.
-``ev_step``, ``ev_n``, ``ev_last``
+``ev_step``, ``ev_n``, ``ev_last``, ``ev_roots``
     exact contact events (an events loop, ``loop.make_roll(events=True)``):
     the index n of the step being taken (it starts at n·h, the time of the
     state), the events recorded so far (more than the buffer holds: it is
-    full) and the contact set of the last one (``contacts.note_event``).
+    full), the contact set of the last one (``contacts.note_event``) and
+    the crossings of each node's height inside a sub-step (scratch of
+    ``contacts.note_substep_events``; in the record, not allocated by the
+    loop, so that a GPU thread has it too).
 ``lazy``
     set by a run loop that reads neither the forces nor the node
     velocities at a step's end (a summary loop with the ``rigid`` stop-test
@@ -126,6 +129,7 @@ STATE = np.dtype(
         ("ev_step", np.int64),
         ("ev_n", np.int64),
         ("ev_last", np.int64),
+        ("ev_roots", _F8, (8, 3)),
         ("lazy", np.bool_),
     ],
     align=True,

@@ -56,7 +56,7 @@ class ScanDefinition:
     ``"auto"``: :func:`~dicetrace.scan.scan` resolves its ``device`` argument).
     ``events``: the rows hold the exact contact events (``simulate_batch(...,
     events=True)``: the contact sets inside the sub-steps and a column
-    ``contact_times_s``); the contact integrators only, on the CPU.
+    ``contact_times_s``); the contact integrators only.
     """
 
     space: IcSpace
@@ -90,9 +90,6 @@ class ScanDefinition:
                 check_events(self.config, True)
             except ValueError as e:
                 raise ConfigError("events", str(e)) from None
-            if d != "cpu":
-                raise ConfigError("events", f"events=True runs on the CPU only, and this scan runs on {d!r}: the GPU "
-                                  "kernels record the sets at output-step ends")
         size = self.space.size
         what = {"grid": "res", "sample": "n"}.get(self.space.kind, "points")  # what sets the size
         if size > MAX_ICS:

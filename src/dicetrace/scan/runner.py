@@ -33,7 +33,7 @@ from rich.progress import (
 from dicetrace.devices import check_device, device_label, resolve_device
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.memory import available_memory
-from dicetrace.params import Config, ConfigError, resolve_config
+from dicetrace.params import Config, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, device_kind
 from dicetrace.sinks._common import human_bytes, output_folder
 from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC, TABLE_MEMORY_PER_IC_EVENTS
@@ -135,26 +135,15 @@ def _definition(space, config, chunk, options, device=None, events=None) -> Scan
             f"space must be a Grid, Sample or Points (dicetrace.ics) or a ScanDefinition, not {type(space).__name__}"
         )
     events = False if events is None else events
-    if events is True and device == "cuda":
-        raise ConfigError("events", "events=True runs on the CPU only (device='cpu' or 'auto'): the GPU kernels "
-                          "record the sets at output-step ends")
     return ScanDefinition(space, resolve_config(config, **options), chunk, events=events)
 
 
 def _on_device(defn: ScanDefinition, device: str | None, client=None) -> ScanDefinition:
     """``defn`` on the device ``device`` (cpu, cuda, auto; None: the definition's own) as it resolves here, or on
-    a worker of the Dask ``client`` (a :class:`~dicetrace.devices.DeviceError` where there is no GPU for cuda).
-    A scan with exact contact events runs on the CPU: ``auto`` is then the CPU."""
+    a worker of the Dask ``client`` (a :class:`~dicetrace.devices.DeviceError` where there is no GPU for cuda)."""
     want = device_kind(defn.device) if device is None else device
-    if defn.events and want == "auto":
-        want = "cpu"
     label = worker_device(client, want) if client is not None else device_label(resolve_device(want))
     return defn if label == defn.device else replace(defn, device=label)
-
-
-def _dask_device(defn: ScanDefinition, device: str | None) -> str:
-    """The device a local Dask cluster for ``defn`` is made for (its workers per GPU): the CPU for exact events."""
-    return "cpu" if defn.events else (device or defn.device)
 
 
 def _chunks(defn: ScanDefinition, todo: Iterable[int], client, threads) -> Iterator[tuple[int, pa.Table]]:
@@ -188,7 +177,7 @@ def iter_scan(
     _check_int(n_workers, "n_workers", 1)
     _check_dask(dask)
     todo = range(defn.n_chunks) if chunks is None else chunks
-    client, closers = _open_dask(dask, n_workers, device=_dask_device(defn, device)) if dask else (None, [])
+    client, closers = _open_dask(dask, n_workers, device=device or defn.device) if dask else (None, [])
     try:
         defn = _on_device(defn, device, client)
         yield from _chunks(defn, todo, client, threads)
@@ -280,9 +269,8 @@ def scan(
         refused (:class:`~dicetrace.scan.folder.DeviceMismatchError`): a
         GPU's throws may differ from the CPU's by rounding.
     events
-        Record the exact contact events (the contact integrators, on the
-        CPU: ``device="auto"`` then runs on the CPU, ``"cuda"`` is refused),
-        as ``simulate_batch(..., events=True)``: each row's contact sets are
+        Record the exact contact events (the contact integrators, on either
+        device), as ``simulate_batch(..., events=True)``: each row's contact sets are
         then those inside the sub-steps and a column ``contact_times_s`` says
         when each began.  Part of the definition (None: False, or a
         ScanDefinition's own).
@@ -322,7 +310,7 @@ def scan(
         defn = _on_device(defn, device)
         if folder is not None:
             check_folder(folder, defn)  # refuse at once, without waiting for a lock (read only)
-    client, closers = _open_dask(dask, n_workers, device=_dask_device(defn, device)) if dask else (None, [])
+    client, closers = _open_dask(dask, n_workers, device=device or defn.device) if dask else (None, [])
     try:
         if client is not None:
             defn = _on_device(defn, device, client)

@@ -170,8 +170,11 @@ def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times, roots)
     """
     copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off)
     free_advance(st.sub_X, st.sub_U, st.W, st.sub_off, kp, tau)
+    # a piece of no length (the ground reached at its start) resolves nothing: its cut-off is infinite, said so
+    # rather than left to a division by zero (infinite in the kernels, an exception in plain Python)
+    cmin = MIN_CUT * hmax / tau if tau > 0.0 else math.inf
     note_substep_events(st, t, tau, h, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off, st.sub_X, st.sub_U,
-                        st.sub_L, st.sub_off, kp.inertia, MIN_CUT * hmax / tau, sets, set_steps, ev_times, roots)
+                        st.sub_L, st.sub_off, kp.inertia, cmin, sets, set_steps, ev_times, roots)
 
 
 def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bool = True):
