@@ -267,6 +267,28 @@ def test_real_gpu_agrees_with_the_cpu(preset):
 
 
 @pytest.mark.gpu
+def test_real_gpu_streams_and_pieces_give_one_streams_results(monkeypatch):
+    """On a real GPU, 20,000 `seed` throws cut into pieces of 2,000 on two streams (copies and kernels overlapping)
+    and with 64 contact sets a throw (some fill them and are re-run): the results of one stream running the
+    whole batch as one piece, bit for bit."""
+    why = _gpu_missing()
+    if why:
+        pytest.skip(why)
+    import dicetrace.batch_chunks as bc
+
+    rng = np.random.default_rng(11)
+    ics = seed_slice(rng.uniform(0, 20, 20_000), rng.uniform(0, 20, 20_000))
+    monkeypatch.setenv("DICETRACE_GPU_STREAMS", "1")
+    one = simulate_batch(ics, config="seed", device="cuda", cap=64)
+    monkeypatch.setenv("DICETRACE_GPU_STREAMS", "2")
+    monkeypatch.setattr(bc, "GPU_PIECE_MIN", 2000)
+    two = simulate_batch(ics, config="seed", device="cuda", cap=64, chunk=5000)
+    assert np.any(np.diff(one.set_offsets) > 64)
+    for k in ("outcome", "steps", "status_code", "set_offsets", "sets", "set_steps"):
+        assert np.array_equal(getattr(one, k), getattr(two, k)), k
+
+
+@pytest.mark.gpu
 def test_real_gpu_events_agree_with_the_cpu():
     """On a real GPU, 1000 `physical` throws with exact contact events: outcomes equal to the CPU's on at least
     99 % (as without events), every settled throw's event times increasing from 0, and where a throw's event
@@ -289,28 +311,6 @@ def test_real_gpu_events_agree_with_the_cpu():
             same += 1
             np.testing.assert_allclose(tb, ta, rtol=0, atol=1e-9)
     assert same >= 500
-
-
-@pytest.mark.gpu
-def test_real_gpu_streams_and_pieces_give_one_streams_results(monkeypatch):
-    """On a real GPU, 20,000 `seed` throws cut into pieces of 2,000 on two streams (copies and kernels overlapping)
-    and with 64 contact sets a throw (some fill them and are re-run): the results of one stream running the
-    whole batch as one piece, bit for bit."""
-    why = _gpu_missing()
-    if why:
-        pytest.skip(why)
-    import dicetrace.batch_chunks as bc
-
-    rng = np.random.default_rng(11)
-    ics = seed_slice(rng.uniform(0, 20, 20_000), rng.uniform(0, 20, 20_000))
-    monkeypatch.setenv("DICETRACE_GPU_STREAMS", "1")
-    one = simulate_batch(ics, config="seed", device="cuda", cap=64)
-    monkeypatch.setenv("DICETRACE_GPU_STREAMS", "2")
-    monkeypatch.setattr(bc, "GPU_PIECE_MIN", 2000)
-    two = simulate_batch(ics, config="seed", device="cuda", cap=64, chunk=5000)
-    assert np.any(np.diff(one.set_offsets) > 64)
-    for k in ("outcome", "steps", "status_code", "set_offsets", "sets", "set_steps"):
-        assert np.array_equal(getattr(one, k), getattr(two, k)), k
 
 
 @pytest.mark.slow
