@@ -4,8 +4,9 @@ There is no second copy of the physics here.  numba-cuda compiles a
 function that numba's CPU ``jit`` made (``core._jit``) as a device function
 when device code calls it, so the force law, the steps, the sub-step
 drivers and the run loop are the very functions the CPU runs.  This module
-only adds the kernels that give each thread its throw (and two that pack
-the contact sets, and the events' times, the throws used, for the copy back):
+only adds the kernels that give each thread its throw (and one that packs
+the contact sets, their steps and the events' times the throws used, for
+the copy back):
 
 ``seed kernel``
     the `seed` preset's specialised summary kernel
@@ -287,32 +288,19 @@ def _launch(kernel, m: int, args, stream) -> None:
     kernel[blocks, THREADS_PER_BLOCK, stream](*args)
 
 
-def _gather_kernel(sets, set_steps, cap, starts, out_sets, out_steps):
-    """Thread i copies its throw's contact sets (``starts[i+1] - starts[i]`` of them, from ``i * cap``) to
-    ``starts[i]`` of the packed outputs: only the sets the throws used cross to the host."""
+def _gather_kernel(per_throw, cap, starts, packed):
+    """Thread i copies its throw's entries of a per-set array (the sets, their steps or the events' times:
+    ``starts[i+1] - starts[i]`` of them, from ``i * cap``) to ``starts[i]`` of the packed output: only what the
+    throws used crosses to the host."""
     i = cuda.grid(1)
     if i < starts.shape[0] - 1:
         a = starts[i]
         lo = i * cap
         for j in range(starts[i + 1] - a):
-            out_sets[a + j] = sets[lo + j]
-            out_steps[a + j] = set_steps[lo + j]
+            packed[a + j] = per_throw[lo + j]
 
 
 _GATHER = cuda.jit(_gather_kernel, cache=CACHE)
-
-
-def _gather_times_kernel(times, cap, starts, out_times):
-    """``_gather_kernel`` for the events' times (laid out as the sets)."""
-    i = cuda.grid(1)
-    if i < starts.shape[0] - 1:
-        a = starts[i]
-        lo = i * cap
-        for j in range(starts[i + 1] - a):
-            out_times[a + j] = times[lo + j]
-
-
-_GATHER_TIMES = cuda.jit(_gather_times_kernel, cache=CACHE)
 
 
 def uses_seed_kernel(kp, off0, integ: int) -> bool:
@@ -441,18 +429,16 @@ def _run_batch_cuda(ics, off0, kp, integ, cap, events):
         h_starts[:] = starts
         d_starts = buf.dev("starts", m + 1, np.int64)
         d_starts.copy_to_device(h_starts, stream=stream)
-        d_out = (buf.dev("packed_sets", total, np.uint8), buf.dev("packed_steps", total, np.int32))
-        _launch(_GATHER, m, (d_sets, d_set_steps, cap, d_starts, *d_out), stream)
-        h_out = (buf.host("packed_sets", total, np.uint8), buf.host("packed_steps", total, np.int32))
-        for dev, host in zip(d_out, h_out):
-            dev.copy_to_host(host, stream=stream)
+        per_set = [("sets", d_sets, sets), ("steps", d_set_steps, set_steps)]
         if events:
-            d_packed_times = buf.dev("packed_times", total, np.float64)
-            _launch(_GATHER_TIMES, m, (d_times, cap, d_starts, d_packed_times), stream)
-            h_times = buf.host("packed_times", total, np.float64)
-            d_packed_times.copy_to_host(h_times, stream=stream)
+            per_set.append(("times", d_times, times))
+        hosts = []
+        for name, d_all, out in per_set:
+            d_packed = buf.dev(f"packed_{name}", total, out.dtype)
+            _launch(_GATHER, m, (d_all, cap, d_starts, d_packed), stream)
+            hosts.append(buf.host(f"packed_{name}", total, out.dtype))
+            d_packed.copy_to_host(hosts[-1], stream=stream)
         stream.synchronize()
-        sets[:], set_steps[:] = h_out
-        if events:
-            times[:] = h_times
+        for (_, _, out), host in zip(per_set, hosts):
+            out[:] = host
     return status, steps, outcome, nsets, sets, set_steps, times, starts[:-1]
