@@ -210,40 +210,33 @@ def _make_seed_kernel(tag: int):
     return seed_kernel
 
 
-def _make_events_kernel(scheme, tag: int):
-    """The one-thread-per-throw kernel around ``scheme.roll_events`` (``loop.make_roll(events=True)``); ``tag``
-    as above.  ``ev_times`` is laid out as ``sets``: thread i owns ``[i·cap, (i+1)·cap)``."""
+def _make_loop_kernel(scheme, tag: int, events: bool):
+    """The one-thread-per-throw kernel around a scheme's run loop (``loop.make_roll``): its summary loop
+    (``scheme.roll_summary``: the general kernel) or, with ``events``, its events loop (``scheme.roll_events``:
+    the events kernel); ``tag`` as above.  ``ev_times`` is laid out as ``sets`` (thread i owns
+    ``[i·cap, (i+1)·cap)``); a summary loop ignores it (length 0).  The closure holds the module and a bool
+    (the constant branch is pruned), never a compiled function: numba-cuda's disk cache keys on its values."""
+    events = bool(events)
 
-    def events_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2,
-                      ev_times):
+    def loop_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2,
+                    ev_times):
         i = cuda.grid(1)
         if i < ics.shape[0] and tag >= 0:
             lo = i * cap
-            s, n, o, ns = scheme.roll_events(ics[i], off0, kp, states[i : i + 1], sets[lo : lo + cap],
-                                             set_steps[lo : lo + cap], e0, e1, e2, ev_times[lo : lo + cap])
+            S = states[i : i + 1]
+            if events:
+                s, n, o, ns = scheme.roll_events(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
+                                                 e0, e1, e2, ev_times[lo : lo + cap])
+            else:
+                s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
+                                                  e0, e1, e2, ev_times)
             status[i] = s
             steps[i] = n
             outcome[i] = o
             nsets[i] = ns
 
-    return events_kernel
-
-
-def _make_general_kernel(scheme, tag: int):
-    """The one-thread-per-throw kernel around ``scheme.roll_summary`` (``loop.make_roll``); ``tag`` as above."""
-
-    def general_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2, e3):
-        i = cuda.grid(1)
-        if i < ics.shape[0] and tag >= 0:
-            lo = i * cap
-            s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, states[i : i + 1], sets[lo : lo + cap],
-                                              set_steps[lo : lo + cap], e0, e1, e2, e3)
-            status[i] = s
-            steps[i] = n
-            outcome[i] = o
-            nsets[i] = ns
-
-    return general_kernel
+    loop_kernel.__name__ = "events_kernel" if events else "general_kernel"
+    return loop_kernel
 
 
 _KERNELS: dict = {}
@@ -262,8 +255,7 @@ def _kernel(integ: int, seed_path: bool, events: bool = False):
 def _kernel_locked(key: str, scheme, seed_path: bool, events: bool = False):
     if key not in _KERNELS:
         tag = int(kernel_digest()[:15], 16)
-        make = _make_seed_kernel if seed_path else _make_events_kernel if events else _make_general_kernel
-        fn = make(tag) if seed_path else make(scheme, tag)
+        fn = _make_seed_kernel(tag) if seed_path else _make_loop_kernel(scheme, tag, events)
         short = scheme.__name__.rsplit(".", 1)[-1] if not seed_path else "seed"
         fn.__qualname__ = fn.__name__ = f"{fn.__name__}_{short}"
         _KERNELS[key] = cuda.jit(fn, cache=CACHE)
