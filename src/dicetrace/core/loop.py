@@ -224,7 +224,6 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         nsets = 1
         last_mask = 0
         if events:
-            roots = st.ev_roots  # the events' root scratch
             ev_times[0] = 0.0
             st.ev_n = 1
         # The program starts out of contact (forces are zero before the first
@@ -268,7 +267,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
             else:
                 n += 1
                 if events:
-                    contact, mask = scheme.step_events(st, kp, h, contact, sets, set_steps, ev_times, roots)
+                    contact, mask = scheme.step_events(st, kp, h, contact, sets, set_steps, ev_times)
                 else:
                     contact, mask = scheme.step(st, kp, h, contact)
             finite = state_finite(X[2], U[0], U[1], U[2], L[0], L[1], L[2], off[0, 0], off[7, 2])

@@ -45,8 +45,8 @@ scheme keeps from one step to the next:
     state), the events recorded so far (more than the buffer holds: it is
     full), the contact set of the last one (``contacts.note_event``) and
     the crossings of each node's height inside a sub-step (scratch of
-    ``contacts.note_substep_events``; in the record, not allocated by the
-    loop, so that a GPU thread has it too).
+    ``contacts.note_substep_events``; in the record, so that a GPU thread
+    has it too).
 ``lazy``
     set by a run loop that reads neither the forces nor the node
     velocities at a step's end (a summary loop with the ``rigid`` stop-test

@@ -156,7 +156,7 @@ def friction_rate(z, uk, P, kp):
 
 
 @jit(inline="always")
-def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times, roots):
+def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times):
     """An events step's exact free flight of a piece of length tau from the sub-step start ``st.sub_*``, ``t`` s into
     the step, with its contact events.
 
@@ -174,7 +174,7 @@ def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times, roots)
     # rather than left to a division by zero (infinite in the kernels, an exception in plain Python)
     cmin = MIN_CUT * hmax / tau if tau > 0.0 else math.inf
     note_substep_events(st, t, tau, h, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off, st.sub_X, st.sub_U,
-                        st.sub_L, st.sub_off, kp.inertia, cmin, sets, set_steps, ev_times, roots)
+                        st.sub_L, st.sub_off, kp.inertia, cmin, sets, set_steps, ev_times)
 
 
 def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bool = True):
@@ -182,7 +182,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
 
     ``cache=False`` for a method module made at run time (see ``loop.make_roll``).
     ``events``: the step of an events loop, ``drive(st, kp, h, contact, sets,
-    set_steps, ev_times, roots)`` (``roots`` (8, 3) scratch), which records the exact contact events
+    set_steps, ev_times)``, which records the exact contact events
     (``contacts.note_event``): the set inside every accepted sub-step (whose
     ends are the crossings), the empty set where a free flight starts.
 
@@ -313,14 +313,14 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
                 m1 = free_min_height(Xw, Uw, W, offw, kp, hs)
                 if m1 >= 0.0:
                     if events_on:
-                        free_piece_events(st, t, hs, h, hmax, kp, ev[0], ev[1], ev[2], ev[3])
+                        free_piece_events(st, t, hs, h, hmax, kp, ev[0], ev[1], ev[2])
                     else:
                         free_advance(Xw, Uw, W, offw, kp, hs)
                     t = h if last else t + hs
                     continue
                 tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)
                 if events_on:
-                    free_piece_events(st, t, tau, h, hmax, kp, ev[0], ev[1], ev[2], ev[3])
+                    free_piece_events(st, t, tau, h, hmax, kp, ev[0], ev[1], ev[2])
                 else:
                     free_advance(Xw, Uw, W, offw, kp, tau)
                 t = t + tau
@@ -413,7 +413,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
             if events_on:
                 # the sets inside the sub-step, from its start: the nodes below the ground there and
                 # every crossing inside (a node that enters and leaves within it: the cuts see none)
-                note_substep_events(st, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, cmin, ev[0], ev[1], ev[2], ev[3])
+                note_substep_events(st, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, cmin, ev[0], ev[1], ev[2])
             accept_substep(st, kp)
             st.substeps[cause] += 1
             if ahead:
