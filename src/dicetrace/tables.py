@@ -99,8 +99,6 @@ ROLLS_SCHEMA = pa.schema(
 
 #: The column a ``rolls`` table of exact contact events adds at its end: when each contact set began.
 EVENT_TIMES_FIELD = _f("contact_times_s", pa.list_(pa.float64()), "s")
-#: ``ROLLS_SCHEMA`` with ``contact_times_s``: the rows of throws with exact contact events.
-ROLLS_EVENTS_SCHEMA = ROLLS_SCHEMA.append(EVENT_TIMES_FIELD)
 
 #: ``ROLLS_SCHEMA`` with the grid indices after ``ic_id``: the rows of a scan dataset.
 GRID_ROLLS_SCHEMA = pa.schema([ROLLS_SCHEMA.field(0), *GRID_FIELDS, *list(ROLLS_SCHEMA)[1:]])
