@@ -53,8 +53,9 @@ import numpy as np
 
 from dicetrace.core import loop
 from dicetrace.core._jit import jit
-from dicetrace.core.schemes import contact_tsit5, erk
-from dicetrace.core.schemes.contact_substep import make_drive
+from dicetrace.core.contact_driver import make_drive
+from dicetrace.core.methods import erk, tsit5
+from dicetrace.core.schemes import contact_tsit5
 from dicetrace.core.state import new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.simulate import simulate
@@ -109,15 +110,15 @@ def _drive_twice(name: str, line: str, result: str):
 
 
 def method_module(tag: str, **replaced):
-    """A copy of ``contact_tsit5`` (the driver's sub-step method) made at run time, ``replaced`` set in it."""
+    """A copy of ``methods.tsit5`` (contact-tsit5's sub-step method) made at run time, ``replaced`` set in it."""
     mod = types.ModuleType(f"bench_method_{tag}")
-    mod.__dict__.update({k: v for k, v in vars(contact_tsit5).items() if not k.startswith("__")})
+    mod.__dict__.update({k: v for k, v in vars(tsit5).items() if not k.startswith("__")})
     mod.__dict__.update(replaced)
     return mod
 
 
 def build_step(factory, tag: str, **replaced):
-    """The contact step that ``factory`` (``make_drive`` or an edited copy) makes on ``contact_tsit5``'s
+    """The contact step that ``factory`` (``make_drive`` or an edited copy) makes on ``methods.tsit5``,
     method with ``replaced`` swapped in, compiled uncached as ``step_<tag>``."""
     return factory(method_module(tag, **replaced), f"step_{tag}", cache=False)
 

@@ -1,6 +1,6 @@
 """What limits ``contact-tsit5``'s sub-steps: the friction law's relaxation or the contact spring, and where attempts are rejected.
 
-The driver (``contact_substep.make_drive``) counts its sub-steps by what
+The driver (``contact_driver.make_drive``) counts its sub-steps by what
 ended them (``Roll.substeps``).  That says an accepted sub-step was error-limited,
 not which part of the motion the error came from.  This script runs an
 instrumented copy of the driver (lines added to the source of ``make_drive``,
@@ -9,7 +9,7 @@ study's zoom-out ICs and prints:
 
 * the error- and friction-limited sub-steps by λ_f·h, with λ_f the friction
   law's stiffness bound that the driver computes at the sub-step's start
-  (``contact_substep.friction_rate``), and by ω·h with ω = √k the contact
+  (``contact_driver.friction_rate``), and by ω·h with ω = √k the contact
   spring's frequency per node mass.  Where λ_f·h is near 1 while ω·h ≪ 1 the
   step follows the regularised friction's relaxation, not the spring;
 * the rejected attempts by what came before them (an entry or exit cut, an
@@ -38,7 +38,7 @@ import numpy as np
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from bench_cost_split import DRIVE, _all, _edited, build_step, summary_roll
-from dicetrace.core.schemes.contact_substep import make_drive
+from dicetrace.core.contact_driver import make_drive
 from dicetrace.core.state import STATE, SUBSTEP_CAUSES, new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics

@@ -4,7 +4,7 @@
 variant of the driver with that part done twice, and
 ``benchmarks/bench_step_limits.py`` counts what limits its sub-steps with
 lines added to the driver; both edit the source of the driver's factory
-(``contact_substep.make_drive``).  When the driver changes, an edited line
+(``contact_driver.make_drive``).  When the driver changes, an edited line
 can vanish and the script stops with a message: building the variants (no
 compiling) is enough to catch that here.
 

@@ -616,8 +616,8 @@ def test_tsit5_tableau_is_a_5_4_pair():
     function reaches −3.51 on the real axis (the friction bound ``FRICTION_THETA`` sits
     inside) and the table's ``stability_bound`` is where one step amplifies an undamped
     oscillation by 1e-3."""
-    from dicetrace.core.schemes import contact_tsit5
-    from dicetrace.core.schemes.erk import TSIT5_A, TSIT5_B, TSIT5_E
+    from dicetrace.core.methods import tsit5 as contact_tsit5
+    from dicetrace.core.methods.erk import TSIT5_A, TSIT5_B, TSIT5_E
 
     A, b, E = TSIT5_A, TSIT5_B, TSIT5_E
     assert A.shape == (6, 6) and b.shape == (6,) and E.shape == (7,)
@@ -687,7 +687,7 @@ def test_tsit5_sub_steps_may_span_several_steps():
     the 0.5 s with fewer accepted sub-steps than steps (the step ends between are interpolated;
     at a bound of dt it would need one a step at least), contact-adaptive (no dense output)
     with more.  Both end where a tolerance of 1e-9 takes the die."""
-    from dicetrace.core.schemes.contact_substep import DENSE_CAP
+    from dicetrace.core.contact_driver import DENSE_CAP
     from dicetrace.core.state import SUBSTEP_CAUSES
 
     assert DENSE_CAP > 1
@@ -720,8 +720,8 @@ def tsit5_dense_errors(hs, theta):
     at SMOOTH_T/2¹⁰ sub-steps to the same time.  Also returns, per h, how far θ = 1 is from
     the sub-step's own result (b_i(1) = B_i, to the rounding of the tabulated digits)."""
     from dicetrace.core.forces import step_wrench, wrench_at
-    from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsit5_substep
-    from dicetrace.core.schemes.rk4 import begin_substeps
+    from dicetrace.core.methods.erk import dense_keep, dense_state, tsit5_error, tsit5_substep
+    from dicetrace.core.state import begin_substeps
 
     kp = kparams(integrator="contact-tsit5", **SMOOTH)
     d_eq = 8 * 980.0 / (4 * kp.k)
@@ -794,7 +794,7 @@ def test_stage_wrench_is_rotation_then_wrench_at(friction):
     gives the force sum and torque of ``quat_rotate`` + ``wrench_at`` exactly, on tilted,
     moving dice with 0 to 4 nodes in the ground, for both friction laws."""
     from dicetrace.core.forces import wrench_at
-    from dicetrace.core.schemes.erk import quat_rotate, stage_wrench
+    from dicetrace.core.methods.erk import quat_rotate, stage_wrench
 
     kp = kparams(friction=friction, clamp_normal=friction == "per-node", v_reg_cm_s=10.0)
     off = np.zeros((8, 3))

@@ -30,13 +30,20 @@ cannot be written, the cache falls back to ``__pycache__`` beside the
 sources (keyed by the digest and the files' times), and where nothing can
 be written, kernels compile without a disk cache (one line says so).
 
+The cache locators are a patch of numba's internals: ``_compat`` holds it,
+with the versions it was written for and its self-test.
+
 Compile-time variants of one source (a run loop per scheme, a sub-step per
-Runge–Kutta tableau) are closures made by a factory (``loop.make_roll``,
-``contact_substep.make_drive``, ``erk.erk_substep``): numba compiles closure
-values in as constants.  They close over modules, booleans, numbers and
-arrays only, which numba's cache keys on by value (a compiled function in a
-closure would be keyed by an identity that changes from one process to the
-next, and the cache would never hit).
+Runge–Kutta tableau, the contact driver per sub-step method) are closures
+made by a factory (``loop.make_roll``, ``contact_driver.make_drive``,
+``erk.erk_substep``): numba compiles closure values in as constants.  They
+close over modules, booleans, numbers and arrays only, which numba's cache
+keys on by value (a module by its name: numba pickles the closure's values
+to key the cache, and a module in ``sys.modules`` pickles as its name).  A
+compiled function in a closure would be keyed by an identity that changes
+from one process to the next, and the cache would never hit: where one
+kernel calls another that a factory made (the batch kernel calls a run
+loop), it calls it through a module that holds it (``kernels.kernels_of``).
 """
 
 from __future__ import annotations
@@ -49,6 +56,8 @@ import sys
 from pathlib import Path
 
 import numba
+
+from dicetrace.core import _compat
 
 CACHE = os.environ.get("DICETRACE_CACHE", "1") not in ("0", "false", "no")
 
@@ -131,69 +140,18 @@ def prune_digests(root: Path, current: str, keep: int = KEEP_DIGESTS) -> list[Pa
 
 
 def _install_core_locator() -> None:
-    try:
-        from numba.core import caching
-
-        in_tree = caching.InTreeCacheLocator
-        mixin = caching._SourceFileBackedLocatorMixin
-        abstract = caching._CacheLocator
-        impl = caching.CacheImpl
-    except (ImportError, AttributeError):  # numba internals moved: keep numba's default
-        return
+    """Cache the kernels of ``dicetrace.core`` under the kernel digest (``_compat.install_cache_locator``)."""
     digest = kernel_digest()
-    key = digest[:20]
     root = cache_root()
-
-    def in_core(py_file) -> bool:
-        try:
-            return Path(py_file).resolve().is_relative_to(_CORE_DIR)
-        except OSError:
-            return False
-
-    class _CoreCacheLocator(mixin, abstract):
-        """Kernels of ``dicetrace.core`` in ``cache_root()/<digest>``, stamped by the digest alone."""
-
-        def __init__(self, py_func, py_file):
-            self._py_file = py_file
-            self._lineno = py_func.__code__.co_firstlineno
-            rel = Path(py_file).resolve().parent.relative_to(_CORE_DIR)
-            self._cache_path = str(root / key / rel)
-
-        def get_cache_path(self):
-            return self._cache_path
-
-        def get_source_stamp(self):
-            return digest
-
-        @classmethod
-        def from_function(cls, py_func, py_file):
-            if not in_core(py_file):
-                return None
-            self = cls(py_func, py_file)
-            try:
-                self.ensure_cache_path()
-            except OSError:
-                return None
-            return self
-
-    class _CoreInTreeCacheLocator(in_tree):
-        """Where the user cache folder cannot be written: ``__pycache__`` beside the sources, digest and times."""
-
-        @classmethod
-        def from_function(cls, py_func, py_file):
-            return super().from_function(py_func, py_file) if in_core(py_file) else None
-
-        def get_source_stamp(self):
-            return (super().get_source_stamp(), digest)
-
-    if not any(c.__name__ == "_CoreCacheLocator" for c in impl._locator_classes):
-        impl._locator_classes[0:0] = [_CoreCacheLocator, _CoreInTreeCacheLocator]
-        try:
-            (root / key).mkdir(parents=True, exist_ok=True)
-            os.utime(root / key)  # the most recently used digest
-        except OSError:
-            return
-        prune_digests(root, key)
+    if not _compat.install_cache_locator(_CORE_DIR, digest, root):
+        return  # numba's internals moved: its default locators cache per source file (the self-test says so)
+    key = digest[:20]
+    try:
+        (root / key).mkdir(parents=True, exist_ok=True)
+        os.utime(root / key)  # the most recently used digest
+    except OSError:
+        return
+    prune_digests(root, key)
 
 
 if CACHE:

@@ -210,7 +210,7 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     """One throw to rest, summary only: semi-implicit Euler, point-mass stop test, in the given node arrays.
 
     The one source of the kernel: the CPU's :func:`roll_summary_sie` runs it
-    in fresh arrays, the GPU's (``core.cuda``) in per-thread local arrays.
+    in fresh arrays, the GPU's (``core.gpu``) in per-thread local arrays.
 
     Parameters
     ----------

@@ -60,15 +60,16 @@ import threading
 
 import numpy as np
 
-if not hasattr(np, "row_stack"):  # numpy 2.5 removed it; numba-cuda 0.30 still names it
-    np.row_stack = np.vstack
+from dicetrace.core import _compat
+
+_compat.ensure_row_stack()  # numpy 2.5 removed np.row_stack; numba-cuda 0.30.4 still names it
 
 from numba import cuda, float64, typeof  # noqa: E402 (after the alias above)
 from numba.cuda.cudadrv import nvvm  # noqa: E402
 
 from dicetrace.core import fast, loop  # noqa: E402
 from dicetrace.core._jit import CACHE, kernel_digest  # noqa: E402
-from dicetrace.core.kernels import scheme_of  # noqa: E402
+from dicetrace.core.kernels import kernels_for  # noqa: E402
 from dicetrace.core.state import new_states  # noqa: E402
 from dicetrace.status import Status  # noqa: E402
 
@@ -161,27 +162,6 @@ def free_memory() -> int:
     return int(free)
 
 
-@contextlib.contextmanager
-def _nvvm_without_fma():
-    """NVVM compiles with ``-fma=0`` inside: no contraction of a·b + c, as the CPU compiles every kernel.
-
-    numba-cuda passes its code library's options to ``nvvm.compile_ir``
-    when it makes PTX; it has no public switch for this one, so the option
-    is added there for the kernels compiled in this context.
-    """
-    compile_ir = nvvm.compile_ir
-
-    def strict(llvmir, **options):
-        options["fma"] = False
-        return compile_ir(llvmir, **options)
-
-    nvvm.compile_ir = strict
-    try:
-        yield
-    finally:
-        nvvm.compile_ir = compile_ir
-
-
 def _make_seed_kernel(tag: int):
     """The one-thread-per-throw kernel around the seed path's summary kernel (``fast.roll_summary_sie_in``).
 
@@ -210,12 +190,13 @@ def _make_seed_kernel(tag: int):
     return seed_kernel
 
 
-def _make_loop_kernel(scheme, tag: int, events: bool):
+def _make_loop_kernel(loops, tag: int, events: bool):
     """The one-thread-per-throw kernel around a scheme's run loop (``loop.make_roll``): its summary loop
-    (``scheme.roll_summary``: the general kernel) or, with ``events``, its events loop (``scheme.roll_events``:
-    the events kernel); ``tag`` as above.  ``ev_times`` is laid out as ``sets`` (thread i owns
-    ``[i·cap, (i+1)·cap)``); a summary loop ignores it (length 0).  The closure holds the module and a bool
-    (the constant branch is pruned), never a compiled function: numba-cuda's disk cache keys on its values."""
+    (``loops.roll_summary``: the general kernel) or, with ``events``, its events loop (``loops.roll_events``:
+    the events kernel); ``loops`` the module of the scheme's kernels (``kernels.kernels_of``), ``tag`` as above.
+    ``ev_times`` is laid out as ``sets`` (thread i owns ``[i·cap, (i+1)·cap)``); a summary loop ignores it
+    (length 0).  The closure holds the module and a bool (the constant branch is pruned), never a compiled
+    function: numba-cuda's disk cache keys on its values."""
     events = bool(events)
 
     def loop_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2,
@@ -225,10 +206,10 @@ def _make_loop_kernel(scheme, tag: int, events: bool):
             lo = i * cap
             S = states[i : i + 1]
             if events:
-                s, n, o, ns = scheme.roll_events(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
+                s, n, o, ns = loops.roll_events(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
                                                  e0, e1, e2, ev_times[lo : lo + cap])
             else:
-                s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
+                s, n, o, ns = loops.roll_summary(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
                                                   e0, e1, e2, ev_times)
             status[i] = s
             steps[i] = n
@@ -246,23 +227,23 @@ _KERNELS_LOCK = threading.Lock()
 def _kernel(integ: int, seed_path: bool, events: bool = False):
     """The CUDA dispatcher for integrator ``integ`` (kernel id): the seed kernel, the general one, or (``events``)
     the events kernel."""
-    scheme = scheme_of(integ)
-    key = "seed" if seed_path else scheme.__name__ + (".events" if events else "")
+    loops = kernels_for(integ)
+    key = "seed" if seed_path else loops.scheme.__name__ + (".events" if events else "")
     with _KERNELS_LOCK:  # the threads of a GPU (or of several) share one dispatcher, compiled once
-        return _kernel_locked(key, scheme, seed_path, events)
+        return _kernel_locked(key, loops, seed_path, events)
 
 
-def _kernel_locked(key: str, scheme, seed_path: bool, events: bool = False):
+def _kernel_locked(key: str, loops, seed_path: bool, events: bool = False):
     if key not in _KERNELS:
         tag = int(kernel_digest()[:15], 16)
-        fn = _make_seed_kernel(tag) if seed_path else _make_loop_kernel(scheme, tag, events)
-        short = scheme.__name__.rsplit(".", 1)[-1] if not seed_path else "seed"
+        fn = _make_seed_kernel(tag) if seed_path else _make_loop_kernel(loops, tag, events)
+        short = loops.scheme.__name__.rsplit(".", 1)[-1] if not seed_path else "seed"
         fn.__qualname__ = fn.__name__ = f"{fn.__name__}_{short}"
         _KERNELS[key] = cuda.jit(fn, cache=CACHE)
     return _KERNELS[key]
 
 
-#: Held while a kernel compiles: its ``-fma=0`` option is set module-wide (``_nvvm_without_fma``), and a
+#: Held while a kernel compiles: its ``-fma=0`` option is set module-wide (``_compat.nvvm_without_fma``), and a
 #: thread running another GPU must neither restore it too early nor compile under it.
 _COMPILE_LOCK = threading.Lock()
 
@@ -275,7 +256,7 @@ def _launch(kernel, m: int, args, stream) -> None:
     if not simulated() and sig not in kernel.overloads:
         with _COMPILE_LOCK:
             if sig not in kernel.overloads:
-                with _nvvm_without_fma():
+                with _compat.nvvm_without_fma(nvvm):
                     kernel.compile(sig)
     kernel[blocks, THREADS_PER_BLOCK, stream](*args)
 
@@ -297,7 +278,7 @@ _GATHER = cuda.jit(_gather_kernel, cache=CACHE)
 
 def uses_seed_kernel(kp, off0, integ: int) -> bool:
     """Whether throws of this configuration run the seed kernel (the CPU's specialised kernel applies)."""
-    scheme = scheme_of(integ)
+    scheme = kernels_for(integ).scheme
     # the seed kernel wraps the seed path's specialised summary: the one scheme whose ``summary`` that is
     return getattr(scheme, "summary", None) is fast.roll_summary_sie and bool(scheme.summary_applies(kp, off0))
 

@@ -1,8 +1,13 @@
-"""The kernels of an integrator, by its kernel id (``IntegratorSpec.kernel_id``), and the entry points.
+"""The kernels of a scheme, built once per process, and the entry points by integrator.
 
-Each row of the integrator table names a scheme module (``core.schemes``),
-which binds its run loops (``core.loop.scheme_kernels``); integrators that
-share a scheme share its kernels.
+:func:`kernels_of` builds the compiled kernels of a scheme module
+(``core.schemes``): its tracing and summary run loops and its parallel batch
+kernel, and for a contact scheme its events loop and batch
+(:class:`SchemeKernels`; ``core.loop.make_roll``, ``make_batch``).  Nothing
+compiles there: numba compiles (or loads from its disk cache) each kernel
+on its first call.  Integrators that share a scheme share its kernels.
+
+The entry points take an integrator's kernel id (``IntegratorSpec.kernel_id``):
 
 ``run_roll``
     one throw, through the tracing loop (with all trace arrays of zero rows
@@ -18,15 +23,22 @@ share a scheme share its kernels.
 ``run_events``, ``run_batch_events``
     one throw, or many in parallel, through a contact scheme's events loop:
     the exact contact events instead of the sets at output-step ends
-    (``core.loop.event_kernels``; :func:`has_events` says which integrators
-    have one).
+    (:func:`has_events` says which integrators have one).
 """
 
 from __future__ import annotations
 
+import functools
+import sys
+import threading
+import types
+from types import ModuleType
+from typing import Protocol
+
 import numpy as np
 
-from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS
+from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, make_batch, make_roll
+from dicetrace.core.schemes import has_events as _scheme_has_events
 from dicetrace.core.schemes import scheme_module
 from dicetrace.core.state import new_states
 from dicetrace.integrators import INTEGRATORS
@@ -38,6 +50,58 @@ NO_TRACE = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, E
 _NO_EVENTS = np.zeros(0)
 
 
+class SchemeKernels(Protocol):
+    """The compiled kernels of one scheme (:func:`kernels_of`); numba dispatchers, compiled on first call."""
+
+    #: The scheme module they run (``core.schemes``).
+    scheme: ModuleType
+    #: The tracing run loop (``loop.make_roll(scheme, trace=True)``).
+    roll_trace: object
+    #: The summary run loop (``loop.make_roll(scheme, trace=False)``).
+    roll_summary: object
+    #: The parallel batch kernel of summaries (``loop.make_batch``).
+    batch: object
+    #: The events loop and its batch (contact schemes; None for the others).
+    roll_events: object
+    batch_events: object
+
+
+#: The module namespaces of the built kernels: one per scheme, ``dicetrace.core.kernels.<scheme>``.
+_BUILT: dict = {}
+_BUILD_LOCK = threading.Lock()
+
+
+def kernels_of(scheme: ModuleType) -> SchemeKernels:
+    """The kernels of the scheme module ``scheme``, built on the first call for it and kept for the process.
+
+    They are held in a module registered as ``dicetrace.core.kernels.<scheme>``
+    (a namespace, made here): the batch kernel and the GPU's kernels call
+    the run loops through it, and a closure over a module is what numba's
+    disk cache can key on by name (``core._jit``), where one over a compiled
+    function would never hit.
+    """
+    with _BUILD_LOCK:
+        built = _BUILT.get(scheme)
+        if built is None:
+            built = _BUILT[scheme] = _build(scheme)
+        return built
+
+
+def _build(scheme: ModuleType) -> SchemeKernels:
+    short = scheme.__name__.rsplit(".", 1)[-1]
+    name = f"{__name__}.{short}"
+    mod = types.ModuleType(name, f"The compiled kernels of the scheme ``{scheme.__name__}`` (``core.kernels.kernels_of``).")
+    sys.modules[name] = mod
+    mod.scheme = scheme
+    mod.roll_trace = make_roll(scheme, trace=True)
+    mod.roll_summary = make_roll(scheme, trace=False)
+    mod.batch = make_batch(scheme, mod)
+    events = _scheme_has_events(scheme)
+    mod.roll_events = make_roll(scheme, trace=False, events=True) if events else None
+    mod.batch_events = make_batch(scheme, mod, events=True) if events else None
+    return mod
+
+
 def spec_of(integ: int):
     """The integrator table's row with kernel id ``integ``."""
     try:
@@ -46,9 +110,14 @@ def spec_of(integ: int):
         raise ValueError(f"no integrator has kernel id {integ!r} (see dicetrace.integrators.INTEGRATORS)") from None
 
 
-def scheme_of(integ: int):
-    """The scheme module of integrator ``integ`` (kernel id), imported on first use."""
+def scheme_of(integ: int) -> ModuleType:
+    """The scheme module of integrator ``integ`` (kernel id)."""
     return scheme_module(spec_of(integ))
+
+
+def kernels_for(integ: int) -> SchemeKernels:
+    """The kernels of integrator ``integ`` (kernel id): those of its scheme (:func:`kernels_of`)."""
+    return kernels_of(scheme_of(integ))
 
 
 def roll_kernel(integ: int, trace: bool):
@@ -57,13 +126,13 @@ def roll_kernel(integ: int, trace: bool):
     Called as ``kernel(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, ev_times)``
     (see ``core.loop.make_roll``).
     """
-    mod = scheme_of(integ)
-    return mod.roll_trace if trace else mod.roll_summary
+    k = kernels_for(integ)
+    return k.roll_trace if trace else k.roll_summary
 
 
 def batch_kernel(integ: int):
     """The parallel batch kernel of integrator ``integ`` (kernel id); see ``core.loop.make_batch``."""
-    return scheme_of(integ).batch
+    return kernels_for(integ).batch
 
 
 def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy, states=None):
@@ -84,10 +153,10 @@ def run_summary(ic, off0, kp, integ, sets, set_steps):
 
     The choice the batch kernel makes (``core.loop.make_batch``).
     """
-    mod = scheme_of(integ)
-    if hasattr(mod, "summary") and mod.summary_applies(kp, off0):
-        return mod.summary(ic, off0, kp, sets, set_steps)
-    return mod.roll_summary(ic, off0, kp, new_states(1), sets, set_steps, *NO_TRACE, _NO_EVENTS)
+    k = kernels_for(integ)
+    if hasattr(k.scheme, "summary") and k.scheme.summary_applies(kp, off0):
+        return k.scheme.summary(ic, off0, kp, sets, set_steps)
+    return k.roll_summary(ic, off0, kp, new_states(1), sets, set_steps, *NO_TRACE, _NO_EVENTS)
 
 
 def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
@@ -106,14 +175,14 @@ def _block_states(m: int):
 
 def has_events(integ: int) -> bool:
     """Whether integrator ``integ`` (kernel id) has an events loop (the contact schemes: their sub-steps end at the crossings)."""
-    return hasattr(scheme_of(integ), "roll_events")
+    return _scheme_has_events(scheme_of(integ))
 
 
-def _events_scheme(integ: int):
-    """The scheme module of integrator ``integ``, refused (ValueError) where it has no events loop."""
+def _events_kernels(integ: int) -> SchemeKernels:
+    """The kernels of integrator ``integ``, refused (ValueError) where it has no events loop."""
     if not has_events(integ):
         raise ValueError(f"integrator {spec_of(integ).name!r} has no exact contact events (only the contact schemes do)")
-    return scheme_of(integ)
+    return kernels_for(integ)
 
 
 def run_events(ic, off0, kp, integ, sets, set_steps, ev_times, states=None):
@@ -123,10 +192,10 @@ def run_events(ic, off0, kp, integ, sets, set_steps, ev_times, states=None):
     events (``core.loop.make_roll`` with ``events``).
     """
     S = new_states(1) if states is None else states
-    return _events_scheme(integ).roll_events(ic, off0, kp, S, sets, set_steps, *NO_TRACE, ev_times)
+    return _events_kernels(integ).roll_events(ic, off0, kp, S, sets, set_steps, *NO_TRACE, ev_times)
 
 
 def run_batch_events(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps, ev_times):
     """:func:`run_batch` through the events loop: ``ev_times`` (m·cap,) float64 laid out as ``sets``."""
-    _events_scheme(integ).batch_events(ics, off0, kp, cap, _block_states(len(ics)), status, steps, outcome, nsets,
+    _events_kernels(integ).batch_events(ics, off0, kp, cap, _block_states(len(ics)), status, steps, outcome, nsets,
                                        sets, set_steps, ev_times)

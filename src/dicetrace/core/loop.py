@@ -10,13 +10,14 @@ in it, so the stop test cannot fire, and no contact set changes.
 
 The loop is a closure over a scheme module (``core.schemes``) and a few
 booleans, which numba compiles in as constants: each compiled loop calls its
-scheme's step directly, and a summary loop has no trace code.  Every scheme
-module ends by binding its kernels, ``roll_trace, roll_summary, batch =
-loop.scheme_kernels(<the module>)``; nothing compiles until a kernel's first
-call, so a command that runs one integrator compiles (or loads from the
-cache) that integrator's loops only.  The entry points by integrator
-(``run_roll``, ``run_summary``, ``run_batch``) are in ``core.kernels``; the
-GPU's are in ``core.cuda``, which compiles the same functions for the device.
+scheme's step directly, and a summary loop has no trace code.
+``core.kernels.kernels_of`` builds a scheme's loops and batch kernels
+(:func:`make_roll`, :func:`make_batch`) once per process; nothing compiles
+until a kernel's first call, so a command that runs one integrator compiles
+(or loads from the cache) that integrator's loops only.  The entry points by
+integrator (``run_roll``, ``run_summary``, ``run_batch``) are in
+``core.kernels``; the GPU's are in ``core.gpu``, which compiles the same
+functions for the device.
 
 Trace layouts (row n = state after n steps, row 0 the initial state):
 ``tr_state`` (n+1, 33): X(3), U(3), L(3) (program convention), offsets (8×3);
@@ -165,8 +166,8 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     benchmark's variant of a scheme) is keyed by its contents, which change
     from one process to the next: build those with ``cache=False``.
 
-    ``events``: an events loop (:func:`event_kernels`; a contact scheme's,
-    whose module defines ``step_events``).  It records the exact contact events
+    ``events``: an events loop (a contact scheme's, whose module defines
+    ``step_events``: ``core.schemes.EventsScheme``).  It records the exact contact events
     (docs/model.md §8.1) in ``sets``, ``set_steps`` and ``ev_times``
     instead of the sets at output-step ends: the set inside every sub-step
     of the scheme, the step it began in (1-based) and its time (s), up to
@@ -203,7 +204,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         -1 unless the status is SETTLED.
     """
     trace = bool(trace)
-    flight = bool(getattr(scheme, "EXACT_FLIGHT", False) if exact_flight is None else exact_flight)
+    flight = bool(scheme.EXACT_FLIGHT if exact_flight is None else exact_flight)
     events = bool(events)
     use_summary = bool(use_summary) and not trace and not events and hasattr(scheme, "summary")
 
@@ -334,12 +335,14 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     return jit(roll, cache=cache)
 
 
-def make_batch(scheme: ModuleType, *, events: bool = False, name: str | None = None):
+def make_batch(scheme: ModuleType, loops: ModuleType, *, events: bool = False, name: str | None = None):
     """The parallel batch kernel of the scheme module ``scheme``: summaries of many throws (``prange``).
 
-    It runs ``scheme.roll_summary`` (the scheme's summary loop, from
-    :func:`scheme_kernels`) per IC, or ``scheme.summary`` directly where
-    that applies (decided once per call).  The kernel,
+    It runs ``loops.roll_summary`` (the scheme's summary loop, :func:`make_roll`)
+    per IC, or ``scheme.summary`` directly where that applies (decided once
+    per call).  ``loops`` is the module that holds the scheme's run loops
+    (``core.kernels.kernels_of``): the kernel closes over modules only, which
+    numba's disk cache keys on by name (``core._jit``).  The kernel,
     ``batch(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps)``:
     ``sets``/``set_steps`` are (m·cap,) with IC i owning [i·cap, (i+1)·cap).
     The ICs are cut into blocks of ``BATCH_BLOCK``; block b owns the state
@@ -348,7 +351,7 @@ def make_batch(scheme: ModuleType, *, events: bool = False, name: str | None = N
     loop of ``run_roll`` whatever the number of threads, the scheduling or
     the caller's chunking.
 
-    ``events``: the batch of the events loop (``scheme.roll_events``), with
+    ``events``: the batch of the events loop (``loops.roll_events``), with
     one more argument, ``ev_times`` (m·cap,) float64, laid out as ``sets``.
     """
     events = bool(events)
@@ -370,12 +373,12 @@ def make_batch(scheme: ModuleType, *, events: bool = False, name: str | None = N
                 lo = i * cap
                 hi = lo + cap
                 if events:
-                    s, n, o, ns = scheme.roll_events(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2,
-                                                     ev[0][lo:hi])
+                    s, n, o, ns = loops.roll_events(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2,
+                                                    ev[0][lo:hi])
                 elif fast:  # what the summary loop would do, without the call through it
                     s, n, o, ns = scheme.summary(ics[i], off0, kp, sets[lo:hi], set_steps[lo:hi])
                 else:
-                    s, n, o, ns = scheme.roll_summary(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2, e3)
+                    s, n, o, ns = loops.roll_summary(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2, e3)
                 status[i] = s
                 steps[i] = n
                 outcome[i] = o
@@ -384,21 +387,3 @@ def make_batch(scheme: ModuleType, *, events: bool = False, name: str | None = N
     short = scheme.__name__.rsplit(".", 1)[-1]
     batch.__name__ = batch.__qualname__ = name or f"batch_{short}{'_events' if events else ''}"
     return jit_parallel(batch)
-
-
-def scheme_kernels(scheme: ModuleType):
-    """The kernels of a scheme module, ``(roll_trace, roll_summary, batch)``: what its last line binds.
-
-    Nothing compiles here: numba compiles (or loads from its cache) each
-    kernel on its first call.
-    """
-    return make_roll(scheme, trace=True), make_roll(scheme, trace=False), make_batch(scheme)
-
-
-def event_kernels(scheme: ModuleType):
-    """The events loop and batch of a contact scheme module (one that defines ``step_events``), ``(roll_events, batch_events)``.
-
-    What its last line binds after :func:`scheme_kernels`; nothing compiles
-    here.  Exact contact events: docs/model.md §8.1.
-    """
-    return make_roll(scheme, trace=False, events=True), make_batch(scheme, events=True)

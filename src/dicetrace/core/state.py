@@ -18,7 +18,7 @@ scheme keeps from one step to the next:
     and at its end, the offsets of an RK4 stage and the derivatives of
     stage 4 (for the embedded error estimate).
 ``rk_k``, ``rk_y``, ``rk_y0``, ``rk_acc``
-    the work area of the embedded Runge–Kutta pairs (``schemes.erk``):
+    the work area of the embedded Runge–Kutta pairs (``methods.erk``):
     stage derivatives, stage point, sub-step start of y = (X, U, L, q) and
     a weighted sum of stages.
 ``ahead``, ``fr_*``, ``dn_*``
@@ -73,7 +73,7 @@ from dicetrace.status import Status
 
 _F8 = np.float64
 
-#: What ended each sub-step of a contact scheme (``contact_substep.drive``),
+#: What ended each sub-step of a contact scheme (``contact_driver.make_drive``),
 #: counted per throw in ``STATE.substeps`` in this order: accepted sub-steps
 #: whose length the error controller chose ("error"), that ran at the
 #: longest sub-step dt / substeps ("cap"), that the friction law's stability
@@ -250,3 +250,24 @@ def after_step(finite, n, mask, last_mask, sets, set_steps, nsets):
     if not ok:
         return True, Status.BUFFER_FULL, nsets, last_mask
     return False, Status.TIME_CAP, nsets, last_mask
+
+
+@jit(inline="always")
+def begin_substeps(st):
+    """Copy the state into the sub-step start (``st.sub_*``)."""
+    copy_motion(st.X, st.U, st.L, st.off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
+
+
+@jit(inline="always")
+def accept_substep(st, kp):
+    """The sub-step's result (``st.new_*``) becomes the sub-step start; ω follows L."""
+    copy_motion(st.new_X, st.new_U, st.new_L, st.new_off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
+    for j in range(3):
+        st.W[j] = st.sub_L[j] / kp.inertia
+
+
+@jit(inline="always")
+def end_substeps(st, kp):
+    """Copy the sub-step start back into the state (ω follows L; the cached rotation is dropped)."""
+    copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.X, st.U, st.L, st.off)
+    set_angular_momentum(st, st.L[0], st.L[1], st.L[2], kp)

@@ -1,48 +1,21 @@
-"""``contact-tsit5``: contact-aware sub-stepping with Tsitouras' 5(4) pair (docs/model.md §9).
+"""``contact-tsit5``: the contact driver on Tsitouras' 5(4) pair with dense output (docs/model.md §9).
 
-The driver of ``contact_substep`` (exact free flight, sub-steps cut where a
-node enters or leaves the ground, error control, the friction law's
-stability bound) on Tsit5 sub-steps (``erk``: order 5 with an embedded
-order-4 estimate, first same as last, on the state with a unit quaternion).
-In the die's contacts a sub-step is seldom as long as its error allows: it
-ends at the friction law's stability bound or where a node enters or leaves
-the ground.  Six stages then buy more than DOP853's twelve: at the accuracy
-that decides a throw's outcome it needs less work.  With dense output
-(``DENSE``): the last sub-step of a step runs its full length past the
-step's end, the state at the end is Tsit5's continuous extension there
-(``erk.dense_state``), and the next step goes on from the front.
-
-This module is the driver's sub-step method (``contact_substep.make_drive``):
-the names below are what the driver reads.
+The contact driver (``core.contact_driver``: exact free flight, sub-steps cut
+where a node enters or leaves the ground, error control, the friction law's
+stability bound) on Tsit5 sub-steps (``core.methods.tsit5``): the last
+sub-step of a step runs past its end and the state at the end is
+interpolated (Tsit5's continuous extension); the next step goes on from the
+front.  The `physical` preset's default integrator.
 """
 
 from __future__ import annotations
 
-import sys
+from dicetrace.core.contact_driver import make_drive
+from dicetrace.core.methods import tsit5
 
-from dicetrace.core import loop
-from dicetrace.core.schemes.contact_substep import EXACT_FLIGHT, make_drive  # noqa: F401 (the driver's free flight)
-from dicetrace.core.schemes.erk import dense_keep, dense_state, tsit5_error, tsit5_substep  # noqa: F401
+#: Free flight is exact (the parabola and the exact rotation): the run loop crosses a flight of several steps in one piece.
+EXACT_FLIGHT = True
 
-substep = tsit5_substep
-error = tsit5_error
-#: The step-size exponent, 1 / (the estimate's order + 1).
-ERR_EXP = 1.0 / 5.0
-#: Largest λ_f·h of the friction law (Tsit5's interval on the negative real
-#: axis reaches −3.51; a margin for the law's non-linearity and for λ_f, a
-#: per-node bound, being no bound on the die's whole friction Jacobian: at 3.3
-#: a late sub-step of a `physical` throw raised its energy, analysis/accuracy/TUNING.md §2).
-FRICTION_THETA = 3.0
-#: An impact's first sub-step, as ω·h with ω = √k.
-H0 = 0.4
-#: The last sub-step of a step runs past its end; the end is interpolated (``dense_keep``, ``dense_state``).
-DENSE = True
-
-step = make_drive(sys.modules[__name__], "step_tsit5")
-step_events = make_drive(sys.modules[__name__], "step_tsit5_events", events=True)
-
-
-#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
-roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])
-#: Its events loop and batch (exact contact events, ``loop.event_kernels``).
-roll_events, batch_events = loop.event_kernels(sys.modules[__name__])
+#: One contact-aware step on Tsit5 sub-steps (``core.schemes.Scheme``), and its events form.
+step = make_drive(tsit5, "step_tsit5")
+step_events = make_drive(tsit5, "step_tsit5_events", events=True)

@@ -7,18 +7,19 @@ L ← L + τ·h.  Unstable on the contact spring (the energy grows at each conta
 
 from __future__ import annotations
 
-import sys
-
-from dicetrace.core import loop
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import eval_forces, step_wrench
 from dicetrace.core.rotation import turn_by_omega
 from dicetrace.core.state import set_angular_momentum
 
 
+#: A free flight of several steps is not crossed in one piece (the run loop steps through it).
+EXACT_FLIGHT = False
+
+
 @jit
 def step(st, kp, h, contact):
-    """One forward-Euler step of ``st`` (the contract of ``core.schemes``)."""
+    """One forward-Euler step of ``st`` (``core.schemes.Scheme``)."""
     s0, s1, s2, t0, t1, t2 = step_wrench(st, contact, False)
     X = st.X
     U = st.U
@@ -33,7 +34,3 @@ def step(st, kp, h, contact):
         L = st.L
         set_angular_momentum(st, L[0] + t0 * h, L[1] + t1 * h, L[2] + t2 * h, kp)
     return eval_forces(st, kp)
-
-
-#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
-roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

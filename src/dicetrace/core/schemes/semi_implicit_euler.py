@@ -9,9 +9,7 @@ Its summaries run the specialised kernel ``core.fast`` where that applies.
 
 from __future__ import annotations
 
-import sys
-
-from dicetrace.core import fast, loop
+from dicetrace.core import fast
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import eval_forces, step_wrench
 from dicetrace.core.model import program_kick_drift
@@ -19,9 +17,13 @@ from dicetrace.core.rotation import turn_by_omega
 from dicetrace.core.state import set_angular_momentum
 
 
+#: A free flight of several steps is not crossed in one piece (the run loop steps through it).
+EXACT_FLIGHT = False
+
+
 @jit
 def step(st, kp, h, contact):
-    """One program step of ``st`` (the contract of ``core.schemes``)."""
+    """One program step of ``st`` (``core.schemes.Scheme``)."""
     X = st.X
     U = st.U
     L = st.L
@@ -36,7 +38,3 @@ def step(st, kp, h, contact):
 #: The specialised summary kernel (``core.fast``), bit-identical to the summary loop where it applies.
 summary = fast.roll_summary_sie
 summary_applies = fast.applies
-
-
-#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
-roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

@@ -12,20 +12,21 @@ A step in which no node can touch the ground is the exact free flight.
 
 from __future__ import annotations
 
-import sys
-
-from dicetrace.core import loop
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, eval_forces, step_wrench, wrench_at
 from dicetrace.core.free_flight import free_flight, free_flight_safe
 from dicetrace.core.rotation import apply9, rot9
-from dicetrace.core.schemes.rk4 import stage_point
+from dicetrace.core.methods.rk4 import stage_point
 from dicetrace.core.state import set_angular_momentum
+
+
+#: A free flight of several steps is not crossed in one piece (the run loop steps through it).
+EXACT_FLIGHT = False
 
 
 @jit
 def step(st, kp, h, contact):
-    """One velocity-Verlet step of ``st`` (the contract of ``core.schemes``)."""
+    """One velocity-Verlet step of ``st`` (``core.schemes.Scheme``)."""
     X = st.X
     U = st.U
     L = st.L
@@ -59,7 +60,3 @@ def step(st, kp, h, contact):
     U[2] = U[2] + hh * a2
     set_angular_momentum(st, L[0] + hh * t0, L[1] + hh * t1, L[2] + hh * t2, kp)
     return eval_forces(st, kp)
-
-
-#: This scheme's run loops: tracing, summary (``core.loop``) and the parallel batch.
-roll_trace, roll_summary, batch = loop.scheme_kernels(sys.modules[__name__])

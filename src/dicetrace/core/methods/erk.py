@@ -17,7 +17,7 @@ tableau: ns stages, a, b (the system is autonomous: no nodes c), closed
 over so that they compile in as constants; :func:`erk_error1` and
 :func:`erk_error2` the error estimates on its error weights (ns + 1
 entries: the last weighs the derivative at the new state, which the driver
-evaluates anyway as the next sub-step's first stage).  Error norm ``rk4.error_norm``, as
+evaluates anyway as the next sub-step's first stage).  Error norm ``common.error_norm``, as
 contact-adaptive's (position over the half side, velocity over
 ``error_speed``), with the rotation's error counted as the node
 displacement it causes: :func:`erk_error1` for a pair with one
@@ -35,7 +35,7 @@ import numpy as np
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
 from dicetrace.core.model import offset_cross_omega
-from dicetrace.core.schemes.rk4 import error_norm, error_speed
+from dicetrace.core.methods.common import error_norm, error_speed
 from dicetrace.params import FRICTION_SPECTRAL
 
 #: Components of the sub-step state y = (X, U, L, q).
@@ -280,7 +280,7 @@ def substep_end(st, y):
 
 @jit(inline="always")
 def state_error_norm(e, vs, kp):
-    """``rk4.error_norm`` of an error vector e of y = (X, U, L, q) (Euclidean norm of each part; ω's as |e_L| / I)."""
+    """``common.error_norm`` of an error vector e of y = (X, U, L, q) (Euclidean norm of each part; ω's as |e_L| / I)."""
     sx = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
     su = e[3] * e[3] + e[4] * e[4] + e[5] * e[5]
     sl = e[6] * e[6] + e[7] * e[7] + e[8] * e[8]
