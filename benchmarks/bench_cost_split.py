@@ -53,7 +53,7 @@ import numpy as np
 
 from dicetrace.core import loop
 from dicetrace.core._jit import jit
-from dicetrace.core.contact_driver import make_drive
+from dicetrace.core.contact_driver import free_piece, make_drive
 from dicetrace.core.methods import erk, tsit5
 from dicetrace.core.schemes import contact_tsit5
 from dicetrace.core.state import new_states
@@ -75,6 +75,11 @@ def _jit(fn):
     return jit(fn, cache=False)
 
 
+def _jit_inline(**options):
+    """``jit(inline=...)`` as a decorator factory, uncached (an edited copy of one of the driver's inline parts)."""
+    return lambda fn: jit(fn, cache=False, **options)
+
+
 def _named_uncached(fn, name: str, doc: str):
     """``erk._named`` without the disk cache (a variant's factory is this run's only)."""
     fn.__name__ = fn.__qualname__ = name
@@ -85,6 +90,7 @@ def _named_uncached(fn, name: str, doc: str):
 def _edited(fn, name: str, old: str, new: str, *more: str, env: dict | None = None):
     """``fn``'s source with ``old`` replaced once by ``new`` (and each further (old, new) pair of
     ``more`` after it), executed in ``fn``'s module (its globals, updated by ``env``) as ``name``."""
+    fn = getattr(fn, "py_func", fn)  # a compiled part: its Python source
     src = textwrap.dedent(inspect.getsource(fn))
     src = src.replace(f"def {fn.__name__}(", f"def {name}(", 1)
     pairs = (old, new, *more)
@@ -156,30 +162,35 @@ def variants() -> dict:
                              "return _named(", "return _named_uncached(", env={"_named_uncached": _named_uncached})
     stages_twice = stages_factory("tsit5_stages_twice", erk.TSIT5_STAGES, erk.TSIT5_A, erk.TSIT5_B)
 
-    src = textwrap.dedent(inspect.getsource(make_drive))
-    end_forces = (DRIVE + "            c5, g0, g1, g2, q0, q1, q2 = wrench_at(\n"
-                  + DRIVE + "                Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P\n"
-                  + DRIVE + "            )\n")
-    i0 = src.find(DRIVE + "        cut = 2.0\n")
-    i1 = src.find(DRIVE + "        if cut < 1.0:\n")
-    cut_loop = src[i0:i1] if 0 <= i0 < i1 else DRIVE + "        cut = 2.0 (the cut loop)\n"
+    end_forces = (DRIVE + "            c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I,\n"
+                  + DRIVE + "                                                   offn, kp, st.F, st.uk, st.z, st.P)\n")
+    cut = DRIVE + "        cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, hs, cmin)\n"
     interp = DRIVE + "            method.dense_state(st, kp, 1.0 - st.ahead / st.dn_h)\n"
     interp_forces = interp + DRIVE + "            return dense_end(st, kp)\n"
+    # the parts outside the driver's closure (``free_piece``): an edited copy, put in the edited driver's globals
+    piece = "    m1 = free_min_height(Xw, Uw, st.W, offw, kp, hs)\n"
+    search = "    return PIECE_ENTRY, locate_entry(Xw, Uw, st.W, offw, kp, hs, m1), False\n"
+    piece_twice = _edited(free_piece, "free_piece_twice", piece, _twice(piece, "m1"), "@jit(", "@_jit_inline(",
+                          env={"_jit_inline": _jit_inline})
+    search_twice = _edited(free_piece, "free_piece_search", search,
+                           f"    {SINK}locate_entry(Xw, Uw, st.W, offw, kp, hs, m1)\n" + search, "@jit(", "@_jit_inline(",
+                           env={"_jit_inline": _jit_inline})
+    call = "kind, tau, last = free_piece("
     return {
         "plain": (make_drive, {}),
         "substep": (make_drive, dict(substep=substep_twice)),
         "stages": (make_drive, dict(substep=stages_twice)),
         "error": (make_drive, dict(error=error_twice)),
         "end forces": (_drive_twice("make_drive_end_forces", end_forces, "g0"), {}),
-        "cut test": (_drive_twice("make_drive_cut", cut_loop, "cut"), {}),
+        "cut test": (_drive_twice("make_drive_cut", cut, "cut"), {}),
         "interpolation": (_drive_twice("make_drive_interp", interp, "st.X[2] + st.off[7, 2]"), {}),
         "step-end forces": (_edited(make_drive, "make_drive_interp_forces", interp_forces,
                                     interp + f"{DRIVE}            dense_end(st, kp)\n{DRIVE}            {SINK}st.z[0]\n"
                                     f"{DRIVE}            return dense_end(st, kp)\n"), {}),
-        "flight piece": (_drive_twice("make_drive_piece",
-                                      DRIVE + "            m1 = free_min_height(Xw, Uw, W, offw, kp, hs)\n", "m1"), {}),
-        "impact search": (_drive_twice("make_drive_search",
-                                       DRIVE + "            tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)\n", "tau"), {}),
+        "flight piece": (_edited(make_drive, "make_drive_piece", call, "kind, tau, last = free_piece_twice(",
+                                 env={"free_piece_twice": piece_twice}), {}),
+        "impact search": (_edited(make_drive, "make_drive_search", call, "kind, tau, last = free_piece_search(",
+                                  env={"free_piece_search": search_twice}), {}),
     }
 
 

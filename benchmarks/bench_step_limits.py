@@ -37,8 +37,8 @@ import numba
 import numpy as np
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from bench_cost_split import DRIVE, _all, _edited, build_step, summary_roll
-from dicetrace.core.contact_driver import make_drive
+from bench_cost_split import DRIVE, _all, _edited, _jit_inline, build_step, summary_roll
+from dicetrace.core.contact_driver import first_crossing, make_drive
 from dicetrace.core.state import STATE, SUBSTEP_CAUSES, new_states
 from dicetrace.params import convert_l, make_config
 from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
@@ -92,15 +92,25 @@ def _indented(text: str) -> str:
 
 
 def instrumented_drive():
-    """``make_drive`` with the counters added to its ``drive`` (see the module docstring), named ``make_drive_limits``."""
+    """``make_drive`` with the counters added to its ``drive`` (see the module docstring), named ``make_drive_limits``.
+
+    Whether a cut is an entry is read off the crossing locator: an edited copy
+    of ``first_crossing`` that also returns whether its first crossing's node
+    started above the ground, put in the edited driver's globals.
+    """
+    crossing = _edited(
+        first_crossing, "first_crossing_entry",
+        "    cut = 2.0\n", "    cut = 2.0\n    entry = False\n",
+        "                cut = th\n", "                cut = th\n                entry = zs > 0.0\n",
+        "    return cut\n", "    return cut, entry\n",
+        "@jit(", "@_jit_inline(", env={"_jit_inline": _jit_inline})
     edits = [
-        ("    t = 0.0\n", "    t = 0.0\n    ctx = 0\n    centry = False\n"),
-        ("            entering = True\n", "            entering = True\n            ctx = 3\n"),
-        ("                if cmin < th < cut:\n                    cut = th\n",
-         "                if cmin < th < cut:\n                    cut = th\n                    centry = zs > 0.0\n"),
-        ("                st.substeps[CAUSE_REJECTED] += 1\n",
-         f"                st.substeps[CAUSE_REJECTED] += 1\n                st.limits[{ROW_REJECTED}, ctx] += 1.0\n"
-         "                ctx = 4\n"),
+        ("    nsub = 0\n", "    nsub = 0\n    ctx = 0\n    centry = False\n"),
+        ("                entering = True\n", "                entering = True\n                ctx = 3\n"),
+        ("        cut = first_crossing(", "        cut, centry = first_crossing_entry("),
+        ("                nsub += 1\n                continue",
+         f"                st.limits[{ROW_REJECTED}, ctx] += 1.0\n                ctx = 4\n"
+         "                nsub += 1\n                continue"),
         ("        st.substeps[cause] += 1\n",
          "        st.substeps[cause] += 1\n"
          f"        st.limits[{ROW_ACCEPTED}, ctx] += 1.0\n"
@@ -113,7 +123,8 @@ def instrumented_drive():
          "        if cause == CAUSE_CUT:\n            ctx = 1 if centry else 2\n"
          "        elif cause == CAUSE_FRICTION:\n            ctx = 5\n"),
     ]
-    return _edited(make_drive, "make_drive_limits", *(_indented(text) for pair in edits for text in pair))
+    return _edited(make_drive, "make_drive_limits", *(_indented(text) for pair in edits for text in pair),
+                   env={"first_crossing_entry": crossing})
 
 
 def main() -> None:

@@ -159,268 +159,302 @@ def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times):
                         st.sub_L, st.sub_off, kp.inertia, cmin, sets, set_steps, ev_times)
 
 
-def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bool = True):
-    """The contact-aware step (the contract of ``core.schemes``) on the sub-step method ``method``, compiled as ``name``.
+# ------------------------------------------------------------------ the controller (its state: st.h_next)
 
-    ``cache=False`` for a method module made at run time (see ``loop.make_roll``).
+
+@jit(inline="always")
+def impact_start(st, adaptive, h0):
+    """An impact starts: the controller goes on from the impact's first sub-step h0 unless it proposes less."""
+    if adaptive and (st.h_next <= 0.0 or st.h_next > h0):
+        st.h_next = h0
+
+
+@jit(inline="always")
+def propose_substep(st, hcap, rest, adaptive, h0, lam, theta, overshoot):
+    """The length of the next sub-step and what limits it: (hs, cause, limited, last).
+
+    At most ``hcap``, or the controller's proposal ``st.h_next`` (``adaptive``),
+    or ``theta``/λ_f (the friction law's stability bound, ``lam`` its
+    stiffness); shortened to end the step where that is less than a rounding
+    longer than ``rest`` (with ``overshoot``, a dense-output method's last
+    sub-step may run past the end instead).  ``limited``: the sub-step is
+    shorter than the controller proposed, which then does not shrink its
+    next proposal; ``last``: it ends the step.
+    """
+    hs = hcap
+    cause = CAUSE_CAP
+    if adaptive:
+        if st.h_next <= 0.0:
+            st.h_next = h0
+        if st.h_next < hs:
+            hs = st.h_next
+            cause = CAUSE_ERROR
+    limited = hs < st.h_next
+    if lam * hs > theta:
+        hs = theta / lam
+        limited = True
+        cause = CAUSE_FRICTION
+    last = False
+    if hs >= rest * (1.0 - 1e-12) and not (overshoot and hs > rest * (1.0 + DENSE_SNAP)):
+        hs = rest
+        last = True
+        limited = True
+        cause = CAUSE_END
+    return hs, cause, limited, last
+
+
+@jit(inline="always")
+def control_error(st, h, hs, err, err_exp, limited):
+    """Accept a sub-step of length hs whose error estimate over the tolerance is ``err``, or reject it; either way
+    propose the next sub-step in ``st.h_next`` (Hairer, Nørsett & Wanner I, II.4).  Returns whether it is accepted.
+
+    No sub-step shorter than ``ADAPT_HMIN``·h is rejected.  The factor is
+    0.9·err^(−err_exp), within [0.2, 4]; a ``limited`` sub-step (shorter than
+    proposed for another reason) does not shrink the proposal.
+    """
+    if err == 0.0:
+        fac = ADAPT_FAC_MAX
+    elif err_exp == 0.25:  # 0.9·err^(-1/4) by two square roots (libm's pow cost 3 % of a throw)
+        fac = ADAPT_SAFETY / math.sqrt(math.sqrt(err))
+    else:
+        fac = ADAPT_SAFETY * err ** (-err_exp)
+    if err > 1.0 and hs > ADAPT_HMIN * h:
+        st.h_next = hs * max(ADAPT_FAC_MIN, fac)
+        st.substeps[CAUSE_REJECTED] += 1
+        return False
+    hn = hs * min(ADAPT_FAC_MAX, fac)
+    if limited and hn < st.h_next:
+        hn = st.h_next
+    st.h_next = hn
+    return True
+
+
+# ------------------------------------------------------------------ the crossing locator
+
+
+@jit(inline="always")
+def first_crossing(Xs, Us, Ls, offs, Xe, Ue, Le, offe, inertia, hs, cmin):
+    """Where in a sub-step of length hs the first node enters or leaves the ground, as a fraction (2.0: none).
+
+    From the sub-step's two ends (``*s``, ``*e``): a node whose height
+    changed side is located on the cubic Hermite interpolant of its height
+    (``contacts.hermite_root``; the linear estimate where the cubic has no
+    sign change).  A crossing within ``cmin`` of the start (a node left on
+    the ground to rounding by the previous cut) is no crossing: it is left
+    out of the minimum, not allowed to veto the cut of another node's real
+    crossing later in the sub-step (that veto hung on the sign of a 1e-16
+    height and was contact-substep's 1e-12 outcome floor; tests/core).  The
+    exact events inside an accepted sub-step are read off the same cubics
+    (``contacts.note_substep_events``, :func:`free_piece_events`).
+    """
+    cut = 2.0
+    for k in range(8):
+        zs = Xs[2] + offs[k, 2]
+        ze = Xe[2] + offe[k, 2]
+        if (zs < 0.0) != (ze < 0.0) and zs != 0.0:
+            # u_z = U_z + (x × ω)_z at both ends
+            vs = node_vz(Us, Ls, offs, k, inertia)
+            ve = node_vz(Ue, Le, offe, k, inertia)
+            th = hermite_root(zs, vs, ze, ve, hs)
+            if th < 0.0:
+                th = zs / (zs - ze)
+            if cmin < th < cut:
+                cut = th
+    return cut
+
+
+# ------------------------------------------------------------------ free flight inside a step
+
+#: What a free piece of a step is (:func:`free_piece`): the rest of the step, a piece that ends in the air, one
+#: that ends where the lowest node reaches the ground.
+PIECE_REST = 0
+PIECE_AIR = 1
+PIECE_ENTRY = 2
+
+
+@jit(inline="always")
+def free_piece(st, kp, rest, hmax):
+    """The next piece of exact free flight from the sub-step start ``st.sub_*``: (kind, length, last).
+
+    The whole ``rest`` of the step where no node can reach the ground in it
+    (``PIECE_REST``); else a piece of at most ``hmax`` that ends in the air
+    (``PIECE_AIR``; ``last``: it ends the step) or where the lowest node
+    reaches the ground (``PIECE_ENTRY``, found on the exact flight).  The
+    state is not moved.
+    """
+    Xw = st.sub_X
+    Uw = st.sub_U
+    offw = st.sub_off
+    if free_flight_safe(Xw, Uw, st.W, offw, kp, rest):
+        return PIECE_REST, rest, True
+    hs = hmax
+    last = False
+    if hs >= rest * (1.0 - 1e-12):
+        hs = rest
+        last = True
+    m1 = free_min_height(Xw, Uw, st.W, offw, kp, hs)
+    if m1 >= 0.0:
+        return PIECE_AIR, hs, last
+    return PIECE_ENTRY, locate_entry(Xw, Uw, st.W, offw, kp, hs, m1), False
+
+
+# ------------------------------------------------------------------ dense output (its state: st.ahead, fr_*, dn_*)
+
+
+@jit(inline="always")
+def resume_front(st, kp, h):
+    """Go on from the front a dense-output step left in the sub-step start: (t, cached, below, force sum, torque).
+
+    ``t``: how far into this step the front lies (``st.ahead``, now 0);
+    ω follows the front's L; the forces there were kept (``front_keep``)
+    and are the first sub-step's first stage, except at t = h, where the
+    loop ends at once and the forces at the front are evaluated afresh.
+    """
+    t = st.ahead
+    st.ahead = 0.0
+    for j in range(3):
+        st.W[j] = st.sub_L[j] / kp.inertia
+    w = st.fr_wrench
+    return t, t < h, st.fr_below, w[0], w[1], w[2], w[3], w[4], w[5]
+
+
+@jit(inline="always")
+def substeps_end(st, kp, t, h, cached, below):
+    """The end of a step's sub-steps: the state back from the sub-step start, and what ``eval_forces`` returns there.
+
+    A step whose sub-step budget ran out before its end is never returned
+    silently shorter: its height is NaN, which the loop reports as
+    ``non_finite``.  When the step ended on an accepted sub-step whose
+    forces at the new state (the error estimate's evaluation, ``cached``;
+    ``below``: whether a node was below there) are in the scratch, they are
+    what ``eval_forces`` would compute again from the same X, U, ω and offsets.
+    """
+    if t < h:
+        st.sub_X[2] = math.nan
+        cached = False
+    end_substeps(st, kp)
+    if cached:
+        return ended_forces(st, below)
+    return eval_forces(st, kp)
+
+
+# ------------------------------------------------------------------ the sub-step loop
+
+
+def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bool = True):
+    """The contact step (``core.schemes.Scheme``) on the sub-step method ``method`` (``core.methods``), compiled as ``name``.
+
+    The driver composes the parts above: free flight inside the step
+    (:func:`free_piece`), the controller (:func:`propose_substep`,
+    :func:`control_error`), the crossing locator (:func:`first_crossing`)
+    and dense output (:func:`resume_front`, :func:`front_keep`, the
+    method's ``dense_keep``/``dense_state``).  With ``kp.tol_growth`` > 0 a
+    step that starts at time t weighs its sub-steps' error estimates by
+    exp(−tol_growth·t) (``state.age_tolerance``).  Every sub-step is counted
+    in ``st.substeps`` by what ended it (``state.SUBSTEP_CAUSES``).
     ``events``: the step of an events loop, ``drive(st, kp, h, contact, sets,
     set_steps, ev_times)``, which records the exact contact events
     (``contacts.note_event``): the set inside every accepted sub-step (whose
     ends are the crossings), the empty set where a free flight starts.
-
-    ``method`` is a module that defines the sub-step method: ``substep(st,
-    kp, h, f0, f1, f2, t0, t1, t2)`` (one explicit step from the sub-step
-    start ``st.sub_*`` to ``st.new_*``), ``error(st, kp, h, g0, g1, g2, q0,
-    q1, q2)`` (its local error estimate over ``kp.tol``, given the force sum
-    and torque at the new state), ``ERR_EXP`` (the step-size exponent,
-    1 / (estimator order + 1)), ``FRICTION_THETA`` (the largest λ_f·h of the
-    friction law), ``H0`` (an impact's first sub-step as ω·h) and ``DENSE``
-    with ``dense_keep`` and ``dense_state``; with ``DENSE``, a pair with a
-    continuous extension:
-    the last error-controlled sub-step of the step is not shortened to end
-    at h but runs past it; the state at h is interpolated in it and the
-    integration front stays in ``st.sub_*`` (``st.ahead`` beyond the state)
-    for the next step to go on from.
-
-    With ``kp.tol_growth`` > 0 the tolerance loosens over the throw: a step
-    that starts at time t weighs its sub-steps' error estimates by
-    exp(−tol_growth·t) (``st.tol_weight``, 1 after ``init_state``, multiplied
-    by every step while tol_growth > 0), never below kp.tol /
-    ``TOL_LOOSEST`` (weight 1 and the same arithmetic, bit for bit, with
-    tol_growth = 0).
-
-    Free flight (no node below the ground) is integrated exactly, in pieces
-    of at most dt / ``substeps`` near the ground; the moment the lowest node
-    reaches the ground is found on the exact free-flight trajectory.  From
-    there on, RK4 sub-steps of at most dt / ``substeps`` (shorter where the
-    friction law is stiff, see :func:`friction_rate`), each cut where a node
-    enters or leaves the ground (root of the cubic Hermite interpolant of its
-    height), until no node is below the ground.  The sub-step method's
-    order in dt at fixed ``substeps``; error-controlled sub-steps with
-    ``kp.tol > 0``.  Every sub-step is counted in ``st.substeps`` by what
-    ended it (``state.SUBSTEP_CAUSES``).
+    ``cache=False`` for a method module made at run time (``loop.make_roll``).
     """
     events_on = bool(events)
+    dense = bool(method.DENSE)
 
     def drive(st, kp, h, contact, *ev):
-        W = st.W
-        # the weight of this step's error estimates (the tolerance loosened by tol_growth)
-        grade = age_tolerance(st, kp, h, 1)
-        if method.DENSE and st.ahead > 0.0:
-            if st.ahead > h:
-                # the step ends inside the sub-step the front came from: interpolate
+        grade = age_tolerance(st, kp, h, 1)  # the weight of this step's error estimates
+        if dense and st.ahead > 0.0:
+            if st.ahead > h:  # the step ends inside the sub-step the front came from: interpolate
                 st.ahead -= h
                 method.dense_state(st, kp, 1.0 - st.ahead / st.dn_h)
                 return dense_end(st, kp)
-        elif not contact and free_flight_safe(st.X, st.U, W, st.off, kp, h):
+        elif not contact and free_flight_safe(st.X, st.U, st.W, st.off, kp, h):
             if events_on:
                 note_event(st, 0.0, h, 0, ev[0], ev[1], ev[2])
             free_flight(st, kp, h)
             return eval_forces(st, kp)
         I = kp.inertia
+        Xw, Uw, Lw, offw, Xn, Un, Ln, offn = st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.new_X, st.new_U, st.new_L, st.new_off
         hmax = h / max(kp.substeps, 1.0)
         adaptive = kp.tol > 0.0
-        hcap = hmax
-        if method.DENSE and adaptive:
-            hcap = DENSE_CAP * h  # the step's end is interpolated: a sub-step may span several steps
+        overshoot = dense and adaptive  # the step's end is interpolated: a sub-step may span several steps
+        hcap = DENSE_CAP * h if overshoot else hmax
         h0 = method.H0 / math.sqrt(kp.k)
-        # the state lives in the sub-step start during the step (see rk4.cf4); a
-        # front left by the last step (dense output) is there already
-        resume = method.DENSE and st.ahead > 0.0
-        if not resume:
-            begin_substeps(st)
-        Xn = st.new_X
-        Un = st.new_U
-        Ln = st.new_L
-        offn = st.new_off
-        Xw = st.sub_X
-        Uw = st.sub_U
-        Lw = st.sub_L
-        offw = st.sub_off
-        F = st.F
-        uk = st.uk
-        z = st.z
-        P = st.P
+        # the state lives in the sub-step start during the step; a front left by the last step is there already
+        resume = dense and st.ahead > 0.0
         st.rot_h = -1.0  # ω changes: the cached free-flight rotation is stale
-        t = 0.0
+        if resume:
+            t, cached, c5, g0, g1, g2, q0, q1, q2 = resume_front(st, kp, h)
+        else:
+            begin_substeps(st)
+            # in contact, the forces at the step's start are those the last step ended with: its first stage
+            t, cached, c5 = 0.0, contact, contact
+            g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
         nsub = 0
         entering = False
         ahead = False  # the last accepted sub-step ran past the end of the step (dense output)
-        # In contact, the forces at the step's start are those the last step ended
-        # with (``eval_forces``, or the last sub-step's own evaluation): their sums
-        # are the first sub-step's first stage, bit for bit (nodes without a force
-        # hold exact zeros, which leave a sum from +0.0 unchanged).
-        cached = contact
-        c5 = contact
-        if resume:
-            # the sub-steps go on from the front, with the forces kept there
-            t = st.ahead
-            st.ahead = 0.0
-            for j in range(3):
-                W[j] = Lw[j] / I
-            cached = t < h  # at t = h the loop ends at once: the forces at the front are evaluated afresh
-            c5 = st.fr_below
-            w = st.fr_wrench
-            g0, g1, g2, q0, q1, q2 = w[0], w[1], w[2], w[3], w[4], w[5]
-        else:
-            g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
         while t < h and nsub < MAX_SUBSTEPS:
             nsub += 1
             rest = h - t
-            if cached:
-                # the accepted sub-step's last force evaluation is this one's first
+            if cached:  # the accepted sub-step's last force evaluation is this one's first
                 cached = False
-                below = c5
-                f0 = g0
-                f1 = g1
-                f2 = g2
-                t0 = q0
-                t1 = q1
-                t2 = q2
+                below, f0, f1, f2, t0, t1, t2 = c5, g0, g1, g2, q0, q1, q2
             else:
-                below, f0, f1, f2, t0, t1, t2 = wrench_at(Xw[2], Uw[0], Uw[1], Uw[2], W[0], W[1], W[2], offw, kp, F, uk, z, P)
-            if not below and not entering:
-                # free flight, exact, until the end of the step or the next entry
+                below, f0, f1, f2, t0, t1, t2 = wrench_at(Xw[2], Uw[0], Uw[1], Uw[2], st.W[0], st.W[1], st.W[2], offw,
+                                                          kp, st.F, st.uk, st.z, st.P)
+            if not below and not entering:  # free flight, exact, until the end of the step or the next entry
                 if events_on:
                     note_event(st, t, h, 0, ev[0], ev[1], ev[2])
-                if free_flight_safe(Xw, Uw, W, offw, kp, rest):
-                    free_advance(Xw, Uw, W, offw, kp, rest)
-                    t = h
-                    break
-                hs = hmax
-                last = False
-                if hs >= rest * (1.0 - 1e-12):
-                    hs = rest
-                    last = True
-                m1 = free_min_height(Xw, Uw, W, offw, kp, hs)
-                if m1 >= 0.0:
-                    if events_on:
-                        free_piece_events(st, t, hs, h, hmax, kp, ev[0], ev[1], ev[2])
-                    else:
-                        free_advance(Xw, Uw, W, offw, kp, hs)
-                    t = h if last else t + hs
-                    continue
-                tau = locate_entry(Xw, Uw, W, offw, kp, hs, m1)
-                if events_on:
+                kind, tau, last = free_piece(st, kp, rest, hmax)
+                if events_on and kind != PIECE_REST:
                     free_piece_events(st, t, tau, h, hmax, kp, ev[0], ev[1], ev[2])
                 else:
-                    free_advance(Xw, Uw, W, offw, kp, tau)
-                t = t + tau
-                entering = True
-                if adaptive and (st.h_next <= 0.0 or st.h_next > h0):
-                    st.h_next = h0  # an impact starts: the step the controller starts from
+                    free_advance(Xw, Uw, st.W, offw, kp, tau)
+                if kind == PIECE_ENTRY:
+                    t = t + tau
+                    entering = True
+                    impact_start(st, adaptive, h0)
+                else:
+                    t = h if last else t + tau
                 continue
             entering = False
-            hs = hcap
-            cause = CAUSE_CAP
-            if adaptive:
-                if st.h_next <= 0.0:
-                    st.h_next = h0
-                if st.h_next < hs:
-                    hs = st.h_next
-                    cause = CAUSE_ERROR
-            limited = hs < st.h_next
-            if resume and nsub == 1:
-                # the first pass of a resumed step starts at the front, whose λ_f
-                # was kept there (the scratch holds the state's forces now)
-                lam = st.fr_lam
-            else:
-                lam = friction_rate(z, uk, P, kp)
-            if lam * hs > method.FRICTION_THETA:
-                hs = method.FRICTION_THETA / lam
-                limited = True
-                cause = CAUSE_FRICTION
-            last = False
-            if hs >= rest * (1.0 - 1e-12) and not (method.DENSE and adaptive and hs > rest * (1.0 + DENSE_SNAP)):
-                hs = rest
-                last = True
-                limited = True
-                cause = CAUSE_END
+            # the first pass of a resumed step starts at the front, whose λ_f was kept there
+            lam = st.fr_lam if resume and nsub == 1 else friction_rate(st.z, st.uk, st.P, kp)
+            hs, cause, limited, last = propose_substep(st, hcap, rest, adaptive, h0, lam, method.FRICTION_THETA, overshoot)
             method.substep(st, kp, hs, f0, f1, f2, t0, t1, t2)
-            # nodes that changed side within the sub-step: cut at the first crossing.
-            # A crossing within MIN_CUT of the start (a node left on the ground to
-            # rounding by the previous cut) is no crossing: it is left out of the
-            # minimum, not allowed to veto the cut of another node's real crossing
-            # later in the sub-step (that veto hung on the sign of a 1e-16 height
-            # and was contact-substep's 1e-12 outcome floor; tests/core).
-            cut = 2.0
             cmin = MIN_CUT * hmax / hs
-            for k in range(8):
-                zs = Xw[2] + offw[k, 2]
-                ze = Xn[2] + offn[k, 2]
-                if (zs < 0.0) != (ze < 0.0) and zs != 0.0:
-                    # u_z = U_z + (x × ω)_z at both ends
-                    vs = node_vz(Uw, Lw, offw, k, I)
-                    ve = node_vz(Un, Ln, offn, k, I)
-                    th = hermite_root(zs, vs, ze, ve, hs)
-                    if th < 0.0:
-                        th = zs / (zs - ze)
-                    if cmin < th < cut:
-                        cut = th
-            if cut < 1.0:
+            cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, hs, cmin)
+            if cut < 1.0:  # a node crossed the ground inside: the sub-step again, up to the first crossing
                 hs = cut * hs
                 last = False
                 limited = True
                 cause = CAUSE_CUT
                 st.substeps[CAUSE_REDONE] += 1
                 method.substep(st, kp, hs, f0, f1, f2, t0, t1, t2)
-            if adaptive:
-                # embedded order-3 estimate (FSAL): y4 - y3 = h/6·(k4 - k5), k5 the
-                # derivative at the new state; scaled by the die's size and speed
-                c5, g0, g1, g2, q0, q1, q2 = wrench_at(
-                    Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I, offn, kp, F, uk, z, P
-                )
+            if adaptive:  # the estimate's derivative at the new state is the next sub-step's first stage
+                c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I,
+                                                       offn, kp, st.F, st.uk, st.z, st.P)
                 err = method.error(st, kp, hs, g0, g1, g2, q0, q1, q2) * grade
-                if err == 0.0:
-                    fac = ADAPT_FAC_MAX
-                elif method.ERR_EXP == 0.25:  # 0.9·err^(-1/4) by two square roots (libm's pow cost 3 % of a throw)
-                    fac = ADAPT_SAFETY / math.sqrt(math.sqrt(err))
-                else:
-                    fac = ADAPT_SAFETY * err ** (-method.ERR_EXP)
-                if err > 1.0 and hs > ADAPT_HMIN * h:
-                    st.h_next = hs * max(ADAPT_FAC_MIN, fac)
-                    st.substeps[CAUSE_REJECTED] += 1
+                if not control_error(st, h, hs, err, method.ERR_EXP, limited):
                     nsub += 1
-                    # the scratch now holds the rejected candidate's forces: redo the start
-                    continue
-                hn = hs * min(ADAPT_FAC_MAX, fac)
-                if limited and hn < st.h_next:
-                    hn = st.h_next
-                st.h_next = hn
+                    continue  # the scratch holds the rejected candidate's forces: the start is evaluated again
                 cached = True
-            if method.DENSE and adaptive and not last and hs > rest:
-                # past the end of the step: keep this sub-step for the step ends inside it
+            if overshoot and not last and hs > rest:  # past the step's end: kept for the step ends inside it
                 method.dense_keep(st, hs)
                 ahead = True
-            if events_on:
-                # the sets inside the sub-step, from its start: the nodes below the ground there and
-                # every crossing inside (a node that enters and leaves within it: the cuts see none)
+            if events_on:  # the sets inside the sub-step: below at its start, and every crossing inside
                 note_substep_events(st, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, cmin, ev[0], ev[1], ev[2])
             accept_substep(st, kp)
             st.substeps[cause] += 1
             if ahead:
                 break
             t = h if last else t + hs
-        if ahead:
-            # the front stays in the sub-step start, with what its next sub-step
-            # starts from; the state at the end of the step is interpolated in
-            # the last sub-step
+        if ahead:  # the front stays in the sub-step start; the state at the step's end is interpolated
             st.ahead = t + hs - h
-            front_keep(st, c5, g0, g1, g2, q0, q1, q2, friction_rate(z, uk, P, kp))
+            front_keep(st, c5, g0, g1, g2, q0, q1, q2, friction_rate(st.z, st.uk, st.P, kp))
             method.dense_state(st, kp, rest / hs)
             return dense_end(st, kp)
-        if t < h:
-            # the sub-step budget ran out before the end of the step: never return a
-            # silently shorter step; the loop reports the NaN as "non_finite"
-            Xw[2] = math.nan
-            cached = False
-        end_substeps(st, kp)
-        if cached:
-            # the step ended on an accepted sub-step, whose forces at the new state
-            # (the error estimate's evaluation) are in the scratch: what
-            # eval_forces would compute again, from the same X, U, ω = L/I and offsets
-            return ended_forces(st, c5)
-        return eval_forces(st, kp)
+        return substeps_end(st, kp, t, h, cached, c5)
 
     drive.__name__ = drive.__qualname__ = name
     drive.__doc__ = f"One contact-aware step on the sub-step method of ``{method.__name__}`` (``make_drive``)."

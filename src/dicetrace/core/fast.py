@@ -188,6 +188,129 @@ def forces_mirror(Xz, U0, U1, U2, W0, W1, W2, off, kp, F, uk, z, P):
     return below, mask, contact_forces(z, uk, kp, F, P)
 
 
+@jit(inline="always")
+def _flight_run(n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok, R, off, kp, du_free, duz_free,
+                sets, set_steps, nsets, last_mask):
+    """A run of force-free steps in registers, from step n, while no node is at or below the ground.
+
+    The free-flight part of :func:`roll_summary_sie_in` (see the module
+    docstring): steps until a node reaches the ground, the stop-test bound
+    comes near the threshold (the general tail then takes that step), or the
+    run ends (time cap, non-finite state, full buffer: ``done``).  Moves the
+    state and the offsets (written back to ``off``, mirror nodes negated)
+    and records the contact sets.  Returns (n, X, U, nsets, last_mask,
+    status, done); ``status`` says why a ``done`` run ended (TIME_CAP at the
+    cap).
+    """
+    h = kp.dt_s
+    mg = -kp.g
+    e_stop = kp.e_stop
+    e_rest = kp.e_rest
+    half2 = kp.half_side_cm * kp.half_side_cm
+    status = Status.TIME_CAP
+    # nodes 1..4 (the others are their negatives)
+    o00 = off[0, 0]
+    o01 = off[0, 1]
+    o02 = off[0, 2]
+    o10 = off[1, 0]
+    o11 = off[1, 1]
+    o12 = off[1, 2]
+    o20 = off[2, 0]
+    o21 = off[2, 1]
+    o22 = off[2, 2]
+    o30 = off[3, 0]
+    o31 = off[3, 1]
+    o32 = off[3, 2]
+    # free-flight constants of the stop-test bound (U0, U1, ω fixed)
+    lsum = L0 + L1 + L2
+    left = maxn - n  # steps this run may take at most
+    # U0 += (0+0)/8·h is idempotent when that increment is a zero (h finite):
+    # apply it once and step X0, X1 by constant increments.
+    xy_const = du_free == 0.0
+    if xy_const:
+        U0 = U0 + du_free
+        U1 = U1 + du_free
+    dx0 = U0 * h
+    dx1 = U1 * h
+    kt_xy = U0 * U0 + U1 * U1
+    krot = 16.0 * half2 * (W0 * W0 + W1 * W1 + W2 * W2)
+    # "Tame" run: the magnitudes cannot reach overflow within `left` steps, so
+    # the loop's non-finite test passes at every step and is skipped; and the
+    # lowest node is at most r_safe below the centre (offsets keep their length
+    # up to the rounding of an orthonormal R), so heights are examined only
+    # when X_z <= r_safe.
+    tau = _orthonormality_defect(R) if rot_ok else 0.0
+    r2 = max(
+        max(o00 * o00 + o01 * o01 + o02 * o02, o10 * o10 + o11 * o11 + o12 * o12),
+        max(o20 * o20 + o21 * o21 + o22 * o22, o30 * o30 + o31 * o31 + o32 * o32),
+    )
+    drift = left * (1.5 * tau + 4.5e-16)
+    tame = (
+        drift < 0.25
+        and max(max(abs(X0), abs(X1)), abs(X2)) < TAME
+        and max(max(abs(U0), abs(U1)), abs(U2)) < TAME
+        and max(abs(lsum), r2) < TAME
+        and abs(h) < TAME
+        and abs(duz_free) < TAME
+    )
+    r_safe = math.sqrt(r2) * (1.0 + 2.0 * drift + 1e-12) if tame else math.inf
+    countdown = 0  # flight steps whose stop-test bound is implied by an earlier one
+    done = False  # the step ended, fully handled here
+    while True:
+        n += 1
+        if xy_const:
+            X0 = X0 + dx0
+            X1 = X1 + dx1
+        else:
+            U0 = U0 + du_free
+            U1 = U1 + du_free
+            X0 = X0 + U0 * h
+            X1 = X1 + U1 * h
+        U2 = U2 + duz_free
+        X2 = X2 + U2 * h
+        if rot_ok:
+            o00, o01, o02 = turn(o00, o01, o02, R)
+            o10, o11, o12 = turn(o10, o11, o12, R)
+            o20, o21, o22 = turn(o20, o21, o22, R)
+            o30, o31, o32 = turn(o30, o31, o32, R)
+        if not (X2 > r_safe):
+            # lowest node height, exactly min_k z_k (z of node 8-k is X2 - x_kz)
+            zlow = X2 - max(max(abs(o02), abs(o12)), max(abs(o22), abs(o32)))
+            if zlow <= 0.0:
+                break  # a node at or below the ground: the general tail ends this step
+        if not tame:
+            # the loop's non-finite check: X_z + ΣU, ΣL + x_1x + x_8z (x_8z = -x_1z)
+            if not state_finite(X2, U0, U1, U2, L0, L1, L2, o00, -o02):
+                status = Status.NON_FINITE
+                done = True
+                break
+        nsets, last_mask, ok = record_set(n, 0, last_mask, sets, set_steps, nsets)
+        if not ok:
+            status = Status.BUFFER_FULL
+            done = True
+            break
+        # stop test, bounded below (see the module docstring)
+        if countdown > 0:
+            countdown -= 1
+        else:
+            ke = 8.0 * (kt_xy + U2 * U2) + krot
+            ep = 0.5 * ke + mg * (8.0 * X2)
+            scale = ep + abs(mg * 8.0 * X2) + e_rest
+            slack = ((ep - e_rest) - (FLIGHT_BOUND_REL * scale + FLIGHT_BOUND_ABS)) - e_stop
+            if not (slack > 0.0):
+                break  # near the threshold: the general tail evaluates it exactly
+            countdown = _flight_countdown(slack, scale, U2, duz_free, mg, h)
+        if n >= maxn:
+            done = True
+            break
+    # write the offsets back (mirror nodes negated)
+    _put_mirrored(off, 0, (o00, o01, o02))
+    _put_mirrored(off, 1, (o10, o11, o12))
+    _put_mirrored(off, 2, (o20, o21, o22))
+    _put_mirrored(off, 3, (o30, o31, o32))
+    return n, X0, X1, X2, U0, U1, U2, nsets, last_mask, status, done
+
+
 @jit
 def roll_summary_sie(ic, off0, kp, sets, set_steps):
     """One throw to rest, summary only: semi-implicit Euler, point-mass stop test.
@@ -212,31 +335,15 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     The one source of the kernel: the CPU's :func:`roll_summary_sie` runs it
     in fresh arrays, the GPU's (``core.gpu``) in per-thread local arrays.
 
-    Parameters
-    ----------
-    ic : (6,) float64
-        U (cm/s) and L (program convention, node-mass·cm²/s).
-    off0 : (8, 3) float64
-        Initial node offsets, cm; must be mirror-symmetric
-        (``off0[7-k] == -off0[k]`` bitwise, see :func:`mirror_symmetric`).
-    kp : KernelParams
-        Must have ``energy_mode == ENERGY_POINT_MASS`` (see :func:`applies`).
-    sets, set_steps : (cap,) uint8, (cap,) int32
-        Output contact-set sequence (as the run loop).
-    off, F, uk : (8, 3) float64; z, P : (8,) float64
-        Scratch: the node offsets, forces, velocities, heights and normal
-        forces (overwritten; never views of one another).
-
-    Returns
-    -------
-    (status, steps, outcome, nsets), as the run loop.
+    Arguments and result as the run loop's (``core.loop``), where it applies
+    (:func:`applies`: ``off0`` mirror-symmetric bitwise, the point-mass
+    stop-test energy); ``off``, ``F``, ``uk`` (8, 3) and ``z``, ``P`` (8,)
+    are scratch (overwritten; never views of one another).
     """
     h = kp.dt_s
     inertia = kp.inertia
     e_stop = kp.e_stop
     e_rest = kp.e_rest
-    mg = -kp.g
-    half2 = kp.half_side_cm * kp.half_side_cm
 
     # --- initial state (the run loop's prologue, ``state.init_state``) ---
     X0 = 0.0
@@ -274,106 +381,9 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     while n < maxn:
         if not contact:
             # ---------------- free flight: a run of force-free steps in registers ----------------
-            # nodes 1..4 (the others are their negatives)
-            o00 = off[0, 0]
-            o01 = off[0, 1]
-            o02 = off[0, 2]
-            o10 = off[1, 0]
-            o11 = off[1, 1]
-            o12 = off[1, 2]
-            o20 = off[2, 0]
-            o21 = off[2, 1]
-            o22 = off[2, 2]
-            o30 = off[3, 0]
-            o31 = off[3, 1]
-            o32 = off[3, 2]
-            # free-flight constants of the stop-test bound (U0, U1, ω fixed)
-            lsum = L0 + L1 + L2
-            left = maxn - n  # steps this run may take at most
-            # U0 += (0+0)/8·h is idempotent when that increment is a zero (h finite):
-            # apply it once and step X0, X1 by constant increments.
-            xy_const = du_free == 0.0
-            if xy_const:
-                U0 = U0 + du_free
-                U1 = U1 + du_free
-            dx0 = U0 * h
-            dx1 = U1 * h
-            kt_xy = U0 * U0 + U1 * U1
-            krot = 16.0 * half2 * (W0 * W0 + W1 * W1 + W2 * W2)
-            # "Tame" run: the magnitudes cannot reach overflow within `left` steps, so
-            # the loop's non-finite test passes at every step and is skipped; and the
-            # lowest node is at most r_safe below the centre (offsets keep their length
-            # up to the rounding of an orthonormal R), so heights are examined only
-            # when X_z <= r_safe.
-            tau = _orthonormality_defect(R) if rot_ok else 0.0
-            r2 = max(
-                max(o00 * o00 + o01 * o01 + o02 * o02, o10 * o10 + o11 * o11 + o12 * o12),
-                max(o20 * o20 + o21 * o21 + o22 * o22, o30 * o30 + o31 * o31 + o32 * o32),
-            )
-            drift = left * (1.5 * tau + 4.5e-16)
-            tame = (
-                drift < 0.25
-                and max(max(abs(X0), abs(X1)), abs(X2)) < TAME
-                and max(max(abs(U0), abs(U1)), abs(U2)) < TAME
-                and max(abs(lsum), r2) < TAME
-                and abs(h) < TAME
-                and abs(duz_free) < TAME
-            )
-            r_safe = math.sqrt(r2) * (1.0 + 2.0 * drift + 1e-12) if tame else math.inf
-            countdown = 0  # flight steps whose stop-test bound is implied by an earlier one
-            done = False  # the step ended, fully handled here
-            while True:
-                n += 1
-                if xy_const:
-                    X0 = X0 + dx0
-                    X1 = X1 + dx1
-                else:
-                    U0 = U0 + du_free
-                    U1 = U1 + du_free
-                    X0 = X0 + U0 * h
-                    X1 = X1 + U1 * h
-                U2 = U2 + duz_free
-                X2 = X2 + U2 * h
-                if rot_ok:
-                    o00, o01, o02 = turn(o00, o01, o02, R)
-                    o10, o11, o12 = turn(o10, o11, o12, R)
-                    o20, o21, o22 = turn(o20, o21, o22, R)
-                    o30, o31, o32 = turn(o30, o31, o32, R)
-                if not (X2 > r_safe):
-                    # lowest node height, exactly min_k z_k (z of node 8-k is X2 - x_kz)
-                    zlow = X2 - max(max(abs(o02), abs(o12)), max(abs(o22), abs(o32)))
-                    if zlow <= 0.0:
-                        break  # a node at or below the ground: the general tail ends this step
-                if not tame:
-                    # the loop's non-finite check: X_z + ΣU, ΣL + x_1x + x_8z (x_8z = -x_1z)
-                    if not state_finite(X2, U0, U1, U2, L0, L1, L2, o00, -o02):
-                        status = Status.NON_FINITE
-                        done = True
-                        break
-                nsets, last_mask, ok = record_set(n, 0, last_mask, sets, set_steps, nsets)
-                if not ok:
-                    status = Status.BUFFER_FULL
-                    done = True
-                    break
-                # stop test, bounded below (see the module docstring)
-                if countdown > 0:
-                    countdown -= 1
-                else:
-                    ke = 8.0 * (kt_xy + U2 * U2) + krot
-                    ep = 0.5 * ke + mg * (8.0 * X2)
-                    scale = ep + abs(mg * 8.0 * X2) + e_rest
-                    slack = ((ep - e_rest) - (FLIGHT_BOUND_REL * scale + FLIGHT_BOUND_ABS)) - e_stop
-                    if not (slack > 0.0):
-                        break  # near the threshold: the general tail evaluates it exactly
-                    countdown = _flight_countdown(slack, scale, U2, duz_free, mg, h)
-                if n >= maxn:
-                    done = True
-                    break
-            # write the offsets back (mirror nodes negated)
-            _put_mirrored(off, 0, (o00, o01, o02))
-            _put_mirrored(off, 1, (o10, o11, o12))
-            _put_mirrored(off, 2, (o20, o21, o22))
-            _put_mirrored(off, 3, (o30, o31, o32))
+            n, X0, X1, X2, U0, U1, U2, nsets, last_mask, status, done = _flight_run(
+                n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok, R, off, kp, du_free, duz_free,
+                sets, set_steps, nsets, last_mask)
             if done:
                 break
         else:

@@ -19,6 +19,22 @@ integrator (``run_roll``, ``run_summary``, ``run_batch``) are in
 ``core.kernels``; the GPU's are in ``core.gpu``, which compiles the same
 functions for the device.
 
+A run loop is ``roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force,
+tr_energy, ev_times) -> (status, steps, outcome, nsets)``: ``ic`` (6,) the
+IC, U (cm/s) and L (program convention, node-mass·cm²/s); ``off0`` (8, 3)
+the initial node offsets from the centre of mass, cm (the program: ±half
+on each axis; a rotated cube starts tilted); ``kp`` the ``KernelParams``;
+``S`` a (1,) ``core.state.STATE`` array, the throw's state (scratch,
+overwritten); ``sets``, ``set_steps`` (cap,) uint8 and int32, outputs: the
+contact-set sequence (bit k = node k+1 at or below the ground) and the step
+at which each set was first seen; ``tr_*`` float64 arrays of 0 or n+1 rows
+(ignored by a summary loop); ``ev_times`` (cap,) float64, output of an
+events loop: the time each event began (s), any float64 array (of length 0
+too) for the other loops, which ignore it (every loop takes the same
+arguments, so that a call from Python and one from another kernel compile
+the same signature).  ``outcome`` is the face 1..6, 0 when the top four
+nodes are no face, and -1 unless the status is SETTLED.
+
 Trace layouts (row n = state after n steps, row 0 the initial state):
 ``tr_state`` (n+1, 33): X(3), U(3), L(3) (program convention), offsets (8×3);
 ``tr_force`` (n+1, 24): contact forces F_k at the end of the step;
@@ -121,6 +137,49 @@ def _clears(e, kp):
     return e - kp.e_stop > E_BOUND_MARGIN * (abs(e) + kp.e_rest + abs(kp.e_stop)) + 1e-9
 
 
+@jit(inline="always")
+def stop_energy(st, kp, contact, e_dyn, tracing):
+    """The stop-test energy after a step, and whether it clears the threshold by far: (e, clear).
+
+    ``e_dyn``: the dynamic energy the blow-up test computed (in contact).
+    In free flight (no contact) the point-mass energy is bounded below
+    cheaply: Σ|u_k|² = 8|U|² + 16·h²|ω|² + rounding, so the exact 24-term
+    sum is needed only when that bound is near threshold (or a trace shows
+    it).  ``clear``: the stop-test energy of a free state clears the
+    threshold by far more than rounding (computed alike whether or not
+    tracing), so that a free flight may be crossed in one piece.
+    """
+    U = st.U
+    W = st.W
+    z = st.z
+    e_rest = kp.e_rest
+    clear = False
+    if kp.energy_mode == ENERGY_POINT_MASS:
+        half2 = kp.half_side_cm * kp.half_side_cm
+        need = True
+        if not contact:
+            ke = 8.0 * (U[0] * U[0] + U[1] * U[1] + U[2] * U[2]) + 16.0 * half2 * (
+                W[0] * W[0] + W[1] * W[1] + W[2] * W[2]
+            )
+            sz = 0.0
+            for k in range(8):
+                sz += z[k]
+            e_approx = (0.5 * ke + (-kp.g) * sz) - e_rest
+            margin = E_BOUND_MARGIN * (0.5 * ke + abs(kp.g) * abs(sz) + e_rest) + 1e-9
+            clear = e_approx - margin > kp.e_stop  # False for a NaN bound (overflow)
+            need = tracing or not clear
+        if need:
+            if not contact:
+                node_velocities(U[0], U[1], U[2], W[0], W[1], W[2], st.off, st.uk)
+            e = energy_stop(st.uk, z, st.P, kp)
+        else:
+            e = kp.e_stop + 1.0
+    else:
+        e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
+        clear = not contact and _clears(e, kp)
+    return e, clear
+
+
 @jit
 def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
     """Steps n+1 … n+m of a free flight in one exact piece (``free_flight.free_advance`` over m·h).
@@ -152,56 +211,21 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     """The run loop of a throw on the step of the scheme module ``scheme`` (``core.schemes``), compiled.
 
     ``trace``: the tracing loop (it writes the trace arrays that have rows)
-    or the summary loop (it never touches them).  ``exact_flight``: whether
-    a free flight of several whole steps is crossed in one piece (default:
-    the scheme's ``EXACT_FLIGHT``).  ``use_summary``: whether a summary loop
-    hands the throw to the scheme's specialised summary kernel
-    ``scheme.summary`` where ``scheme.summary_applies(kp, off0)`` (off by
-    default: the batch kernels and ``kernels.run_summary`` make that choice
-    once per call, and a GPU cannot run a kernel that allocates).  These are
-    closed over, and numba compiles closure
-    values in as constants: the loop calls its step directly and a summary
-    loop has no trace code.  The closure holds a module and booleans only,
-    which numba's disk cache keys on by name; a module made at run time (a
-    benchmark's variant of a scheme) is keyed by its contents, which change
-    from one process to the next: build those with ``cache=False``.
-
-    ``events``: an events loop (a contact scheme's, whose module defines
-    ``step_events``: ``core.schemes.EventsScheme``).  It records the exact contact events
-    (docs/model.md §8.1) in ``sets``, ``set_steps`` and ``ev_times``
-    instead of the sets at output-step ends: the set inside every sub-step
-    of the scheme, the step it began in (1-based) and its time (s), up to
-    the step the stop test fires on.  A throw with more events than the
-    buffer holds ends as BUFFER_FULL, as one with more sets does.
-
-    The loop, ``roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, ev_times)``:
-
-    Parameters
-    ----------
-    ic : (6,) float64
-        U (cm/s) and L (program convention, node-mass·cm²/s).
-    off0 : (8, 3) float64
-        Initial node offsets from the centre of mass, cm (the program: ±half
-        on each axis); a rotated cube starts tilted.
-    kp : KernelParams
-    S : (1,) ``core.state.STATE``
-        The throw's state (scratch, overwritten).
-    sets, set_steps : (cap,) uint8, (cap,) int32
-        Output: the contact-set sequence (bit k = node k+1 at or below the
-        ground) and the step at which each set was first seen.
-    tr_state, tr_force, tr_energy : float64 arrays with 0 or n+1 rows
-        (ignored by a summary loop).
-    ev_times : (cap,) float64
-        Output of an events loop: the time each event began (s); any
-        float64 array, of length 0 too, for the other loops, which ignore
-        it.  (Every loop takes the same arguments, so that a call from
-        Python and one from another kernel compile the same signature.)
-
-    Returns
-    -------
-    (status, steps, outcome, nsets)
-        outcome is the face 1..6, 0 when the top four nodes are no face, and
-        -1 unless the status is SETTLED.
+    or the summary loop (it never touches them).  ``exact_flight``: whether a
+    free flight of several whole steps is crossed in one piece (default: the
+    scheme's ``EXACT_FLIGHT``).  ``use_summary``: whether a summary loop
+    hands the throw to ``scheme.summary`` where ``scheme.summary_applies``
+    (off by default: the batch kernels make that choice once per call, and a
+    GPU cannot run a kernel that allocates).  ``events``: an events loop (a
+    contact scheme's, ``core.schemes.EventsScheme``), which records the
+    exact contact events (docs/model.md §8.1) instead of the sets at
+    output-step ends: the set inside every sub-step, the step it began in
+    (1-based) and its time (s), up to the step the stop test fires on; more
+    events than the buffer holds end as BUFFER_FULL.  These are closed over
+    as constants (``core._jit``); a module made at run time (a benchmark's
+    variant of a scheme) changes its cache key from one process to the next:
+    build those with ``cache=False``.  The loop's arguments: the module's
+    docstring.
     """
     trace = bool(trace)
     flight = bool(scheme.EXACT_FLIGHT if exact_flight is None else exact_flight)
@@ -213,12 +237,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         if use_summary and scheme.summary_applies(kp, off0):
             return scheme.summary(ic, off0, kp, sets, set_steps)
         init_state(st, ic, off0, kp)
-        X = st.X
-        U = st.U
-        L = st.L
-        W = st.W
-        off = st.off
-        z = st.z
+        X, U, L, W, off, z = st.X, st.U, st.L, st.W, st.off, st.z
 
         sets[0] = 0
         set_steps[0] = 0
@@ -247,7 +266,6 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         h = kp.dt_s
         maxn = int(kp.max_steps)
         status = Status.TIME_CAP
-        half2 = kp.half_side_cm * kp.half_side_cm
         # whether the stop-test energy of a free state clears the stop threshold by far
         # more than rounding (``_clears``; at the start only where that energy is e0)
         clear = not point_mass and _clears(e0, kp)
@@ -287,34 +305,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                     if tracing:  # the state is finite: keep it for inspection
                         _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
                     break
-            # Stop test.  In free flight (no contact) the point-mass energy is
-            # bounded below cheaply: Σ|u_k|² = 8|U|² + 16·h²|ω|² + rounding, so the
-            # exact 24-term sum is needed only when that bound is near threshold.
-            # ``clear``: the stop-test energy of a free state clears the threshold
-            # by far more than rounding (computed alike whether or not tracing).
-            clear = False
-            if point_mass:
-                need = True
-                if not contact:
-                    ke = 8.0 * (U[0] * U[0] + U[1] * U[1] + U[2] * U[2]) + 16.0 * half2 * (
-                        W[0] * W[0] + W[1] * W[1] + W[2] * W[2]
-                    )
-                    sz = 0.0
-                    for k in range(8):
-                        sz += z[k]
-                    e_approx = (0.5 * ke + (-kp.g) * sz) - e_rest
-                    margin = E_BOUND_MARGIN * (0.5 * ke + abs(kp.g) * abs(sz) + e_rest) + 1e-9
-                    clear = e_approx - margin > kp.e_stop  # False for a NaN bound (overflow)
-                    need = tracing or not clear
-                if need:
-                    if not contact:
-                        node_velocities(U[0], U[1], U[2], W[0], W[1], W[2], off, st.uk)
-                    e = energy_stop(st.uk, z, st.P, kp)
-                else:
-                    e = kp.e_stop + 1.0
-            else:
-                e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
-                clear = not contact and _clears(e, kp)
+            e, clear = stop_energy(st, kp, contact, e_dyn, tracing)
             if tracing:
                 _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
             if not math.isfinite(e):
