@@ -56,16 +56,16 @@ from dicetrace.core._jit import jit
 from dicetrace.core.contact_driver import free_piece, make_drive
 from dicetrace.core.methods import erk, tsit5
 from dicetrace.core.schemes import contact_tsit5
-from dicetrace.core.state import new_states
+from dicetrace.core.state import new_states, new_work
 from dicetrace.params import convert_l, make_config
 from dicetrace.simulate import simulate
 from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
 from dicetrace.studies.text import tol_text
 
 #: A scratch cell of the state that the step never reads before writing it
-#: (``erk.dense_state`` sets all of ``dn_w`` first): where a repeated part's
+#: (``erk.dense_state`` sets all of ``wk.dn_w`` first): where a repeated part's
 #: first result goes.
-SINK = "st.dn_w[6] += "
+SINK = "wk.dn_w[6] += "
 #: How much deeper than the factory ``make_drive`` its inner ``drive`` is indented.
 DRIVE = "    "
 
@@ -134,7 +134,8 @@ def summary_roll(step, tag: str):
     scheme = types.ModuleType(f"bench_scheme_{tag}")
     scheme.step = step
     scheme.EXACT_FLIGHT = contact_tsit5.EXACT_FLIGHT
-    return loop.make_roll(scheme, trace=False, use_summary=False, name=f"roll_{tag}", cache=False)
+    scheme.WORK = contact_tsit5.WORK
+    return loop.make_roll(scheme, trace=False, name=f"roll_{tag}", cache=False)
 
 
 def variants() -> dict:
@@ -147,15 +148,15 @@ def variants() -> dict:
     terr = erk.tsit5_error
 
     @_jit
-    def substep_twice(st, kp, h, f0, f1, f2, t0, t1, t2):
-        tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
-        st.dn_w[6] += st.new_X[2]
-        tsub(st, kp, h, f0, f1, f2, t0, t1, t2)
+    def substep_twice(st, wk, kp, h, f0, f1, f2, t0, t1, t2):
+        tsub(st, wk, kp, h, f0, f1, f2, t0, t1, t2)
+        wk.dn_w[6] += wk.new_X[2]
+        tsub(st, wk, kp, h, f0, f1, f2, t0, t1, t2)
 
     @_jit
-    def error_twice(st, kp, h, g0, g1, g2, q0, q1, q2):
-        st.dn_w[6] += terr(st, kp, h, g0, g1, g2, q0, q1, q2)
-        return terr(st, kp, h, g0, g1, g2, q0, q1, q2)
+    def error_twice(st, wk, kp, h, g0, g1, g2, q0, q1, q2):
+        wk.dn_w[6] += terr(st, wk, kp, h, g0, g1, g2, q0, q1, q2)
+        return terr(st, wk, kp, h, g0, g1, g2, q0, q1, q2)
 
     stage = "            g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)\n"
     stages_factory = _edited(erk.erk_substep, "erk_substep_stages_twice", stage, _twice(stage, "g0 + q1"),
@@ -165,7 +166,7 @@ def variants() -> dict:
     end_forces = (DRIVE + "            c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I,\n"
                   + DRIVE + "                                                   offn, kp, st.F, st.uk, st.z, st.P)\n")
     cut = DRIVE + "        cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, hs, cmin)\n"
-    interp = DRIVE + "            method.dense_state(st, kp, 1.0 - st.ahead / st.dn_h)\n"
+    interp = DRIVE + "            method.dense_state(st, wk, kp, 1.0 - st.ahead / wk.dn_h)\n"
     interp_forces = interp + DRIVE + "            return dense_end(st, kp)\n"
     # the parts outside the driver's closure (``free_piece``): an edited copy, put in the edited driver's globals
     piece = "    m1 = free_min_height(Xw, Uw, st.W, offw, kp, hs)\n"
@@ -195,15 +196,12 @@ def variants() -> dict:
 
 
 @numba.njit(cache=False)
-def _all(roll, ics, off0, kp, S, status, steps, outcome):
+def _all(roll, ics, off0, kp, S, Wk, status, steps, outcome):
     cap = 1 << 16
-    sets = np.zeros(cap, np.uint8)
-    set_steps = np.zeros(cap, np.int32)
-    e0 = np.zeros((0, loop.STATE_COLS))
-    e1 = np.zeros((0, loop.FORCE_COLS))
-    e2 = np.zeros((0, loop.ENERGY_COLS))
+    out = loop.RollOut(np.zeros(cap, np.uint8), np.zeros(cap, np.int32), np.zeros(0), np.zeros((0, loop.STATE_COLS)),
+                       np.zeros((0, loop.FORCE_COLS)), np.zeros((0, loop.ENERGY_COLS)))
     for i in range(ics.shape[0]):
-        status[i], steps[i], outcome[i], _ = roll(ics[i], off0, kp, S, sets, set_steps, e0, e1, e2)
+        status[i], steps[i], outcome[i], _ = roll(ics[i], off0, kp, S, Wk, out, False, 1 << 62)
 
 
 def main() -> None:
@@ -229,7 +227,7 @@ def main() -> None:
     numba.set_num_threads(1)
     ics = convert_l(sample_ics(n=args.n), "program", cfg.preset.l_convention)
     kin = cfg.kernel_inputs(ics)
-    S = new_states(1)
+    S, Wk = new_states(1), new_work(contact_tsit5.WORK)
     m = len(ics)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
     kernels = {}
@@ -240,7 +238,7 @@ def main() -> None:
         kernels[name] = summary_roll(build_step(factory, tag, **over), tag)
     hashes = {}
     for name in names:  # compile (numba compiles on the first call) and check the trajectory
-        _all(kernels[name], kin.ics, kin.off0, kin.params, S, *out)
+        _all(kernels[name], kin.ics, kin.off0, kin.params, S, Wk, *out)
         hashes[name] = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()[:12]
     print(f"compiled {len(names)} variants in {time.perf_counter() - t0:.0f} s", flush=True)
     # the plain scheme runs twice a round: the gap between its two best times is the noise floor
@@ -250,7 +248,7 @@ def main() -> None:
     for _ in range(max(1, args.repeat)):
         for name in rounds:
             c0 = time.process_time()
-            _all(kernels[name], kin.ics, kin.off0, kin.params, S, *out)
+            _all(kernels[name], kin.ics, kin.off0, kin.params, S, Wk, *out)
             best[name] = min(best[name], (time.process_time() - c0) / m * 1e3)
     attempts = macro = 0.0
     for ic in ics:

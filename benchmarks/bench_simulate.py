@@ -25,21 +25,21 @@ import time
 import numba
 import numpy as np
 
-from dicetrace.core.kernels import NO_TRACE, roll_kernel, run_batch
-from dicetrace.core.state import new_states
+from dicetrace.core.kernels import NO_TRACE, batch_out, new_roll_state, roll_kernel, run_batch
+from dicetrace.core.loop import RollOut
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 from dicetrace.simulate import simulate_batch
 
 
 @numba.njit(cache=False)  # takes a compiled kernel as an argument: nothing to cache
-def _general_loop(roll, ics, off0, kp, S, steps, e0, e1, e2):
-    """``roll`` (the tracing loop, what ``kernels.run_roll`` calls) on every IC, with no trace rows."""
+def _general_loop(roll, ics, off0, kp, S, Wk, steps, e0, e1, e2):
+    """``roll`` (the tracing loop, what ``kernels.run_roll`` calls) on every IC, with no trace rows, in one call each."""
     sets = np.zeros(4096, np.uint8)
     set_steps = np.zeros(4096, np.int32)
-    e3 = np.zeros(0)
+    out = RollOut(sets, set_steps, np.zeros(0), e0, e1, e2)
     for i in range(ics.shape[0]):
-        s, n, o, ns = roll(ics[i], off0, kp, S, sets, set_steps, e0, e1, e2, e3)
+        s, n, o, ns = roll(ics[i], off0, kp, S, Wk, out, False, 1 << 62)
         steps[i] = n
 
 
@@ -84,34 +84,31 @@ def main() -> None:
     # the run loop on the scheme's step (kernels.run_roll's tracing loop, no trace rows), serial
     g = ics[: args.general]
     gsteps = np.zeros(len(g), np.int64)
-    roll, S = roll_kernel(integ, True), new_states(1)
-    _general_loop(roll, g[:2], off0, kp, S, gsteps[:2], *NO_TRACE)
-    wall, cpu = _timed(lambda: _general_loop(roll, g, off0, kp, S, gsteps, *NO_TRACE), 1)
+    roll, (S, Wk) = roll_kernel(integ, True), new_roll_state(integ)
+    _general_loop(roll, g[:2], off0, kp, S, Wk, gsteps[:2], *NO_TRACE)
+    wall, cpu = _timed(lambda: _general_loop(roll, g, off0, kp, S, Wk, gsteps, *NO_TRACE), 1)
     _line(f"run loop on the step, {len(g)} ICs", len(g), gsteps.sum(), wall, cpu, 1)
 
-    out = dict(
-        status=np.zeros(m, np.int8), steps=np.zeros(m, np.int64), outcome=np.zeros(m, np.int8),
-        nsets=np.zeros(m, np.int64), sets=np.zeros(m * cap, np.uint8), set_steps=np.zeros(m * cap, np.int32),
-    )
+    out = batch_out(m, cap)
 
     def batch():
         with numba.parallel_chunksize(1):
-            run_batch(ics, off0, kp, integ, cap, *out.values())
+            run_batch(ics, off0, kp, integ, cap, out)
 
     numba.set_num_threads(1)
-    run_batch(ics[:16], off0, kp, integ, cap, *(a[: 16 * (cap if k in ("sets", "set_steps") else 1)] for k, a in out.items()))
+    run_batch(ics[:16], off0, kp, integ, cap, batch_out(16, cap))
     rates = {}
     for t in [int(v) for v in args.threads.split(",")]:
         t = min(t, numba.config.NUMBA_NUM_THREADS)
         numba.set_num_threads(t)
         wall, cpu = _timed(batch, args.repeat)
         rates[t] = m / wall
-        _line(f"run_batch, {t} thread(s)", m, out["steps"].sum(), wall, cpu, t)
+        _line(f"run_batch, {t} thread(s)", m, out.steps.sum(), wall, cpu, t)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     if len(rates) > 1:
         t0, t1 = min(rates), max(rates)
         print(f"scaling {t0}→{t1} threads: ×{rates[t1] / rates[t0]:.2f}")
-    assert np.array_equal(out["steps"][: len(g)], gsteps), "the specialised kernel and the run loop disagree"
+    assert np.array_equal(out.steps[: len(g)], gsteps), "the specialised kernel and the run loop disagree"
     wall, cpu = _timed(lambda: simulate_batch(ics), args.repeat)
     _line(f"simulate_batch, {numba.config.NUMBA_NUM_THREADS} threads", m, out["steps"].sum(), wall, cpu,
           numba.config.NUMBA_NUM_THREADS)

@@ -16,12 +16,11 @@ study's zoom-out ICs and prints:
   impact's first sub-step, a rejection, a friction-limited sub-step, or
   none of these), against the accepted sub-steps in the same situation.
 
-The counters live in a field this script adds to a copy of the state record
-(``COUNTED``: ``STATE``'s fields at their offsets, then ``limits``), which the
-instrumented driver runs in; the plain driver runs in ``STATE``.  numba takes
-such a record as a subtype of ``STATE``, so the core kernels compiled for
-``STATE`` serve it too.  Compiles two variants, the plain driver and the
-counted one (about a minute each, nothing cached).
+The counters live in a field this script adds to a copy of contact-tsit5's
+work record (``COUNTED``: its fields, then ``limits``), which the instrumented
+driver runs in; the plain driver runs in the scheme's own.  Compiles two
+variants, the plain driver and the counted one (about a minute each, nothing
+cached).
 
 Usage: ``python benchmarks/bench_step_limits.py [--n 300] [--preset physical] [--tol 1e-7]``
 (default: the preset's tolerance schedule).
@@ -31,15 +30,14 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import warnings
 
 import numba
 import numpy as np
-from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from bench_cost_split import DRIVE, _all, _edited, _jit_inline, build_step, summary_roll
 from dicetrace.core.contact_driver import first_crossing, make_drive
-from dicetrace.core.state import STATE, SUBSTEP_CAUSES, new_states
+from dicetrace.core.schemes import contact_tsit5
+from dicetrace.core.state import SUBSTEP_CAUSES, new_states, new_work
 from dicetrace.params import convert_l, make_config
 from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
 from dicetrace.studies.text import tol_text
@@ -57,21 +55,18 @@ ROW_REJECTED = 6
 ROW_ACCEPTED = 7
 #: The counters' shape: a row each, a column per bucket or per context.
 LIMITS_SHAPE = (ROW_ACCEPTED + 1, max(len(CONTEXTS), len(LAM_EDGES) + 1, len(OMEGA_EDGES) + 1))
-#: The state record with the counters added (the driver reads every other field by name, as in ``STATE``).
+#: contact-tsit5's work record with the counters added (the driver reads every other field by name).
+WORK = contact_tsit5.WORK
 COUNTED = np.dtype(
-    {"names": [*STATE.names, "limits"],
-     "formats": [STATE.fields[n][0] for n in STATE.names] + [np.dtype((np.float64, LIMITS_SHAPE))]},
+    {"names": [*WORK.names, "limits"],
+     "formats": [WORK.fields[n][0] for n in WORK.names] + [np.dtype((np.float64, LIMITS_SHAPE))]},
     align=True,
 )
 
 
-def counted_states() -> np.ndarray:
-    """A (1,) ``COUNTED`` array: ``new_states(1)``'s values, the counters at zero."""
-    S = np.zeros(1, COUNTED)
-    base = new_states(1)
-    for name in STATE.names:
-        S[name] = base[name]
-    return S
+def counted_work() -> np.ndarray:
+    """A (1,) ``COUNTED`` array: zeros, as ``new_work`` makes the scheme's own."""
+    return np.zeros(1, COUNTED)
 
 
 def _bucket(name: str, edges) -> str:
@@ -109,16 +104,16 @@ def instrumented_drive():
         ("                entering = True\n", "                entering = True\n                ctx = 3\n"),
         ("        cut = first_crossing(", "        cut, centry = first_crossing_entry("),
         ("                nsub += 1\n                continue",
-         f"                st.limits[{ROW_REJECTED}, ctx] += 1.0\n                ctx = 4\n"
+         f"                wk.limits[{ROW_REJECTED}, ctx] += 1.0\n                ctx = 4\n"
          "                nsub += 1\n                continue"),
         ("        st.substeps[cause] += 1\n",
          "        st.substeps[cause] += 1\n"
-         f"        st.limits[{ROW_ACCEPTED}, ctx] += 1.0\n"
+         f"        wk.limits[{ROW_ACCEPTED}, ctx] += 1.0\n"
          "        if cause == CAUSE_ERROR or cause == CAUSE_FRICTION:\n"
          "            x = lam * hs\n" + _bucket("b", LAM_EDGES)
-         + f"            st.limits[{ROW_LAM} + cause, b] += 1.0\n"
+         + f"            wk.limits[{ROW_LAM} + cause, b] += 1.0\n"
          "            x = hs * math.sqrt(kp.k)\n" + _bucket("c", OMEGA_EDGES)
-         + f"            st.limits[{ROW_OMEGA} + cause, c] += 1.0\n"
+         + f"            wk.limits[{ROW_OMEGA} + cause, c] += 1.0\n"
          "        ctx = 0\n"
          "        if cause == CAUSE_CUT:\n            ctx = 1 if centry else 2\n"
          "        elif cause == CAUSE_FRICTION:\n            ctx = 5\n"),
@@ -140,8 +135,6 @@ def main() -> None:
     if args.n < 1:
         ap.error(f"--n must be at least 1, got {args.n}")
     numba.set_num_threads(1)
-    # COUNTED passed where STATE is compiled for: numba's record subtyping, which it calls experimental
-    warnings.filterwarnings("ignore", category=NumbaExperimentalFeatureWarning)
     ics = convert_l(sample_ics(n=args.n), "program", cfg.preset.l_convention)
     kin = cfg.kernel_inputs(ics)
     m = len(ics)
@@ -150,16 +143,16 @@ def main() -> None:
         tag = f"limits_{name}"
         kernels[name] = summary_roll(build_step(factory, tag), tag)
     out = (np.zeros(m, np.int64), np.zeros(m, np.int64), np.zeros(m, np.int64))
-    _all(kernels["plain"], kin.ics, kin.off0, kin.params, new_states(1), *out)
+    _all(kernels["plain"], kin.ics, kin.off0, kin.params, new_states(1), new_work(WORK), *out)
     plain = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()
-    S = counted_states()
+    S, Wk = new_states(1), counted_work()
     counts = np.zeros(LIMITS_SHAPE)
     causes = np.zeros(len(SUBSTEP_CAUSES))
     for i in range(m):  # one IC at a time: the counters are per throw
-        S[0]["limits"][:] = 0.0
+        Wk[0]["limits"][:] = 0.0
         one = tuple(a[i : i + 1] for a in out)
-        _all(kernels["counted"], kin.ics[i : i + 1], kin.off0, kin.params, S, *one)
-        counts += S[0]["limits"]
+        _all(kernels["counted"], kin.ics[i : i + 1], kin.off0, kin.params, S, Wk, *one)
+        counts += Wk[0]["limits"]
         causes += S[0]["substeps"]
     counted = hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest()
     counts /= m

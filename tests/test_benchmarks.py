@@ -62,17 +62,15 @@ def test_step_limits_counters_build():
     mod = _load("bench_step_limits")
     factory = mod.instrumented_drive()
     assert factory.__name__ == "make_drive_limits"
-    # every counter the script writes lies inside the field it adds to the state record
+    # every counter the script writes lies inside the field it adds to the work record
     rows, cols = mod.COUNTED.fields["limits"][0].shape
     assert max(mod.ROW_LAM + 2, mod.ROW_OMEGA + 2, mod.ROW_REJECTED, mod.ROW_ACCEPTED) < rows
     assert len(mod.CONTEXTS) <= cols and len(mod.LAM_EDGES) + 1 <= cols and len(mod.OMEGA_EDGES) + 1 <= cols
-    # which holds every field of the state record, with its values from new_states
-    S = mod.counted_states()
-    base = mod.new_states(1)
-    for name in mod.STATE.names:  # same type and offset: numba takes COUNTED as a subtype of STATE
-        assert S.dtype.fields[name][:2] == base.dtype.fields[name][:2], name
-        assert np.array_equal(S[0][name], base[0][name]), name
-    assert not S[0]["limits"].any()
+    # which holds every field of the scheme's work record, as it is (same type and offset)
+    W = mod.counted_work()
+    for name in mod.WORK.names:
+        assert W.dtype.fields[name][:2] == mod.WORK.fields[name][:2], name
+    assert not W[0]["limits"].any()
     assert mod._ranges((0.1, 0.3)) == ["≤ 0.1", "0.1–0.3", "> 0.3"]
 
 

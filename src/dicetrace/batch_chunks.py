@@ -17,7 +17,7 @@ import numpy as np
 
 import numba
 
-from dicetrace.core.kernels import NO_TRACE, run_batch, run_batch_events, run_events, run_roll
+from dicetrace.core.kernels import batch_out, roll_out, run_batch, run_events, run_roll
 from dicetrace.core.loop import BATCH_BLOCK
 from dicetrace.memory import available_memory
 from dicetrace.status import Status
@@ -68,22 +68,10 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu", events: bool = False
     starts = np.arange(m, dtype=np.int64) * cap
     if m <= BATCH_BLOCK:
         return (*_run_serial(kin, cap, events), starts)
-    out = (
-        np.zeros(m, dtype=np.int8),
-        np.zeros(m, dtype=np.int64),
-        np.zeros(m, dtype=np.int8),
-        np.zeros(m, dtype=np.int64),
-        np.zeros(m * cap, dtype=np.uint8),
-        np.zeros(m * cap, dtype=np.int32),
-    )
-    status, steps, outcome, nsets, sets, set_steps = out
-    times = np.zeros(m * cap) if events else None
+    out = batch_out(m, cap, events)
     with _Threads(threads), numba.parallel_chunksize(1):
-        if events:
-            run_batch_events(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, *out, times)
-        else:
-            run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, *out)
-    return (*out, times, starts)
+        run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, out, events=events)
+    return (*out[:6], out.ev_times if events else None, starts)
 
 
 def _run_serial(kin, cap: int, events: bool = False):
@@ -94,12 +82,9 @@ def _run_serial(kin, cap: int, events: bool = False):
     times = np.zeros(m * cap) if events else None
     for i in range(m):
         part = slice(i * cap, (i + 1) * cap)
-        if events:
-            status[i], steps[i], outcome[i], nsets[i] = run_events(
-                kin.ics[i], kin.off0, kin.params, kin.integrator_id, sets[part], set_steps[part], times[part])
-        else:
-            status[i], steps[i], outcome[i], nsets[i] = run_roll(
-                kin.ics[i], kin.off0, kin.params, kin.integrator_id, sets[part], set_steps[part], *NO_TRACE)
+        out = roll_out(sets[part], set_steps[part], times[part] if events else None)
+        run = run_events if events else run_roll
+        status[i], steps[i], outcome[i], nsets[i] = run(kin.ics[i], kin.off0, kin.params, kin.integrator_id, out)
     return status, steps, outcome, nsets, sets, set_steps, times
 
 

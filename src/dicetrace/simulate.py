@@ -24,9 +24,9 @@ from dicetrace.batch_chunks import (
     run_chunk,
 )
 from dicetrace.core.contacts import contact_sets_from_heights
-from dicetrace.core.kernels import NO_TRACE, has_events, run_events, run_roll
+from dicetrace.core.kernels import has_events, new_roll_state, roll_out, run_events, run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
-from dicetrace.core.state import SUBSTEP_CAUSES, new_states
+from dicetrace.core.state import SUBSTEP_CAUSES
 from dicetrace.devices import check_device, default_device, device_label, resolve_device
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
@@ -291,20 +291,18 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
     events = check_events(cfg, events)
     kin = cfg.kernel_inputs(ic, orientation=orientation)
     cap = DEFAULT_CAP
-    S = new_states(1)
+    state = new_roll_state(kin.integrator_id)
     while True:
         sets = np.zeros(cap, dtype=np.uint8)
         set_steps = np.zeros(cap, dtype=np.int32)
         times = np.zeros(cap) if events else None
-        if events:
-            summary = run_events(*kin, sets, set_steps, times, states=S)
-        else:
-            summary = run_roll(*kin, sets, set_steps, *NO_TRACE, states=S)
+        run = run_events if events else run_roll
+        summary = run(*kin, roll_out(sets, set_steps, times), state=state)
         if summary[0] != Status.BUFFER_FULL:
             break
         cap *= CAP_GROWTH
     status, n, outcome, nsets = summary
-    substeps = dict(zip(SUBSTEP_CAUSES, (int(c) for c in S[0]["substeps"])))
+    substeps = dict(zip(SUBSTEP_CAUSES, (int(c) for c in state[0][0]["substeps"])))
     trace = None
     if record is not None:
         # The summary told how many rows the trace needs; the trace run is the
@@ -315,7 +313,8 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         tr_state = np.zeros((rows if record.states else 0, STATE_COLS))
         tr_force = np.zeros((rows if record.forces else 0, FORCE_COLS))
         tr_energy = np.zeros((rows if record.energy else 0, ENERGY_COLS))
-        traced = run_roll(*kin, np.zeros(cap, np.uint8), np.zeros(cap, np.int32), tr_state, tr_force, tr_energy)
+        traced = run_roll(*kin, roll_out(np.zeros(cap, np.uint8), np.zeros(cap, np.int32), None, tr_state, tr_force,
+                                         tr_energy))
         same = 3 if events else 4  # (status, steps, outcome): the sets are the events'
         if tuple(int(v) for v in traced)[:same] != tuple(int(v) for v in summary)[:same]:
             raise RuntimeError(

@@ -32,6 +32,8 @@ class Status(IntEnum):
     BLOW_UP = 3, "the energy grew beyond its start: a numerical blow-up (reduce dt or use another integrator)"
     #: Internal: the contact-set buffer was too small; ``simulate_batch`` re-runs the throw.
     BUFFER_FULL = 4, "internal: the contact-set buffer was too small (the throw is re-run with a larger one)"
+    #: Internal: the throw's slice of steps ran out before it ended; the kernels' caller goes on with it.
+    RUNNING = 5, "internal: the throw's slice of steps ran out before it ended (it goes on in the next slice)"
 
     def __new__(cls, code: int, advice: str):
         obj = int.__new__(cls, code)
@@ -79,4 +81,4 @@ class Status(IntEnum):
 
 
 #: Labels of the statuses a finished throw can have, in code order (files store these).
-LABELS: tuple[str, ...] = tuple(s.label for s in Status if s is not Status.BUFFER_FULL)
+LABELS: tuple[str, ...] = tuple(s.label for s in Status if s not in (Status.BUFFER_FULL, Status.RUNNING))

@@ -134,6 +134,26 @@ def test_events_kernel_on_the_simulator_is_the_cpu_bit_for_bit():
     assert (want["steps"], want["outcome"]) == (plain["steps"], plain["outcome"])  # the same throws
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("preset,events", [("seed", False), ("physical", False), ("physical", True)])
+def test_throws_that_outlive_a_slice_go_on_in_the_held_kernel(preset, events):
+    """With slices of 60 steps every throw outlives its first launch (the seed kernel's and the local-record
+    kernels' records are lost then): the throws start again in the held kernel, their records in device memory,
+    and go on launch after launch; the results are the CPU's bit for bit, sets (and events' times) packed in
+    throw order beside the throws that ended in the first launch (here: none)."""
+    code = _RUN.replace("r = simulate_batch(", "import dicetrace.core.kernels as K; K.SLICE_STEPS = 60\nr = simulate_batch(")
+    arg = json.dumps(dict(xs=list(map(float, XS[:3])), ys=list(map(float, YS[:3])), preset=preset, device="cuda",
+                          cap=128, options={"events": events}))
+    res = subprocess.run([sys.executable, "-c", code, arg], capture_output=True, text=True, timeout=900,
+                         env={**os.environ, **SIM})
+    assert res.returncode == 0, res.stderr
+    got = json.loads(res.stdout)
+    got.pop("device")
+    want = _cpu(preset, XS[:3], YS[:3], events=events)
+    assert min(want["steps"]) > 60
+    assert got == want
+
+
 def test_auto_without_a_gpu_runs_on_the_cpu_and_says_so_once():
     res = _run("auto", "seed", XS[:2], YS[:2], env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
     assert res.returncode == 0, res.stderr
@@ -196,8 +216,11 @@ def test_kernels_compile_for_the_device():
         devs.get_context = lambda *a, **k: types.SimpleNamespace(device=fake)
         import numpy as np
         from numba import cuda, typeof
+        from numba.cuda.cudadrv import nvvm
+        from dicetrace.core import _compat
         from dicetrace.core import gpu
-        from dicetrace.core.state import new_states
+        from dicetrace.core.kernels import SLICE_STEPS, kernels_for
+        from dicetrace.core.state import MOTION, new_work
         from dicetrace.params import make_config
         out = {}
         for name, preset, events in (("seed", "seed", False), ("physical", "physical", False),
@@ -207,13 +230,14 @@ def test_kernels_compile_for_the_device():
             kernel = gpu._kernel(kin.integrator_id, seed, events)
             o = [np.zeros(2, np.int8), np.zeros(2, np.int64), np.zeros(2, np.int8), np.zeros(2, np.int64),
                  np.zeros(16, np.uint8), np.zeros(16, np.int32)]
-            args = (kin.ics, kin.off0, kin.params, 8, *o) if seed else (
-                kin.ics, kin.off0, kin.params, 8, new_states(2), *o, np.zeros((0, 33)), np.zeros((0, 24)),
-                np.zeros((0, 6)), np.zeros(16 if events else 0))
+            args = (kin.ics, kin.off0, kin.params, 8, *o, SLICE_STEPS) if seed else (
+                kin.ics, kin.off0, kin.params, 8, np.zeros(0, MOTION),
+                new_work(kernels_for(kin.integrator_id).scheme.WORK, 0), *o, np.zeros(16 if events else 0),
+                np.zeros((0, 33)), np.zeros((0, 24)), np.zeros((0, 6)), False, SLICE_STEPS, 0)
             sig = tuple(typeof(a) for a in args)
             counts = []
             for s in (True, False):
-                with gpu._nvvm_without_fma() if s else contextlib.nullcontext():
+                with _compat.nvvm_without_fma(nvvm) if s else contextlib.nullcontext():
                     ptx, _ = cuda.compile_ptx(kernel.py_func, sig, cc=(9, 0))
                 counts.append(ptx.count("fma.rn.f64"))
             out[name] = dict(seed_kernel=seed, fma=counts)

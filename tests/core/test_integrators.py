@@ -15,6 +15,7 @@ integrator must reach its declared order (``IntegratorSpec.order``).
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 import pytest
@@ -25,7 +26,7 @@ from dicetrace.core._jit import _core_digest, jit
 from dicetrace.core.forces import eval_forces
 from dicetrace.core.model import energy_dynamic, init_offsets
 from dicetrace.core.schemes import scheme_module, step_of
-from dicetrace.core.state import new_states
+from dicetrace.core.state import new_states, new_work
 from dicetrace.params import INTEGRATORS, Config, Numerics, Preset, make_config
 
 ALL = tuple(INTEGRATORS)
@@ -42,12 +43,14 @@ _DRIVERS: dict = {}
 
 
 def _make_drive(scheme):
-    def drive(kp, h, nstep, S, zmin, zmax):
-        """Step ``nstep`` times from the state S[0] in place with ``scheme.step``; track each node's height range.
+    def drive(kp, h, nstep, S, Wk, zmin, zmax):
+        """Step ``nstep`` times from the state S[0] (work record Wk[0]) in place with ``scheme.step``; track each
+        node's height range.
 
         Compiled per scheme by :func:`driver` (the scheme module closed over).
         """
         st = S[0]
+        wk = Wk[0]
         below, mask = eval_forces(st, kp)
         # through an array, as the run loop does: the step then compiles for a plain bool only, not
         # also for the literal False that type inference sees first (a second compile of every step)
@@ -55,7 +58,7 @@ def _make_drive(scheme):
         flag[0] = below
         contact = flag[0]
         for _ in range(nstep):
-            contact, mask = scheme.step(st, kp, h, contact)
+            contact, mask = scheme.step(st, wk, kp, h, contact)
             for k in range(8):
                 zmin[k] = min(zmin[k], st.z[k])
                 zmax[k] = max(zmax[k], st.z[k])
@@ -65,12 +68,29 @@ def _make_drive(scheme):
     return jit(drive)
 
 
+#: The work record that goes with a motion record S (what a scheme keeps between steps, a dense-output front
+#: included, lives there): by id(S), with a weak reference to S so that a new array never inherits an old one's.
+_WORK: dict = {}
+
+
+def work_of(S, work_dtype):
+    """The work record (1,) of the scheme's dtype that goes with the motion record S, made on first use."""
+    held = _WORK.get(id(S))
+    if held is None or held[0]() is not S or held[1].dtype != work_dtype:
+        held = _WORK[id(S)] = (weakref.ref(S), new_work(work_dtype))
+    return held[1]
+
+
 def driver(integ):
     """A driver of the scheme of ``integ`` (cached on disk like the kernels, built on first use): steps
-    ``nstep`` times from S[0] in place and tracks each node's height range."""
+    ``nstep`` times from S[0] in place (in S's own work record of the scheme, :func:`work_of`) and tracks each
+    node's height range."""
     scheme = INTEGRATORS[integ].scheme
     if scheme not in _DRIVERS:
-        _DRIVERS[scheme] = _make_drive(scheme_module(INTEGRATORS[integ]))
+        mod = scheme_module(INTEGRATORS[integ])
+        jitted = _make_drive(mod)
+        _DRIVERS[scheme] = lambda kp, h, nstep, S, zmin, zmax: jitted(kp, h, nstep, S, work_of(S, mod.WORK), zmin,
+                                                                      zmax)
     return _DRIVERS[scheme]
 
 
@@ -322,8 +342,7 @@ def test_contact_substep_fast_path_identical(preset, integ_name):
     its summaries: the run loop compiled without trace code) equals the tracing loop
     ``run_roll`` bit for bit: status, steps, outcome and the whole
     contact-set sequence, on tilted and flat starts."""
-    from dicetrace.core import kernels, loop
-    from dicetrace.core.state import new_states
+    from dicetrace.core import kernels
     from dicetrace.ics import seed_slice
     from dicetrace.params import make_config
 
@@ -333,9 +352,6 @@ def test_contact_substep_fast_path_identical(preset, integ_name):
     kp = cfg.kernel_params()
     assert (kp.tol > 0) == (integ_name == "contact-adaptive")
     integ = INTEGRATORS[integ_name].kernel_id
-    e0 = np.zeros((0, loop.STATE_COLS))
-    e1 = np.zeros((0, loop.FORCE_COLS))
-    e2 = np.zeros((0, loop.ENERGY_COLS))
     sign = np.array([1, 1, 1, -1, -1, -1]) if preset == "physical" else np.ones(6)
     ics = [seed_slice(1.65, 3.9) * sign] + [seed_slice(*rng.uniform([1.0, 3.0], [2.5, 5.0])) * sign for _ in range(5)]
     orients = [None, Rotation.from_euler("xyz", [0.3, -0.2, 0.1]).as_matrix()]
@@ -346,8 +362,9 @@ def test_contact_substep_fast_path_identical(preset, integ_name):
             ic = np.asarray(ic, float)
             a = (np.zeros(256, np.uint8), np.zeros(256, np.int32))
             b = (np.zeros(256, np.uint8), np.zeros(256, np.int32))
-            ra = kernels.roll_kernel(integ, False)(ic, off0, kp, new_states(1), *a, e0, e1, e2, np.zeros(0))
-            rb = kernels.run_roll(ic, off0, kp, integ, *b, e0, e1, e2)
+            ra = kernels.roll_kernel(integ, False)(ic, off0, kp, *kernels.new_roll_state(integ), kernels.roll_out(*a),
+                                                   False, kernels.SLICE_STEPS)
+            rb = kernels.run_roll(ic, off0, kp, integ, kernels.roll_out(*b))
             assert ra == rb
             n = ra[3]
             assert np.array_equal(a[0][:n], b[0][:n]) and np.array_equal(a[1][:n], b[1][:n])
@@ -721,6 +738,7 @@ def tsit5_dense_errors(hs, theta):
     the sub-step's own result (b_i(1) = B_i, to the rounding of the tabulated digits)."""
     from dicetrace.core.forces import step_wrench, wrench_at
     from dicetrace.core.methods.erk import dense_keep, dense_state, tsit5_error, tsit5_substep
+    from dicetrace.core.schemes import contact_tsit5
     from dicetrace.core.state import begin_substeps
 
     kp = kparams(integrator="contact-tsit5", **SMOOTH)
@@ -730,18 +748,19 @@ def tsit5_dense_errors(hs, theta):
     for h in hs:
         Xr, Ur, Lr, offr, *_ = run("contact-substep", kp, SMOOTH_T / 2**10, theta * h, X0, U0, L0)
         S = state(kp, X0, U0, L0)
-        st = S[0]
+        Wk = new_work(contact_tsit5.WORK)
+        st, wk = S[0], Wk[0]
         contact, _ = eval_forces(st, kp)
-        begin_substeps(st)
-        tsit5_substep(st, kp, h, *step_wrench(st, contact, True))
-        n = S.copy()[0]
+        begin_substeps(st, wk)
+        tsit5_substep(st, wk, kp, h, *step_wrench(st, contact, True))
+        n = Wk.copy()[0]
         I = kp.inertia
         _, *g = wrench_at(n["new_X"][2], *n["new_U"], *(n["new_L"] / I), n["new_off"], kp, st["F"], st["uk"], st["z"], st["P"])
-        tsit5_error(st, kp, h, *g)
-        dense_keep(st, h)
-        dense_state(st, kp, 1.0)
+        tsit5_error(st, wk, kp, h, *g)
+        dense_keep(st, wk, h)
+        dense_state(st, wk, kp, 1.0)
         ends.append(max(np.abs(st["X"] - n["new_X"]).max(), np.abs(st["off"] - n["new_off"]).max()))
-        dense_state(st, kp, theta)
+        dense_state(st, wk, kp, theta)
         errs.append(max(np.abs(st["X"] - Xr).max(), np.abs(st["U"] - Ur).max() / 100, np.abs(st["L"] - Lr).max() / 100,
                         np.abs(st["off"] - offr).max()))
         W = st["W"] * I
@@ -836,10 +855,11 @@ def test_contact_step_ends_with_the_forces_of_its_state(preset, integ):
     ic = np.array([80.0, -40.0, 0.0, 300.0, -500.0, 150.0])
     S = state(kp, [0.0, 0.0, 2.0], ic[:3], ic[3:] if preset == "seed" else -ic[3:], cfg.initial_offsets())
     step = step_of(INTEGRATORS[integ])
+    Wk = new_work(scheme_module(INTEGRATORS[integ]).WORK)
     contact, mask = eval_forces(S[0], kp)
     in_contact = 0
     for _ in range(600):
-        contact, mask = step(S[0], kp, 1e-3, contact)
+        contact, mask = step(S[0], Wk[0], kp, 1e-3, contact)
         fresh = S.copy()
         want = _STRICT_EVAL(fresh, kp)
         assert (contact, mask) == want

@@ -20,7 +20,8 @@ import pandas as pd
 import pytest
 
 from dicetrace.core.fast import mirror_symmetric, roll_summary_sie
-from dicetrace.core.kernels import run_batch, run_roll, run_summary
+from dicetrace.core.kernels import SLICE_STEPS, batch_out, roll_out, run_batch, run_summary
+from dicetrace.core.kernels import run_roll as _run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
@@ -54,6 +55,11 @@ def _serial(fn, ics, cfg, off0=None, integ=None):
 def _summary(ic, off0, kp, integ, sets, set_steps, *_trace):
     """``run_summary`` with ``run_roll``'s signature (the trace arrays, empty, are dropped)."""
     return run_summary(ic, off0, kp, integ, sets, set_steps)
+
+
+def run_roll(ic, off0, kp, integ, sets, set_steps, *trace):
+    """``kernels.run_roll`` (the tracing loop) on these sets and trace arrays."""
+    return _run_roll(ic, off0, kp, integ, roll_out(sets, set_steps, None, *trace))
 
 
 def _assert_same(a, b):
@@ -208,13 +214,12 @@ def test_batch_is_thread_and_schedule_invariant(golden, threads):
     m, cap = len(ics), 64
     results = []
     for chunksize in (0, 1, 7):
-        arrs = [np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64),
-                np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32)]
+        arrs = batch_out(m, cap)
         old = numba.get_num_threads()
         numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
         try:
             with numba.parallel_chunksize(chunksize):
-                run_batch(ics, off0, kp, 0, cap, *arrs)
+                run_batch(ics, off0, kp, 0, cap, arrs)
         finally:
             numba.set_num_threads(old)
         results.append(arrs)
@@ -232,9 +237,9 @@ def test_scratch_kernel_is_reentrant():
     a, b = seed_slice(1.65, 3.9), seed_slice(0.019775, 0.0182)
     sets = np.zeros(256, np.uint8)
     steps = np.zeros(256, np.int32)
-    first = roll_summary_sie(b, off0, kp, sets, steps)
-    roll_summary_sie(a, off0, kp, sets, steps)
-    assert roll_summary_sie(b, off0, kp, sets, steps) == first
+    first = roll_summary_sie(b, off0, kp, sets, steps, SLICE_STEPS)
+    roll_summary_sie(a, off0, kp, sets, steps, SLICE_STEPS)
+    assert roll_summary_sie(b, off0, kp, sets, steps, SLICE_STEPS) == first
 
 
 @pytest.mark.parametrize("integrator", ["semi-implicit-euler", "verlet"], ids=["fast kernel", "summary loop"])

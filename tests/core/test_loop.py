@@ -23,6 +23,7 @@ from dicetrace.core.schemes import scheme_module
 from dicetrace.core.state import age_tolerance, new_states
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import convert_l, make_config
+from dicetrace.status import Status
 from dicetrace.studies.study_accuracy import T_MAX_S, sample_ics
 
 _CORE = _core_digest()[:16]
@@ -61,12 +62,14 @@ def stepped_loop(spec):
     return _STEPPED[spec.scheme]
 
 
-def _roll(kernel, ic, kin, states=None):
+def _roll(kernel, ic, kin):
+    """One throw through the run loop ``kernel`` in one call (no slice ends it): (summary, sets, set steps, S)."""
     cap = 1 << 14
     sets = np.zeros(cap, np.uint8)
     set_steps = np.zeros(cap, np.int32)
-    S = new_states(1) if states is None else states
-    status, steps, outcome, nsets = kernel(ic, kin.off0, kin.params, S, sets, set_steps, *kernels.NO_TRACE, np.zeros(0))
+    S, Wk = kernels.new_roll_state(kin.integrator_id)
+    status, steps, outcome, nsets = kernel(ic, kin.off0, kin.params, S, Wk, kernels.roll_out(sets, set_steps), False,
+                                           1 << 62)
     return (int(status), int(steps), int(outcome)), sets[:nsets].copy(), set_steps[:nsets].copy(), S
 
 
@@ -139,7 +142,8 @@ def test_a_recording_inside_a_crossed_flight_is_the_exact_flight_and_steers_noth
     tr_energy = np.zeros((n + 1, loop.ENERGY_COLS))
     cap = 1 << 14
     sets, set_steps = np.zeros(cap, np.uint8), np.zeros(cap, np.int32)
-    traced = kernels.run_roll(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, sets, set_steps, tr_state, tr_force, tr_energy)
+    traced = kernels.run_roll(kin.ics[0], kin.off0, kp, TSIT5.kernel_id,
+                              kernels.roll_out(sets, set_steps, None, tr_state, tr_force, tr_energy))
     summary = kernels.run_summary(kin.ics[0], kin.off0, kp, TSIT5.kernel_id, np.zeros(cap, np.uint8),
                                np.zeros(cap, np.int32))
     assert tuple(traced) == tuple(summary)
@@ -157,3 +161,73 @@ def test_a_recording_inside_a_crossed_flight_is_the_exact_flight_and_steers_noth
     np.testing.assert_allclose(np.linalg.norm(off, axis=2), math.sqrt(3) * kp.half_side_cm, rtol=1e-13)
     e = tr_energy[1:first, 5]
     assert np.ptp(e) <= 1e-12 * np.abs(e).max()
+
+
+# -- slices: a throw stopped every few steps and gone on with is the same throw ------------------------
+
+
+def _one_call_and_sliced(kernel, ic, kin, budget, out_a, out_b):
+    """``kernel`` on one throw in one call, and again in calls of ``budget`` steps each (resumed from its records)."""
+    a = kernel(ic, kin.off0, kin.params, *kernels.new_roll_state(kin.integrator_id), out_a, False, 1 << 62)
+    S, Wk = kernels.new_roll_state(kin.integrator_id)
+    b = kernel(ic, kin.off0, kin.params, S, Wk, out_b, False, budget)
+    calls = 1
+    while b[0] == Status.RUNNING:
+        assert b[1] < kin.params.max_steps
+        b = kernel(ic, kin.off0, kin.params, S, Wk, out_b, True, budget)
+        calls += 1
+    return a, b, calls
+
+
+@pytest.mark.parametrize("integrator", list(INTEGRATORS))
+@pytest.mark.parametrize("kind", ["summary", "trace", "events"])
+def test_a_throw_in_slices_is_the_throw_in_one_call(integrator, kind):
+    """Every run loop stopped every 37 steps (``Status.RUNNING``, its state kept in its motion and work records)
+    and gone on with gives the throw of one call bit for bit: status, steps, outcome, contact sets (events and
+    their times), trace rows; through free flights crossed in one piece, dense-output fronts and the events'
+    buffers."""
+    spec = INTEGRATORS[integrator]
+    if kind == "events" and not kernels.has_events(spec.kernel_id):
+        pytest.skip("no events loop")
+    cfg = make_config("physical", integrator=integrator, t_max_s=1.5 if integrator == "forward-euler" else 8.0)
+    ics = convert_l(sample_ics("zoom-out", 3), "program", "physical")
+    kin = cfg.kernel_inputs(ics)
+    k = kernels.kernels_for(spec.kernel_id)
+    kernel = {"summary": k.roll_summary, "trace": k.roll_trace, "events": k.roll_events}[kind]
+    rows = int(kin.params.max_steps) + 1 if kind == "trace" else 0
+
+    def out():
+        cap = 1 << 12
+        return kernels.roll_out(np.zeros(cap, np.uint8), np.zeros(cap, np.int32),
+                                np.zeros(cap) if kind == "events" else None,
+                                np.zeros((rows, loop.STATE_COLS)), np.zeros((rows, loop.FORCE_COLS)),
+                                np.zeros((rows, loop.ENERGY_COLS)))
+
+    sliced = 0
+    for ic in kin.ics:
+        oa, ob = out(), out()
+        a, b, calls = _one_call_and_sliced(kernel, ic, kin, 37, oa, ob)
+        assert tuple(map(int, a)) == tuple(map(int, b))
+        n = int(a[3])
+        for x, y in zip(oa, ob):
+            np.testing.assert_array_equal(x[:n] if x.ndim == 1 else x, y[:n] if y.ndim == 1 else y)
+        sliced += calls > 3
+    assert sliced == len(kin.ics)  # every throw went through several slices
+
+
+def test_batch_goes_on_with_the_throws_a_slice_stopped(monkeypatch):
+    """``run_batch`` with slices of 50 steps (the seed path's specialised kernel stops at the budget, keeps nothing,
+    and the throw starts again in the run loop; the others go on from their records): the results of slices
+    long enough for every throw, bit for bit."""
+    for preset, integrator in (("seed", None), ("physical", None), ("physical", "verlet")):
+        cfg = make_config(preset, **({} if integrator is None else {"integrator": integrator}))
+        kin = cfg.kernel_inputs(convert_l(sample_ics("zoom-out", 40), "program", cfg.preset.l_convention))
+        whole = kernels.batch_out(40, 64)
+        kernels.run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, 64, whole)
+        monkeypatch.setattr(kernels, "SLICE_STEPS", 50)
+        sliced = kernels.batch_out(40, 64)
+        kernels.run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, 64, sliced)
+        monkeypatch.undo()
+        assert whole.steps.min() > 50  # every throw outlived its first slice
+        for x, y in zip(whole, sliced):
+            np.testing.assert_array_equal(x, y)

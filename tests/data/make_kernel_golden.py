@@ -12,8 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dicetrace.core.kernels import run_roll
-from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
+from dicetrace.core.kernels import roll_out, run_roll
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
 
@@ -31,7 +30,6 @@ def main():
     ics = seed_slice(x, y)
     cfg = make_config("seed")
     kp, off0 = cfg.kernel_params(), cfg.initial_offsets()
-    empty = (np.zeros((0, STATE_COLS)), np.zeros((0, FORCE_COLS)), np.zeros((0, ENERGY_COLS)))
     status = np.zeros(N, np.int8)
     steps = np.zeros(N, np.int64)
     outcome = np.zeros(N, np.int8)
@@ -39,7 +37,7 @@ def main():
     sets, set_steps = [], []
     buf, buf_steps = np.zeros(4096, np.uint8), np.zeros(4096, np.int32)
     for i in range(N):
-        st, n, o, ns = run_roll(ics[i], off0, kp, 0, buf, buf_steps, *empty)
+        st, n, o, ns = run_roll(ics[i], off0, kp, 0, roll_out(buf, buf_steps))
         status[i], steps[i], outcome[i] = st, n, o
         sets.append(buf[:ns].copy())
         set_steps.append(buf_steps[:ns].copy())

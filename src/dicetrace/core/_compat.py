@@ -21,6 +21,12 @@ naming the patch, when an upgrade moves what it relies on:
     numpy 2.5 removed ``np.row_stack``, which numba-cuda 0.30.4 still names
     at import: an alias to ``np.vstack`` (its documented replacement) before
     numba-cuda is imported.
+``simulator_local_records``  (numba-cuda 0.30.4's simulator)
+    The simulator makes ``cuda.local.array(shape, dtype)`` with ``np.empty``;
+    for a record dtype its elements are ``np.void``, which has no attribute
+    access to its fields, where the device's records have: the kernels read
+    ``st.X``.  The simulator's local arrays of records are made
+    ``np.recarray`` (whose elements, ``np.record``, have it).
 """
 
 from __future__ import annotations
@@ -123,6 +129,24 @@ def ensure_row_stack() -> None:
         np.row_stack = np.vstack
 
 
+def simulator_local_records() -> None:
+    """Local arrays of records in numba-cuda's simulator are ``np.recarray`` (attribute access to fields, as on the
+    device); idempotent."""
+    from numba.cuda.simulator import kernelapi
+
+    local = kernelapi.FakeCUDALocal
+    original = local.array
+    if getattr(original, "_dicetrace_records", False):
+        return
+
+    def array(self, shape, dtype, alignment=None):
+        a = original(self, shape, dtype, alignment)
+        return a.view(np.recarray) if a.dtype.names else a
+
+    array._dicetrace_records = True
+    local.array = array
+
+
 # ---------------------------------------------------------------- NVVM's -fma=0
 
 
@@ -189,4 +213,11 @@ def self_test(*, cache_on: bool = False, cuda: bool = False) -> list[str]:
                 opts = getattr(nvvm, "CompilationUnit", None)
                 if opts is None:
                     problems.append(f"nvvm_without_fma: nvvm.CompilationUnit is gone (written for numba-cuda {NUMBA_CUDA_TESTED})")
+        try:
+            from numba.cuda.simulator import kernelapi
+
+            inspect.signature(kernelapi.FakeCUDALocal.array).bind(None, 1, np.float64)
+        except (ImportError, AttributeError, TypeError) as exc:
+            problems.append(f"simulator_local_records: the simulator's FakeCUDALocal.array moved ({exc}; written for "
+                            f"numba-cuda {NUMBA_CUDA_TESTED})")
     return problems

@@ -43,7 +43,17 @@ from dicetrace.core.free_flight import (
     free_min_height,
     locate_entry,
 )
-from dicetrace.core.state import SUBSTEP_CAUSES, accept_substep, age_tolerance, begin_substeps, copy_motion, end_substeps
+from dicetrace.core.state import (
+    DRIVER_WORK,
+    SUBSTEP_CAUSES,
+    SUBSTEP_WORK,
+    accept_substep,
+    age_tolerance,
+    begin_substeps,
+    copy_motion,
+    end_substeps,
+    work_dtype,
+)
 from dicetrace.params import FRICTION_SPECTRAL
 
 #: Largest RK4 sub-step for the friction law, in units of 1/λ_f (λ_f the
@@ -90,16 +100,16 @@ MAX_SUBSTEPS = 100000
 
 
 @jit(inline="always")
-def front_keep(st, below, f0, f1, f2, t0, t1, t2, lam):
+def front_keep(wk, below, f0, f1, f2, t0, t1, t2, lam):
     """Keep what the front's next sub-step starts from: whether a node is below, the force sum and torque, λ_f."""
-    st.fr_below = below
-    st.fr_wrench[0] = f0
-    st.fr_wrench[1] = f1
-    st.fr_wrench[2] = f2
-    st.fr_wrench[3] = t0
-    st.fr_wrench[4] = t1
-    st.fr_wrench[5] = t2
-    st.fr_lam = lam
+    wk.fr_below = below
+    wk.fr_wrench[0] = f0
+    wk.fr_wrench[1] = f1
+    wk.fr_wrench[2] = f2
+    wk.fr_wrench[3] = t0
+    wk.fr_wrench[4] = t1
+    wk.fr_wrench[5] = t2
+    wk.fr_lam = lam
 
 
 @jit(inline="always")
@@ -138,25 +148,26 @@ def friction_rate(z, uk, P, kp):
 
 
 @jit(inline="always")
-def free_piece_events(st, t, tau, h, hmax, kp, sets, set_steps, ev_times):
-    """An events step's exact free flight of a piece of length tau from the sub-step start ``st.sub_*``, ``t`` s into
+def free_piece_events(st, wk, t, tau, h, hmax, kp, sets, set_steps, ev_times):
+    """An events step's exact free flight of a piece of length tau from the sub-step start ``wk.sub_*``, ``t`` s into
     the step, with its contact events.
 
     A node can dip below the ground and out again inside a piece (the driver
     checks a piece's end only): that is the geometry of the flight, with no
     force, and it is recorded (``contacts.note_substep_events``).  The
-    piece's start is kept in RK4 stage scratch, free between sub-steps.
+    piece's start is kept in the sub-step end ``wk.new_*``, free between
+    sub-steps (the next sub-step writes it before anything reads it).
     The flight is the driver's own free piece (``free_advance``) and the
     events are read off beside it, so the motion is the same as without
     events, bit for bit (strict arithmetic, ``core._jit``).
     """
-    copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off)
-    free_advance(st.sub_X, st.sub_U, st.W, st.sub_off, kp, tau)
+    copy_motion(wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off, wk.new_X, wk.new_U, wk.new_L, wk.new_off)
+    free_advance(wk.sub_X, wk.sub_U, st.W, wk.sub_off, kp, tau)
     # a piece of no length (the ground reached at its start) resolves nothing: its cut-off is infinite, said so
     # rather than left to a division by zero (infinite in the kernels, an exception in plain Python)
     cmin = MIN_CUT * hmax / tau if tau > 0.0 else math.inf
-    note_substep_events(st, t, tau, h, st.stage4_u, st.stage4_a, st.stage4_t, st.stage_off, st.sub_X, st.sub_U,
-                        st.sub_L, st.sub_off, kp.inertia, cmin, sets, set_steps, ev_times)
+    note_substep_events(st, wk.ev_roots, t, tau, h, wk.new_X, wk.new_U, wk.new_L, wk.new_off, wk.sub_X, wk.sub_U,
+                        wk.sub_L, wk.sub_off, kp.inertia, cmin, sets, set_steps, ev_times)
 
 
 # ------------------------------------------------------------------ the controller (its state: st.h_next)
@@ -273,8 +284,8 @@ PIECE_ENTRY = 2
 
 
 @jit(inline="always")
-def free_piece(st, kp, rest, hmax):
-    """The next piece of exact free flight from the sub-step start ``st.sub_*``: (kind, length, last).
+def free_piece(st, wk, kp, rest, hmax):
+    """The next piece of exact free flight from the sub-step start ``wk.sub_*``: (kind, length, last).
 
     The whole ``rest`` of the step where no node can reach the ground in it
     (``PIECE_REST``); else a piece of at most ``hmax`` that ends in the air
@@ -282,9 +293,9 @@ def free_piece(st, kp, rest, hmax):
     reaches the ground (``PIECE_ENTRY``, found on the exact flight).  The
     state is not moved.
     """
-    Xw = st.sub_X
-    Uw = st.sub_U
-    offw = st.sub_off
+    Xw = wk.sub_X
+    Uw = wk.sub_U
+    offw = wk.sub_off
     if free_flight_safe(Xw, Uw, st.W, offw, kp, rest):
         return PIECE_REST, rest, True
     hs = hmax
@@ -302,7 +313,7 @@ def free_piece(st, kp, rest, hmax):
 
 
 @jit(inline="always")
-def resume_front(st, kp, h):
+def resume_front(st, wk, kp, h):
     """Go on from the front a dense-output step left in the sub-step start: (t, cached, below, force sum, torque).
 
     ``t``: how far into this step the front lies (``st.ahead``, now 0);
@@ -313,13 +324,13 @@ def resume_front(st, kp, h):
     t = st.ahead
     st.ahead = 0.0
     for j in range(3):
-        st.W[j] = st.sub_L[j] / kp.inertia
-    w = st.fr_wrench
-    return t, t < h, st.fr_below, w[0], w[1], w[2], w[3], w[4], w[5]
+        st.W[j] = wk.sub_L[j] / kp.inertia
+    w = wk.fr_wrench
+    return t, t < h, wk.fr_below, w[0], w[1], w[2], w[3], w[4], w[5]
 
 
 @jit(inline="always")
-def substeps_end(st, kp, t, h, cached, below):
+def substeps_end(st, wk, kp, t, h, cached, below):
     """The end of a step's sub-steps: the state back from the sub-step start, and what ``eval_forces`` returns there.
 
     A step whose sub-step budget ran out before its end is never returned
@@ -330,15 +341,22 @@ def substeps_end(st, kp, t, h, cached, below):
     what ``eval_forces`` would compute again from the same X, U, ω and offsets.
     """
     if t < h:
-        st.sub_X[2] = math.nan
+        wk.sub_X[2] = math.nan
         cached = False
-    end_substeps(st, kp)
+    end_substeps(st, wk, kp)
     if cached:
         return ended_forces(st, below)
     return eval_forces(st, kp)
 
 
 # ------------------------------------------------------------------ the sub-step loop
+
+
+def work_of(method: ModuleType):
+    """The work record of the driver on the sub-step method ``method``: the sub-step start and end, the driver's
+    own fields (``state.DRIVER_WORK``) and the method's (``method.WORK``)."""
+    return work_dtype(SUBSTEP_WORK, DRIVER_WORK, method.WORK)
+
 
 
 def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bool = True):
@@ -352,7 +370,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
     step that starts at time t weighs its sub-steps' error estimates by
     exp(−tol_growth·t) (``state.age_tolerance``).  Every sub-step is counted
     in ``st.substeps`` by what ended it (``state.SUBSTEP_CAUSES``).
-    ``events``: the step of an events loop, ``drive(st, kp, h, contact, sets,
+    ``events``: the step of an events loop, ``drive(st, wk, kp, h, contact, sets,
     set_steps, ev_times)``, which records the exact contact events
     (``contacts.note_event``): the set inside every accepted sub-step (whose
     ends are the crossings), the empty set where a free flight starts.
@@ -361,12 +379,12 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
     events_on = bool(events)
     dense = bool(method.DENSE)
 
-    def drive(st, kp, h, contact, *ev):
+    def drive(st, wk, kp, h, contact, *ev):
         grade = age_tolerance(st, kp, h, 1)  # the weight of this step's error estimates
         if dense and st.ahead > 0.0:
             if st.ahead > h:  # the step ends inside the sub-step the front came from: interpolate
                 st.ahead -= h
-                method.dense_state(st, kp, 1.0 - st.ahead / st.dn_h)
+                method.dense_state(st, wk, kp, 1.0 - st.ahead / wk.dn_h)
                 return dense_end(st, kp)
         elif not contact and free_flight_safe(st.X, st.U, st.W, st.off, kp, h):
             if events_on:
@@ -374,7 +392,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
             free_flight(st, kp, h)
             return eval_forces(st, kp)
         I = kp.inertia
-        Xw, Uw, Lw, offw, Xn, Un, Ln, offn = st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.new_X, st.new_U, st.new_L, st.new_off
+        Xw, Uw, Lw, offw, Xn, Un, Ln, offn = wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off, wk.new_X, wk.new_U, wk.new_L, wk.new_off
         hmax = h / max(kp.substeps, 1.0)
         adaptive = kp.tol > 0.0
         overshoot = dense and adaptive  # the step's end is interpolated: a sub-step may span several steps
@@ -384,9 +402,9 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
         resume = dense and st.ahead > 0.0
         st.rot_h = -1.0  # ω changes: the cached free-flight rotation is stale
         if resume:
-            t, cached, c5, g0, g1, g2, q0, q1, q2 = resume_front(st, kp, h)
+            t, cached, c5, g0, g1, g2, q0, q1, q2 = resume_front(st, wk, kp, h)
         else:
-            begin_substeps(st)
+            begin_substeps(st, wk)
             # in contact, the forces at the step's start are those the last step ended with: its first stage
             t, cached, c5 = 0.0, contact, contact
             g0, g1, g2, q0, q1, q2 = step_wrench(st, contact, True)
@@ -405,9 +423,9 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
             if not below and not entering:  # free flight, exact, until the end of the step or the next entry
                 if events_on:
                     note_event(st, t, h, 0, ev[0], ev[1], ev[2])
-                kind, tau, last = free_piece(st, kp, rest, hmax)
+                kind, tau, last = free_piece(st, wk, kp, rest, hmax)
                 if events_on and kind != PIECE_REST:
-                    free_piece_events(st, t, tau, h, hmax, kp, ev[0], ev[1], ev[2])
+                    free_piece_events(st, wk, t, tau, h, hmax, kp, ev[0], ev[1], ev[2])
                 else:
                     free_advance(Xw, Uw, st.W, offw, kp, tau)
                 if kind == PIECE_ENTRY:
@@ -419,9 +437,9 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
                 continue
             entering = False
             # the first pass of a resumed step starts at the front, whose λ_f was kept there
-            lam = st.fr_lam if resume and nsub == 1 else friction_rate(st.z, st.uk, st.P, kp)
+            lam = wk.fr_lam if resume and nsub == 1 else friction_rate(st.z, st.uk, st.P, kp)
             hs, cause, limited, last = propose_substep(st, hcap, rest, adaptive, h0, lam, method.FRICTION_THETA, overshoot)
-            method.substep(st, kp, hs, f0, f1, f2, t0, t1, t2)
+            method.substep(st, wk, kp, hs, f0, f1, f2, t0, t1, t2)
             cmin = MIN_CUT * hmax / hs
             cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, hs, cmin)
             if cut < 1.0:  # a node crossed the ground inside: the sub-step again, up to the first crossing
@@ -430,31 +448,31 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
                 limited = True
                 cause = CAUSE_CUT
                 st.substeps[CAUSE_REDONE] += 1
-                method.substep(st, kp, hs, f0, f1, f2, t0, t1, t2)
+                method.substep(st, wk, kp, hs, f0, f1, f2, t0, t1, t2)
             if adaptive:  # the estimate's derivative at the new state is the next sub-step's first stage
                 c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I,
                                                        offn, kp, st.F, st.uk, st.z, st.P)
-                err = method.error(st, kp, hs, g0, g1, g2, q0, q1, q2) * grade
+                err = method.error(st, wk, kp, hs, g0, g1, g2, q0, q1, q2) * grade
                 if not control_error(st, h, hs, err, method.ERR_EXP, limited):
                     nsub += 1
                     continue  # the scratch holds the rejected candidate's forces: the start is evaluated again
                 cached = True
             if overshoot and not last and hs > rest:  # past the step's end: kept for the step ends inside it
-                method.dense_keep(st, hs)
+                method.dense_keep(st, wk, hs)
                 ahead = True
             if events_on:  # the sets inside the sub-step: below at its start, and every crossing inside
-                note_substep_events(st, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, cmin, ev[0], ev[1], ev[2])
-            accept_substep(st, kp)
+                note_substep_events(st, wk.ev_roots, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, cmin, ev[0], ev[1], ev[2])
+            accept_substep(st, wk, kp)
             st.substeps[cause] += 1
             if ahead:
                 break
             t = h if last else t + hs
         if ahead:  # the front stays in the sub-step start; the state at the step's end is interpolated
             st.ahead = t + hs - h
-            front_keep(st, c5, g0, g1, g2, q0, q1, q2, friction_rate(st.z, st.uk, st.P, kp))
-            method.dense_state(st, kp, rest / hs)
+            front_keep(wk, c5, g0, g1, g2, q0, q1, q2, friction_rate(st.z, st.uk, st.P, kp))
+            method.dense_state(st, wk, kp, rest / hs)
             return dense_end(st, kp)
-        return substeps_end(st, kp, t, h, cached, c5)
+        return substeps_end(st, wk, kp, t, h, cached, c5)
 
     drive.__name__ = drive.__qualname__ = name
     drive.__doc__ = f"One contact-aware step on the sub-step method of ``{method.__name__}`` (``make_drive``)."

@@ -245,7 +245,7 @@ HERMITE_SLOPE_BOUND = 4.0 / 27.0
 
 
 @jit
-def note_substep_events(st, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, inertia, cmin, sets, set_steps, ev_times):
+def note_substep_events(st, roots, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, inertia, cmin, sets, set_steps, ev_times):
     """Record the contact sets of one accepted sub-step of length hs that starts ``t`` s into the step.
 
     From its two ends (X, U, L and the offsets at the start ``*s`` and the
@@ -262,13 +262,13 @@ def note_substep_events(st, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, inerti
     not see: both ends lie above the ground) has two.  A node whose cubic
     cannot reach the ground (its end heights clear it by more than
     ``HERMITE_SLOPE_BOUND`` times its end slopes) is not searched.  Each
-    node's crossings are kept in the throw's scratch ``st.ev_roots`` (8, 3).
+    node's crossings are kept in the scratch ``roots`` (8, 3) (the contact
+    driver's work record: a GPU thread has it too).
     """
     if cmin >= 0.5:
         # shorter than twice the cut-off: nothing inside it can be resolved (the
         # start of the next sub-step says which set holds)
         return
-    roots = st.ev_roots
     mask = 0
     crossing = False
     for k in range(8):

@@ -196,7 +196,8 @@ def _flight_run(n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok,
     The free-flight part of :func:`roll_summary_sie_in` (see the module
     docstring): steps until a node reaches the ground, the stop-test bound
     comes near the threshold (the general tail then takes that step), or the
-    run ends (time cap, non-finite state, full buffer: ``done``).  Moves the
+    run ends (step ``maxn``: the time cap or the end of the slice, a
+    non-finite state, a full buffer: ``done``).  Moves the
     state and the offsets (written back to ``off``, mirror nodes negated)
     and records the contact sets.  Returns (n, X, U, nsets, last_mask,
     status, done); ``status`` says why a ``done`` run ended (TIME_CAP at the
@@ -312,7 +313,7 @@ def _flight_run(n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok,
 
 
 @jit
-def roll_summary_sie(ic, off0, kp, sets, set_steps):
+def roll_summary_sie(ic, off0, kp, sets, set_steps, budget):
     """One throw to rest, summary only: semi-implicit Euler, point-mass stop test.
 
     :func:`roll_summary_sie_in` in node arrays of its own: fresh
@@ -325,11 +326,11 @@ def roll_summary_sie(ic, off0, kp, sets, set_steps):
     uk = np.empty((8, 3))
     z = np.empty(8)
     P = np.empty(8)
-    return roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P)
+    return roll_summary_sie_in(ic, off0, kp, sets, set_steps, budget, off, F, uk, z, P)
 
 
 @jit(inline="always")
-def roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
+def roll_summary_sie_in(ic, off0, kp, sets, set_steps, budget, off, F, uk, z, P):
     """One throw to rest, summary only: semi-implicit Euler, point-mass stop test, in the given node arrays.
 
     The one source of the kernel: the CPU's :func:`roll_summary_sie` runs it
@@ -338,7 +339,10 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     Arguments and result as the run loop's (``core.loop``), where it applies
     (:func:`applies`: ``off0`` mirror-symmetric bitwise, the point-mass
     stop-test energy); ``off``, ``F``, ``uk`` (8, 3) and ``z``, ``P`` (8,)
-    are scratch (overwritten; never views of one another).
+    are scratch (overwritten; never views of one another).  A throw not
+    ended after ``budget`` steps stops there as ``Status.RUNNING`` and keeps
+    nothing: the caller runs it again through the run loop, which can go on
+    from a slice (the same throw, bit for bit).
     """
     h = kp.dt_s
     inertia = kp.inertia
@@ -374,15 +378,16 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
     rot_ok, R = program_rotation(W0, W1, W2, h)
 
     maxn = int(kp.max_steps)
+    lim = min(maxn, budget)
     status = Status.TIME_CAP
     n = 0
     live = ALL_NODES  # nodes whose force may be non-zero at the last force evaluation
     contact = False  # forces are zero before the first step (program)
-    while n < maxn:
+    while n < lim:
         if not contact:
             # ---------------- free flight: a run of force-free steps in registers ----------------
             n, X0, X1, X2, U0, U1, U2, nsets, last_mask, status, done = _flight_run(
-                n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok, R, off, kp, du_free, duz_free,
+                n, lim, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok, R, off, kp, du_free, duz_free,
                 sets, set_steps, nsets, last_mask)
             if done:
                 break
@@ -434,6 +439,8 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, off, F, uk, z, P):
         if e <= e_stop:
             status = Status.SETTLED
             break
+    if status == Status.TIME_CAP and n < maxn:  # stopped at the budget
+        return Status.RUNNING, n, -1, nsets
     # the heights are current: the tail ran this step
     outcome = face_up(z) if status == Status.SETTLED else -1
     return status, n, outcome, nsets

@@ -13,12 +13,19 @@ the copy back):
     (``fast.roll_summary_sie_in``) in per-thread local arrays, wherever it
     applies on the CPU (``fast.applies``);
 ``general kernel``
-    a scheme's summary run loop (``scheme.roll_summary``, ``loop.make_roll``),
-    in a per-thread state record in device memory;
+    a scheme's summary run loop (``roll_summary``, ``loop.make_roll``), its
+    motion and work records (``core.state``: what its scheme uses) in the
+    thread's local memory, which the hardware interleaves across a warp;
 ``events kernel``
-    a contact scheme's events loop (``scheme.roll_events``: exact contact
-    events, docs/model.md §8.1), likewise, with each thread's event times
-    beside its sets.
+    a contact scheme's events loop (``roll_events``: exact contact events,
+    docs/model.md §8.1), likewise, with each thread's event times beside
+    its sets;
+``held kernels``
+    the general and events kernels with each throw's records in device
+    memory, for the throws that outlive a slice of ``kernels.SLICE_STEPS``
+    steps (their records must outlive a launch; only with a time cap above
+    65 s of 1 ms steps): launch after launch goes on with them, and Python
+    runs between launches (Ctrl-C stops them).
 
 All are cached on disk by numba-cuda (beside this file, or in the user's
 cache where that cannot be written), keyed on the kernel digest of
@@ -32,9 +39,7 @@ operation, and only libdevice's sin, cos and exp can differ from the
 host's, in the last ulp (sqrt is correctly rounded on both).
 
 Memory and transfers.  Each thread owns ``cap`` contact sets in device
-memory and, on the general kernel, one state record (``core.state.STATE``,
-4.0 kB, scratch that ``init_state`` overwrites, so uploaded once and reused
-as on the CPU).  ``run_batch_cuda`` runs one chunk on the calling host
+memory; its records are local.  ``run_batch_cuda`` runs one chunk on the calling host
 thread's own CUDA stream, with that thread's pinned host buffers and device
 buffers (grown as needed, kept for its next chunk): the ICs go in, the
 kernel runs, the summaries come back, and then only the contact sets the
@@ -69,17 +74,24 @@ from numba.cuda.cudadrv import nvvm  # noqa: E402
 
 from dicetrace.core import fast, loop  # noqa: E402
 from dicetrace.core._jit import CACHE, kernel_digest  # noqa: E402
+from dicetrace.core import kernels  # noqa: E402
 from dicetrace.core.kernels import kernels_for  # noqa: E402
-from dicetrace.core.state import new_states  # noqa: E402
+from dicetrace.core.loop import RollOut  # noqa: E402
+from dicetrace.core.state import MOTION, new_states, new_work  # noqa: E402
 from dicetrace.status import Status  # noqa: E402
 
-#: Threads per block: the kernels hold ~180 registers a thread, so blocks of 128 keep several resident.
+#: Threads per block: the kernels hold up to 255 registers a thread (``benchmarks/bench_ptxas.py``), so blocks of
+#: 128 keep several resident.
 THREADS_PER_BLOCK = 128
 
 
 def simulated() -> bool:
     """Whether numba-cuda's simulator stands in for a GPU (``NUMBA_ENABLE_CUDASIM=1``)."""
     return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") not in ("", "0")
+
+
+if simulated():
+    _compat.simulator_local_records()  # a thread's local records with their fields by name, as on the device
 
 
 def device_count() -> int:
@@ -168,10 +180,12 @@ def _make_seed_kernel(tag: int):
     ``tag``: 60 bits of the kernel digest (``_jit.kernel_digest``), closed
     over so that numba-cuda's disk cache, which keys a kernel on its own
     code and its closure, never loads a kernel compiled from other core
-    sources.
+    sources.  A throw not ended after ``budget`` steps stops as
+    ``Status.RUNNING`` and keeps nothing (the caller runs it again in the
+    held kernel, :func:`_make_loop_kernel`).
     """
 
-    def seed_kernel(ics, off0, kp, cap, status, steps, outcome, nsets, sets, set_steps):
+    def seed_kernel(ics, off0, kp, cap, status, steps, outcome, nsets, sets, set_steps, budget):
         i = cuda.grid(1)
         if i < ics.shape[0] and tag >= 0:
             off = cuda.local.array((8, 3), float64)
@@ -181,7 +195,7 @@ def _make_seed_kernel(tag: int):
             P = cuda.local.array(8, float64)
             lo = i * cap
             s, n, o, ns = fast.roll_summary_sie_in(ics[i], off0, kp, sets[lo : lo + cap], set_steps[lo : lo + cap],
-                                                   off, F, uk, z, P)
+                                                   budget, off, F, uk, z, P)
             status[i] = s
             steps[i] = n
             outcome[i] = o
@@ -190,33 +204,53 @@ def _make_seed_kernel(tag: int):
     return seed_kernel
 
 
-def _make_loop_kernel(loops, tag: int, events: bool):
+def _make_loop_kernel(loops, tag: int, events: bool, held: bool):
     """The one-thread-per-throw kernel around a scheme's run loop (``loop.make_roll``): its summary loop
     (``loops.roll_summary``: the general kernel) or, with ``events``, its events loop (``loops.roll_events``:
     the events kernel); ``loops`` the module of the scheme's kernels (``kernels.kernels_of``), ``tag`` as above.
-    ``ev_times`` is laid out as ``sets`` (thread i owns ``[i·cap, (i+1)·cap)``); a summary loop ignores it
-    (length 0).  The closure holds the module and a bool (the constant branch is pruned), never a compiled
-    function: numba-cuda's disk cache keys on its values."""
-    events = bool(events)
 
-    def loop_kernel(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, e0, e1, e2,
-                    ev_times):
+    Each thread runs its throw in motion and work records in its local
+    memory (``core.state``: what its scheme uses, interleaved across a warp
+    by the hardware), at most ``budget`` steps: a throw not ended then stops
+    as ``Status.RUNNING``, its records lost.  ``held``: the kernel of such
+    throws instead, their records in device memory (``S``, ``Wk``, one per
+    throw), which a launch with ``resume`` goes on from.  ``rec`` is 0 (see
+    the local records below).  ``ev_times`` is
+    laid out as ``sets`` (thread i owns ``[i·cap, (i+1)·cap)``); a summary
+    loop ignores it (length 0).  The closure holds the module and bools (the
+    constant branches are pruned), never a compiled function: numba-cuda's
+    disk cache keys on its values.
+    """
+    events = bool(events)
+    held = bool(held)
+
+    def loop_kernel(ics, off0, kp, cap, S_all, Wk_all, status, steps, outcome, nsets, sets, set_steps, ev_times,
+                    e0, e1, e2, resume, budget, rec):
+        # S_all, Wk_all: the held kernel's records, one per throw (of no rows for the others)
         i = cuda.grid(1)
-        if i < ics.shape[0] and tag >= 0:
+        if i < ics.shape[0] and tag >= 0 and not (resume and status[i] != Status.RUNNING):  # (held: ended already)
             lo = i * cap
-            S = states[i : i + 1]
-            if events:
-                s, n, o, ns = loops.roll_events(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
-                                                 e0, e1, e2, ev_times[lo : lo + cap])
+            if held:
+                S = S_all[i : i + 1]
+                Wk = Wk_all[i : i + 1]
             else:
-                s, n, o, ns = loops.roll_summary(ics[i], off0, kp, S, sets[lo : lo + cap], set_steps[lo : lo + cap],
-                                                  e0, e1, e2, ev_times)
+                # in the thread's local memory; indexed from a run-time value (``rec``, 0), so that NVVM keeps
+                # them there, where the hardware interleaves them across the warp, instead of promoting their
+                # 1-4 kB of fields to registers (which spilled ~2 kB a thread: benchmarks/bench_ptxas.py)
+                S = cuda.local.array(1, MOTION)[rec : rec + 1]
+                Wk = cuda.local.array(1, loops.scheme.WORK)[rec : rec + 1]
+            if events:
+                out = RollOut(sets[lo : lo + cap], set_steps[lo : lo + cap], ev_times[lo : lo + cap], e0, e1, e2)
+                s, n, o, ns = loops.roll_events(ics[i], off0, kp, S, Wk, out, resume, budget)
+            else:
+                out = RollOut(sets[lo : lo + cap], set_steps[lo : lo + cap], ev_times, e0, e1, e2)
+                s, n, o, ns = loops.roll_summary(ics[i], off0, kp, S, Wk, out, resume, budget)
             status[i] = s
             steps[i] = n
             outcome[i] = o
             nsets[i] = ns
 
-    loop_kernel.__name__ = "events_kernel" if events else "general_kernel"
+    loop_kernel.__name__ = ("events_kernel" if events else "general_kernel") + ("_held" if held else "")
     return loop_kernel
 
 
@@ -224,19 +258,19 @@ _KERNELS: dict = {}
 _KERNELS_LOCK = threading.Lock()
 
 
-def _kernel(integ: int, seed_path: bool, events: bool = False):
+def _kernel(integ: int, seed_path: bool, events: bool = False, held: bool = False):
     """The CUDA dispatcher for integrator ``integ`` (kernel id): the seed kernel, the general one, or (``events``)
-    the events kernel."""
+    the events kernel; ``held``: its form whose throws keep their records in device memory between launches."""
     loops = kernels_for(integ)
-    key = "seed" if seed_path else loops.scheme.__name__ + (".events" if events else "")
+    key = "seed" if seed_path else loops.scheme.__name__ + (".events" if events else "") + (".held" if held else "")
     with _KERNELS_LOCK:  # the threads of a GPU (or of several) share one dispatcher, compiled once
-        return _kernel_locked(key, loops, seed_path, events)
+        return _kernel_locked(key, loops, seed_path, events, held)
 
 
-def _kernel_locked(key: str, loops, seed_path: bool, events: bool = False):
+def _kernel_locked(key: str, loops, seed_path: bool, events: bool = False, held: bool = False):
     if key not in _KERNELS:
         tag = int(kernel_digest()[:15], 16)
-        fn = _make_seed_kernel(tag) if seed_path else _make_loop_kernel(loops, tag, events)
+        fn = _make_seed_kernel(tag) if seed_path else _make_loop_kernel(loops, tag, events, held)
         short = loops.scheme.__name__.rsplit(".", 1)[-1] if not seed_path else "seed"
         fn.__qualname__ = fn.__name__ = f"{fn.__name__}_{short}"
         _KERNELS[key] = cuda.jit(fn, cache=CACHE)
@@ -285,20 +319,17 @@ def uses_seed_kernel(kp, off0, integ: int) -> bool:
 
 def bytes_per_throw(integ: int, cap: int, kp=None, off0=None, events: bool = False) -> int:
     """Device memory one throw of a chunk takes: IC, summaries, ``cap`` contact sets, as many packed for the
-    host (at most), its offset there, (general and events kernels) its state record and (``events``) the
-    times of its sets, likewise twice."""
-    state = 0 if (kp is not None and not events and uses_seed_kernel(kp, off0, integ)) else new_states(1).itemsize
-    return 6 * 8 + 1 + 8 + 1 + 8 + 2 * (5 + (8 if events else 0)) * cap + 8 + state
+    host (at most), its offset there and (``events``) the times of its sets, likewise twice.  Its records are
+    in the thread's local memory (the few throws that outlive a slice get theirs in device memory apart,
+    ``_run_held``)."""
+    return 6 * 8 + 1 + 8 + 1 + 8 + 2 * (5 + (8 if events else 0)) * cap + 8
 
 
 class _Buffers:
     """One host thread's CUDA stream and its buffers, device and pinned host, kept from chunk to chunk.
 
     A buffer grows (it is made anew) when a chunk needs more than it
-    holds; a chunk uses its first rows.  The state records (general
-    kernel) are uploaded when made and are scratch after: every throw's
-    ``init_state`` sets what it reads, as on the CPU, where a batch block
-    reuses one record for all its throws.
+    holds; a chunk uses its first rows.
     """
 
     def __init__(self, device: int):
@@ -312,7 +343,7 @@ class _Buffers:
         have = self._dev.get(name)
         if have is None or len(have) < n:
             shape = (n, width) if width else n
-            have = cuda.to_device(new_states(n), stream=self.stream) if dtype is None else cuda.device_array(shape, dtype)
+            have = cuda.device_array(shape, dtype)
             self._dev[name] = have
         return have if len(have) == n else have[:n]
 
@@ -363,6 +394,50 @@ def _run_batch_cuda(ics, off0, kp, integ, cap, events):
     if m == 0:
         return (np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int8), np.zeros(0, np.int64),
                 np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0) if events else None, np.zeros(0, np.int64))
+    status, steps, outcome, nsets, sets, set_steps, times, starts = _first_pass(ics, off0, kp, integ, cap, events)
+    going = np.nonzero(status == Status.RUNNING)[0]
+    if going.size:  # throws not ended within a slice: again from their start, their records kept on the device
+        old_used = _used(status, nsets, cap)
+        held = _run_held(ics[going], off0, kp, integ, cap, events)
+        status[going], steps[going], outcome[going], nsets[going] = held[:4]
+        sets, set_steps, times, starts = _merged(old_used, _used(status, nsets, cap), starts, (sets, set_steps, times),
+                                                 going, held)
+    return status, steps, outcome, nsets, sets, set_steps, times, starts
+
+
+def _used(status, nsets, cap):
+    """How many sets of each throw come back: none for a throw that filled its buffer or has not ended."""
+    return np.where((status == Status.BUFFER_FULL) | (status == Status.RUNNING), 0, np.minimum(nsets, cap))
+
+
+def _merged(old_used, new_used, starts, arrays, going, held):
+    """The first pass's packed sets (steps, times: ``arrays``, ``old_used`` per throw from ``starts``) with those
+    of the throws ``going`` from the held run (``held``: what :func:`_run_held` returns): (sets, set_steps,
+    times, starts), packed end to end in throw order (``new_used`` per throw)."""
+    m = len(old_used)
+    new_starts = np.zeros(m + 1, np.int64)
+    np.cumsum(new_used, out=new_starts[1:])
+    owner = np.repeat(np.arange(m), old_used)  # the throw of each entry of the first pass's packed arrays
+    pos_old = new_starts[owner] + (np.arange(len(owner)) - starts[owner])
+    h_starts = held[7]
+    owner_h = np.repeat(np.arange(len(going)), new_used[going])
+    pos_held = new_starts[going[owner_h]] + (np.arange(len(owner_h)) - h_starts[owner_h])
+    out = []
+    for a, h in zip(arrays, held[4:7]):
+        if a is None:
+            out.append(None)
+            continue
+        b = np.empty(int(new_starts[-1]), a.dtype)
+        b[pos_old] = a
+        b[pos_held] = h
+        out.append(b)
+    return (*out, new_starts[:-1])
+
+
+def _first_pass(ics, off0, kp, integ, cap, events):
+    """One chunk through the seed kernel or the scheme's kernel in local records, ``kernels.SLICE_STEPS`` steps a
+    throw at most, on this host thread's stream; its sets packed (none for throws that have not ended)."""
+    m = len(ics)
     seed_path = not events and uses_seed_kernel(kp, off0, integ)
     kernel = _kernel(integ, seed_path, events)
     buf = _buffers()
@@ -377,13 +452,12 @@ def _run_batch_cuda(ics, off0, kp, integ, cap, events):
     kinds = (("status", np.int8), ("steps", np.int64), ("outcome", np.int8), ("nsets", np.int64))
     outs = [buf.dev(name, m, dt) for name, dt in kinds]
     d_sets, d_set_steps = buf.dev("sets", m * cap, np.uint8), buf.dev("set_steps", m * cap, np.int32)
+    d_times = buf.dev("times", m * cap, np.float64) if events else buf.dev("ev_times", 0, np.float64)
     if seed_path:
-        args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps)
+        args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps, kernels.SLICE_STEPS)
     else:
-        empty = (buf.dev("tr_state", 0, np.float64, loop.STATE_COLS), buf.dev("tr_force", 0, np.float64, loop.FORCE_COLS),
-                 buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS))
-        d_times = buf.dev("times", m * cap, np.float64) if events else buf.dev("ev_times", 0, np.float64)
-        args = (d_ics, d_off0, kp, cap, buf.dev("states", m, None), *outs, d_sets, d_set_steps, *empty, d_times)
+        args = (d_ics, d_off0, kp, cap, buf.dev("no_motion", 0, MOTION), buf.dev("no_work", 0, kernels_for(integ).scheme.WORK),
+                *outs, d_sets, d_set_steps, d_times, *_no_trace(buf), False, kernels.SLICE_STEPS, 0)
     _launch(kernel, m, args, stream)
     # out: the summaries first, then only the contact sets the throws used
     hosts = [buf.host(name, m, dt) for name, dt in kinds]
@@ -391,9 +465,8 @@ def _run_batch_cuda(ics, off0, kp, integ, cap, events):
         dev.copy_to_host(host, stream=stream)
     stream.synchronize()
     status, steps, outcome, nsets = (h.copy() for h in hosts)
-    used = np.where(status == Status.BUFFER_FULL, 0, np.minimum(nsets, cap))
     starts = np.zeros(m + 1, dtype=np.int64)
-    np.cumsum(used, out=starts[1:])
+    np.cumsum(_used(status, nsets, cap), out=starts[1:])
     total = int(starts[-1])
     sets, set_steps = np.empty(total, np.uint8), np.empty(total, np.int32)
     times = np.empty(total) if events else None
@@ -415,3 +488,46 @@ def _run_batch_cuda(ics, off0, kp, integ, cap, events):
         for (_, _, out), host in zip(per_set, hosts):
             out[:] = host
     return status, steps, outcome, nsets, sets, set_steps, times, starts[:-1]
+
+
+def _no_trace(buf):
+    """The trace arrays of no rows a summary or events loop takes (device arrays)."""
+    return (buf.dev("tr_state", 0, np.float64, loop.STATE_COLS), buf.dev("tr_force", 0, np.float64, loop.FORCE_COLS),
+            buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS))
+
+
+def _run_held(ics, off0, kp, integ, cap, events):
+    """Throws that did not end within a slice, from their start, their records in device memory: launch after launch
+    of ``kernels.SLICE_STEPS`` steps a throw until every one has ended (Python runs between launches: Ctrl-C stops them).
+    Returns what :func:`_first_pass` returns, for these throws."""
+    m = len(ics)
+    kernel = _kernel(integ, False, events, held=True)
+    buf = _buffers()
+    stream = buf.stream
+    d = {name: cuda.to_device(a, stream=stream) for name, a in (
+        ("ics", np.ascontiguousarray(ics)), ("off0", np.ascontiguousarray(off0)), ("S", new_states(m)),
+        ("Wk", new_work(kernels_for(integ).scheme.WORK, m)), ("status", np.zeros(m, np.int8)),
+        ("steps", np.zeros(m, np.int64)), ("outcome", np.zeros(m, np.int8)), ("nsets", np.zeros(m, np.int64)),
+        ("sets", np.zeros(m * cap, np.uint8)), ("set_steps", np.zeros(m * cap, np.int32)),
+        ("times", np.zeros(m * cap if events else 0)))}
+    resume = False
+    while True:
+        _launch(kernel, m, (d["ics"], d["off0"], kp, cap, d["S"], d["Wk"], d["status"], d["steps"], d["outcome"],
+                            d["nsets"], d["sets"], d["set_steps"], d["times"], *_no_trace(buf), resume, kernels.SLICE_STEPS, 0),
+                stream)
+        status = d["status"].copy_to_host(stream=stream)
+        stream.synchronize()
+        if not np.any(status == Status.RUNNING):
+            break
+        resume = True
+    steps, outcome, nsets = (d[k].copy_to_host(stream=stream) for k in ("steps", "outcome", "nsets"))
+    flat = [d["sets"].copy_to_host(stream=stream), d["set_steps"].copy_to_host(stream=stream)]
+    if events:
+        flat.append(d["times"].copy_to_host(stream=stream))
+    stream.synchronize()
+    used = _used(status, nsets, cap)
+    keep = (np.arange(cap)[None, :] < used[:, None]).ravel()
+    starts = np.zeros(m + 1, np.int64)
+    np.cumsum(used, out=starts[1:])
+    packed = [a[keep] for a in flat]
+    return status, steps, outcome, nsets, packed[0], packed[1], packed[2] if events else None, starts[:-1]

@@ -28,20 +28,31 @@ The entry points take an integrator's kernel id (``IntegratorSpec.kernel_id``):
 
 from __future__ import annotations
 
-import functools
 import sys
 import threading
+import time
 import types
 from types import ModuleType
 from typing import Protocol
 
+import numba
 import numpy as np
 
-from dicetrace.core.loop import BATCH_BLOCK, ENERGY_COLS, FORCE_COLS, STATE_COLS, make_batch, make_roll
+from dicetrace.core.loop import (
+    BATCH_BLOCK,
+    ENERGY_COLS,
+    FORCE_COLS,
+    STATE_COLS,
+    BatchOut,
+    RollOut,
+    make_batch,
+    make_roll,
+)
 from dicetrace.core.schemes import has_events as _scheme_has_events
 from dicetrace.core.schemes import scheme_module
-from dicetrace.core.state import new_states
+from dicetrace.core.state import new_states, new_work
 from dicetrace.integrators import INTEGRATORS
+from dicetrace.status import Status
 
 _SPECS_BY_ID = {s.kernel_id: s for s in INTEGRATORS.values()}
 #: The trace arrays of a run that traces nothing (state, forces, energy: no rows), as a run loop takes them.
@@ -123,8 +134,7 @@ def kernels_for(integ: int) -> SchemeKernels:
 def roll_kernel(integ: int, trace: bool):
     """The run loop of integrator ``integ`` (kernel id), tracing or summary only.
 
-    Called as ``kernel(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, ev_times)``
-    (see ``core.loop.make_roll``).
+    Called as ``kernel(ic, off0, kp, S, Wk, out, resume, budget)`` (``core.loop.make_roll``).
     """
     k = kernels_for(integ)
     return k.roll_trace if trace else k.roll_summary
@@ -135,42 +145,65 @@ def batch_kernel(integ: int):
     return kernels_for(integ).batch
 
 
-def run_roll(ic, off0, kp, integ, sets, set_steps, tr_state, tr_force, tr_energy, states=None):
-    """Integrate one throw with integrator ``integ`` (kernel id) in its tracing loop; see ``core.loop.make_roll``.
+# ------------------------------------------------------------------ slices: every kernel returns within a bound
 
-    The trace arrays (float64, 0 or n+1 rows) get the channels that have
-    rows; with none, only the summary is returned (the same arithmetic as
-    the summary loop: tracing writes, never steers).  ``states``: a (1,)
-    ``STATE`` array to run in (its final state, e.g. the sub-step counts,
-    can then be read); a fresh one by default.
+#: Steps of one throw per call of a kernel: a throw that has not ended then stops as ``Status.RUNNING`` with
+#: its state kept, and the caller goes on with it in the next call.  Python runs between calls, so Ctrl-C
+#: (KeyboardInterrupt) stops a run within one slice.  Above the default time cap's 60,000 steps of 1 ms: a
+#: throw at the default settings never stops in the middle.
+SLICE_STEPS = 1 << 16
+#: The time one call of a batch kernel aims at (its throws are chosen from the last call's rate).
+CALL_SECONDS = 0.25
+#: Most throws in one call of a batch kernel, per numba thread (the state records of a call: a few MiB).
+CALL_THROWS_PER_THREAD = 256
+
+
+def new_roll_state(integ: int, n: int = 1):
+    """The motion and work records ``(S, Wk)`` that ``n`` throws of integrator ``integ`` run in."""
+    return new_states(n), new_work(kernels_for(integ).scheme.WORK, n)
+
+
+def roll_out(sets, set_steps, ev_times=None, tr_state=None, tr_force=None, tr_energy=None) -> RollOut:
+    """A run loop's outputs (:class:`~dicetrace.core.loop.RollOut`); absent channels are arrays of no rows."""
+    return RollOut(sets, set_steps, _NO_EVENTS if ev_times is None else ev_times,
+                   NO_TRACE[0] if tr_state is None else tr_state, NO_TRACE[1] if tr_force is None else tr_force,
+                   NO_TRACE[2] if tr_energy is None else tr_energy)
+
+
+def _in_slices(kernel, ic, off0, kp, state, out: RollOut):
+    """One throw through a run loop, slice by slice (``SLICE_STEPS`` steps each) until it ends."""
+    S, Wk = state
+    r = kernel(ic, off0, kp, S, Wk, out, False, SLICE_STEPS)
+    while r[0] == Status.RUNNING:
+        r = kernel(ic, off0, kp, S, Wk, out, True, SLICE_STEPS)
+    return r
+
+
+def run_roll(ic, off0, kp, integ, out: RollOut, state=None):
+    """Integrate one throw with integrator ``integ`` (kernel id) in its tracing loop: (status, steps, outcome, nsets).
+
+    ``out`` (:func:`roll_out`): the trace arrays (float64, 0 or n+1 rows)
+    get the channels that have rows; with none, only the summary is returned
+    (the same arithmetic as the summary loop: tracing writes, never steers).
+    ``state``: the ``(S, Wk)`` records to run in (:func:`new_roll_state`; its
+    final state, e.g. the sub-step counts ``S[0]["substeps"]``, can then be
+    read); fresh ones by default.  Runs in slices of ``SLICE_STEPS`` steps.
     """
-    S = new_states(1) if states is None else states
-    return roll_kernel(integ, True)(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, _NO_EVENTS)
+    return _in_slices(roll_kernel(integ, True), ic, off0, kp, state or new_roll_state(integ), out)
 
 
 def run_summary(ic, off0, kp, integ, sets, set_steps):
     """One throw through integrator ``integ``'s specialised summary kernel where it applies, else its summary loop.
 
-    The choice the batch kernel makes (``core.loop.make_batch``).
+    The choice the batch kernel makes (``core.loop.make_batch``): a throw the
+    specialised kernel does not end within a slice runs again in the loop.
     """
     k = kernels_for(integ)
     if hasattr(k.scheme, "summary") and k.scheme.summary_applies(kp, off0):
-        return k.scheme.summary(ic, off0, kp, sets, set_steps)
-    return k.roll_summary(ic, off0, kp, new_states(1), sets, set_steps, *NO_TRACE, _NO_EVENTS)
-
-
-def run_batch(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps):
-    """Summaries of many throws with integrator ``integ`` (kernel id), in parallel; see ``core.loop.make_batch``.
-
-    ``off0`` (8, 3) are the initial node offsets shared by all ICs; outputs
-    are written in place.
-    """
-    batch_kernel(integ)(ics, off0, kp, cap, _block_states(len(ics)), status, steps, outcome, nsets, sets, set_steps)
-
-
-def _block_states(m: int):
-    """The state records a batch kernel of m throws runs in: one per block of ``BATCH_BLOCK`` throws."""
-    return new_states(max(1, (m + BATCH_BLOCK - 1) // BATCH_BLOCK))
+        r = k.scheme.summary(ic, off0, kp, sets, set_steps, SLICE_STEPS)
+        if r[0] != Status.RUNNING:
+            return r
+    return _in_slices(k.roll_summary, ic, off0, kp, new_roll_state(integ), roll_out(sets, set_steps))
 
 
 def has_events(integ: int) -> bool:
@@ -185,17 +218,93 @@ def _events_kernels(integ: int) -> SchemeKernels:
     return kernels_for(integ)
 
 
-def run_events(ic, off0, kp, integ, sets, set_steps, ev_times, states=None):
+def run_events(ic, off0, kp, integ, out: RollOut, state=None):
     """One throw through integrator ``integ``'s events loop: (status, steps, outcome, nevents).
 
-    ``sets``, ``set_steps``, ``ev_times`` (cap,) get the exact contact
-    events (``core.loop.make_roll`` with ``events``).
+    ``out.sets``, ``out.set_steps``, ``out.ev_times`` (cap,) get the exact
+    contact events (``core.loop.make_roll`` with ``events``).  In slices, as
+    :func:`run_roll`.
     """
-    S = new_states(1) if states is None else states
-    return _events_kernels(integ).roll_events(ic, off0, kp, S, sets, set_steps, *NO_TRACE, ev_times)
+    return _in_slices(_events_kernels(integ).roll_events, ic, off0, kp, state or new_roll_state(integ), out)
 
 
-def run_batch_events(ics, off0, kp, integ, cap, status, steps, outcome, nsets, sets, set_steps, ev_times):
-    """:func:`run_batch` through the events loop: ``ev_times`` (m·cap,) float64 laid out as ``sets``."""
-    _events_kernels(integ).batch_events(ics, off0, kp, cap, _block_states(len(ics)), status, steps, outcome, nsets,
-                                       sets, set_steps, ev_times)
+def batch_out(m: int, cap: int, events: bool = False) -> BatchOut:
+    """Fresh outputs of a batch kernel for ``m`` throws of ``cap`` sets each (:class:`~dicetrace.core.loop.BatchOut`)."""
+    return BatchOut(np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64),
+                    np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32), np.zeros(m * cap) if events else _NO_EVENTS)
+
+
+def _rows(out: BatchOut, a: int, b: int, cap: int) -> BatchOut:
+    """Throws a..b of a batch's outputs (views)."""
+    lo, hi = a * cap, b * cap
+    ev = out.ev_times[lo:hi] if len(out.ev_times) else out.ev_times
+    return BatchOut(out.status[a:b], out.steps[a:b], out.outcome[a:b], out.nsets[a:b], out.sets[lo:hi],
+                    out.set_steps[lo:hi], ev)
+
+
+def _taken(out: BatchOut, idx: np.ndarray, cap: int) -> BatchOut:
+    """Copies of the throws ``idx``'s outputs, in that order (their sets so far included)."""
+    cols = (idx[:, None] * cap + np.arange(cap)[None, :]).ravel()
+    ev = out.ev_times[cols] if len(out.ev_times) else out.ev_times
+    return BatchOut(out.status[idx], out.steps[idx], out.outcome[idx], out.nsets[idx], out.sets[cols],
+                    out.set_steps[cols], ev)
+
+
+def _put(out: BatchOut, idx: np.ndarray, cap: int, part: BatchOut) -> None:
+    """Write ``part`` (from :func:`_taken`) back to the throws ``idx`` of ``out``."""
+    cols = (idx[:, None] * cap + np.arange(cap)[None, :]).ravel()
+    for name in ("status", "steps", "outcome", "nsets"):
+        getattr(out, name)[idx] = getattr(part, name)
+    out.sets[cols] = part.sets
+    out.set_steps[cols] = part.set_steps
+    if len(out.ev_times):
+        out.ev_times[cols] = part.ev_times
+
+
+def run_batch(ics, off0, kp, integ, cap, out: BatchOut, *, events: bool = False) -> None:
+    """Every throw of ``ics`` to its end with integrator ``integ`` (kernel id), in parallel, written to ``out``.
+
+    ``out`` (:func:`batch_out`): throw i's summary and its contact sets in
+    ``[i·cap, (i+1)·cap)`` (``events``: the events loop's sets and times).
+    ``off0`` (8, 3) are the initial node offsets shared by all ICs.  The
+    throws run in calls of the batch kernel (``core.loop.make_batch``) that
+    each take about ``CALL_SECONDS`` (sized from the last call's rate, at most
+    ``CALL_THROWS_PER_THREAD`` throws a thread), each throw at most
+    ``SLICE_STEPS`` steps a call; those not ended go on, all together, in
+    further calls.  Python runs between calls (Ctrl-C stops a batch within
+    about a call).  Every throw runs the same serial code from a fresh
+    state whatever the calls, so the results are those of one call.
+    """
+    k = _events_kernels(integ) if events else kernels_for(integ)
+    kernel = k.batch_events if events else k.batch
+    m = len(ics)
+    threads = max(1, numba.get_num_threads())
+    most = max(BATCH_BLOCK, CALL_THROWS_PER_THREAD * threads)
+    S, Wk = new_states(min(m, most)), new_work(k.scheme.WORK, min(m, most))
+    size = min(m, BATCH_BLOCK * threads)
+    held = []  # (throw indices, their records) of throws not ended in their first call
+    a = 0
+    while a < m:
+        b = min(m, a + size)
+        t0 = time.perf_counter()
+        kernel(ics[a:b], off0, kp, cap, S[: b - a], Wk[: b - a], _rows(out, a, b, cap), False, SLICE_STEPS)
+        spent = time.perf_counter() - t0
+        going = np.nonzero(out.status[a:b] == Status.RUNNING)[0]
+        if going.size:
+            held.append((a + going, S[going].copy(), Wk[going].copy()))
+        # the next call's throws, from this one's rate (at most 4x more; a first call may have compiled)
+        per = spent / (b - a)
+        size = int(min(most, 4 * size, max(BATCH_BLOCK, CALL_SECONDS / per if per > 0 else most)))
+        a = b
+    for idx, Sh, Wh in held:
+        part = _taken(out, idx, cap)
+        while True:
+            going = np.nonzero(part.status == Status.RUNNING)[0]
+            if not going.size:
+                break
+            sub = _taken(part, going, cap)
+            Sg, Wg = Sh[going], Wh[going]  # copies: the call moves them on, and they go back after it
+            kernel(ics[idx[going]], off0, kp, cap, Sg, Wg, sub, True, SLICE_STEPS)
+            _put(part, going, cap, sub)
+            Sh[going], Wh[going] = Sg, Wg
+        _put(out, idx, cap, part)

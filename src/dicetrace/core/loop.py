@@ -19,21 +19,23 @@ integrator (``run_roll``, ``run_summary``, ``run_batch``) are in
 ``core.kernels``; the GPU's are in ``core.gpu``, which compiles the same
 functions for the device.
 
-A run loop is ``roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force,
-tr_energy, ev_times) -> (status, steps, outcome, nsets)``: ``ic`` (6,) the
-IC, U (cm/s) and L (program convention, node-mass·cm²/s); ``off0`` (8, 3)
-the initial node offsets from the centre of mass, cm (the program: ±half
-on each axis; a rotated cube starts tilted); ``kp`` the ``KernelParams``;
-``S`` a (1,) ``core.state.STATE`` array, the throw's state (scratch,
-overwritten); ``sets``, ``set_steps`` (cap,) uint8 and int32, outputs: the
-contact-set sequence (bit k = node k+1 at or below the ground) and the step
-at which each set was first seen; ``tr_*`` float64 arrays of 0 or n+1 rows
-(ignored by a summary loop); ``ev_times`` (cap,) float64, output of an
-events loop: the time each event began (s), any float64 array (of length 0
-too) for the other loops, which ignore it (every loop takes the same
-arguments, so that a call from Python and one from another kernel compile
-the same signature).  ``outcome`` is the face 1..6, 0 when the top four
-nodes are no face, and -1 unless the status is SETTLED.
+A run loop is ``roll(ic, off0, kp, S, Wk, out, resume, budget) -> (status,
+steps, outcome, nsets)``: ``ic`` (6,) the IC, U (cm/s) and L (program
+convention, node-mass·cm²/s); ``off0`` (8, 3) the initial node offsets from
+the centre of mass, cm (the program: ±half on each axis; a rotated cube
+starts tilted); ``kp`` the ``KernelParams``; ``S``, ``Wk`` (1,) arrays of
+the throw's motion record and its scheme's work record (``core.state``);
+``out`` a :class:`RollOut` (the contact sets, an events loop's times, the
+trace rows).  ``outcome`` is the face 1..6, 0 when the top four nodes are no
+face, and -1 unless the status is SETTLED.
+
+Slices.  A loop takes at most ``budget`` steps per call: a throw not ended
+then returns ``Status.RUNNING`` with the loop's own variables kept in its
+motion record (``run_*``), and a call with ``resume`` goes on from there;
+the throw is the same, bit for bit, however it is sliced (a free flight
+crossed in one piece may run past the slice's end: it is never cut).  So
+every kernel returns to Python within a bounded time, where Ctrl-C is seen
+(``core.kernels.SLICE_STEPS``).
 
 Trace layouts (row n = state after n steps, row 0 the initial state):
 ``tr_state`` (n+1, 33): X(3), U(3), L(3) (program convention), offsets (8×3);
@@ -46,6 +48,7 @@ from __future__ import annotations
 
 import math
 from types import ModuleType
+from typing import NamedTuple
 
 import numpy as np
 from numba import prange
@@ -54,7 +57,7 @@ from dicetrace.core._jit import jit, jit_parallel
 from dicetrace.core.contacts import note_event
 from dicetrace.core.free_flight import flight_steps, free_advance
 from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_heights, node_velocities
-from dicetrace.core.state import STATE, after_step, age_tolerance, copy_motion, init_state, new_states, state_finite
+from dicetrace.core.state import after_step, age_tolerance, copy_motion, init_state, state_finite
 from dicetrace.params import ENERGY_POINT_MASS
 from dicetrace.status import Status
 
@@ -181,7 +184,7 @@ def stop_energy(st, kp, contact, e_dyn, tracing):
 
 
 @jit
-def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
+def _cross_flight(n, m, st, wk, kp, h, tracing, tr_state, tr_force, tr_energy):
     """Steps n+1 … n+m of a free flight in one exact piece (``free_flight.free_advance`` over m·h).
 
     Returns what a step returns (no node below the ground, contact mask 0).
@@ -189,14 +192,16 @@ def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
     step ends, each from the flight's start (row n+m is the loop's, as for
     any step): tracing writes, never steers, so a traced throw and its
     summary stay the same bit for bit.  The tolerance weight ages by m steps.
+    Only schemes whose free flight is exact cross one (``EXACT_FLIGHT``: the
+    contact schemes, whose work record has the sub-step start).
     """
     age_tolerance(st, kp, h, m)
     if tracing:
         # the flight's start, kept in the sub-step work area (free between steps without a front)
-        copy_motion(st.X, st.U, st.L, st.off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
+        copy_motion(st.X, st.U, st.L, st.off, wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off)
         for i in range(1, m + 1):
             if i > 1:
-                copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.X, st.U, st.L, st.off)
+                copy_motion(wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off, st.X, st.U, st.L, st.off)
             free_advance(st.X, st.U, st.W, st.off, kp, i * h)
             if i < m:
                 node_heights(st.X[2], st.off, st.z)
@@ -206,89 +211,107 @@ def _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy):
     return node_heights(st.X[2], st.off, st.z)
 
 
-def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = None,
-              use_summary: bool = False, events: bool = False, name: str | None = None, cache: bool = True):
+class RollOut(NamedTuple):
+    """What a run loop writes (``make_roll``): the contact sets and, where asked for, events and trace rows.
+
+    ``sets``, ``set_steps`` (cap,) uint8 and int32: the contact-set sequence
+    (bit k = node k+1 at or below the ground) and the step at which each set
+    was first seen; ``ev_times`` (cap,) float64: an events loop's time of
+    each event (s), of length 0 for the other loops; ``tr_state``,
+    ``tr_force``, ``tr_energy``: the trace channels, n+1 rows where asked for
+    and 0 rows otherwise (a summary loop never touches them).
+    """
+
+    sets: np.ndarray
+    set_steps: np.ndarray
+    ev_times: np.ndarray
+    tr_state: np.ndarray
+    tr_force: np.ndarray
+    tr_energy: np.ndarray
+
+
+class BatchOut(NamedTuple):
+    """What a batch kernel writes (``make_batch``), per throw i: its summary, and its contact sets (and events'
+    times) in ``[i·cap, (i+1)·cap)`` of the flat ``sets``, ``set_steps`` (``ev_times``: of length 0 without events)."""
+
+    status: np.ndarray
+    steps: np.ndarray
+    outcome: np.ndarray
+    nsets: np.ndarray
+    sets: np.ndarray
+    set_steps: np.ndarray
+    ev_times: np.ndarray
+
+
+def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = None, events: bool = False,
+              name: str | None = None, cache: bool = True):
     """The run loop of a throw on the step of the scheme module ``scheme`` (``core.schemes``), compiled.
 
     ``trace``: the tracing loop (it writes the trace arrays that have rows)
     or the summary loop (it never touches them).  ``exact_flight``: whether a
     free flight of several whole steps is crossed in one piece (default: the
-    scheme's ``EXACT_FLIGHT``).  ``use_summary``: whether a summary loop
-    hands the throw to ``scheme.summary`` where ``scheme.summary_applies``
-    (off by default: the batch kernels make that choice once per call, and a
-    GPU cannot run a kernel that allocates).  ``events``: an events loop (a
-    contact scheme's, ``core.schemes.EventsScheme``), which records the
-    exact contact events (docs/model.md §8.1) instead of the sets at
-    output-step ends: the set inside every sub-step, the step it began in
-    (1-based) and its time (s), up to the step the stop test fires on; more
-    events than the buffer holds end as BUFFER_FULL.  These are closed over
-    as constants (``core._jit``); a module made at run time (a benchmark's
-    variant of a scheme) changes its cache key from one process to the next:
-    build those with ``cache=False``.  The loop's arguments: the module's
-    docstring.
+    scheme's ``EXACT_FLIGHT``).  ``events``: an events loop (a contact
+    scheme's, ``core.schemes.EventsScheme``), which records the exact contact
+    events (docs/model.md §8.1) instead of the sets at output-step ends: the
+    set inside every sub-step, the step it began in (1-based) and its time
+    (s), up to the step the stop test fires on; more events than the buffer
+    holds end as BUFFER_FULL.  These are closed over as constants
+    (``core._jit``); a module made at run time (a benchmark's variant of a
+    scheme) changes its cache key from one process to the next: build those
+    with ``cache=False``.  The loop's arguments: the module's docstring.
     """
     trace = bool(trace)
     flight = bool(scheme.EXACT_FLIGHT if exact_flight is None else exact_flight)
     events = bool(events)
-    use_summary = bool(use_summary) and not trace and not events and hasattr(scheme, "summary")
 
-    def roll(ic, off0, kp, S, sets, set_steps, tr_state, tr_force, tr_energy, ev_times):
+    def roll(ic, off0, kp, S, Wk, out, resume, budget):
         st = S[0]
-        if use_summary and scheme.summary_applies(kp, off0):
-            return scheme.summary(ic, off0, kp, sets, set_steps)
-        init_state(st, ic, off0, kp)
+        wk = Wk[0]
+        sets, set_steps, ev_times = out.sets, out.set_steps, out.ev_times
+        tr_state, tr_force, tr_energy = out.tr_state, out.tr_force, out.tr_energy
         X, U, L, W, off, z = st.X, st.U, st.L, st.W, st.off, st.z
-
-        sets[0] = 0
-        set_steps[0] = 0
-        nsets = 1
-        last_mask = 0
-        if events:
-            ev_times[0] = 0.0
-            st.ev_n = 1
-        # The program starts out of contact (forces are zero before the first
-        # step): the start's recorded set is empty.  Read from the array, not
-        # written as the constant False, so that the step compiles for a plain
-        # bool only, not also for the literal False (half a cold run's compile).
-        contact = sets[0] != 0
-        n = nsets - 1  # the start's row (0), likewise an int64, never the literal 0
-
-        e_rest = kp.e_rest
-        e0 = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
-        e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
         point_mass = kp.energy_mode == ENERGY_POINT_MASS
         tracing = trace and (tr_state.shape[0] > 0 or tr_force.shape[0] > 0 or tr_energy.shape[0] > 0)
-        # nothing reads the forces or node velocities at a step's end: an interpolating scheme may skip them
-        st.lazy = not tracing and not point_mass
-        if tracing:
-            _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
-
+        if resume:  # the throw goes on from where its last slice stopped
+            n, nsets, last_mask = st.run_n, st.run_nsets, st.run_last
+            contact, clear, e_blow = st.run_contact, st.run_clear, st.run_e_blow
+        else:
+            init_state(st, ic, off0, kp)
+            nsets, last_mask, contact, n, e0, e_blow = start_run(st, kp, sets, set_steps)
+            if events:
+                ev_times[0] = 0.0
+                st.ev_n = 1
+            # nothing reads the forces or node velocities at a step's end: an interpolating scheme may skip them
+            st.lazy = not tracing and not point_mass
+            if tracing:
+                _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
+            # whether the stop-test energy of a free state clears the stop threshold by far
+            # more than rounding (``_clears``; at the start only where that energy is e0)
+            clear = not point_mass and _clears(e0, kp)
         h = kp.dt_s
         maxn = int(kp.max_steps)
+        stop = min(maxn, n + budget)  # this slice's last step
         status = Status.TIME_CAP
-        # whether the stop-test energy of a free state clears the stop threshold by far
-        # more than rounding (``_clears``; at the start only where that energy is e0)
-        clear = not point_mass and _clears(e0, kp)
-        while n < maxn:
-            m = 0
+        while n < stop:
             if events:  # the step about to be taken
                 st.ev_step = n
-            if flight and clear and last_mask == 0 and st.ahead == 0.0:
-                # A free flight conserves the stop-test energy: while it lasts the
-                # stop test cannot fire and no contact set changes.  Cross it in
-                # one exact piece.
-                m = flight_steps(X, U, W, off, kp, h, maxn - n)
-            if m > 1:
-                if events:
-                    note_event(st, 0.0, h, 0, sets, set_steps, ev_times)
-                contact, mask = _cross_flight(n, m, st, kp, h, tracing, tr_state, tr_force, tr_energy)
-                n += m
-            else:
+            m = 0
+            if flight:
+                if clear and last_mask == 0 and st.ahead == 0.0:
+                    # A free flight conserves the stop-test energy: while it lasts the stop test cannot fire
+                    # and no contact set changes.  Cross it in one exact piece (to the time cap, not the slice).
+                    m = flight_steps(X, U, W, off, kp, h, maxn - n)
+                if m > 1:
+                    if events:
+                        note_event(st, 0.0, h, 0, sets, set_steps, ev_times)
+                    contact, mask = _cross_flight(n, m, st, wk, kp, h, tracing, tr_state, tr_force, tr_energy)
+                    n += m
+            if m <= 1:
                 n += 1
                 if events:
-                    contact, mask = scheme.step_events(st, kp, h, contact, sets, set_steps, ev_times)
+                    contact, mask = scheme.step_events(st, wk, kp, h, contact, sets, set_steps, ev_times)
                 else:
-                    contact, mask = scheme.step(st, kp, h, contact)
+                    contact, mask = scheme.step(st, wk, kp, h, contact)
             finite = state_finite(X[2], U[0], U[1], U[2], L[0], L[1], L[2], off[0, 0], off[7, 2])
             if events:
                 ended, status = events_after_step(finite, st, sets)
@@ -299,7 +322,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                 break
             e_dyn = math.nan
             if contact:
-                e_dyn = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
+                e_dyn = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - kp.e_rest
                 if e_dyn > e_blow:
                     status = Status.BLOW_UP
                     if tracing:  # the state is finite: keep it for inspection
@@ -314,6 +337,9 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
             if e <= kp.e_stop:
                 status = Status.SETTLED
                 break
+        if status == Status.TIME_CAP and n < maxn:  # the slice ran out: keep what the next one goes on from
+            keep_run(st, n, nsets, last_mask, contact, clear, e_blow)
+            return Status.RUNNING, n, -1, nsets
         outcome = face_up(z) if status == Status.SETTLED else -1
         if events:
             nsets = events_kept(st, n, status, set_steps)
@@ -326,50 +352,86 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
     return jit(roll, cache=cache)
 
 
+@jit(inline="always")
+def start_run(st, kp, sets, set_steps):
+    """A throw's start, after ``init_state``: the empty first contact set, and the loop's variables
+    (nsets, last_mask, contact, n, e0, e_blow): e0 the start's dynamic energy, e_blow the blow-up bound."""
+    sets[0] = 0
+    set_steps[0] = 0
+    nsets = 1
+    last_mask = 0
+    # The program starts out of contact (forces are zero before the first step): the start's recorded set is
+    # empty.  Read from the array, not written as the constant False, so that the step compiles for a plain
+    # bool only, not also for the literal False (half a cold run's compile).
+    contact = sets[0] != 0
+    n = nsets - 1  # the start's row (0), likewise an int64, never the literal 0
+    U = st.U
+    W = st.W
+    e0 = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], st.z, kp) - kp.e_rest
+    e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
+    return nsets, last_mask, contact, n, e0, e_blow
+
+
+@jit(inline="always")
+def keep_run(st, n, nsets, last_mask, contact, clear, e_blow):
+    """The run loop's variables, kept in the motion record at the end of a slice (``run_*``)."""
+    st.run_n = n
+    st.run_nsets = nsets
+    st.run_last = last_mask
+    st.run_contact = contact
+    st.run_clear = clear
+    st.run_e_blow = e_blow
+
+
 def make_batch(scheme: ModuleType, loops: ModuleType, *, events: bool = False, name: str | None = None):
-    """The parallel batch kernel of the scheme module ``scheme``: summaries of many throws (``prange``).
+    """The parallel batch kernel of the scheme module ``scheme``: many throws, summaries only (``prange``).
 
     It runs ``loops.roll_summary`` (the scheme's summary loop, :func:`make_roll`)
     per IC, or ``scheme.summary`` directly where that applies (decided once
-    per call).  ``loops`` is the module that holds the scheme's run loops
-    (``core.kernels.kernels_of``): the kernel closes over modules only, which
-    numba's disk cache keys on by name (``core._jit``).  The kernel,
-    ``batch(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps)``:
-    ``sets``/``set_steps`` are (m·cap,) with IC i owning [i·cap, (i+1)·cap).
-    The ICs are cut into blocks of ``BATCH_BLOCK``; block b owns the state
-    ``states[b]`` (never shared by two threads), and every IC runs the very
-    same serial code from a fresh state, so results are bit-identical to a
-    loop of ``run_roll`` whatever the number of threads, the scheduling or
-    the caller's chunking.
-
-    ``events``: the batch of the events loop (``loops.roll_events``), with
-    one more argument, ``ev_times`` (m·cap,) float64, laid out as ``sets``.
+    per call; never to resume).  ``loops`` is the module that holds the
+    scheme's run loops (``core.kernels.kernels_of``): the kernel closes over
+    modules only, which numba's disk cache keys on by name (``core._jit``).
+    The kernel, ``batch(ics, off0, kp, cap, S, Wk, out, resume, budget)``:
+    throw i runs in its own motion and work records ``S[i]``, ``Wk[i]`` and
+    writes ``out`` (:class:`BatchOut`), at most ``budget`` steps (a throw
+    not ended then is ``Status.RUNNING``, kept in its records); with
+    ``resume`` every throw goes on from where its last slice stopped.  A
+    throw the specialised kernel stopped at the budget (it keeps nothing)
+    starts again in the run loop, which keeps its state.  Blocks of ``BATCH_BLOCK`` throws go
+    to the threads, and every throw runs the very same serial code, so
+    results are bit-identical to a loop of the single-throw loop whatever the
+    number of threads, the scheduling or the caller's chunking.  ``events``:
+    the batch of the events loop (``loops.roll_events``).
     """
     events = bool(events)
     use_summary = hasattr(scheme, "summary") and not events
 
-    def batch(ics, off0, kp, cap, states, status, steps, outcome, nsets, sets, set_steps, *ev):
+    def batch(ics, off0, kp, cap, S, Wk, out, resume, budget):
         m = ics.shape[0]
         nblk = (m + BATCH_BLOCK - 1) // BATCH_BLOCK
-        fast = use_summary and scheme.summary_applies(kp, off0)
+        fast = use_summary and not resume and scheme.summary_applies(kp, off0)
         e0 = np.zeros((0, STATE_COLS))
         e1 = np.zeros((0, FORCE_COLS))
         e2 = np.zeros((0, ENERGY_COLS))
-        e3 = np.zeros(0)
+        # the outputs as local names: inside a prange body, numba 0.68 writes through a named tuple's field to a copy
+        status, steps, outcome, nsets = out.status, out.steps, out.outcome, out.nsets
+        sets, set_steps, ev_times = out.sets, out.set_steps, out.ev_times
         for b in prange(nblk):
             i0 = b * BATCH_BLOCK
             i1 = min(m, i0 + BATCH_BLOCK)
-            S = states[b : b + 1]
             for i in range(i0, i1):
                 lo = i * cap
                 hi = lo + cap
-                if events:
-                    s, n, o, ns = loops.roll_events(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2,
-                                                    ev[0][lo:hi])
-                elif fast:  # what the summary loop would do, without the call through it
-                    s, n, o, ns = scheme.summary(ics[i], off0, kp, sets[lo:hi], set_steps[lo:hi])
-                else:
-                    s, n, o, ns = loops.roll_summary(ics[i], off0, kp, S, sets[lo:hi], set_steps[lo:hi], e0, e1, e2, e3)
+                s = Status.RUNNING
+                if fast:  # what the summary loop would do, without the call through it
+                    s, n, o, ns = scheme.summary(ics[i], off0, kp, sets[lo:hi], set_steps[lo:hi], budget)
+                if s == Status.RUNNING:  # a fresh throw the specialised kernel did not end (it keeps nothing), or any
+                    ro = RollOut(sets[lo:hi], set_steps[lo:hi], ev_times[lo:hi], e0, e1, e2)
+                    if events:
+                        s, n, o, ns = loops.roll_events(ics[i], off0, kp, S[i : i + 1], Wk[i : i + 1], ro, resume, budget)
+                    else:
+                        s, n, o, ns = loops.roll_summary(ics[i], off0, kp, S[i : i + 1], Wk[i : i + 1], ro, resume,
+                                                         budget)
                 status[i] = s
                 steps[i] = n
                 outcome[i] = o

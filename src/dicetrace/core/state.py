@@ -1,63 +1,68 @@
-"""The state of one throw: a numpy record that every kernel passes by reference.
+"""The state of one throw: a motion record shared by every scheme, and a work record per scheme.
 
-One ``STATE`` record holds everything a step reads and writes, by name
-(docs/model.md §5.1): the centre of mass X and its velocity U (cm, cm/s),
-the angular momentum L and ω = L / I (program convention, docs/model.md §4),
-the node offsets ``off`` (8, 3), the contact forces ``F`` (8, 3) and normal
-forces ``P`` (8,) of the last force evaluation with the node velocities
-``uk`` (8, 3) and heights ``z`` (8,) they were computed from, and what a
-scheme keeps from one step to the next:
+Kernels pass both by reference (numba passes a record as a pointer; its
+fields are views without a reference count).  Loops take (1,) arrays of
+each and index them, so that their owner is alive for the whole call; a
+step is ``step(st, wk, kp, h, contact)`` with ``st`` the motion and ``wk``
+the scheme's work record (``core.schemes.Scheme.WORK``).  A GPU thread keeps
+both in its local memory, which the hardware interleaves across a warp: a
+thread carries only what its scheme uses.
+
+``MOTION`` (docs/model.md §5.1): the centre of mass X and its velocity U
+(cm, cm/s), the angular momentum L and ω = L / I (program convention,
+docs/model.md §4), the node offsets ``off`` (8, 3), the contact forces ``F``
+(8, 3) and normal forces ``P`` (8,) of the last force evaluation with the
+node velocities ``uk`` (8, 3) and heights ``z`` (8,) they were computed
+from, and what a step keeps for the next one:
 
 ``R``, ``rot_h``, ``rot_ok``
     the cached program rotation (docs/model.md §5.2) for the step ``rot_h``
     (-1: none), and whether it turns at all (ω ≠ 0);
 ``h_next``
-    contact-adaptive's proposed sub-step, s (0: none yet);
-``sub_*``, ``new_*``, ``stage_off``, ``stage4_*``
-    the work area of the RK4 schemes: the state at the start of a sub-step
-    and at its end, the offsets of an RK4 stage and the derivatives of
-    stage 4 (for the embedded error estimate).
-``rk_k``, ``rk_y``, ``rk_y0``, ``rk_acc``
-    the work area of the embedded Runge–Kutta pairs (``methods.erk``):
-    stage derivatives, stage point, sub-step start of y = (X, U, L, q) and
-    a weighted sum of stages.
-``ahead``, ``fr_*``, ``dn_*``
-    a scheme with dense output (``contact-tsit5``) lets its last sub-step
-    of a step run past the step's end: ``ahead`` is how far the integration
-    front (kept in ``sub_*``) lies beyond the state (s; 0: the front is the
-    state), ``fr_*`` what the front's next sub-step starts from (whether a
-    node is below the ground there, the force sum and torque, the friction
-    law's stiffness), ``dn_*`` what the state at a step end inside the last
-    sub-step is interpolated from with the stages in ``rk_k``, ``rk_y0``
-    (the sub-step's starting offsets and length, and scratch weights).
+    the contact driver's proposed sub-step, s (0: none yet; its controller's state);
+``ahead``
+    how far a dense-output scheme's integration front lies beyond the
+    state (s; 0: the front is the state; the front itself is in the work
+    record);
 ``substeps``
     the sub-steps of a contact scheme in this throw, by what ended them
-    (:data:`SUBSTEP_CAUSES`); zero for the other schemes.
+    (:data:`SUBSTEP_CAUSES`); zero for the other schemes;
 ``tol_weight``, ``tol_h``, ``tol_decay``
     an error-controlled scheme with ``tol_growth`` > 0: exp(−tol_growth·t)
     at the start of the next step (t its time in the throw, 1 at the
     start), kept as a product of exp(−tol_growth·h) per step of length h
     (``tol_decay``, computed again when the step's length ``tol_h``
-    changes): one multiplication a step instead of an exponential.
-``ev_step``, ``ev_n``, ``ev_last``, ``ev_roots``
+    changes): one multiplication a step instead of an exponential;
+``ev_step``, ``ev_n``, ``ev_last``
     exact contact events (an events loop, ``loop.make_roll(events=True)``):
     the index n of the step being taken (it starts at n·h, the time of the
     state), the events recorded so far (more than the buffer holds: it is
-    full), the contact set of the last one (``contacts.note_event``) and
-    the crossings of each node's height inside a sub-step (scratch of
-    ``contacts.note_substep_events``; in the record, so that a GPU thread
-    has it too).
+    full), the contact set of the last one (``contacts.note_event``);
 ``lazy``
     set by a run loop that reads neither the forces nor the node
     velocities at a step's end (a summary loop with the ``rigid`` stop-test
     energy): a scheme whose step ends on an interpolated state
-    (``contact-tsit5``) then computes only the node heights there.
+    (``contact-tsit5``) then computes only the node heights there;
+``run_*``
+    the run loop's own variables between two slices of a throw (the steps
+    taken, the sets recorded, the last contact set, whether the state is in
+    contact, whether its energy clears the stop threshold by far, the
+    blow-up bound): a loop that stops after a slice of steps
+    (``Status.RUNNING``) goes on from them (``core.loop``).
 
-A record costs no reference counting when it crosses a call (numba passes
-a pointer; its fields are views without a reference count), unlike the
-dozen separate arrays it replaces.  Kernels take the record as ``st``;
-loops take a (1,) ``STATE`` array and index it, so that its owner is alive
-for the whole call.
+Work records (:func:`work_dtype` of the parts a scheme uses):
+
+``SUBSTEP_WORK``: ``sub_*``, ``new_*``
+    the state at the start of a sub-step and at its end (the RK4 schemes
+    and the contact driver);
+``DRIVER_WORK``: ``fr_*``, ``dn_h``, ``ev_roots``
+    the contact driver's: what a dense-output front's next sub-step starts
+    from (whether a node is below the ground there, the force sum and
+    torque, the friction law's stiffness), the length of the sub-step the
+    front came from, and the crossings of each node's height inside a
+    sub-step (scratch of ``contacts.note_substep_events``);
+the sub-step methods' own (``core.methods``: RK4's stage offsets and
+stage-4 derivatives, the Runge–Kutta pairs' stages and dense output).
 """
 
 from __future__ import annotations
@@ -74,7 +79,7 @@ from dicetrace.status import Status
 _F8 = np.float64
 
 #: What ended each sub-step of a contact scheme (``contact_driver.make_drive``),
-#: counted per throw in ``STATE.substeps`` in this order: accepted sub-steps
+#: counted per throw in ``MOTION.substeps`` in this order: accepted sub-steps
 #: whose length the error controller chose ("error"), that ran at the
 #: longest sub-step dt / substeps ("cap"), that the friction law's stability
 #: bound shortened ("friction"), that ended at the end of the macro step
@@ -84,7 +89,7 @@ _F8 = np.float64
 SUBSTEP_CAUSES = ("error", "cap", "friction", "end", "cut", "rejected", "redone")
 SUBSTEP_CAUSES_N = len(SUBSTEP_CAUSES)
 
-STATE = np.dtype(
+MOTION = np.dtype(
     [
         ("X", _F8, 3),
         ("U", _F8, 3),
@@ -97,53 +102,71 @@ STATE = np.dtype(
         ("P", _F8, 8),
         ("R", _F8, 9),
         ("rot_h", _F8),
-        ("rot_ok", np.bool_),
         ("h_next", _F8),
-        ("sub_X", _F8, 3),
-        ("sub_U", _F8, 3),
-        ("sub_L", _F8, 3),
-        ("sub_off", _F8, (8, 3)),
-        ("new_X", _F8, 3),
-        ("new_U", _F8, 3),
-        ("new_L", _F8, 3),
-        ("new_off", _F8, (8, 3)),
-        ("stage_off", _F8, (8, 3)),
-        ("stage4_u", _F8, 3),
-        ("stage4_a", _F8, 3),
-        ("stage4_t", _F8, 3),
-        ("rk_k", _F8, (13, 13)),
-        ("rk_y", _F8, 13),
-        ("rk_y0", _F8, 13),
-        ("rk_acc", _F8, 13),
         ("ahead", _F8),
-        ("fr_below", np.bool_),
-        ("fr_wrench", _F8, 6),
-        ("fr_lam", _F8),
-        ("dn_off", _F8, (8, 3)),
-        ("dn_h", _F8),
-        ("dn_w", _F8, 7),
-        ("substeps", np.int64, SUBSTEP_CAUSES_N),
         ("tol_weight", _F8),
         ("tol_h", _F8),
         ("tol_decay", _F8),
+        ("run_e_blow", _F8),
+        ("substeps", np.int64, SUBSTEP_CAUSES_N),
         ("ev_step", np.int64),
         ("ev_n", np.int64),
         ("ev_last", np.int64),
-        ("ev_roots", _F8, (8, 3)),
+        ("run_n", np.int64),
+        ("run_nsets", np.int64),
+        ("run_last", np.int64),
+        ("rot_ok", np.bool_),
         ("lazy", np.bool_),
+        ("run_contact", np.bool_),
+        ("run_clear", np.bool_),
     ],
     align=True,
 )
 
+#: The sub-step start and end (``begin_substeps``, ``accept_substep``, ``end_substeps``).
+SUBSTEP_WORK = [
+    ("sub_X", _F8, 3),
+    ("sub_U", _F8, 3),
+    ("sub_L", _F8, 3),
+    ("sub_off", _F8, (8, 3)),
+    ("new_X", _F8, 3),
+    ("new_U", _F8, 3),
+    ("new_L", _F8, 3),
+    ("new_off", _F8, (8, 3)),
+]
+#: The contact driver's own (``core.contact_driver``): a dense-output front, the crossings' scratch.
+DRIVER_WORK = [
+    ("fr_wrench", _F8, 6),
+    ("fr_lam", _F8),
+    ("dn_h", _F8),
+    ("ev_roots", _F8, (8, 3)),
+    ("fr_below", np.bool_),
+]
+
+
+def work_dtype(*parts) -> np.dtype:
+    """The aligned work record of the field lists ``parts`` (a scheme's ``WORK``); a one-byte record for none."""
+    fields = [f for part in parts for f in part]
+    return np.dtype(fields or [("none", np.int8)], align=True)
+
+
+#: The work record of a scheme that keeps nothing between its stages (the program's step, forward Euler, Verlet).
+NO_WORK = work_dtype()
+
 
 def new_states(n: int = 1) -> np.ndarray:
-    """``n`` state records (the scratch that a loop or a batch block owns): zeros, and a throw's start
-    tolerance weight (``init_state`` sets everything a throw reads)."""
-    S = np.zeros(n, dtype=STATE)
+    """``n`` motion records (the scratch a loop or a batch runs in): zeros, and a throw's start tolerance weight
+    (``init_state`` sets everything a throw reads)."""
+    S = np.zeros(n, dtype=MOTION)
     S["tol_weight"] = 1.0
     S["tol_h"] = -1.0
     S["tol_decay"] = 1.0
     return S
+
+
+def new_work(work: np.dtype, n: int = 1) -> np.ndarray:
+    """``n`` work records of the dtype ``work`` (a scheme's ``WORK``): zeros, scratch that a step writes before it reads."""
+    return np.zeros(n, dtype=work)
 
 
 @jit(inline="always")
@@ -253,21 +276,21 @@ def after_step(finite, n, mask, last_mask, sets, set_steps, nsets):
 
 
 @jit(inline="always")
-def begin_substeps(st):
-    """Copy the state into the sub-step start (``st.sub_*``)."""
-    copy_motion(st.X, st.U, st.L, st.off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
+def begin_substeps(st, wk):
+    """Copy the state into the sub-step start (``wk.sub_*``)."""
+    copy_motion(st.X, st.U, st.L, st.off, wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off)
 
 
 @jit(inline="always")
-def accept_substep(st, kp):
-    """The sub-step's result (``st.new_*``) becomes the sub-step start; ω follows L."""
-    copy_motion(st.new_X, st.new_U, st.new_L, st.new_off, st.sub_X, st.sub_U, st.sub_L, st.sub_off)
+def accept_substep(st, wk, kp):
+    """The sub-step's result (``wk.new_*``) becomes the sub-step start; ω follows L."""
+    copy_motion(wk.new_X, wk.new_U, wk.new_L, wk.new_off, wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off)
     for j in range(3):
-        st.W[j] = st.sub_L[j] / kp.inertia
+        st.W[j] = wk.sub_L[j] / kp.inertia
 
 
 @jit(inline="always")
-def end_substeps(st, kp):
+def end_substeps(st, wk, kp):
     """Copy the sub-step start back into the state (ω follows L; the cached rotation is dropped)."""
-    copy_motion(st.sub_X, st.sub_U, st.sub_L, st.sub_off, st.X, st.U, st.L, st.off)
+    copy_motion(wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off, st.X, st.U, st.L, st.off)
     set_angular_momentum(st, st.L[0], st.L[1], st.L[2], kp)

@@ -39,16 +39,18 @@ class SubstepMethod(Protocol):
     H0: float
     #: Whether the method has a continuous extension: the last sub-step of a step then runs past the step's end.
     DENSE: bool
+    #: The fields of its work area besides the sub-step start and end (``core.state.work_dtype``).
+    WORK: list
 
-    def substep(self, st, kp, h, f0, f1, f2, t0, t1, t2) -> None:
-        """One explicit step of length h from the sub-step start ``st.sub_*`` to ``st.new_*``; f, t: the contact
-        force sum and torque at the start."""
+    def substep(self, st, wk, kp, h, f0, f1, f2, t0, t1, t2) -> None:
+        """One explicit step of length h from the sub-step start ``wk.sub_*`` to ``wk.new_*``; f, t: the contact
+        force sum and torque at the start; ``st``'s forces and node arrays are stage scratch."""
 
-    def error(self, st, kp, h, g0, g1, g2, q0, q1, q2) -> float:
+    def error(self, st, wk, kp, h, g0, g1, g2, q0, q1, q2) -> float:
         """The last sub-step's local error estimate over ``kp.tol``; g, q: force sum and torque at its end."""
 
-    def dense_keep(self, st, h) -> None:
+    def dense_keep(self, st, wk, h) -> None:
         """Keep what :meth:`dense_state` needs of the sub-step just computed (length h); a no-op without ``DENSE``."""
 
-    def dense_state(self, st, kp, theta) -> None:
+    def dense_state(self, st, wk, kp, theta) -> None:
         """The state at θ·h into the kept sub-step, written into ``st`` (only called with ``DENSE``)."""

@@ -34,10 +34,10 @@ def error_norm(ex, eq, eu, el, vs, kp):
 
 
 @jit(inline="always")
-def no_dense_keep(st, h):
+def no_dense_keep(st, wk, h):
     """``dense_keep`` of a sub-step method without a continuous extension: nothing to keep."""
 
 
 @jit(inline="always")
-def no_dense_state(st, kp, theta):
+def no_dense_state(st, wk, kp, theta):
     """``dense_state`` of a sub-step method without a continuous extension: never called."""

@@ -10,7 +10,7 @@ output.  The scheme ``contact_dop853`` is the contact driver on this method.
 from __future__ import annotations
 
 from dicetrace.core.methods.common import no_dense_keep, no_dense_state
-from dicetrace.core.methods.erk import dop853_error, dop853_substep
+from dicetrace.core.methods.erk import DOP853_STAGES, dop853_error, dop853_substep, erk_work
 
 substep = dop853_substep
 error = dop853_error
@@ -24,3 +24,5 @@ H0 = 0.3
 DENSE = False
 dense_keep = no_dense_keep
 dense_state = no_dense_state
+#: Its work area besides the sub-step start and end (``core.state``): the stages.
+WORK = erk_work(DOP853_STAGES)

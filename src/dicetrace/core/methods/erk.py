@@ -253,12 +253,12 @@ def combine(w, n, K, y0, h, y):
 
 
 @jit(inline="always")
-def substep_start(st, y0):
-    """y0 = (X, U, L, q = 1) from the sub-step start ``st.sub_*``."""
+def substep_start(wk, y0):
+    """y0 = (X, U, L, q = 1) from the sub-step start ``wk.sub_*``."""
     for j in range(3):
-        y0[j] = st.sub_X[j]
-        y0[3 + j] = st.sub_U[j]
-        y0[6 + j] = st.sub_L[j]
+        y0[j] = wk.sub_X[j]
+        y0[3 + j] = wk.sub_U[j]
+        y0[6 + j] = wk.sub_L[j]
     y0[9] = 1.0
     y0[10] = 0.0
     y0[11] = 0.0
@@ -266,16 +266,16 @@ def substep_start(st, y0):
 
 
 @jit(inline="always")
-def substep_end(st, y):
-    """``st.new_*`` from the step's result y: q normalised (in y), the offsets turned exactly by it."""
+def substep_end(wk, y):
+    """``wk.new_*`` from the step's result y: q normalised (in y), the offsets turned exactly by it."""
     qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
     for c in range(9, NY):
         y[c] = y[c] / qn
     for j in range(3):
-        st.new_X[j] = y[j]
-        st.new_U[j] = y[3 + j]
-        st.new_L[j] = y[6 + j]
-    quat_rotate(y[9], y[10], y[11], y[12], st.sub_off, st.new_off)
+        wk.new_X[j] = y[j]
+        wk.new_U[j] = y[3 + j]
+        wk.new_L[j] = y[6 + j]
+    quat_rotate(y[9], y[10], y[11], y[12], wk.sub_off, wk.new_off)
 
 
 @jit(inline="always")
@@ -297,29 +297,29 @@ def _named(fn, name: str, doc: str):
 def erk_substep(name: str, ns: int, a: np.ndarray, b: np.ndarray):
     """The sub-step of the tableau (``ns`` stages, ``a``, ``b``), compiled as ``name``.
 
-    ``substep(st, kp, h, f0, f1, f2, t0, t1, t2)``: one step from the
-    sub-step start ``st.sub_*`` to ``st.new_*``; ``f*``, ``t*`` the contact
+    ``substep(st, wk, kp, h, f0, f1, f2, t0, t1, t2)``: one step from the
+    sub-step start ``wk.sub_*`` to ``wk.new_*``; ``f*``, ``t*`` the contact
     force sum and torque at the start.  Leaves the stage derivatives in
-    ``st.rk_k`` (rows 0..ns−1) and the new state y in ``st.rk_y`` (q
-    normalised) for the error estimate (which overwrites ``st.rk_y0`` and
-    ``st.rk_acc``).  The tableau is closed over, so numba compiles it in as
+    ``wk.rk_k`` (rows 0..ns−1) and the new state y in ``wk.rk_y`` (q
+    normalised) for the error estimate (which overwrites ``wk.rk_y0`` and
+    ``wk.rk_acc``).  The tableau is closed over, so numba compiles it in as
     constants.
     """
 
-    def substep(st, kp, h, f0, f1, f2, t0, t1, t2):
-        K = st.rk_k
-        y = st.rk_y
-        y0 = st.rk_y0
-        off = st.sub_off
-        offs = st.stage_off
-        substep_start(st, y0)
+    def substep(st, wk, kp, h, f0, f1, f2, t0, t1, t2):
+        K = wk.rk_k
+        y = wk.rk_y
+        y0 = wk.rk_y0
+        off = wk.sub_off
+        offs = wk.stage_off
+        substep_start(wk, y0)
         derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
         for i in range(1, ns):
             combine(a[i], i, K, y0, h, y)
             g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
             derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
         combine(b, ns, K, y0, h, y)
-        substep_end(st, y)
+        substep_end(wk, y)
 
     return _named(substep, name, erk_substep.__doc__)
 
@@ -327,19 +327,19 @@ def erk_substep(name: str, ns: int, a: np.ndarray, b: np.ndarray):
 def erk_error2(name: str, ns: int, e5: np.ndarray, e3: np.ndarray):
     """The error estimate of a pair with two embedded estimates (DOP853's ``e5``, ``e3``), compiled as ``name``.
 
-    ``error(st, kp, h, g0, g1, g2, q0, q1, q2)``: the local error of the last
+    ``error(st, wk, kp, h, g0, g1, g2, q0, q1, q2)``: the local error of the last
     sub-step over ``kp.tol``; g, q the force sum and torque at the new state.
     """
 
-    def error(st, kp, h, g0, g1, g2, q0, q1, q2):
-        K = st.rk_k
-        y = st.rk_y
+    def error(st, wk, kp, h, g0, g1, g2, q0, q1, q2):
+        K = wk.rk_k
+        y = wk.rk_y
         derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, kp)
-        err5 = st.rk_acc
-        err3 = st.rk_y0  # the sub-step start is no longer needed
+        err5 = wk.rk_acc
+        err3 = wk.rk_y0  # the sub-step start is no longer needed
         combine(e5, ns + 1, K, ZERO, 1.0, err5)
         combine(e3, ns + 1, K, ZERO, 1.0, err3)
-        vs = error_speed(st.new_U, st.new_L, kp)
+        vs = error_speed(wk.new_U, wk.new_L, kp)
         k5 = state_error_norm(err5, vs, kp)
         k3 = state_error_norm(err3, vs, kp)
         r5 = abs(h) * k5
@@ -354,21 +354,37 @@ def erk_error2(name: str, ns: int, e5: np.ndarray, e3: np.ndarray):
 def erk_error1(name: str, ns: int, e: np.ndarray):
     """The error estimate of a pair with one embedded estimate, e = b − b̂ (ns + 1 entries), compiled as ``name``.
 
-    ``error(st, kp, h, g0, g1, g2, q0, q1, q2)``: the local error of the last
+    ``error(st, wk, kp, h, g0, g1, g2, q0, q1, q2)``: the local error of the last
     sub-step over ``kp.tol``.
     """
 
-    def error(st, kp, h, g0, g1, g2, q0, q1, q2):
-        K = st.rk_k
-        y = st.rk_y
+    def error(st, wk, kp, h, g0, g1, g2, q0, q1, q2):
+        K = wk.rk_k
+        y = wk.rk_y
         derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, kp)
-        err = st.rk_acc
+        err = wk.rk_acc
         combine(e, ns + 1, K, ZERO, 1.0, err)
-        vs = error_speed(st.new_U, st.new_L, kp)
+        vs = error_speed(wk.new_U, wk.new_L, kp)
         return abs(h) * state_error_norm(err, vs, kp) / kp.tol
 
     return _named(error, name, erk_error1.__doc__)
 
+
+def erk_work(ns: int) -> list:
+    """The work area of a pair of ``ns`` stages (besides the sub-step start and end, ``core.state``): the stage
+    derivatives (ns + 1 rows: the last the derivative at the new state), the stage point, the sub-step's start and
+    a weighted sum of stages (13 components each), and a stage's node offsets."""
+    return [
+        ("rk_k", np.float64, (ns + 1, NY)),
+        ("rk_y", np.float64, NY),
+        ("rk_y0", np.float64, NY),
+        ("rk_acc", np.float64, NY),
+        ("stage_off", np.float64, (8, 3)),
+    ]
+
+
+#: Tsit5's dense output keeps the starting offsets of the sub-step the step ends in, and the interpolation weights.
+TSIT5_DENSE_WORK = [("dn_off", np.float64, (8, 3)), ("dn_w", np.float64, TSIT5_STAGES + 1)]
 
 #: DOP853's sub-step and its error estimate (order 8; the estimate's exponent 1/8).
 dop853_substep = erk_substep("dop853_substep", DOP853_STAGES, DOP853_A, DOP853_B)
@@ -380,21 +396,21 @@ tsit5_error = erk_error1("tsit5_error", TSIT5_STAGES, TSIT5_E)
 
 
 @jit(inline="always")
-def dense_keep(st, h):
+def dense_keep(st, wk, h):
     """Keep what :func:`dense_state` needs of the sub-step just computed (length h) besides its stages.
 
-    The stages stay in ``st.rk_k`` (row 6: the derivative at the new state,
-    from the error estimate) and the start in ``st.rk_y0`` until the next
-    sub-step; its starting offsets ``st.sub_off`` are copied.
+    The stages stay in ``wk.rk_k`` (row 6: the derivative at the new state,
+    from the error estimate) and the start in ``wk.rk_y0`` until the next
+    sub-step; its starting offsets ``wk.sub_off`` are copied.
     """
     for k in range(8):
         for j in range(3):
-            st.dn_off[k, j] = st.sub_off[k, j]
-    st.dn_h = h
+            wk.dn_off[k, j] = wk.sub_off[k, j]
+    wk.dn_h = h
 
 
 @jit(inline="always")
-def dense_state(st, kp, theta):
+def dense_state(st, wk, kp, theta):
     """X, U, L, ω and the offsets of ``st`` at θ·h into the kept sub-step (Tsit5's continuous extension).
 
     The quaternion is normalised and the offsets are its exact rotation of
@@ -403,12 +419,12 @@ def dense_state(st, kp, theta):
     end) only the offsets' z components are turned; the next step goes on
     from the front, never from these offsets.
     """
-    w = st.dn_w
+    w = wk.dn_w
     for i in range(TSIT5_STAGES + 1):
         w[i] = theta * (TSIT5_DENSE[i, 0] + theta * (TSIT5_DENSE[i, 1] + theta * (
             TSIT5_DENSE[i, 2] + theta * TSIT5_DENSE[i, 3])))
-    y = st.rk_acc
-    combine(w, TSIT5_STAGES + 1, st.rk_k, st.rk_y0, st.dn_h, y)
+    y = wk.rk_acc
+    combine(w, TSIT5_STAGES + 1, wk.rk_k, wk.rk_y0, wk.dn_h, y)
     qn = math.sqrt(y[9] * y[9] + y[10] * y[10] + y[11] * y[11] + y[12] * y[12])
     for j in range(3):
         st.X[j] = y[j]
@@ -419,9 +435,9 @@ def dense_state(st, kp, theta):
         # only the heights are read at this step end: the offsets' third row (the rest of R unused)
         r = quat_matrix(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn)
         r20, r21, r22 = r[6], r[7], r[8]
-        off = st.dn_off
+        off = wk.dn_off
         for k in range(8):
             st.off[k, 2] = r20 * off[k, 0] + r21 * off[k, 1] + r22 * off[k, 2]
     else:
-        quat_rotate(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, st.dn_off, st.off)
+        quat_rotate(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn, wk.dn_off, st.off)
     st.rot_h = -1.0

@@ -28,10 +28,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, wrench_at
 from dicetrace.core.methods.common import error_norm, error_speed, no_dense_keep, no_dense_state
 from dicetrace.core.rotation import apply9, mul9, rot9
+
+_F8 = np.float64
 
 
 @jit(inline="always")
@@ -49,21 +53,21 @@ def stage_point(Xz, U, L, c, uz, a0, a1, a2, t0, t1, t2, I):
 
 
 @jit
-def cf4(st, kp, h, f10, f11, f12, t10, t11, t12):
+def cf4(st, wk, kp, h, f10, f11, f12, t10, t11, t12):
     """One commutator-free Lie-group RK4 step of length h from the sub-step start of ``st``.
 
-    Reads ``st.sub_X``, ``sub_U``, ``sub_L``, ``sub_off`` (left unchanged);
-    writes the result to ``st.new_X``, ``new_U``, ``new_L``, ``new_off`` and
-    stage 4's derivatives to ``st.stage4_u``, ``stage4_a``, ``stage4_t`` (for
-    the embedded error estimate of contact-adaptive); ``st.stage_off``,
+    Reads ``wk.sub_X``, ``sub_U``, ``sub_L``, ``sub_off`` (left unchanged);
+    writes the result to ``wk.new_X``, ``new_U``, ``new_L``, ``new_off`` and
+    stage 4's derivatives to ``wk.stage4_u``, ``stage4_a``, ``stage4_t`` (for
+    the embedded error estimate of contact-adaptive); ``wk.stage_off``,
     ``F``, ``uk``, ``z``, ``P`` are stage scratch.  ``f1*``, ``t1*``: contact
     force sum and torque at the start.
     """
-    X = st.sub_X
-    U = st.sub_U
-    L = st.sub_L
-    off = st.sub_off
-    offs = st.stage_off
+    X = wk.sub_X
+    U = wk.sub_U
+    L = wk.sub_L
+    off = wk.sub_off
+    offs = wk.stage_off
     F = st.F
     uk = st.uk
     z = st.z
@@ -97,9 +101,9 @@ def cf4(st, kp, h, f10, f11, f12, t10, t11, t12):
     c, f40, f41, f42, t40, t41, t42 = wrench_at(xs2, u40, u41, u42, w40, w41, w42, offs, kp, F, uk, z, P)
     a40, a41, a42 = acceleration(f40, f41, f42, kp)
     # combine
-    Xn = st.new_X
-    Un = st.new_U
-    Ln = st.new_L
+    Xn = wk.new_X
+    Un = wk.new_U
+    Ln = wk.new_L
     h6 = h / 6.0
     Xn[0] = X[0] + h6 * (U[0] + 2.0 * (u20 + u30) + u40)
     Xn[1] = X[1] + h6 * (U[1] + 2.0 * (u21 + u31) + u41)
@@ -110,15 +114,15 @@ def cf4(st, kp, h, f10, f11, f12, t10, t11, t12):
     Ln[0] = L[0] + h6 * (t10 + 2.0 * (t20 + t30) + t40)
     Ln[1] = L[1] + h6 * (t11 + 2.0 * (t21 + t31) + t41)
     Ln[2] = L[2] + h6 * (t12 + 2.0 * (t22 + t32) + t42)
-    st.stage4_u[0] = u40
-    st.stage4_u[1] = u41
-    st.stage4_u[2] = u42
-    st.stage4_a[0] = a40
-    st.stage4_a[1] = a41
-    st.stage4_a[2] = a42
-    st.stage4_t[0] = t40
-    st.stage4_t[1] = t41
-    st.stage4_t[2] = t42
+    wk.stage4_u[0] = u40
+    wk.stage4_u[1] = u41
+    wk.stage4_u[2] = u42
+    wk.stage4_a[0] = a40
+    wk.stage4_a[1] = a41
+    wk.stage4_a[2] = a42
+    wk.stage4_t[0] = t40
+    wk.stage4_t[1] = t41
+    wk.stage4_t[2] = t42
     h12 = h / 12.0
     Ra = rot9(
         (3.0 * w10 + 2.0 * (w20 + w30) - w40),
@@ -132,11 +136,11 @@ def cf4(st, kp, h, f10, f11, f12, t10, t11, t12):
         (-w12 + 2.0 * (w22 + w32) + 3.0 * w42),
         h12,
     )
-    apply9(off, mul9(Ra, Rb), st.new_off)
+    apply9(off, mul9(Ra, Rb), wk.new_off)
 
 
 @jit(inline="always")
-def cf4_error(st, kp, h, g0, g1, g2, q0, q1, q2):
+def cf4_error(st, wk, kp, h, g0, g1, g2, q0, q1, q2):
     """Local error of the last ``cf4`` step over ``kp.tol`` (contact-adaptive's estimate).
 
     RK4 with its last stage and the derivative at the new state (force sum
@@ -146,11 +150,11 @@ def cf4_error(st, kp, h, g0, g1, g2, q0, q1, q2):
     (|e_U| + √3·half·|e_L|/I) / :func:`error_speed`.
     """
     I = kp.inertia
-    Un = st.new_U
-    Ln = st.new_L
-    u4 = st.stage4_u
-    a4 = st.stage4_a
-    t4 = st.stage4_t
+    Un = wk.new_U
+    Ln = wk.new_L
+    u4 = wk.stage4_u
+    a4 = wk.stage4_a
+    t4 = wk.stage4_t
     h6 = h / 6.0
     ex = h6 * math.sqrt((u4[0] - Un[0]) ** 2 + (u4[1] - Un[1]) ** 2 + (u4[2] - Un[2]) ** 2)
     d0 = a4[0] - g0 / 8.0
@@ -174,3 +178,10 @@ H0 = 0.1
 DENSE = False
 dense_keep = no_dense_keep
 dense_state = no_dense_state
+#: Its work area besides the sub-step start and end (``core.state``): a stage's offsets and stage 4's derivatives.
+WORK = [
+    ("stage_off", _F8, (8, 3)),
+    ("stage4_u", _F8, 3),
+    ("stage4_a", _F8, 3),
+    ("stage4_t", _F8, 3),
+]

@@ -14,7 +14,15 @@ contact driver on this method.
 
 from __future__ import annotations
 
-from dicetrace.core.methods.erk import dense_keep, dense_state, tsit5_error, tsit5_substep  # noqa: F401
+from dicetrace.core.methods.erk import (  # noqa: F401
+    TSIT5_DENSE_WORK,
+    TSIT5_STAGES,
+    dense_keep,
+    dense_state,
+    erk_work,
+    tsit5_error,
+    tsit5_substep,
+)
 
 substep = tsit5_substep
 error = tsit5_error
@@ -29,3 +37,5 @@ FRICTION_THETA = 3.0
 H0 = 0.4
 #: The last sub-step of a step runs past its end; the end is interpolated (``dense_keep``, ``dense_state``).
 DENSE = True
+#: Its work area besides the sub-step start and end (``core.state``): the stages, and what dense output keeps.
+WORK = erk_work(TSIT5_STAGES) + TSIT5_DENSE_WORK

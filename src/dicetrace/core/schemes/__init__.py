@@ -30,6 +30,8 @@ from __future__ import annotations
 from types import ModuleType
 from typing import Protocol, runtime_checkable
 
+import numpy as np
+
 from dicetrace.core.schemes import (
     contact_dop853,
     contact_substep,
@@ -52,9 +54,12 @@ class Scheme(Protocol):
     #: True when the step integrates free flight exactly (the parabola and the exact rotation,
     #: ``core.free_flight``): the run loop then crosses a free flight of several whole steps in one piece.
     EXACT_FLIGHT: bool
+    #: The dtype of its work record (``core.state.work_dtype``): what it keeps between its stages and steps
+    #: besides the motion.
+    WORK: np.dtype
 
-    def step(self, st, kp, h, contact) -> tuple[bool, int]:
-        """One step of length h of the state record ``st`` (``core.state``).
+    def step(self, st, wk, kp, h, contact) -> tuple[bool, int]:
+        """One step of length h of the motion record ``st`` in the work record ``wk`` (``core.state``).
 
         On entry ``st.F``, ``st.P`` hold the contact forces at the current
         state (``contact`` says whether any is non-zero); on exit the state
@@ -70,7 +75,7 @@ class Scheme(Protocol):
 class EventsScheme(Scheme, Protocol):
     """A scheme with exact contact events (the contact schemes, docs/model.md §8.1)."""
 
-    def step_events(self, st, kp, h, contact, sets, set_steps, ev_times) -> tuple[bool, int]:
+    def step_events(self, st, wk, kp, h, contact, sets, set_steps, ev_times) -> tuple[bool, int]:
         """``step``, recording the contact sets inside its sub-steps with their times (``contacts.note_event``)."""
 
 
@@ -78,8 +83,10 @@ class EventsScheme(Scheme, Protocol):
 class SummaryScheme(Scheme, Protocol):
     """A scheme with a specialised summary kernel, bit-identical to the run loop's summary where it applies."""
 
-    def summary(self, ic, off0, kp, sets, set_steps) -> tuple[int, int, int, int]:
-        """One throw to rest, summary only (``core.fast.roll_summary_sie`` for the program's scheme)."""
+    def summary(self, ic, off0, kp, sets, set_steps, budget) -> tuple[int, int, int, int]:
+        """One throw to rest, summary only (``core.fast.roll_summary_sie`` for the program's scheme); a throw not
+        ended after ``budget`` steps stops as ``Status.RUNNING`` and keeps nothing (the run loop goes on from
+        slices)."""
 
     def summary_applies(self, kp, off0) -> bool:
         """Whether :meth:`summary` computes this configuration's summaries."""

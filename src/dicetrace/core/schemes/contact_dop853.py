@@ -8,11 +8,13 @@ its 5th- and 3rd-order error estimates).  No dense output.
 
 from __future__ import annotations
 
-from dicetrace.core.contact_driver import make_drive
+from dicetrace.core.contact_driver import make_drive, work_of
 from dicetrace.core.methods import dop853
 
 #: Free flight is exact (the parabola and the exact rotation): the run loop crosses a flight of several steps in one piece.
 EXACT_FLIGHT = True
+#: The driver's work area and the method's.
+WORK = work_of(dop853)
 
 #: One contact-aware step on DOP853 sub-steps (``core.schemes.Scheme``), and its events form.
 step = make_drive(dop853, "step_dop853")

@@ -10,11 +10,13 @@ front.  The `physical` preset's default integrator.
 
 from __future__ import annotations
 
-from dicetrace.core.contact_driver import make_drive
+from dicetrace.core.contact_driver import make_drive, work_of
 from dicetrace.core.methods import tsit5
 
 #: Free flight is exact (the parabola and the exact rotation): the run loop crosses a flight of several steps in one piece.
 EXACT_FLIGHT = True
+#: The driver's work area and the method's.
+WORK = work_of(tsit5)
 
 #: One contact-aware step on Tsit5 sub-steps (``core.schemes.Scheme``), and its events form.
 step = make_drive(tsit5, "step_tsit5")

@@ -14,15 +14,17 @@ from dicetrace.core._jit import jit
 from dicetrace.core.forces import eval_forces, step_wrench
 from dicetrace.core.model import program_kick_drift
 from dicetrace.core.rotation import turn_by_omega
-from dicetrace.core.state import set_angular_momentum
+from dicetrace.core.state import NO_WORK, set_angular_momentum
 
 
 #: A free flight of several steps is not crossed in one piece (the run loop steps through it).
 EXACT_FLIGHT = False
+#: No work area: the step keeps nothing between its stages.
+WORK = NO_WORK
 
 
 @jit
-def step(st, kp, h, contact):
+def step(st, wk, kp, h, contact):
     """One program step of ``st`` (``core.schemes.Scheme``)."""
     X = st.X
     U = st.U

@@ -17,15 +17,17 @@ from dicetrace.core.forces import acceleration, eval_forces, step_wrench, wrench
 from dicetrace.core.free_flight import free_flight, free_flight_safe
 from dicetrace.core.rotation import apply9, rot9
 from dicetrace.core.methods.rk4 import stage_point
-from dicetrace.core.state import set_angular_momentum
+from dicetrace.core.state import NO_WORK, set_angular_momentum
 
 
 #: A free flight of several steps is not crossed in one piece (the run loop steps through it).
 EXACT_FLIGHT = False
+#: No work area: the step keeps nothing between its stages.
+WORK = NO_WORK
 
 
 @jit
-def step(st, kp, h, contact):
+def step(st, wk, kp, h, contact):
     """One velocity-Verlet step of ``st`` (``core.schemes.Scheme``)."""
     X = st.X
     U = st.U
