@@ -28,8 +28,8 @@ what differs), never mixed in.  One writer at a time: taking the folder's lock
 to the folder (it makes the folder to hold it), and it holds the lock while
 it writes; a second one waits at most ``wait`` seconds, then refuses
 (:class:`ScanBusyError`), touching nothing.  Nothing removes a lock it does
-not hold: a scan that fails before writing its manifest removes its own lock
-(holding it) and the folders it made.
+not hold: a scan that fails before its first chunk reached a new folder removes
+the manifest it wrote, its own lock (holding it) and the folders it made.
 
 Every reader reads the folder as it is: ``polars.scan_parquet("scan/")``,
 ``pandas.read_parquet("scan")``, DuckDB's ``read_parquet('scan/**/*.parquet')``
@@ -595,16 +595,36 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
     return path
 
 
+def _forget_unused_manifest(folder: Path) -> None:
+    """Remove the manifest (and ``rolls/``) of a scan that failed before its first chunk reached ``rolls/``.
+
+    Called holding the lock, for a folder that held no manifest before this
+    run: the manifest would record a scan that never ran (its device
+    included), and refuse the next run of another one.
+    """
+    rolls = folder / ROLLS_DIR
+    try:
+        if rolls.is_dir() and any(os.scandir(rolls)):
+            return
+        remove_quietly(folder / MANIFEST)
+        if rolls.is_dir():
+            rolls.rmdir()
+    except OSError:  # what cannot be removed stays: the next run checks it as it checks any folder
+        pass
+
+
 class _FolderLock:
     """The folder's writer lock (``filelock``): the first thing a scan does to the folder.
 
     The folder is made (the lock file lives in it) and locked at once;
     after ``wait`` seconds without the lock it refuses in one line,
     removing nothing: the folder and the lock are the holder's.  Nothing
-    removes a lock it does not hold.  A scan that ends on an error while
-    holding the lock, before it wrote the manifest, removes the lock file
-    (still holding it: a waiter that had opened it sees it unlinked and
-    takes a fresh one) and the folders it made, where empty.
+    removes a lock it does not hold.  A scan that ends on an error (or an
+    interrupt) while holding the lock of a folder that held no manifest
+    before it, and before its first chunk reached ``rolls/``, removes the
+    manifest it wrote and ``rolls/``, then the lock file (still holding it:
+    a waiter that had opened it sees it unlinked and takes a fresh one) and
+    the folders it made, where empty: it leaves no scan that never ran.
     """
 
     #: A folder removed under a waiting scan (by one that failed before writing anything) is made again at most
@@ -638,10 +658,13 @@ class _FolderLock:
                     raise OutputError(f"the scan folder {str(self.folder)!r} keeps disappearing") from None
                 continue
             self.lock = lock
+            self.had_manifest = has_manifest(self.folder)
             return self
 
     def __exit__(self, exc_type, *exc):
         try:
+            if exc_type is not None and not self.had_manifest:
+                _forget_unused_manifest(self.folder)
             if exc_type is not None and not has_manifest(self.folder):  # nothing written: leave nothing behind
                 remove_quietly(self.folder / LOCK)  # ours: we hold it
                 for d in reversed(self.created):
