@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -90,6 +91,45 @@ def _flush_stdout() -> None:
         sys.stdout.flush()
 
 
+class _Interrupts:
+    """While a command runs: Ctrl-C raises KeyboardInterrupt, as Python's own handler does, and is remembered
+    (``seen``), so that an interrupt a library turned into another error (an extension module's ``ImportError:
+    initialization failed``) still ends as one: one line, exit 130.  Only where Python's handler is in place, in
+    the main thread; restored on exit."""
+
+    #: The line a command printed on its own interrupt (:func:`say_interrupted`), for this run.
+    said: str | None = None
+
+    def __init__(self) -> None:
+        self.seen = False
+        self.installed = False
+        _Interrupts.said = None
+
+    def _handler(self, signum, frame) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __enter__(self) -> "_Interrupts":
+        try:
+            if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+                signal.signal(signal.SIGINT, self._handler)
+                self.installed = True
+        except ValueError:  # not the main thread
+            pass
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.installed:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def say_interrupted(line: str) -> None:
+    """Say on standard error what an interrupt leaves (a command's own line, e.g. what a scan kept), instead of
+    :func:`run_app`'s plain ``dicetrace: interrupted``: still one line."""
+    _Interrupts.said = line
+    _print_err(line)
+
+
 def run_app(app: typer.Typer) -> None:
     """Run the typer app; bad input → ``dicetrace: error: ...`` (one line) and exit 2."""
     usage, cexc, exits = _click_exceptions()
@@ -108,11 +148,18 @@ def run_app(app: typer.Typer) -> None:
         _print_err(f"dicetrace: error: {one_line(msg)}")
         sys.exit(code)
 
-    with warnings.catch_warnings():  # the filters stay as they are; only how a warning is shown changes
+    with warnings.catch_warnings(), _Interrupts() as interrupts:  # the filters stay; only how a warning shows
         warnings.showwarning = show
         try:
-            with compile_notice():
-                rc = app(standalone_mode=False)
+            try:
+                with compile_notice():
+                    rc = app(standalone_mode=False)
+            except Exception:
+                if interrupts.seen:  # Ctrl-C inside an import (numba's, say) that turned it into an ImportError
+                    raise KeyboardInterrupt from None
+                raise
+            if rc == 130 and interrupts.seen:  # typer turns a command's KeyboardInterrupt into a silent exit 130
+                raise KeyboardInterrupt
             try:
                 _flush_stdout()
             except OSError as e:  # stdout is a full device, a closed pipe, ...
@@ -129,7 +176,8 @@ def run_app(app: typer.Typer) -> None:
         except cexc as e:
             error(e.format_message(), getattr(e, "exit_code", 1) or 1)
         except (typer.Abort, KeyboardInterrupt):
-            _print_err("dicetrace: interrupted")
+            if _Interrupts.said is None:
+                _print_err("dicetrace: interrupted")
             sys.exit(130)
         except OSError as e:
             if isinstance(e, BrokenPipeError):

@@ -47,7 +47,14 @@ from typing import List, Optional
 import numpy as np
 import typer
 
-from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
+from dicetrace.commands._common import (
+    EXIT_NUMERICAL_FAILURE,
+    fail,
+    output_dir,
+    output_file,
+    parse_floats,
+    say_interrupted,
+)
 from dicetrace.commands.options import (
     DEVICE_HELP,
     INTEGRATOR_HELP,
@@ -411,8 +418,11 @@ def register(app: typer.Typer) -> None:
         except SchedulerError as e:
             fail(f"--scheduler {scheduler}: {e}" if scheduler else f"--dask: {e}")
         except KeyboardInterrupt:
-            print(f"dicetrace: interrupted; finished chunks are kept in {str(out)!r}: re-run the same command to resume",
-                  file=sys.stderr)
+            from dicetrace.scan.folder import has_manifest  # loaded already
+
+            say_interrupted(f"dicetrace: interrupted; finished chunks are kept in {str(out)!r}: re-run the same command "
+                            "to resume" if has_manifest(out_dir) else
+                            f"dicetrace: interrupted before the scan's first chunk: {str(out)!r} holds no scan")
             raise
         finally:
             for x in closers:
