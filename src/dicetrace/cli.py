@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 
 
 def _interrupted_while_loading(signum, frame) -> None:  # runs in a subprocess of the tests (tests/test_main.py)
@@ -40,6 +41,30 @@ def _catch_interrupts_while_loading() -> bool:
     return False
 
 
+def _occupy_closed_std_fds() -> None:
+    """Open /dev/null on fds 0, 1 and 2 where they are closed (``2>&-``): otherwise the next file opened (a scan's
+    lock, a chunk) would get that number, and whatever a library writes to standard error would land in it.  A
+    closed standard error becomes a ``sys.stderr`` on /dev/null (None, ``print(file=sys.stderr)`` would write to
+    standard output): what a command says there is dropped, and decides nothing.  A closed standard output stays
+    None: output asked for there is refused (``sinks._common``), never dropped."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            try:
+                got = os.open(os.devnull, os.O_RDWR)
+            except OSError:
+                return
+            if got != fd:  # a lower one was free after all: not ours to fill
+                os.close(got)
+    if sys.stderr is None:
+        try:
+            sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")  # noqa: SIM115 (the process's own)
+        except OSError:
+            pass
+
+
+_occupy_closed_std_fds()
 _LOADING = _catch_interrupts_while_loading()
 
 import importlib  # noqa: E402  (the imports after the handler: typer, rich, the commands' modules)

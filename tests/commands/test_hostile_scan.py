@@ -393,6 +393,43 @@ def test_rrd_onto_a_full_disk_does_not_hang(tmp_path, tmpfs, fill_fs, dicetrace_
     assert sorted(p.name for p in tmpfs.iterdir()) == ["filler"]
 
 
+# -- standard error decides nothing (issue 47 F3) ----------------------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stderr", ["closed", "/dev/full"])
+def test_a_scan_writes_its_data_and_exits_0_whatever_standard_error_is(tmp_path, stderr):
+    """With standard error closed (``2>&-``: once exit 70, nothing written) or on /dev/full (once the data, then
+    exit 2), a scan writes its folder, puts nothing on standard output, and exits 0: what it says there decides
+    nothing.  Its summary lines, a device line and a warning all try to reach it."""
+    import subprocess
+    import sys
+
+    from dicetrace.ics import Grid
+    from dicetrace.scan import read_scan, scan
+
+    if stderr == "/dev/full" and not Path("/dev/full").exists():
+        pytest.skip("no /dev/full here")
+    scan(Grid("seed", "home", 3), tmp_path / "s", chunk=4, max_chunks=1)
+    (tmp_path / "s" / "rolls" / "part-000000.parquet").write_bytes(b"PAR1 damaged PAR1")  # a warning to say
+    args = [sys.executable, "-m", "dicetrace", "scan", "--window", "home", "--res", "3", "--chunk", "4", "--out", "s",
+            "--device", "auto", "--png", "m.png"]
+    if stderr == "closed":
+        res = subprocess.run(["sh", "-c", '"$0" "$@" 2>&-', *args], cwd=tmp_path, capture_output=True, text=True,
+                             timeout=300)
+    else:
+        with open("/dev/full", "w") as full:
+            res = subprocess.run(args, cwd=tmp_path, stdout=subprocess.PIPE, stderr=full, text=True, timeout=300)
+    assert res.returncode == 0, res
+    assert res.stdout == ""
+    got = read_scan(tmp_path / "s")
+    want = scan(Grid("seed", "home", 3), chunk=4).to_pandas()
+    assert got[["ic_id", "outcome", "steps", "contact_sequence"]].equals(want[["ic_id", "outcome", "steps",
+                                                                                "contact_sequence"]])
+    assert (tmp_path / "m.png").read_bytes().startswith(b"\x89PNG")
+    assert sorted(p.name for p in (tmp_path / "s").iterdir()) == [".dicetrace-scan.lock", "_scan.parquet", "rolls"]
+
+
 # -- property --------------------------------------------------------------------------------------------------------
 
 _VALUES = {

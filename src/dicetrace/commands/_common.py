@@ -75,15 +75,43 @@ def _print_err(line: str) -> None:
         try:
             print(line, file=sys.stderr, flush=True)
         except (OSError, ValueError):
-            pass
+            _silence(2)
+
+
+def say(line: str) -> None:
+    """Print ``line`` on standard error, if it can be: closed (``2>&-``), full (``/dev/full``) or gone, what a
+    command says is lost, and never decides its exit code or what it writes."""
+    _print_err(line)
+
+
+def stderr_is_terminal() -> bool:
+    """Whether standard error is a terminal (False when it is closed)."""
+    try:
+        return sys.stderr is not None and sys.stderr.isatty()
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
+def _silence(fd: int) -> None:
+    """After a failed write to fd 1 or 2: point it at /dev/null, so that the interpreter's exit flush (which
+    would otherwise fail again and exit 120) is quiet."""
+    with contextlib.suppress(Exception):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
 
 
 def _silence_stdout() -> None:
-    """After a failed write to stdout: point fd 1 at /dev/null so that the interpreter's exit flush is quiet."""
-    with contextlib.suppress(Exception):
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, 1)
-        os.close(devnull)
+    _silence(1)
+
+
+def _settle_stderr() -> None:
+    """Flush standard error as a command ends; a failure (a full device) silences it: see :func:`say`."""
+    if sys.stderr is not None:
+        try:
+            sys.stderr.flush()
+        except (OSError, ValueError):
+            _silence(2)
 
 
 def _flush_stdout() -> None:
@@ -148,54 +176,58 @@ def run_app(app: typer.Typer) -> None:
         _print_err(f"dicetrace: error: {one_line(msg)}")
         sys.exit(code)
 
-    with warnings.catch_warnings(), _Interrupts() as interrupts:  # the filters stay; only how a warning shows
-        warnings.showwarning = show
-        try:
+    try:  # whatever happens, standard error is settled: a full one never turns into exit 120
+        with warnings.catch_warnings(), _Interrupts() as interrupts:  # the filters stay; only how a warning shows
+            warnings.showwarning = show
             try:
-                with compile_notice():
-                    rc = app(standalone_mode=False)
-            except Exception:
-                if interrupts.seen:  # Ctrl-C inside an import (numba's, say) that turned it into an ImportError
-                    raise KeyboardInterrupt from None
+                try:
+                    with compile_notice():
+                        rc = app(standalone_mode=False)
+                except Exception:
+                    if interrupts.seen:  # Ctrl-C inside an import (numba's, say) that turned it into an ImportError
+                        raise KeyboardInterrupt from None
+                    raise
+                if rc == 130 and interrupts.seen:  # typer turns a command's KeyboardInterrupt into a silent exit 130
+                    raise KeyboardInterrupt
+                try:
+                    _flush_stdout()
+                except OSError as e:  # stdout is a full device, a closed pipe, ...
+                    _silence_stdout()
+                    raise BadInput(f"cannot write standard output: {e.strerror or e}") from None
+            except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate (and OutputError)
+                error(e)
+            except usage as e:
+                if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed
+                    sys.exit(0)
+                error(e.format_message())
+            except exits as e:
+                sys.exit(getattr(e, "exit_code", 0))
+            except cexc as e:
+                error(e.format_message(), getattr(e, "exit_code", 1) or 1)
+            except (typer.Abort, KeyboardInterrupt):
+                if _Interrupts.said is None:
+                    _print_err("dicetrace: interrupted")
+                sys.exit(130)
+            except OSError as e:
+                if isinstance(e, BrokenPipeError):
+                    _silence_stdout()
+                    error(f"cannot write standard output: {e.strerror or e}")
+                where = f": {e.filename}" if e.filename else ""
+                error(f"{e.strerror or e}{where}")
+            except MemoryError as e:
+                error(f"out of memory{': ' + str(e) if str(e) else ''}: use a smaller input (fewer ICs, a larger "
+                      "--dt, a shorter --t-max)")
+            except SystemExit:
                 raise
-            if rc == 130 and interrupts.seen:  # typer turns a command's KeyboardInterrupt into a silent exit 130
-                raise KeyboardInterrupt
-            try:
-                _flush_stdout()
-            except OSError as e:  # stdout is a full device, a closed pipe, ...
-                _silence_stdout()
-                raise BadInput(f"cannot write standard output: {e.strerror or e}") from None
-        except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate (and OutputError)
-            error(e)
-        except usage as e:
-            if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed
-                sys.exit(0)
-            error(e.format_message())
-        except exits as e:
-            sys.exit(getattr(e, "exit_code", 0))
-        except cexc as e:
-            error(e.format_message(), getattr(e, "exit_code", 1) or 1)
-        except (typer.Abort, KeyboardInterrupt):
-            if _Interrupts.said is None:
-                _print_err("dicetrace: interrupted")
-            sys.exit(130)
-        except OSError as e:
-            if isinstance(e, BrokenPipeError):
-                _silence_stdout()
-                error(f"cannot write standard output: {e.strerror or e}")
-            where = f": {e.filename}" if e.filename else ""
-            error(f"{e.strerror or e}{where}")
-        except MemoryError as e:
-            error(f"out of memory{': ' + str(e) if str(e) else ''}: use a smaller input (fewer ICs, a larger --dt, a shorter --t-max)")
-        except SystemExit:
-            raise
-        except Exception as e:  # a defect: one line, and the way to see its traceback
-            if os.environ.get(DEBUG_ENV):
-                raise
-            error(f"internal error ({type(e).__name__}: {one_line(e)[:300]}); run with {DEBUG_ENV}=1 for the "
-                  "traceback and please report it", EXIT_INTERNAL)
-    for text in held:
-        _print_err(text)
+            except Exception as e:  # a defect: one line, and the way to see its traceback
+                if os.environ.get(DEBUG_ENV):
+                    raise
+                error(f"internal error ({type(e).__name__}: {one_line(e)[:300]}); run with {DEBUG_ENV}=1 for the "
+                      "traceback and please report it", EXIT_INTERNAL)
+        for text in held:
+            _print_err(text)
+    finally:
+        _settle_stderr()
     sys.exit(rc if isinstance(rc, int) else 0)
 
 

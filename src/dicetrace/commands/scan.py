@@ -53,7 +53,9 @@ from dicetrace.commands._common import (
     output_dir,
     output_file,
     parse_floats,
+    say,
     say_interrupted,
+    stderr_is_terminal,
 )
 from dicetrace.commands.options import (
     DEVICE_HELP,
@@ -212,15 +214,15 @@ def _status_summary(out: Path, quiet: bool) -> bool:
         counts = outcome_counts(out)
         names = {-1: "not settled", 0: "undefined"}
         parts = [f"{names.get(v, f'face {v}')}: {c / total:.1%}" for v, c in counts.items()]
-        print("outcomes: " + ", ".join(parts), file=sys.stderr)
-        print("statuses: " + ", ".join(f"{k}: {c:,} ({c / total:.1%})" for k, c in
-                                       sorted(statuses.items(), key=lambda kv: -kv[1])), file=sys.stderr)
+        say("outcomes: " + ", ".join(parts))
+        say("statuses: " + ", ".join(f"{k}: {c:,} ({c / total:.1%})" for k, c in
+                                     sorted(statuses.items(), key=lambda kv: -kv[1])))
     failed = {k: c for k, c in statuses.items() if Status.from_label(k).failed}
     if failed:
         first = Status.from_label(max(failed, key=failed.get))
         detail = ", ".join(f"{k}: {c:,}" for k, c in sorted(failed.items()))
-        print(f"dicetrace: numerical failure: {sum(failed.values()):,} of {total:,} ICs failed ({detail}): "
-              f"{first.advice}", file=sys.stderr)
+        say(f"dicetrace: numerical failure: {sum(failed.values()):,} of {total:,} ICs failed ({detail}): "
+            f"{first.advice}")
     return bool(failed)
 
 
@@ -268,7 +270,7 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
         fail(f"this scan would take {est.describe()}, more than {human_seconds(MAX_UNCONFIRMED_S)}: "
              "confirm with --yes, or scan in parts with --max-chunks N (re-run to resume)")
     if not quiet and ((est.seconds or 0) > LARGE_SCAN_S or est.bytes > LARGE_SCAN_BYTES):
-        print(f"dicetrace: scan: {est.describe()}", file=sys.stderr)
+        say(f"dicetrace: scan: {est.describe()}")
 
 
 def _check_out(out: Path, defn) -> None:
@@ -398,12 +400,12 @@ def register(app: typer.Typer) -> None:
                 with config_errors():
                     defn = replace(defn, device=worker_device(client, device))
                 if device == "auto":
-                    print(f"dicetrace: device auto: the Dask workers run on {defn.device}", file=sys.stderr)
+                    say(f"dicetrace: device auto: the Dask workers run on {defn.device}")
                 _check_out(out_dir, defn)
             _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None, maps=maps,
                             local_workers=local)
             report = scan(
-                defn, out_dir, threads=threads, progress=not quiet and sys.stderr.isatty(),
+                defn, out_dir, threads=threads, progress=not quiet and stderr_is_terminal(),
                 dask=client if client is not None else (True if dask else None), n_workers=local if dask else workers,
                 max_chunks=max_chunks, wait=wait,
             )
@@ -432,9 +434,9 @@ def register(app: typer.Typer) -> None:
             msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (a Parquet dataset: read the folder as it is)  "
                    f"({report.chunks_computed:,} computed, {report.chunks_skipped:,} already there; "
                    f"{report.ics_computed:,} ICs in {report.wall_s:.1f} s, {report.rate_ics_s:,.0f} ICs/s)")
-            print(msg, file=sys.stderr)
+            say(msg)
             if done < report.n_chunks:
-                print(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish", file=sys.stderr)
+                say(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish")
         failed = _status_summary(out_dir, quiet)
         if png_dest is not None or rrd_dest is not None:
             from dicetrace.scan.map_rrd import write_scan_rrd  # lazy: keeps `dicetrace --help` fast (imports numba)
@@ -447,8 +449,8 @@ def register(app: typer.Typer) -> None:
                     write_scan_rrd(out_dir, rrd_dest, staging=staging)
             if not quiet:
                 if png_dest is not None:
-                    print(f"outcome map → {png}", file=sys.stderr)
+                    say(f"outcome map → {png}")
                 if rrd_dest is not None:
-                    print(f"scan map → {rrd} (open with: rerun {rrd})", file=sys.stderr)
+                    say(f"scan map → {rrd} (open with: rerun {rrd})")
         if failed and strict:
             sys.exit(EXIT_NUMERICAL_FAILURE)
