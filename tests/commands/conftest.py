@@ -36,6 +36,16 @@ def mount_small_tmpfs():
         _unmount(d)
 
 
+@pytest.fixture
+def tmpfs(tmp_path, mount_small_tmpfs):
+    """A 64 KiB tmpfs folder (root only; unmounted in teardown)."""
+    d = tmp_path / "small"
+    d.mkdir()
+    if not mount_small_tmpfs(d):
+        pytest.skip("needs root to mount a small tmpfs (the injected-ENOSPC variants cover the rest)")
+    return d
+
+
 def _fill(folder: Path) -> None:
     """Fill ``folder``'s file system to the last byte."""
     with open(folder / "filler", "wb", buffering=0) as f:

@@ -322,16 +322,6 @@ def test_maps_go_to_a_fifo_and_through_a_symlink(tmp_path, dicetrace_cli):
 # -- a full disk: --png, --rrd, the chunks ---------------------------------------------------------------------------
 
 
-@pytest.fixture
-def tmpfs(tmp_path, mount_small_tmpfs):
-    """A 64 KiB tmpfs folder (root only; unmounted in teardown)."""
-    d = tmp_path / "small"
-    d.mkdir()
-    if not mount_small_tmpfs(d):
-        pytest.skip("needs root to mount a small tmpfs (the injected-ENOSPC variants cover the rest)")
-    return d
-
-
 def test_maps_onto_a_full_disk_are_one_line_and_keep_the_old_maps(snapshot, fill_fs, tmp_path, tmpfs, dicetrace_cli, assert_one_line_error):
     (tmpfs / "m.png").write_bytes(b"old map")
     (tmpfs / "m.rrd").write_bytes(b"old scan map")
