@@ -95,3 +95,14 @@ def test_ctrl_c_while_the_command_loads_is_one_line_and_exit_130(tmp_path, entry
 def test_ctrl_c_in_a_commands_first_seconds_is_one_line_and_exit_130(tmp_path, entry, args, at, as_import_error):
     _assert_interrupted(_interrupted_run(tmp_path, entry, args, at, as_import_error=as_import_error))
     assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-2", "2.5"])
+def test_a_numba_thread_count_that_is_none_is_one_line(tmp_path, monkeypatch, dicetrace_cli, assert_one_line_error,
+                                                       value):
+    """``NUMBA_NUM_THREADS=abc`` once let numba print its own traceback-shaped warning (and ``0`` fail its import):
+    one line naming the variable, exit 2, nothing written."""
+    monkeypatch.setenv("NUMBA_NUM_THREADS", value)
+    res = dicetrace_cli("scan", "--window", "home", "--res", "3", "--out", "s", cwd=tmp_path)
+    assert_one_line_error(res, "NUMBA_NUM_THREADS", repr(value), "integer >= 1")
+    assert list(tmp_path.iterdir()) == []

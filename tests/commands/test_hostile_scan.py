@@ -130,6 +130,8 @@ BAD = [
     case([*HOME3, "--set", "k=inf"], "--set", "k"),
     case([*HOME3, "--set", "friction=coulomb"], "--set", "friction"),
     case([*HOME3, "--set", "k"], "--set", "NAME=VALUE"),
+    case([*HOME3, "--set", "gamma=0.01", "--set", "gamma=0.02"], "--set gamma", "twice", "gamma=0.01", "gamma=0.02"),
+    case([*HOME3, "--set", "gamma=0.01", "--set", "mu=0.5", "--set", "gamma = 0.01"], "--set gamma", "twice"),
     # Dask (items 5, 6) and the rest of the options
     case([*HOME3, "--scheduler", "tcp://x y"], "--scheduler", "'tcp://x y'"),
     case([*HOME3, "--scheduler", "tcp://127.0.0.1:99999"], "--scheduler", "99999"),

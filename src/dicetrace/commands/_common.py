@@ -78,6 +78,26 @@ def _print_err(line: str) -> None:
             _silence(2)
 
 
+#: Environment variables numba reads as it loads, with what they must be: an integer >= 1 (numba would warn
+#: with a traceback's text for a word and keep its default, or fail to load for 0).
+NUMBA_INT_ENV = ("NUMBA_NUM_THREADS",)
+
+
+def check_environment() -> None:
+    """Refuse (:class:`BadInput`, one line naming the variable) what numba would choke on in the environment."""
+    for name in NUMBA_INT_ENV:
+        text = os.environ.get(name)
+        if text is None or not text.strip():
+            continue
+        try:
+            ok = int(text.strip()) >= 1
+        except ValueError:
+            ok = False
+        if not ok:
+            raise BadInput(f"{name}={text!r} in the environment is not a number of threads (an integer >= 1): "
+                           f"set one, or unset it (every core)")
+
+
 def say(line: str) -> None:
     """Print ``line`` on standard error, if it can be: closed (``2>&-``), full (``/dev/full``) or gone, what a
     command says is lost, and never decides its exit code or what it writes."""
@@ -181,6 +201,7 @@ def run_app(app: typer.Typer) -> None:
             warnings.showwarning = show
             try:
                 try:
+                    check_environment()
                     with compile_notice():
                         rc = app(standalone_mode=False)
                 except Exception:

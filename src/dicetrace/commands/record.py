@@ -261,7 +261,7 @@ def register(app: typer.Typer) -> None:
             None, "--nudge", help="Compare with a second throw whose IC is the first one's times (1 + NUDGE), e.g. 1e-6: "
             "both dice side by side and their divergence on a log scale."
         ),
-        preset: Optional[str] = typer.Option(None, "--preset", help=PRESET_HELP + " [default: seed]"),
+        preset: Optional[str] = typer.Option(None, "--preset", help=PRESET_HELP + " \\[default: seed]"),
         integrator: opts.IntegratorOption = None,
         dt: opts.DtOption = None,
         t_max: opts.TMaxOption = None,

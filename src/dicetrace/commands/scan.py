@@ -171,7 +171,7 @@ def parse_overrides(preset, items: List[str]) -> dict:
     if not items:
         return {}
     names = {f.name: f for f in fields(preset) if f.name != "name"}
-    changes = {}
+    changes, given = {}, {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip().replace("-", "_")
@@ -179,6 +179,9 @@ def parse_overrides(preset, items: List[str]) -> dict:
             fail(f"--set needs NAME=VALUE with NAME one of {', '.join(sorted(names))}, got {item!r}")
         current = getattr(preset, key)
         text = text.strip()
+        if key in given:  # the last one would win, silently
+            fail(f"--set {key} given twice ({key}={given[key]}, {key}={text}): give each parameter once")
+        given[key] = text
         if isinstance(current, bool):
             if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
                 fail(f"--set {key} needs true or false, got {text!r}")

@@ -218,8 +218,15 @@ def _manifest_metadata(path: Path) -> dict:
 
 
 def read_manifest(folder) -> dict:
-    """The scan folder's manifest: its definition (``"definition"``), dicetrace version, size and creation time."""
+    """The scan folder's manifest: its definition (``"definition"``), dicetrace version, size and creation time.
+
+    FileNotFoundError where ``folder`` holds no scan (or does not exist), NotADirectoryError where it is a file
+    (the manifest itself included: the scan is its folder), ValueError where the manifest cannot be read.
+    """
     folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        hint = f": give its folder, {str(folder.parent)!r}" if folder.name in (MANIFEST, LEGACY_MANIFEST) else ""
+        raise NotADirectoryError(f"{str(folder)!r} is a file, not a dicetrace scan folder{hint}")
     p = folder / MANIFEST
     if not p.is_file():
         p = folder / LEGACY_MANIFEST
