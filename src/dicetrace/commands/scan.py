@@ -229,30 +229,31 @@ def _status_summary(out: Path, quiet: bool) -> bool:
     return bool(failed)
 
 
-def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers, *,
-                    maps=(), local_workers=None) -> None:
-    """Check the run's size before any work: memory (a chunk, the maps, local Dask workers) and disk first, then
-    the time (calibrated: refused beyond MAX_UNCONFIRMED_S without --yes); say it when large.
-
-    ``maps``: the map options given (``--png``, ``--rrd``: drawn from the whole scan in memory);
-    ``local_workers``: the processes of a local ``--dask`` cluster (None: no local cluster).
-    """
+def _check_fits(est, defn, out: Path, maps, local_workers) -> None:
+    """Refuse (one line) a run whose chunk in flight, maps or local Dask workers would not fit in memory, or whose
+    new chunks would not fit on the disk, by the estimate ``est``."""
     from dicetrace.scan.estimate import (  # lazy: keeps `dicetrace --help` fast (imports numba)
         DASK_WORKER_MEMORY,
-        MAP_MEMORY_PER_IC,
         MAP_MEMORY_BASE,
-        estimate_scan,
-        human_seconds,
+        MAP_MEMORY_PER_IC,
+        TYPICAL_SETS,
     )
 
-    quick = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks, calibrate=False)
     avail = available_memory()
+    heavy = est.sets_per_ic is not None and est.sets_per_ic > TYPICAL_SETS
+    probed = f" ({est.sets_per_ic:,.0f} contact sets per IC on a probe)" if heavy else ""
     if avail is not None:
-        if quick.chunk_memory * 2 > avail:
-            fail(f"--chunk {defn.chunk:,}: one chunk needs about {human_bytes(quick.chunk_memory)} of memory, "
-                 f"{human_bytes(avail)} available: use a smaller --chunk")
+        if est.ic_memory * 2 > avail:
+            fail(f"--t-max {fmt_num(defn.config.numerics.t_max_s)}: one IC's row needs about "
+                 f"{human_bytes(est.ic_memory)} of memory{probed}, {human_bytes(avail)} available: use a shorter "
+                 "--t-max" + (" or scan without --events" if defn.events else ""))
+        if est.chunk_memory * 2 > avail:
+            ics = min(defn.chunk, defn.size)
+            fail(f"--chunk {defn.chunk:,}: one chunk{'' if ics == defn.chunk else f' ({ics:,} ICs)'} needs about "
+                 f"{human_bytes(est.chunk_memory)} of memory{probed}, {human_bytes(avail)} available: use a smaller "
+                 "--chunk")
         if local_workers is not None:
-            need = local_workers * (DASK_WORKER_MEMORY + quick.chunk_memory)
+            need = local_workers * (DASK_WORKER_MEMORY + est.chunk_memory)
             if need > avail:
                 fail(f"--workers {local_workers:,}: a local Dask cluster of {local_workers:,} worker process(es) needs "
                      f"about {human_bytes(need)} of memory, {human_bytes(avail)} available: use fewer --workers")
@@ -260,10 +261,28 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
         if maps and need > avail:
             fail(f"{' and '.join(maps)}: drawing the map of {defn.size:,} ICs needs about {human_bytes(need)} of "
                  f"memory, {human_bytes(avail)} available: scan without {' and '.join(maps)}, or a smaller grid")
-    if quick.free_bytes is not None and quick.bytes > quick.free_bytes:
-        fail(f"--out {str(out)!r}: this run writes about {human_bytes(quick.bytes)} ({quick.ics_todo:,} ICs), "
-             f"only {human_bytes(quick.free_bytes)} free there: free space, or scan in parts with --max-chunks N")
+    if est.free_bytes is not None and est.bytes > est.free_bytes:
+        fail(f"--out {str(out)!r}: this run writes about {human_bytes(est.bytes)} ({est.ics_todo:,} ICs{probed}), "
+             f"only {human_bytes(est.free_bytes)} free there: free space, or scan in parts with --max-chunks N")
+
+
+def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers, *,
+                    maps=(), local_workers=None) -> None:
+    """Check the run's size before any work: memory (a chunk, the maps, local Dask workers) and disk first, then
+    the time (calibrated: refused beyond MAX_UNCONFIRMED_S without --yes); say it when large.
+
+    The calibrating probe also counts the throws' contact sets: memory and disk are checked again with what they
+    take (a throw that never settles can record millions).  ``maps``: the map options given (``--png``,
+    ``--rrd``: drawn from the whole scan in memory); ``local_workers``: the processes of a local ``--dask``
+    cluster (None: no local cluster).
+    """
+    from dicetrace.scan.estimate import estimate_scan, human_seconds  # lazy: keeps `dicetrace --help` fast
+
+    quick = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks, calibrate=False)
+    _check_fits(quick, defn, out, maps, local_workers)
     est = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
+    if est.sets_per_ic is not None:
+        _check_fits(est, defn, out, maps, local_workers)
     if est.seconds is not None and est.seconds > MAX_UNCONFIRMED_S and not yes:
         # refuse only on an estimate that holds: measure once more (a busy moment can slow one measure down)
         again = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
