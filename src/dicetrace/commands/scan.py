@@ -16,7 +16,10 @@ The output folder holds the rolls table ``rolls/part-*.parquet``, written
 chunk by chunk, and the manifest ``_scan.parquet`` (no rows; the scan's
 definition and chunk log in its metadata): any Parquet reader reads ``OUT/``
 as it is (``OUT/rolls/`` too, even while a scan writes); re-running the same command
-resumes; a different definition against the folder is refused, and so is
+resumes (each finished chunk checked against its checksum and the definition in its own
+metadata; one not logged yet adopted once its content is the chunk's; anything that is
+not the scan's refused by name); a different definition against the folder is refused
+(the definitions compared by value, the field that differs named), and so is
 resuming on another ``--device`` than the scan started on (the definition
 and every chunk's metadata record the device: ``cpu`` or ``cuda: <GPU name>``).  ``--png`` draws the outcome map,
 ``--rrd`` writes the interactive scan map for the Rerun viewer.
@@ -25,14 +28,18 @@ Every option and output (``--out``, ``--png``, ``--rrd``) is checked before
 any work (``--device cuda`` without a GPU too: on a ``--scheduler`` cluster,
 by a worker); a large run says its estimated time and disk first (the time from
 the warm kernels' throughput on a probe, at the machine's present load: a
-first run's compile is not counted), refuses what the disk cannot hold, and
+first run's compile is not counted; the probe's throws' contact sets count in
+the disk and memory), refuses what the disk or the memory cannot hold, and
 asks for ``--yes`` beyond ``MAX_UNCONFIRMED_S`` (measured twice before it
 refuses).  One writer per folder: a second scan into a folder
 being written waits ``--wait`` seconds for it, then refuses.
 
 Exit codes: 0 done; 1 with ``--strict`` when an IC ended in a numerical
 failure (non_finite, blow_up); 2 bad input (or a folder holding another
-scan, or being written by one); 130 interrupted (re-run to resume).
+scan, or being written by one); 130 interrupted (re-run to resume; a run
+interrupted or failing before its first chunk leaves no scan in a new
+folder).  What the scan says on standard error decides nothing: closed or
+full, the data is written and the exit code is the same.
 """
 
 from __future__ import annotations
