@@ -33,7 +33,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from dicetrace.ics import Grid
-from dicetrace.scan import CorruptChunkError, ForeignFileError, read_manifest, read_scan, read_scan_table, scan
+from dicetrace.scan import CorruptChunkError, read_manifest, read_scan, read_scan_table, scan
 from dicetrace.scan.definition import describe_differences
 from dicetrace.scan.folder import (
     CHUNK_LOG_KEY,
@@ -44,14 +44,10 @@ from dicetrace.scan.folder import (
     _write_manifest,
     read_chunk_log,
 )
+from scan_rows import rows as _data
 
 HOME5 = Grid("seed", "home", 5)
 ARGS = ["scan", "--window", "home", "--res", "5", "--chunk", "5", "-q"]
-
-
-def _data(table) -> pa.Table:
-    df = table.to_pandas() if isinstance(table, pa.Table) else table
-    return pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False).replace_schema_metadata(None)
 
 
 @pytest.fixture(scope="module")
