@@ -202,7 +202,7 @@ def chunk_identity(path: Path, defn: ScanDefinition, c: int, schema=None) -> str
     file checked once by this process is not read again while its size and
     modification time hold.
     """
-    key = (str(Path(path).absolute()), defn.canonical(), c)
+    key = (str(Path(path).absolute()), defn.digest(), c)
     try:
         st = os.stat(path)
         if schema is None and _IDENTIFIED.get(key) == (st.st_size, st.st_mtime_ns):
@@ -254,6 +254,8 @@ def _metadata_why(schema, defn: ScanDefinition, c: int) -> str | None:
         return f"its metadata says it is chunk {index!r}, not chunk {c}"
     if "scan" not in meta:
         return "its metadata names no scan definition"
+    if json.dumps(as_written_now(meta["scan"]), sort_keys=True) == defn.canonical():  # as written: the same (fast)
+        return None
     diffs = describe_differences(as_written_now(meta["scan"]), defn.to_dict())
     if diffs:
         return f"its metadata says it belongs to another scan ({'; '.join(diffs[:2])}{'; ...' if len(diffs) > 2 else ''})"

@@ -10,6 +10,7 @@ compared on resume, and shipped to Dask workers as a plain dict.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -138,8 +139,19 @@ class ScanDefinition:
         return GRID_ROLLS_EVENTS_SCHEMA if self.events else GRID_ROLLS_SCHEMA
 
     def canonical(self) -> str:
-        """Canonical JSON (what resuming compares)."""
-        return json.dumps(self.to_dict(), sort_keys=True)
+        """Canonical JSON: :meth:`to_dict` with sorted keys (made once per definition: a scan of points holds
+        every point)."""
+        text = self.__dict__.get("_canonical")
+        if text is None:
+            text = self.__dict__["_canonical"] = json.dumps(self.to_dict(), sort_keys=True)  # frozen: not setattr
+        return text
+
+    def digest(self) -> str:
+        """SHA-256 of :meth:`canonical` (a short key for the definition)."""
+        text = self.__dict__.get("_digest")
+        if text is None:
+            text = self.__dict__["_digest"] = hashlib.sha256(self.canonical().encode()).hexdigest()
+        return text
 
 
 def as_written_now(d):
