@@ -1,11 +1,12 @@
 """Shared fixtures: the reference data of the 2019 program (tests/data/reference), the golden-file switch, and
 ``dicetrace`` run in-process (the console script's own ``run_app``, without the ~2 s start-up of a new
-interpreter: numba's cache, rerun, pandas)."""
+interpreter: numba's cache, rerun, pandas), and a byte-for-byte snapshot of a folder."""
 
 from __future__ import annotations
 
 import os
 import shutil
+import stat
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -108,6 +109,34 @@ def _assert_one_line_error(res: CliResult, *names: str) -> str:
 def assert_one_line_error():
     """``check(result, *names)``: exit code 2, nothing on stdout, no traceback, one error line naming all ``names``."""
     return _assert_one_line_error
+
+
+# -- a folder, byte for byte ----------------------------------------------------------------------------
+
+
+def _snapshot(root: Path) -> dict:
+    """Everything under ``root``: type, bytes, mode and link target of each entry (symlinks not followed)."""
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
+        for name in dirnames + filenames:
+            p = Path(dirpath) / name
+            st_ = p.lstat()
+            rel = str(p.relative_to(root))
+            if stat.S_ISLNK(st_.st_mode):
+                out[rel] = ("link", os.readlink(p))
+            elif stat.S_ISDIR(st_.st_mode):
+                out[rel] = ("dir", stat.S_IMODE(st_.st_mode))
+            elif stat.S_ISREG(st_.st_mode):
+                out[rel] = ("file", p.read_bytes(), stat.S_IMODE(st_.st_mode))
+            else:
+                out[rel] = ("special", stat.S_IFMT(st_.st_mode), st_.st_rdev)
+    return out
+
+
+@pytest.fixture
+def snapshot():
+    """``snapshot(folder)``: a dict of every entry's type, bytes, mode and link target, to compare before and after."""
+    return _snapshot
 
 
 # -- a headless browser ----------------------------------------------------------------------------

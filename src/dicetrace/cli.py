@@ -2,7 +2,11 @@
 
 Each sub-command lives in ``dicetrace.commands.<name>`` and registers itself
 on ``app``.  Bad input is reported as one line on stderr with exit code 2
-(see ``commands._common.fail``), never as a traceback.  ``--help`` shows no
+(see ``commands._common.fail``), never as a traceback; so is Ctrl-C, exit
+130, from the first moment: a handler installed before anything heavy is
+imported covers the loading of the modules (the console script and
+``python -m dicetrace`` both import this module first, and ``import
+dicetrace`` itself loads nothing heavy), then ``run_app`` takes over.  ``--help`` shows no
 type column where typer's default says nothing the help does not (``<bool>``
 on a flag, ``<str>``, ``<path>``); numbers, choices and explicit metavars
 stay.
@@ -10,15 +14,68 @@ stay.
 
 from __future__ import annotations
 
-import importlib
-import platform
-from importlib import metadata
+import os
+import signal
+import sys
 
-import typer
-from typer.core import TyperGroup
 
-import dicetrace
-from dicetrace.commands._common import run_app
+def _interrupted_while_loading(signum, frame) -> None:  # runs in a subprocess of the tests (tests/test_main.py)
+    """Ctrl-C while the command's modules load: one line and exit 130 at once (nothing has started, nothing is
+    kept): not a traceback out of whichever import it interrupted."""
+    try:
+        os.write(2, b"dicetrace: interrupted\n")
+    except OSError:  # standard error closed or full: the exit code says it
+        pass
+    os._exit(130)
+
+
+def _catch_interrupts_while_loading() -> bool:
+    """Install :func:`_interrupted_while_loading` for SIGINT, before the heavy imports below, where Python's own
+    handler is in place in the main thread; True if installed (:func:`run_app` takes over once they are done)."""
+    try:
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, _interrupted_while_loading)
+            return True
+    except ValueError:  # not the main thread: imported, not run
+        pass
+    return False
+
+
+def _occupy_closed_std_fds() -> None:
+    """Open /dev/null on fds 0, 1 and 2 where they are closed (``2>&-``): otherwise the next file opened (a scan's
+    lock, a chunk) would get that number, and whatever a library writes to standard error would land in it.  A
+    closed standard error becomes a ``sys.stderr`` on /dev/null (None, ``print(file=sys.stderr)`` would write to
+    standard output): what a command says there is dropped, and decides nothing.  A closed standard output stays
+    None: output asked for there is refused (``sinks._common``), never dropped."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            try:
+                got = os.open(os.devnull, os.O_RDWR)
+            except OSError:
+                return
+            if got != fd:  # a lower one was free after all: not ours to fill
+                os.close(got)
+    if sys.stderr is None:
+        try:
+            sys.stderr = open(2, "w", closefd=False, errors="backslashreplace")  # noqa: SIM115 (the process's own)
+        except OSError:
+            pass
+
+
+_occupy_closed_std_fds()
+_LOADING = _catch_interrupts_while_loading()
+
+import importlib  # noqa: E402  (the imports after the handler: typer, rich, the commands' modules)
+import platform  # noqa: E402
+from importlib import metadata  # noqa: E402
+
+import typer  # noqa: E402
+from typer.core import TyperGroup  # noqa: E402
+
+import dicetrace  # noqa: E402
+from dicetrace.commands._common import run_app  # noqa: E402
 
 #: typer's default type labels that add nothing to an option's help (a flag's ``<bool>``, text, paths).
 NOISE_TYPES = frozenset({"<bool>", "<str>", "<path>", "<list[str]>", "<list[path]>"})
@@ -100,6 +157,8 @@ def _register() -> None:
 
 
 _register()
+if _LOADING:  # loaded: Ctrl-C is KeyboardInterrupt again, which run_app turns into its one line
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def main() -> None:

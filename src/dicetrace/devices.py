@@ -5,7 +5,8 @@
 does for every batch its studies run),
 ``"cuda"`` (a GPU; refused with :class:`DeviceError` where there is none) or
 ``"auto"`` (a GPU where numba-cuda finds one, else the CPU; one line on
-standard error says which, once per process).  The GPU runs the CPU's own
+standard error says which, once per process; numba-cuda's simulator,
+``NUMBA_ENABLE_CUDASIM=1``, is no GPU to it).  The GPU runs the CPU's own
 kernels, compiled for the device (``dicetrace.core.gpu``) with the CPU's
 arithmetic (no fused multiply-adds on either): every preset's throws as on
 the CPU up to the last-ulp rounding of the device's sin, cos and exp.
@@ -68,9 +69,14 @@ _SAID: set = set()
 
 
 def _say_once(line: str) -> None:
+    """Say ``line`` on standard error, once per process; a closed or full standard error says nothing (what it
+    would say never decides the run)."""
     if line not in _SAID:
         _SAID.add(line)
-        sys.stderr.write(f"dicetrace: {line}\n")
+        try:
+            sys.stderr.write(f"dicetrace: {line}\n")
+        except (AttributeError, OSError, ValueError):  # None (closed at start), a full device, a closed stream
+            pass
 
 
 def check_device(device) -> str:
@@ -84,8 +90,9 @@ def resolve_device(device: str) -> str:
     """``"cpu"`` or ``"cuda"``: where ``device`` runs here.
 
     ``"cuda"`` without a usable GPU is a :class:`DeviceError` (one line, the
-    reason); ``"auto"`` takes the GPU where there is one and says which
-    device it chose on standard error, once per process.
+    reason); ``"auto"`` takes the GPU where there is one (never numba-cuda's
+    simulator) and says which device it chose on
+    standard error, once per process.
     """
     device = check_device(device)
     if device == "cpu":
@@ -95,11 +102,21 @@ def resolve_device(device: str) -> str:
         if why is not None:
             raise DeviceError(f"device 'cuda': {why}")
         return "cuda"
+    if why is None and _simulated():
+        why = "NUMBA_ENABLE_CUDASIM=1: numba-cuda's simulator is no GPU; device 'cuda' runs on it"
     if why is not None:
         _say_once(f"device auto: running on the CPU ({why})")
         return "cpu"
     _say_once(f"device auto: running on the GPU ({device_label('cuda')})")
     return "cuda"
+
+
+def _simulated() -> bool:
+    """Whether numba-cuda's simulator stands in for the GPU (``NUMBA_ENABLE_CUDASIM=1``): ``"cuda"`` runs on it
+    (the tests of the GPU path do), ``"auto"`` never takes it for a GPU.  Asked once the GPU backend loaded."""
+    from dicetrace.core import gpu
+
+    return gpu.simulated()
 
 
 def device_label(device: str) -> str:

@@ -15,8 +15,6 @@ from __future__ import annotations
 
 from enum import IntEnum
 
-import numpy as np
-
 
 class Status(IntEnum):
     """The end of a throw.
@@ -77,6 +75,8 @@ class Status(IntEnum):
     @classmethod
     def labels_of(cls, codes) -> np.ndarray:
         """Labels (object array) of an array of integer codes."""
+        import numpy as np  # here, not at the top: ``import dicetrace`` (which imports this module) loads no numpy
+
         return np.asarray(LABELS, dtype=object)[np.asarray(codes, dtype=np.int64)]
 
 

@@ -1,39 +1,13 @@
-"""Fixtures of the hostile-input tests: a byte-for-byte snapshot of a folder, and a small full-able tmpfs."""
+"""Fixtures of the hostile-input tests: a small full-able tmpfs (the folder snapshot is tests/conftest.py's)."""
 
 from __future__ import annotations
 
 import gc
 import os
-import stat
 import subprocess
 from pathlib import Path
 
 import pytest
-
-
-def _snapshot(root: Path) -> dict:
-    """Everything under ``root``: type, bytes, mode and link target of each entry (symlinks not followed)."""
-    out = {}
-    for dirpath, dirnames, filenames in os.walk(root, followlinks=False):
-        for name in dirnames + filenames:
-            p = Path(dirpath) / name
-            st_ = p.lstat()
-            rel = str(p.relative_to(root))
-            if stat.S_ISLNK(st_.st_mode):
-                out[rel] = ("link", os.readlink(p))
-            elif stat.S_ISDIR(st_.st_mode):
-                out[rel] = ("dir", stat.S_IMODE(st_.st_mode))
-            elif stat.S_ISREG(st_.st_mode):
-                out[rel] = ("file", p.read_bytes(), stat.S_IMODE(st_.st_mode))
-            else:
-                out[rel] = ("special", stat.S_IFMT(st_.st_mode), st_.st_rdev)
-    return out
-
-
-@pytest.fixture
-def snapshot():
-    """``snapshot(folder)``: a dict of every entry's type, bytes, mode and link target, to compare before and after."""
-    return _snapshot
 
 
 def _unmount(d: Path) -> None:
@@ -60,6 +34,16 @@ def mount_small_tmpfs():
     yield mount
     for d in mounted:
         _unmount(d)
+
+
+@pytest.fixture
+def tmpfs(tmp_path, mount_small_tmpfs):
+    """A 64 KiB tmpfs folder (root only; unmounted in teardown)."""
+    d = tmp_path / "small"
+    d.mkdir()
+    if not mount_small_tmpfs(d):
+        pytest.skip("needs root to mount a small tmpfs (the injected-ENOSPC variants cover the rest)")
+    return d
 
 
 def _fill(folder: Path) -> None:

@@ -79,3 +79,21 @@ def test_each_title_is_its_modules_own(name):
         assert first.rstrip().rstrip(".") == f'"""Study {letter} ({name}): {TITLES[name]}'
     else:
         assert first.rstrip().rstrip(".") == f'"""Study {name}: {INTEGRATOR_TITLES[name]}'
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_shows_every_bracket_of_the_help_texts(dicetrace_cli, tmp_path, monkeypatch, command):
+    """Rich reads ``[word]`` in a help text as markup and drops it: ``analyze --help`` said ``pip install
+    'dicetrace'`` for ``'dicetrace[cuda]'``, ``record --help`` lost ``[default: seed]``.  Every bracketed part of
+    every option's help text is shown as written (escaped ``\\[`` in the source where it would read as markup)."""
+    import typer.main
+
+    monkeypatch.setenv("COLUMNS", "2000")  # one line per option: nothing wrapped
+    res = dicetrace_cli(command, "--help", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    shown = " ".join(res.stdout.split())
+    params = typer.main.get_command(app).commands[command].params
+    brackets = [m.group(0).lstrip("\\") for p in params for m in re.finditer(r"\\?\[[^\[\]]*\]", p.help or "")]
+    assert all(b in shown for b in brackets), [b for b in brackets if b not in shown]
+    if command == "analyze":
+        assert "pip install 'dicetrace[cuda]'" in shown

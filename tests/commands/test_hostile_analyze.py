@@ -232,3 +232,95 @@ def test_a_gpu_asked_for_where_there_is_none_is_one_line_before_any_work(work, s
     assert_one_line_error(dicetrace_cli("analyze", "cells", "--quick", "--device", "cuda", "--out", OUT, cwd=work),
                           "--device", "cuda")
     assert no_work == [] and not (work / OUT).exists() and snapshot(work) == before
+
+
+# -- a full disk while the studies write (issue 47 F2) -------------------------------------------------------------
+
+
+def _half_then_enospc(write):
+    """``write`` (Path.write_bytes or DataFrame.to_csv) made to write half its content, then fail as a full disk."""
+    import errno
+    import io
+
+    def full(self, target, *args, **kwargs):
+        if write.__name__ == "to_csv":
+            buf = io.StringIO()
+            write(self, buf, *args, **kwargs)
+            data = buf.getvalue().encode()
+        else:
+            data = bytes(target)
+            target = self
+        with open(target, "wb") as f:
+            f.write(data[: len(data) // 2])
+        raise OSError(errno.ENOSPC, "No space left on device")
+    return full
+
+
+def test_figures_tables_and_results_on_a_full_disk_keep_the_old_files_and_name_the_new(tmp_path, monkeypatch,
+                                                                                     snapshot):
+    """A figure, a CSV table, a results JSON and REPORT.md whose write fails half way (a full disk): the old file
+    is whole under its name, no temporary is left, and the error names the file (once: a 0-byte or half figure under
+    its final name, and a bare 'No space left on device')."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from dicetrace.sinks._common import OutputError
+    from dicetrace.studies.context import Output, write_json
+    from dicetrace.studies.report import build
+
+    out = Output(tmp_path)
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [1, 0])
+    out.save_fig(fig, "a_line")
+    out.write_csv(pd.DataFrame({"x": range(100)}), "a_table")
+    write_json(out.res_dir / "cells.json", {"study": "cells", "quick": True, "n": 1})
+    build(tmp_path)
+    before = snapshot(tmp_path)
+
+    with monkeypatch.context() as mp:
+        mp.setattr(Path, "write_bytes", _half_then_enospc(Path.write_bytes))
+        fig, ax = plt.subplots()
+        ax.plot([0, 1], [0, 1])
+        with pytest.raises(OutputError, match=r"cannot write figure '.*figures/a_line\.png': No space left on device"):
+            out.save_fig(fig, "a_line")
+    with monkeypatch.context() as mp:
+        mp.setattr(pd.DataFrame, "to_csv", _half_then_enospc(pd.DataFrame.to_csv))
+        with pytest.raises(OutputError, match=r"cannot write table '.*results/a_table\.csv': No space left"):
+            out.write_csv(pd.DataFrame({"x": range(200)}), "a_table")
+    with monkeypatch.context() as mp:
+        mp.setattr(Path, "write_text", lambda self, text: _half_then_enospc(Path.write_bytes)(self, text.encode()))
+        with pytest.raises(OutputError, match=r"cannot write results file '.*results/cells\.json': No space left"):
+            write_json(out.res_dir / "cells.json", {"study": "cells", "quick": True, "n": 2})
+        with pytest.raises(OutputError, match=r"cannot write report '.*REPORT\.md': No space left"):
+            build(tmp_path)
+    assert snapshot(tmp_path) == before  # every old file whole, no temporary left
+
+
+@pytest.mark.slow
+def test_analyze_onto_a_full_disk_is_one_line_naming_the_file_and_leaves_no_broken_file(tmp_path, tmpfs,
+                                                                                       dicetrace_cli):
+    """``analyze cells --quick`` into a 64 KiB file system: its grid cache is skipped with a warning, then a figure
+    or a results file does not fit. One error line naming that file (exit 2); everything under OUT is whole:
+    PNGs decode, JSON parses, no 0-byte file, no temporary."""
+    import json
+
+    from PIL import Image
+
+    res = dicetrace_cli("analyze", "cells", "--quick", "--out", str(tmpfs / "OUT"), cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    assert "Traceback" not in res.stderr
+    errors = [line for line in res.stderr.splitlines() if line.startswith("dicetrace: error: ")]
+    assert len(errors) == 1 and f"'{tmpfs / 'OUT'}/" in errors[0] and "No space left on device" in errors[0], \
+        res.stderr
+    files = [p for p in (tmpfs / "OUT").rglob("*") if p.is_file()]
+    assert not [p for p in files if p.name.startswith(".")]  # no temporary
+    for p in files:
+        assert p.stat().st_size > 0, p
+        if p.suffix == ".png":
+            with Image.open(p) as im:
+                im.load()  # the whole image decodes
+        elif p.suffix == ".json":
+            json.loads(p.read_text())

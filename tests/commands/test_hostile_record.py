@@ -97,6 +97,9 @@ BAD = [
     case(["--scan", "scan", "--at", "nan,1"], "--at", "non-finite"),
     case(["--scan", "scan", "--at", "0.05,0.05", "--dt", "0.01"], "--scan", "--dt"),
     case(["--scan", "scan", "--at", "0.05,0.05", "--ic", IC], "--scan", "--ic"),
+    # a point snapped to the grid says which only once every option passed (issue 47 F4: two lines once)
+    case(["--scan", "scan", "--at", "0.051,0.05", "--events"], "--events", "semi-implicit-euler"),
+    case(["--scan", "scan", "--at", "0.051,0.05", "--out", "map"], "--out", "'map'", ".rrd"),
     # sinks (--spawn, --connect, --serve) and compare options
     case([*AT, "--spawn", "--serve"], "--spawn", "--serve", "at most one"),
     case([*AT, "--spawn", "--port", "1"], "--spawn"),  # no display (unset below), or nothing listens

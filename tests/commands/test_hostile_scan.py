@@ -130,6 +130,8 @@ BAD = [
     case([*HOME3, "--set", "k=inf"], "--set", "k"),
     case([*HOME3, "--set", "friction=coulomb"], "--set", "friction"),
     case([*HOME3, "--set", "k"], "--set", "NAME=VALUE"),
+    case([*HOME3, "--set", "gamma=0.01", "--set", "gamma=0.02"], "--set gamma", "twice", "gamma=0.01", "gamma=0.02"),
+    case([*HOME3, "--set", "gamma=0.01", "--set", "mu=0.5", "--set", "gamma = 0.01"], "--set gamma", "twice"),
     # Dask (items 5, 6) and the rest of the options
     case([*HOME3, "--scheduler", "tcp://x y"], "--scheduler", "'tcp://x y'"),
     case([*HOME3, "--scheduler", "tcp://127.0.0.1:99999"], "--scheduler", "99999"),
@@ -322,16 +324,6 @@ def test_maps_go_to_a_fifo_and_through_a_symlink(tmp_path, dicetrace_cli):
 # -- a full disk: --png, --rrd, the chunks ---------------------------------------------------------------------------
 
 
-@pytest.fixture
-def tmpfs(tmp_path, mount_small_tmpfs):
-    """A 64 KiB tmpfs folder (root only; unmounted in teardown)."""
-    d = tmp_path / "small"
-    d.mkdir()
-    if not mount_small_tmpfs(d):
-        pytest.skip("needs root to mount a small tmpfs (the injected-ENOSPC variants cover the rest)")
-    return d
-
-
 def test_maps_onto_a_full_disk_are_one_line_and_keep_the_old_maps(snapshot, fill_fs, tmp_path, tmpfs, dicetrace_cli, assert_one_line_error):
     (tmpfs / "m.png").write_bytes(b"old map")
     (tmpfs / "m.rrd").write_bytes(b"old scan map")
@@ -391,6 +383,43 @@ def test_rrd_onto_a_full_disk_does_not_hang(tmp_path, tmpfs, fill_fs, dicetrace_
     (line,) = res.stderr.strip().splitlines()
     assert "No space left on device" in line and "Traceback" not in res.stderr
     assert sorted(p.name for p in tmpfs.iterdir()) == ["filler"]
+
+
+# -- standard error decides nothing (issue 47 F3) ----------------------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("stderr", ["closed", "/dev/full"])
+def test_a_scan_writes_its_data_and_exits_0_whatever_standard_error_is(tmp_path, stderr):
+    """With standard error closed (``2>&-``: once exit 70, nothing written) or on /dev/full (once the data, then
+    exit 2), a scan writes its folder, puts nothing on standard output, and exits 0: what it says there decides
+    nothing.  Its summary lines, a device line and a warning all try to reach it."""
+    import subprocess
+    import sys
+
+    from dicetrace.ics import Grid
+    from dicetrace.scan import read_scan, scan
+
+    if stderr == "/dev/full" and not Path("/dev/full").exists():
+        pytest.skip("no /dev/full here")
+    scan(Grid("seed", "home", 3), tmp_path / "s", chunk=4, max_chunks=1)
+    (tmp_path / "s" / "rolls" / "part-000000.parquet").write_bytes(b"PAR1 damaged PAR1")  # a warning to say
+    args = [sys.executable, "-m", "dicetrace", "scan", "--window", "home", "--res", "3", "--chunk", "4", "--out", "s",
+            "--device", "auto", "--png", "m.png"]
+    if stderr == "closed":
+        res = subprocess.run(["sh", "-c", '"$0" "$@" 2>&-', *args], cwd=tmp_path, capture_output=True, text=True,
+                             timeout=300)
+    else:
+        with open("/dev/full", "w") as full:
+            res = subprocess.run(args, cwd=tmp_path, stdout=subprocess.PIPE, stderr=full, text=True, timeout=300)
+    assert res.returncode == 0, res
+    assert res.stdout == ""
+    got = read_scan(tmp_path / "s")
+    want = scan(Grid("seed", "home", 3), chunk=4).to_pandas()
+    assert got[["ic_id", "outcome", "steps", "contact_sequence"]].equals(want[["ic_id", "outcome", "steps",
+                                                                                "contact_sequence"]])
+    assert (tmp_path / "m.png").read_bytes().startswith(b"\x89PNG")
+    assert sorted(p.name for p in (tmp_path / "s").iterdir()) == [".dicetrace-scan.lock", "_scan.parquet", "rolls"]
 
 
 # -- property --------------------------------------------------------------------------------------------------------

@@ -156,3 +156,17 @@ def test_the_scan_command_names_the_table_folder(tmp_path, dicetrace_cli):
     assert res.returncode == 0, res.stderr
     assert "→ s (a Parquet dataset: read the folder as it is)" in res.stderr
     assert len(pl.scan_parquet(tmp_path / "s").collect()) == 16
+
+
+def test_read_manifest_of_a_file_says_it_is_a_file(folder, tmp_path):
+    """Given a file -- any, or the manifest itself -- read_manifest says so (a FileNotFoundError once, for a file
+    that exists); a path that holds no scan is still FileNotFoundError."""
+    with pytest.raises(NotADirectoryError, match=r"_scan\.parquet' is a file, not a dicetrace scan folder: give its "
+                                                 r"folder, '.*home'"):
+        read_manifest(folder / MANIFEST)
+    (tmp_path / "notes.txt").write_text("mine")
+    with pytest.raises(NotADirectoryError, match=r"notes\.txt' is a file"):
+        read_manifest(tmp_path / "notes.txt")
+    with pytest.raises(FileNotFoundError, match="no _scan.parquet"):
+        read_manifest(tmp_path / "nowhere")
+    assert read_manifest(folder)["n_ics"] == 49

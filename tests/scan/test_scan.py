@@ -28,6 +28,7 @@ from dicetrace.scan import (
     scan,
 )
 from dicetrace.simulate import simulate
+from scan_rows import rows as _data
 
 HOME21 = Grid("seed", "home", 21)
 
@@ -35,12 +36,6 @@ HOME21 = Grid("seed", "home", 21)
 def cli(*args: str, cwd=None, timeout=300) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "dicetrace.cli", *args], cwd=cwd, capture_output=True, text=True,
                           timeout=timeout)
-
-
-def _data(table) -> pa.Table:
-    """Rows and columns only (no metadata, nullability flags or chunk layout), comparable with ``equals``."""
-    df = table.to_pandas() if isinstance(table, pa.Table) else table
-    return pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False).replace_schema_metadata(None)
 
 
 @pytest.fixture(scope="module")

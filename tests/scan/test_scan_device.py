@@ -74,6 +74,54 @@ def test_auto_without_a_gpu_runs_on_the_cpu_says_so_once_and_records_cpu(tmp_pat
     assert got[ROW_COLUMNS].equals(want[ROW_COLUMNS])
 
 
+def test_auto_never_takes_numba_cudas_simulator_for_a_gpu(tmp_path):
+    """``NUMBA_ENABLE_CUDASIM=1`` (without NUMBA_DISABLE_JIT, whose device kernels fail): ``--device auto`` runs on
+    the CPU, says why in one line, and records the CPU (once "running on the GPU (cuda: numba-cuda simulator)",
+    exit 70, and a manifest of a simulator scan that refused the plain re-run)."""
+    res = cli("scan", *HOME, "--res", "3", "--chunk", "4", "--out", "s", "--device", "auto", "-q", cwd=tmp_path,
+              env={"NUMBA_ENABLE_CUDASIM": "1", "NUMBA_DISABLE_JIT": None})
+    assert res.returncode == 0, res.stderr
+    (line,) = res.stderr.strip().splitlines()
+    assert line.startswith("dicetrace: device auto: running on the CPU (") and "simulator is no GPU" in line, line
+    assert read_manifest(tmp_path / "s")["definition"]["device"] == "cpu"
+    assert chunk_devices(tmp_path / "s") == {"cpu"}
+    res = cli("scan", *HOME, "--res", "3", "--chunk", "4", "--out", "s", "-q", cwd=tmp_path, env=NO_GPU)
+    assert res.returncode == 0 and res.stderr == "", res.stderr  # the plain re-run resumes it
+
+
+@pytest.mark.parametrize("error", [RuntimeError("a device kernel failed"), KeyboardInterrupt()],
+                         ids=["error", "interrupt"])
+def test_a_run_that_fails_before_its_first_chunk_leaves_no_manifest(tmp_path, monkeypatch, dicetrace_cli, error):
+    """A run into a new folder that fails (or is interrupted) before its first chunk is written leaves no
+    manifest, no rolls/ and no lock: the next run, of any definition and on any device, starts afresh.  A folder
+    that held a manifest before keeps it."""
+    from dicetrace.scan import runner
+
+    def fails(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(runner, "compute_chunk", fails)
+    (tmp_path / "kept").mkdir()
+    out = tmp_path / "kept" / "new" / "s"
+    with pytest.raises(type(error)):
+        scan(Grid("seed", "home", 3), out, chunk=4)
+    assert list((tmp_path / "kept").iterdir()) == []  # the folders it made went too
+    (tmp_path / "mine").mkdir()
+    res = dicetrace_cli("scan", *HOME, "--res", "3", "--chunk", "4", "--out", str(tmp_path / "mine"), "-q",
+                        cwd=tmp_path)
+    assert res.returncode == (130 if isinstance(error, KeyboardInterrupt) else 70), res.stderr
+    assert list((tmp_path / "mine").iterdir()) == []  # the folder was there before: it stays, empty
+    monkeypatch.undo()
+    scan(Grid("seed", "home", 3), tmp_path / "mine", chunk=4, max_chunks=1)
+    monkeypatch.setattr(runner, "compute_chunk", fails)
+    with pytest.raises(type(error)):
+        scan(Grid("seed", "home", 3), tmp_path / "mine", chunk=4)  # a resume that fails: its folder is kept
+    assert read_manifest(tmp_path / "mine")["definition"]["device"] == "cpu"
+    assert sorted(p.name for p in (tmp_path / "mine" / "rolls").iterdir()) == ["part-000000.parquet"]
+    monkeypatch.undo()
+    assert scan(Grid("seed", "party", 3), tmp_path / "kept" / "new" / "s", chunk=4).complete  # another scan: afresh
+
+
 @pytest.mark.slow
 def test_cuda_scan_on_the_simulator_is_the_cpu_scan_and_resumes_only_on_its_device(tmp_path, dicetrace_cli):
     """A 4×4 `seed` scan with --device cuda on numba-cuda's simulator: the CPU scan's rows (outcome, steps,

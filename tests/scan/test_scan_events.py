@@ -129,6 +129,52 @@ def test_the_disk_estimate_bounds_an_events_scan(tmp_path):
     assert est.chunk_memory > estimate_scan(plain, calibrate=False).chunk_memory
 
 
+@pytest.mark.slow
+def test_the_probe_counts_the_events_of_throws_that_never_settle_and_the_estimate_bounds_their_files(tmp_path,
+                                                                                                   monkeypatch):
+    """Without damping or friction the die bounces to the time cap: thousands of events a throw (millions at
+    t_max 1e5: 32 MB a row, once estimated at 640 bytes).  The calibrating probe counts them (a throw it cut
+    short, at the rate it had, to the time cap); the estimate bounds the files written, and holds them in a
+    chunk's memory."""
+    import dicetrace.scan.estimate as E
+
+    monkeypatch.setattr(E, "SLOWEST_STEP_S", 1.0)  # calibrate this small scan (its time bound says 30 s and more)
+    cfg = make_config("physical", gamma=0.0, mu=0.0, t_max_s=300.0)  # 300,000 steps; the probe runs 20,000
+    space = Grid("seed", "home", 2)
+    defn = ScanDefinition(space, cfg, 2, events=True)
+    fixed, est = estimate_scan(defn, calibrate=False), estimate_scan(defn)
+    assert fixed.sets_per_ic is None and est.sets_per_ic > 1000
+    assert est.bytes > 10 * fixed.bytes and est.chunk_memory > 10 * fixed.chunk_memory
+    assert "contact sets per IC on a probe" in est.describe()
+    scan(defn, tmp_path / "s")
+    df = read_scan(tmp_path / "s")
+    sets = df["contact_times_s"].map(len)
+    assert (df["status"] == "time_cap").all() and sets.min() > 1000
+    assert 0.5 < est.sets_per_ic / sets.mean() < 2  # extrapolated from a fifteenth of the throw
+    on_disk = sum(f.stat().st_size for f in (tmp_path / "s" / "rolls").iterdir())
+    assert on_disk <= est.bytes  # an upper bound of the real files
+    per_event = (on_disk - defn.n_chunks * E.BYTES_PER_CHUNK) / sets.sum()
+    assert per_event < E.BYTES_PER_SET_EVENTS, per_event
+
+
+@pytest.mark.slow
+def test_a_scan_of_millions_of_events_says_so_and_what_will_not_fit_is_refused_before_any_work(tmp_path,
+                                                                                               dicetrace_cli):
+    """The issue's scan: 100 ICs that never settle, events, t_max 1e5 (about 2 million events each): its chunk
+    would need tens of GiB, refused in one line naming --chunk and the events counted, nothing written; in chunks
+    of one IC the estimate says gigabytes on disk, not 78.5 KiB."""
+    args = ["scan", "--preset", "physical", "--window", "home", "--res", "10", "--events", "--set", "gamma=0",
+            "--set", "mu=0", "--t-max", "1e5", "--out", "s"]
+    res = dicetrace_cli(*args, cwd=tmp_path)
+    assert res.returncode == 2, res.stderr
+    (line,) = res.stderr.strip().splitlines()
+    assert "--chunk" in line and "contact sets per IC on a probe" in line and "GiB of memory" in line, line
+    assert not (tmp_path / "s").exists()
+    cfg = make_config("physical", gamma=0.0, mu=0.0, t_max_s=1e5)
+    est = estimate_scan(ScanDefinition(Grid("seed", "home", 10), cfg, 1, events=True))
+    assert est.sets_per_ic > 1e6 and est.bytes > 2**30 and "GiB on disk" in est.describe()
+
+
 def test_cli_scan_events_and_record_reproduce_the_row(tmp_path, dicetrace_cli):
     out = tmp_path / "ev"
     res = dicetrace_cli("scan", "--preset", "physical", "--window", "home", "--res", "3", "--events", "--out", str(out),

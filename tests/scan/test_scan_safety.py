@@ -36,13 +36,9 @@ from dicetrace.scan.folder import (
     ScanWarning,
     read_chunk_log,
 )
+from scan_rows import rows as _data
 
 HOME5 = Grid("seed", "home", 5)
-
-
-def _data(table) -> pa.Table:
-    df = table.to_pandas() if isinstance(table, pa.Table) else table
-    return pa.Table.from_pandas(df.reset_index(drop=True), preserve_index=False).replace_schema_metadata(None)
 
 
 @pytest.fixture(scope="module")

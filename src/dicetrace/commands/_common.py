@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import signal
 import sys
 import warnings
 from pathlib import Path
@@ -74,20 +75,107 @@ def _print_err(line: str) -> None:
         try:
             print(line, file=sys.stderr, flush=True)
         except (OSError, ValueError):
-            pass
+            _silence(2)
+
+
+#: Environment variables numba reads as it loads, with what they must be: an integer >= 1 (numba would warn
+#: with a traceback's text for a word and keep its default, or fail to load for 0).
+NUMBA_INT_ENV = ("NUMBA_NUM_THREADS",)
+
+
+def check_environment() -> None:
+    """Refuse (:class:`BadInput`, one line naming the variable) what numba would choke on in the environment."""
+    for name in NUMBA_INT_ENV:
+        text = os.environ.get(name)
+        if text is None or not text.strip():
+            continue
+        try:
+            ok = int(text.strip()) >= 1
+        except ValueError:
+            ok = False
+        if not ok:
+            raise BadInput(f"{name}={text!r} in the environment is not a number of threads (an integer >= 1): "
+                           f"set one, or unset it (every core)")
+
+
+def say(line: str) -> None:
+    """Print ``line`` on standard error, if it can be: closed (``2>&-``), full (``/dev/full``) or gone, what a
+    command says is lost, and never decides its exit code or what it writes."""
+    _print_err(line)
+
+
+def stderr_is_terminal() -> bool:
+    """Whether standard error is a terminal (False when it is closed)."""
+    try:
+        return sys.stderr is not None and sys.stderr.isatty()
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
+def _silence(fd: int) -> None:
+    """After a failed write to fd 1 or 2: point it at /dev/null, so that the interpreter's exit flush (which
+    would otherwise fail again and exit 120) is quiet."""
+    with contextlib.suppress(Exception):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)
 
 
 def _silence_stdout() -> None:
-    """After a failed write to stdout: point fd 1 at /dev/null so that the interpreter's exit flush is quiet."""
-    with contextlib.suppress(Exception):
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, 1)
-        os.close(devnull)
+    _silence(1)
+
+
+def _settle_stderr() -> None:
+    """Flush standard error as a command ends; a failure (a full device) silences it: see :func:`say`."""
+    if sys.stderr is not None:
+        try:
+            sys.stderr.flush()
+        except (OSError, ValueError):
+            _silence(2)
 
 
 def _flush_stdout() -> None:
     if sys.stdout is not None:
         sys.stdout.flush()
+
+
+class _Interrupts:
+    """While a command runs: Ctrl-C raises KeyboardInterrupt, as Python's own handler does, and is remembered
+    (``seen``), so that an interrupt a library turned into another error (an extension module's ``ImportError:
+    initialization failed``) still ends as one: one line, exit 130.  Only where Python's handler is in place, in
+    the main thread; restored on exit."""
+
+    #: The line a command printed on its own interrupt (:func:`say_interrupted`), for this run.
+    said: str | None = None
+
+    def __init__(self) -> None:
+        self.seen = False
+        self.installed = False
+        _Interrupts.said = None
+
+    def _handler(self, signum, frame) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __enter__(self) -> "_Interrupts":
+        try:
+            if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+                signal.signal(signal.SIGINT, self._handler)
+                self.installed = True
+        except ValueError:  # not the main thread
+            pass
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.installed:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def say_interrupted(line: str) -> None:
+    """Say on standard error what an interrupt leaves (a command's own line, e.g. what a scan kept), instead of
+    :func:`run_app`'s plain ``dicetrace: interrupted``: still one line."""
+    _Interrupts.said = line
+    _print_err(line)
 
 
 def run_app(app: typer.Typer) -> None:
@@ -108,46 +196,59 @@ def run_app(app: typer.Typer) -> None:
         _print_err(f"dicetrace: error: {one_line(msg)}")
         sys.exit(code)
 
-    with warnings.catch_warnings():  # the filters stay as they are; only how a warning is shown changes
-        warnings.showwarning = show
-        try:
-            with compile_notice():
-                rc = app(standalone_mode=False)
+    try:  # whatever happens, standard error is settled: a full one never turns into exit 120
+        with warnings.catch_warnings(), _Interrupts() as interrupts:  # the filters stay; only how a warning shows
+            warnings.showwarning = show
             try:
-                _flush_stdout()
-            except OSError as e:  # stdout is a full device, a closed pipe, ...
-                _silence_stdout()
-                raise BadInput(f"cannot write standard output: {e.strerror or e}") from None
-        except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate (and OutputError)
-            error(e)
-        except usage as e:
-            if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed
-                sys.exit(0)
-            error(e.format_message())
-        except exits as e:
-            sys.exit(getattr(e, "exit_code", 0))
-        except cexc as e:
-            error(e.format_message(), getattr(e, "exit_code", 1) or 1)
-        except (typer.Abort, KeyboardInterrupt):
-            _print_err("dicetrace: interrupted")
-            sys.exit(130)
-        except OSError as e:
-            if isinstance(e, BrokenPipeError):
-                _silence_stdout()
-                error(f"cannot write standard output: {e.strerror or e}")
-            where = f": {e.filename}" if e.filename else ""
-            error(f"{e.strerror or e}{where}")
-        except MemoryError as e:
-            error(f"out of memory{': ' + str(e) if str(e) else ''}: use a smaller input (fewer ICs, a larger --dt, a shorter --t-max)")
-        except SystemExit:
-            raise
-        except Exception as e:  # a defect: one line, and the way to see its traceback
-            if os.environ.get(DEBUG_ENV):
+                try:
+                    check_environment()
+                    with compile_notice():
+                        rc = app(standalone_mode=False)
+                except Exception:
+                    if interrupts.seen:  # Ctrl-C inside an import (numba's, say) that turned it into an ImportError
+                        raise KeyboardInterrupt from None
+                    raise
+                if rc == 130 and interrupts.seen:  # typer turns a command's KeyboardInterrupt into a silent exit 130
+                    raise KeyboardInterrupt
+                try:
+                    _flush_stdout()
+                except OSError as e:  # stdout is a full device, a closed pipe, ...
+                    _silence_stdout()
+                    raise BadInput(f"cannot write standard output: {e.strerror or e}") from None
+            except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate (and OutputError)
+                error(e)
+            except usage as e:
+                if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed
+                    sys.exit(0)
+                error(e.format_message())
+            except exits as e:
+                sys.exit(getattr(e, "exit_code", 0))
+            except cexc as e:
+                error(e.format_message(), getattr(e, "exit_code", 1) or 1)
+            except (typer.Abort, KeyboardInterrupt):
+                if _Interrupts.said is None:
+                    _print_err("dicetrace: interrupted")
+                sys.exit(130)
+            except OSError as e:
+                if isinstance(e, BrokenPipeError):
+                    _silence_stdout()
+                    error(f"cannot write standard output: {e.strerror or e}")
+                where = f": {e.filename}" if e.filename else ""
+                error(f"{e.strerror or e}{where}")
+            except MemoryError as e:
+                error(f"out of memory{': ' + str(e) if str(e) else ''}: use a smaller input (fewer ICs, a larger "
+                      "--dt, a shorter --t-max)")
+            except SystemExit:
                 raise
-            error(f"internal error ({type(e).__name__}: {one_line(e)[:300]}); run with {DEBUG_ENV}=1 for the "
-                  "traceback and please report it", EXIT_INTERNAL)
-    for text in held:
-        _print_err(text)
+            except Exception as e:  # a defect: one line, and the way to see its traceback
+                if os.environ.get(DEBUG_ENV):
+                    raise
+                error(f"internal error ({type(e).__name__}: {one_line(e)[:300]}); run with {DEBUG_ENV}=1 for the "
+                      "traceback and please report it", EXIT_INTERNAL)
+        for text in held:
+            _print_err(text)
+    finally:
+        _settle_stderr()
     sys.exit(rc if isinstance(rc, int) else 0)
 
 

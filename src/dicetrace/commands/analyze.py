@@ -143,7 +143,7 @@ def register(app: typer.Typer) -> None:
         threads: Optional[int] = typer.Option(None, "--threads", help="accuracy: numba threads for the untimed "
                                               "reference runs (default 2; timed runs use one)."),
         device: Optional[str] = typer.Option(None, "--device", help="Writeup studies: where their batches run, cpu, "
-                                             "cuda (a GPU: pip install 'dicetrace[cuda]') or auto (the GPU where "
+                                             "cuda (a GPU: pip install 'dicetrace\\[cuda]') or auto (the GPU where "
                                              "there is one); default cpu. Recorded in each study's results."),
         no_cache: bool = typer.Option(False, "--no-cache", help="Writeup studies: re-simulate grids cached in OUT/cache."),
         no_report: bool = typer.Option(False, "--no-report", help="Writeup studies: do not rebuild REPORT.md."),

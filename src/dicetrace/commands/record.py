@@ -40,7 +40,7 @@ import typer
 
 import numpy as np
 
-from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
+from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats, say
 from dicetrace.commands import options as opts
 from dicetrace.commands.options import AT_HELP, IC_HELP, PRESET_HELP, build_config, fmt_num, ic_from_options, preset_or_fail
 from dicetrace.params import Numerics
@@ -158,7 +158,8 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
     """The IC of a scanned point (nearest grid point to ``--at``) and the scan's configuration.
 
     Returns (ic, config, coords, description dict; its ``events``: whether the scan recorded exact contact
-    events, which the recording then records too, to reproduce the row).
+    events, which the recording then records too, to reproduce the row; its ``note``: the line that says which
+    point was taken when ``--at`` was snapped to it, or None, said once every option has passed its checks).
     """
     if at is None:
         fail("--scan needs --at X,Y (the slice coordinates of a scanned point)")
@@ -179,11 +180,11 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
     ndim = len(coords)
     exact = np.array([row[a] for a in "xyz"[:ndim]], dtype=np.float64)
     desc = {"kind": "scan", "slice": defn.space.slice.name, "scan": str(folder), "ic_id": int(row["ic_id"]),
-            "events": defn.events}
+            "events": defn.events, "note": None}
     if not np.array_equal(exact, np.asarray(coords, dtype=np.float64)):  # snapped: say to which point
         point = ",".join(f"{v:.10g}" for v in exact)
-        print(f"dicetrace: --scan: recording the scanned point nearest to --at {at}: {point} (ic_id {int(row['ic_id'])})",
-              file=sys.stderr, flush=True)
+        desc["note"] = (f"dicetrace: --scan: recording the scanned point nearest to --at {at}: {point} "
+                        f"(ic_id {int(row['ic_id'])})")
     return np.asarray(the_ic, dtype=np.float64), cfg, exact, desc
 
 
@@ -260,7 +261,7 @@ def register(app: typer.Typer) -> None:
             None, "--nudge", help="Compare with a second throw whose IC is the first one's times (1 + NUDGE), e.g. 1e-6: "
             "both dice side by side and their divergence on a log scale."
         ),
-        preset: Optional[str] = typer.Option(None, "--preset", help=PRESET_HELP + " [default: seed]"),
+        preset: Optional[str] = typer.Option(None, "--preset", help=PRESET_HELP + " \\[default: seed]"),
         integrator: opts.IntegratorOption = None,
         dt: opts.DtOption = None,
         t_max: opts.TMaxOption = None,
@@ -342,6 +343,7 @@ def register(app: typer.Typer) -> None:
             conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol,
                            "--tol-growth": tol_growth}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
+            note = desc.pop("note")
             events = events or desc["events"]  # the scan's rows hold exact events: so does their replay
             all_ics = [the_ic]
             labels = [ic_label(the_ic, coords, desc)]
@@ -382,6 +384,8 @@ def register(app: typer.Typer) -> None:
         except ValueError as e:
             fail(f"--url {url}: {e}")
         check_record_size(cfg, len(all_ics), "forces" in chans)
+        if scan is not None and note is not None:  # every option checked: no line before a refusal
+            say(note)
 
         from dicetrace.simulate import Record, simulate  # lazy: keeps `dicetrace --help` fast (imports numba)
 

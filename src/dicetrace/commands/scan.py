@@ -16,7 +16,10 @@ The output folder holds the rolls table ``rolls/part-*.parquet``, written
 chunk by chunk, and the manifest ``_scan.parquet`` (no rows; the scan's
 definition and chunk log in its metadata): any Parquet reader reads ``OUT/``
 as it is (``OUT/rolls/`` too, even while a scan writes); re-running the same command
-resumes; a different definition against the folder is refused, and so is
+resumes (each finished chunk checked against its checksum and the definition in its own
+metadata; one not logged yet adopted once its content is the chunk's; anything that is
+not the scan's refused by name); a different definition against the folder is refused
+(the definitions compared by value, the field that differs named), and so is
 resuming on another ``--device`` than the scan started on (the definition
 and every chunk's metadata record the device: ``cpu`` or ``cuda: <GPU name>``).  ``--png`` draws the outcome map,
 ``--rrd`` writes the interactive scan map for the Rerun viewer.
@@ -25,14 +28,18 @@ Every option and output (``--out``, ``--png``, ``--rrd``) is checked before
 any work (``--device cuda`` without a GPU too: on a ``--scheduler`` cluster,
 by a worker); a large run says its estimated time and disk first (the time from
 the warm kernels' throughput on a probe, at the machine's present load: a
-first run's compile is not counted), refuses what the disk cannot hold, and
+first run's compile is not counted; the probe's throws' contact sets count in
+the disk and memory), refuses what the disk or the memory cannot hold, and
 asks for ``--yes`` beyond ``MAX_UNCONFIRMED_S`` (measured twice before it
 refuses).  One writer per folder: a second scan into a folder
 being written waits ``--wait`` seconds for it, then refuses.
 
 Exit codes: 0 done; 1 with ``--strict`` when an IC ended in a numerical
 failure (non_finite, blow_up); 2 bad input (or a folder holding another
-scan, or being written by one); 130 interrupted (re-run to resume).
+scan, or being written by one); 130 interrupted (re-run to resume; a run
+interrupted or failing before its first chunk leaves no scan in a new
+folder).  What the scan says on standard error decides nothing: closed or
+full, the data is written and the exit code is the same.
 """
 
 from __future__ import annotations
@@ -47,7 +54,16 @@ from typing import List, Optional
 import numpy as np
 import typer
 
-from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
+from dicetrace.commands._common import (
+    EXIT_NUMERICAL_FAILURE,
+    fail,
+    output_dir,
+    output_file,
+    parse_floats,
+    say,
+    say_interrupted,
+    stderr_is_terminal,
+)
 from dicetrace.commands.options import (
     DEVICE_HELP,
     INTEGRATOR_HELP,
@@ -162,7 +178,7 @@ def parse_overrides(preset, items: List[str]) -> dict:
     if not items:
         return {}
     names = {f.name: f for f in fields(preset) if f.name != "name"}
-    changes = {}
+    changes, given = {}, {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip().replace("-", "_")
@@ -170,6 +186,9 @@ def parse_overrides(preset, items: List[str]) -> dict:
             fail(f"--set needs NAME=VALUE with NAME one of {', '.join(sorted(names))}, got {item!r}")
         current = getattr(preset, key)
         text = text.strip()
+        if key in given:  # the last one would win, silently
+            fail(f"--set {key} given twice ({key}={given[key]}, {key}={text}): give each parameter once")
+        given[key] = text
         if isinstance(current, bool):
             if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
                 fail(f"--set {key} needs true or false, got {text!r}")
@@ -205,42 +224,43 @@ def _status_summary(out: Path, quiet: bool) -> bool:
         counts = outcome_counts(out)
         names = {-1: "not settled", 0: "undefined"}
         parts = [f"{names.get(v, f'face {v}')}: {c / total:.1%}" for v, c in counts.items()]
-        print("outcomes: " + ", ".join(parts), file=sys.stderr)
-        print("statuses: " + ", ".join(f"{k}: {c:,} ({c / total:.1%})" for k, c in
-                                       sorted(statuses.items(), key=lambda kv: -kv[1])), file=sys.stderr)
+        say("outcomes: " + ", ".join(parts))
+        say("statuses: " + ", ".join(f"{k}: {c:,} ({c / total:.1%})" for k, c in
+                                     sorted(statuses.items(), key=lambda kv: -kv[1])))
     failed = {k: c for k, c in statuses.items() if Status.from_label(k).failed}
     if failed:
         first = Status.from_label(max(failed, key=failed.get))
         detail = ", ".join(f"{k}: {c:,}" for k, c in sorted(failed.items()))
-        print(f"dicetrace: numerical failure: {sum(failed.values()):,} of {total:,} ICs failed ({detail}): "
-              f"{first.advice}", file=sys.stderr)
+        say(f"dicetrace: numerical failure: {sum(failed.values()):,} of {total:,} ICs failed ({detail}): "
+            f"{first.advice}")
     return bool(failed)
 
 
-def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers, *,
-                    maps=(), local_workers=None) -> None:
-    """Check the run's size before any work: memory (a chunk, the maps, local Dask workers) and disk first, then
-    the time (calibrated: refused beyond MAX_UNCONFIRMED_S without --yes); say it when large.
-
-    ``maps``: the map options given (``--png``, ``--rrd``: drawn from the whole scan in memory);
-    ``local_workers``: the processes of a local ``--dask`` cluster (None: no local cluster).
-    """
+def _check_fits(est, defn, out: Path, maps, local_workers) -> None:
+    """Refuse (one line) a run whose chunk in flight, maps or local Dask workers would not fit in memory, or whose
+    new chunks would not fit on the disk, by the estimate ``est``."""
     from dicetrace.scan.estimate import (  # lazy: keeps `dicetrace --help` fast (imports numba)
         DASK_WORKER_MEMORY,
-        MAP_MEMORY_PER_IC,
         MAP_MEMORY_BASE,
-        estimate_scan,
-        human_seconds,
+        MAP_MEMORY_PER_IC,
+        TYPICAL_SETS,
     )
 
-    quick = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks, calibrate=False)
     avail = available_memory()
+    heavy = est.sets_per_ic is not None and est.sets_per_ic > TYPICAL_SETS
+    probed = f" ({est.sets_per_ic:,.0f} contact sets per IC on a probe)" if heavy else ""
     if avail is not None:
-        if quick.chunk_memory * 2 > avail:
-            fail(f"--chunk {defn.chunk:,}: one chunk needs about {human_bytes(quick.chunk_memory)} of memory, "
-                 f"{human_bytes(avail)} available: use a smaller --chunk")
+        if est.ic_memory * 2 > avail:
+            fail(f"--t-max {fmt_num(defn.config.numerics.t_max_s)}: one IC's row needs about "
+                 f"{human_bytes(est.ic_memory)} of memory{probed}, {human_bytes(avail)} available: use a shorter "
+                 "--t-max" + (" or scan without --events" if defn.events else ""))
+        if est.chunk_memory * 2 > avail:
+            ics = min(defn.chunk, defn.size)
+            fail(f"--chunk {defn.chunk:,}: one chunk{'' if ics == defn.chunk else f' ({ics:,} ICs)'} needs about "
+                 f"{human_bytes(est.chunk_memory)} of memory{probed}, {human_bytes(avail)} available: use a smaller "
+                 "--chunk")
         if local_workers is not None:
-            need = local_workers * (DASK_WORKER_MEMORY + quick.chunk_memory)
+            need = local_workers * (DASK_WORKER_MEMORY + est.chunk_memory)
             if need > avail:
                 fail(f"--workers {local_workers:,}: a local Dask cluster of {local_workers:,} worker process(es) needs "
                      f"about {human_bytes(need)} of memory, {human_bytes(avail)} available: use fewer --workers")
@@ -248,10 +268,28 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
         if maps and need > avail:
             fail(f"{' and '.join(maps)}: drawing the map of {defn.size:,} ICs needs about {human_bytes(need)} of "
                  f"memory, {human_bytes(avail)} available: scan without {' and '.join(maps)}, or a smaller grid")
-    if quick.free_bytes is not None and quick.bytes > quick.free_bytes:
-        fail(f"--out {str(out)!r}: this run writes about {human_bytes(quick.bytes)} ({quick.ics_todo:,} ICs), "
-             f"only {human_bytes(quick.free_bytes)} free there: free space, or scan in parts with --max-chunks N")
+    if est.free_bytes is not None and est.bytes > est.free_bytes:
+        fail(f"--out {str(out)!r}: this run writes about {human_bytes(est.bytes)} ({est.ics_todo:,} ICs{probed}), "
+             f"only {human_bytes(est.free_bytes)} free there: free space, or scan in parts with --max-chunks N")
+
+
+def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool, dask_workers, *,
+                    maps=(), local_workers=None) -> None:
+    """Check the run's size before any work: memory (a chunk, the maps, local Dask workers) and disk first, then
+    the time (calibrated: refused beyond MAX_UNCONFIRMED_S without --yes); say it when large.
+
+    The calibrating probe also counts the throws' contact sets: memory and disk are checked again with what they
+    take (a throw that never settles can record millions).  ``maps``: the map options given (``--png``,
+    ``--rrd``: drawn from the whole scan in memory); ``local_workers``: the processes of a local ``--dask``
+    cluster (None: no local cluster).
+    """
+    from dicetrace.scan.estimate import estimate_scan, human_seconds  # lazy: keeps `dicetrace --help` fast
+
+    quick = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks, calibrate=False)
+    _check_fits(quick, defn, out, maps, local_workers)
     est = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
+    if est.sets_per_ic is not None:
+        _check_fits(est, defn, out, maps, local_workers)
     if est.seconds is not None and est.seconds > MAX_UNCONFIRMED_S and not yes:
         # refuse only on an estimate that holds: measure once more (a busy moment can slow one measure down)
         again = estimate_scan(defn, out, threads=dask_workers or threads, max_chunks=max_chunks)
@@ -261,7 +299,7 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
         fail(f"this scan would take {est.describe()}, more than {human_seconds(MAX_UNCONFIRMED_S)}: "
              "confirm with --yes, or scan in parts with --max-chunks N (re-run to resume)")
     if not quiet and ((est.seconds or 0) > LARGE_SCAN_S or est.bytes > LARGE_SCAN_BYTES):
-        print(f"dicetrace: scan: {est.describe()}", file=sys.stderr)
+        say(f"dicetrace: scan: {est.describe()}")
 
 
 def _check_out(out: Path, defn) -> None:
@@ -391,12 +429,12 @@ def register(app: typer.Typer) -> None:
                 with config_errors():
                     defn = replace(defn, device=worker_device(client, device))
                 if device == "auto":
-                    print(f"dicetrace: device auto: the Dask workers run on {defn.device}", file=sys.stderr)
+                    say(f"dicetrace: device auto: the Dask workers run on {defn.device}")
                 _check_out(out_dir, defn)
             _check_run_size(defn, out_dir, threads, max_chunks, yes, quiet, workers if dask else None, maps=maps,
                             local_workers=local)
             report = scan(
-                defn, out_dir, threads=threads, progress=not quiet and sys.stderr.isatty(),
+                defn, out_dir, threads=threads, progress=not quiet and stderr_is_terminal(),
                 dask=client if client is not None else (True if dask else None), n_workers=local if dask else workers,
                 max_chunks=max_chunks, wait=wait,
             )
@@ -411,8 +449,11 @@ def register(app: typer.Typer) -> None:
         except SchedulerError as e:
             fail(f"--scheduler {scheduler}: {e}" if scheduler else f"--dask: {e}")
         except KeyboardInterrupt:
-            print(f"dicetrace: interrupted; finished chunks are kept in {str(out)!r}: re-run the same command to resume",
-                  file=sys.stderr)
+            from dicetrace.scan.folder import has_manifest  # loaded already
+
+            say_interrupted(f"dicetrace: interrupted; finished chunks are kept in {str(out)!r}: re-run the same command "
+                            "to resume" if has_manifest(out_dir) else
+                            f"dicetrace: interrupted before the scan's first chunk: {str(out)!r} holds no scan")
             raise
         finally:
             for x in closers:
@@ -422,9 +463,9 @@ def register(app: typer.Typer) -> None:
             msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (a Parquet dataset: read the folder as it is)  "
                    f"({report.chunks_computed:,} computed, {report.chunks_skipped:,} already there; "
                    f"{report.ics_computed:,} ICs in {report.wall_s:.1f} s, {report.rate_ics_s:,.0f} ICs/s)")
-            print(msg, file=sys.stderr)
+            say(msg)
             if done < report.n_chunks:
-                print(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish", file=sys.stderr)
+                say(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish")
         failed = _status_summary(out_dir, quiet)
         if png_dest is not None or rrd_dest is not None:
             from dicetrace.scan.map_rrd import write_scan_rrd  # lazy: keeps `dicetrace --help` fast (imports numba)
@@ -437,8 +478,8 @@ def register(app: typer.Typer) -> None:
                     write_scan_rrd(out_dir, rrd_dest, staging=staging)
             if not quiet:
                 if png_dest is not None:
-                    print(f"outcome map → {png}", file=sys.stderr)
+                    say(f"outcome map → {png}")
                 if rrd_dest is not None:
-                    print(f"scan map → {rrd} (open with: rerun {rrd})", file=sys.stderr)
+                    say(f"scan map → {rrd} (open with: rerun {rrd})")
         if failed and strict:
             sys.exit(EXIT_NUMERICAL_FAILURE)

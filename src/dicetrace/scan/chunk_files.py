@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from dicetrace.scan.definition import ScanDefinition, as_written_now
+from dicetrace.scan.definition import ScanDefinition, as_written_now, describe_differences
 
 #: The manifest beside ``rolls/`` (see :mod:`dicetrace.scan.folder`); the messages here name it.
 MANIFEST = "_scan.parquet"
@@ -138,8 +138,26 @@ def verify_chunk(path: Path, entry: dict | None, rows: int) -> str | None:
 
 
 def foreign_file(path: Path, folder: Path, why: str) -> ForeignFileError:
-    return ForeignFileError(f"{str(path)!r} {why}: a scan folder holds only the files its manifest lists; "
-                            f"move it out of {str(folder)!r}, then re-run")
+    return ForeignFileError(f"{str(path)!r} {why}: a scan folder holds only its own chunk files; move it out of "
+                            f"{str(folder)!r} and re-run (its chunk is computed again), or use another folder")
+
+
+def check_beside(folder, log: dict[int, dict]) -> None:
+    """Refuse (:class:`ForeignFileError`, naming it) a chunk file beside the manifest of a folder in this layout.
+
+    This dicetrace keeps every chunk in ``rolls/``; beside the manifest
+    (``folder/part-NNNNNN.parquet``) only an older dicetrace's layout kept
+    them.  Such a part is taken only where the chunk log names it there and
+    ``rolls/`` does not hold its chunk (an older folder whose conversion was
+    interrupted): anything else (a copy, a stray part) is refused, or every
+    other Parquet reader would read its rows twice.
+    """
+    folder = Path(folder)
+    for c, p in _parts_in(folder).items():
+        entry = log.get(c)
+        if entry is None or entry.get("file") != p.name or os.path.lexists(folder / ROLLS_DIR / p.name):
+            raise foreign_file(p, folder, f"lies beside {MANIFEST}, where this scan keeps no chunk (they are in "
+                               f"{ROLLS_DIR}/; Parquet readers of the folder would read its rows too)")
 
 
 def check_rolls(folder, defn: ScanDefinition) -> None:
@@ -173,12 +191,86 @@ def check_rolls(folder, defn: ScanDefinition) -> None:
             raise foreign_file(p, folder, f"is {kind}, not a chunk file")
 
 
+def chunk_identity(path: Path, defn: ScanDefinition, c: int, schema=None) -> str | None:
+    """Why the chunk file ``path`` is not chunk ``c`` of the scan ``defn`` by what its footer says (None: it is).
+
+    Its columns must be the scan's (``defn.schema``), and its dicetrace
+    metadata (every chunk dicetrace writes carries it: the chunk index and
+    the scan's definition) must name chunk ``c`` of this very definition,
+    compared by value (:func:`~dicetrace.scan.definition.same_definition`).
+    Only the footer is read (``schema``: the file's, where already read).  A
+    file checked once by this process is not read again while its size and
+    modification time hold.
+    """
+    key = (str(Path(path).absolute()), defn.digest(), c)
+    try:
+        st = os.stat(path)
+        if schema is None and _IDENTIFIED.get(key) == (st.st_size, st.st_mtime_ns):
+            return None
+        if schema is None:
+            schema = pq.read_schema(path)
+    except Exception as e:  # noqa: BLE001 - any decoding error means "not a finished chunk"
+        return f"it does not decode ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
+    why = _identity(schema, defn, c)
+    if why is None:
+        _IDENTIFIED[key] = (st.st_size, st.st_mtime_ns)
+    return why
+
+
+#: Chunk files this process found to be their chunk (:func:`chunk_identity`), by (path, definition, chunk):
+#: (size, mtime_ns) when checked.
+_IDENTIFIED: dict[tuple[str, str, int], tuple[int, int]] = {}
+
+
+def _identity(schema, defn: ScanDefinition, c: int) -> str | None:
+    return _columns_why(schema, defn) or _metadata_why(schema, defn, c)
+
+
+def _columns_why(schema, defn: ScanDefinition) -> str | None:
+    if not schema.equals(defn.schema, check_metadata=False):
+        have, want = set(schema.names), set(defn.schema.names)
+        if have == want:
+            return "its columns' types are not a scan's"
+        missing, extra = sorted(want - have), sorted(have - want)
+        parts = ([f"{len(missing)} of the scan's columns missing ({', '.join(missing[:3])}"
+                  f"{', ...' if len(missing) > 3 else ''})"] if missing else []) + \
+                ([f"columns no scan has ({', '.join(extra[:3])}{', ...' if len(extra) > 3 else ''})"] if extra else [])
+        return "its columns are not the scan's: " + "; ".join(parts)
+    return None
+
+
+def _metadata_why(schema, defn: ScanDefinition, c: int) -> str | None:
+    raw = (schema.metadata or {}).get(METADATA_KEY)
+    if raw is None:
+        return "it carries no dicetrace metadata (every chunk dicetrace writes names its scan and chunk there)"
+    try:
+        meta = json.loads(raw)
+    except ValueError:
+        meta = None
+    if not isinstance(meta, dict):
+        return "its dicetrace metadata is unreadable"
+    index = meta.get("chunk_index")
+    if isinstance(index, bool) or not isinstance(index, int) or index != c:
+        return f"its metadata says it is chunk {index!r}, not chunk {c}"
+    if "scan" not in meta:
+        return "its metadata names no scan definition"
+    if json.dumps(as_written_now(meta["scan"]), sort_keys=True) == defn.canonical():  # as written: the same (fast)
+        return None
+    diffs = describe_differences(as_written_now(meta["scan"]), defn.to_dict())
+    if diffs:
+        return f"its metadata says it belongs to another scan ({'; '.join(diffs[:2])}{'; ...' if len(diffs) > 2 else ''})"
+    return None
+
+
 def verify_unlogged(path: Path, defn: ScanDefinition, c: int) -> str | None:
     """Why the chunk file ``path``, not in the chunk log, is not chunk ``c`` of the scan ``defn`` (None: it is).
 
-    It must decode whole, hold chunk ``c``'s ic_ids in order, and (where
-    its metadata says) be chunk ``c`` of this very scan: a copy of another
-    chunk, or of another scan's, is not adopted.
+    It must decode whole, hold chunk ``c``'s rows, carry the scan's columns
+    and metadata (:func:`chunk_identity`: chunk ``c`` of this very
+    definition), and its ``ic_id``s, grid indices and slice coordinates must
+    be chunk ``c``'s, as the definition computes them: a copy of another
+    chunk, another scan's chunk, or a file whose metadata was copied or
+    stripped, is not adopted.
     """
     start, stop = defn.chunk_range(c)
     try:
@@ -187,17 +279,19 @@ def verify_unlogged(path: Path, defn: ScanDefinition, c: int) -> str | None:
         return f"it does not decode ({type(e).__name__}: {' '.join(str(e).split())[:120]})"
     if table.num_rows != stop - start:
         return f"it holds {table.num_rows} rows, the chunk has {stop - start}"
-    if "ic_id" not in table.column_names or not np.array_equal(
-            table.column("ic_id").to_numpy(zero_copy_only=False), np.arange(start, stop)):
+    why = _columns_why(table.schema, defn)
+    if why is not None:
+        return why
+    blk = defn.space.block(start, stop)
+
+    def column(name):
+        return table.column(name).to_numpy(zero_copy_only=False)
+
+    if not np.array_equal(column("ic_id"), blk.ic_id):
         return f"its ic_ids are not chunk {c}'s ({start}..{stop - 1})"
-    try:
-        meta = json.loads((table.schema.metadata or {})[METADATA_KEY])
-    except KeyError:
-        return None  # an older dicetrace's chunk: the ic_ids decide
-    except ValueError:
-        return "its dicetrace metadata is unreadable"
-    if meta.get("chunk_index", c) != c:
-        return f"it is chunk {meta.get('chunk_index')} (its metadata says), not chunk {c}"
-    if "scan" in meta and json.dumps(as_written_now(meta["scan"]), sort_keys=True) != defn.canonical():
-        return "it belongs to a scan of another definition (its metadata says)"
-    return None
+    if not np.array_equal(np.stack([column(n) for n in "ijk"], axis=1), blk.index):
+        return f"its grid indices are not chunk {c}'s"
+    coords = np.stack([column(n).astype(np.float64) for n in "xyz"], axis=1)
+    if not np.array_equal(coords, blk.coords, equal_nan=True):
+        return f"its slice coordinates are not chunk {c}'s"
+    return chunk_identity(path, defn, c, schema=table.schema)

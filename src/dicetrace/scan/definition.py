@@ -10,6 +10,7 @@ compared on resume, and shipped to Dask workers as a plain dict.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass
@@ -138,8 +139,19 @@ class ScanDefinition:
         return GRID_ROLLS_EVENTS_SCHEMA if self.events else GRID_ROLLS_SCHEMA
 
     def canonical(self) -> str:
-        """Canonical JSON (what resuming compares)."""
-        return json.dumps(self.to_dict(), sort_keys=True)
+        """Canonical JSON: :meth:`to_dict` with sorted keys (made once per definition: a scan of points holds
+        every point)."""
+        text = self.__dict__.get("_canonical")
+        if text is None:
+            text = self.__dict__["_canonical"] = json.dumps(self.to_dict(), sort_keys=True)  # frozen: not setattr
+        return text
+
+    def digest(self) -> str:
+        """SHA-256 of :meth:`canonical` (a short key for the definition)."""
+        text = self.__dict__.get("_digest")
+        if text is None:
+            text = self.__dict__["_digest"] = hashlib.sha256(self.canonical().encode()).hexdigest()
+        return text
 
 
 def as_written_now(d):
@@ -151,19 +163,42 @@ def as_written_now(d):
     return d
 
 
-def describe_differences(a: dict, b: dict, prefix: str = "") -> list[str]:
-    """Human-readable paths where two definition dicts differ (for refusals)."""
+def _same(a, b) -> bool:
+    """Whether two JSON values are the same value: numbers by value (``0`` is ``0.0``), a boolean only a boolean,
+    lists element by element, objects key by key, anything else by type and value."""
+    if isinstance(a, bool) or isinstance(b, bool):
+        return isinstance(a, bool) and isinstance(b, bool) and a == b
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return a == b
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    return type(a) is type(b) and a == b
+
+
+def describe_differences(a, b, prefix: str = "") -> list[str]:
+    """Where two definition dicts differ, by value (a number written ``0`` or ``0.0`` is the same number): each
+    place a human-readable path with both values (for refusals); empty when they are the same definition."""
     out: list[str] = []
     if isinstance(a, dict) and isinstance(b, dict):
-        for k in sorted(set(a) | set(b)):
+        for k in sorted(set(a) | set(b), key=str):
             p = f"{prefix}.{k}" if prefix else str(k)
             if k not in a or k not in b:
-                out.append(f"{p}: {a.get(k, '(absent)')!r} vs {b.get(k, '(absent)')!r}")
+                out.append(f"{p}: {_short(a[k]) if k in a else '(absent)'} vs {_short(b[k]) if k in b else '(absent)'}")
             else:
                 out += describe_differences(a[k], b[k], p)
-    elif a != b:
-        sa, sb = json.dumps(a), json.dumps(b)
-        if len(sa) > 60:
-            sa, sb = sa[:57] + "...", sb[:57] + "..."
-        out.append(f"{prefix}: {sa} vs {sb}")
+    elif not _same(a, b):
+        out.append(f"{prefix or '(the whole definition)'}: {_short(a)} vs {_short(b)}")
     return out
+
+
+def _short(v) -> str:
+    text = json.dumps(v, default=repr)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def same_definition(a, b) -> bool:
+    """Whether two stored definition dicts are the same scan (:func:`as_written_now` applied to both): their
+    values compared, not their text."""
+    return not describe_differences(as_written_now(a), as_written_now(b))

@@ -1,4 +1,16 @@
-"""What a scan will cost before it starts: time (by calibration), disk and chunk memory."""
+"""What a scan will cost before it starts: time (by calibration), disk and chunk memory.
+
+Disk and memory go by the IC, with fixed figures measured on the writeup's
+windows (``BYTES_PER_IC`` ..., which hold up to ``TYPICAL_SETS`` contact sets
+per IC), and by the contact set beyond those: a throw that never settles
+(no damping, a long time cap) can record millions of sets -- with exact
+events, millions of events, each with its time.  Where the scan is large
+enough to be calibrated, the probe that times it also counts the sets of
+its throws (extrapolated to the time cap for the throws the probe cut
+short) and the estimate adds what sets beyond ``TYPICAL_SETS`` take: an
+upper bound of the real files (``BYTES_PER_SET``, ``BYTES_PER_SET_EVENTS``)
+and of the memory a chunk of them holds in flight.
+"""
 
 from __future__ import annotations
 
@@ -28,6 +40,19 @@ BYTES_PER_CHUNK = 16 * 1024
 MEMORY_PER_IC = 1024
 #: The same with exact contact events (a float64 time beside each of the ``cap`` buffered sets).
 MEMORY_PER_IC_EVENTS = 2048
+#: Contact sets per IC that the figures above hold (measured means on the writeup's windows at 48²: 28 for
+#: `seed`, 44 for `physical`, 49 with exact events, at 80, 102 and 465 bytes per IC on disk).
+TYPICAL_SETS = 64
+#: Bytes on disk per contact set beyond ``TYPICAL_SETS``, upper bounds: the set (a byte), its text in
+#: ``contact_sequence`` and, with exact events, its time (a float64 that compresses little).  Measured on a throw
+#: that never settles (``physical``, gamma = mu = 0, 10⁴ s): 1.3 bytes per set, 8.4 per event.
+BYTES_PER_SET = 4
+BYTES_PER_SET_EVENTS = 12
+#: Memory per contact set beyond ``TYPICAL_SETS`` of a chunk in flight: the kernel's buffer (5 bytes a set, 13
+#: with its time) up to ``CAP_GROWTH`` = 8 times the sets (a throw that fills it runs again with 8 times as
+#: many), their packed copy, the Arrow table and its encoding.  Measured: 86 bytes per event at 238,000 events.
+MEMORY_PER_SET = 64
+MEMORY_PER_SET_EVENTS = 160
 #: Memory to draw a scan's map (``--png``, ``--rrd``: the whole scan is read), bytes: per IC (measured 120 for the
 #: PNG and 230 for the recording at 600², rounded up) and beyond the ICs (measured ~60 MiB).
 MAP_MEMORY_PER_IC = 512
@@ -84,6 +109,11 @@ class ScanEstimate:
     load: float | None = None
     #: The device the scan runs on (its definition's); on a GPU the time is not estimated (``seconds`` None).
     device: str = "cpu"
+    #: Contact sets per IC the probe measured (mean, extrapolated to the time cap; None: not probed, the fixed
+    #: figures apply); ``bytes`` and ``chunk_memory`` count those beyond ``TYPICAL_SETS``.
+    sets_per_ic: float | None = None
+    #: Memory of one IC's row in flight, bytes (a chunk holds ``min(chunk, n_ics)`` of them).
+    ic_memory: int = 0
 
     def describe(self) -> str:
         free = "" if self.free_bytes is None else f", {human_bytes(self.free_bytes)} free"
@@ -93,8 +123,10 @@ class ScanEstimate:
         t = self.seconds if self.seconds is not None else self.seconds_bound
         when = f"{'at most ' if self.seconds is None or self.upper else 'about '}{human_seconds(t)}"
         busy = "" if self.load is None else f" at the machine's present load ({self.load:.1f})"
+        sets = ("" if self.sets_per_ic is None or self.sets_per_ic <= TYPICAL_SETS else
+                f" ({self.sets_per_ic:,.0f} contact sets per IC on a probe)")
         return (f"{self.ics_todo:,} ICs in {self.chunks_todo:,} chunks to compute (of {self.n_ics:,}): "
-                f"{when} on {self.threads} thread(s){busy}, about {human_bytes(self.bytes)} on disk{free}")
+                f"{when} on {self.threads} thread(s){busy}, about {human_bytes(self.bytes)} on disk{sets}{free}")
 
 
 def human_seconds(s: float) -> str:
@@ -121,8 +153,11 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     upper one).  Only warm throughput is timed: the probe runs once untimed
     first, which compiles (or loads) the kernels the scan needs -- on a
     fresh install or with ``DICETRACE_CACHE=0`` that first run takes the
-    compile's time, which the scan then does not spend again.  A scan on a
-    GPU (``defn.device``) is not timed: the probe times the CPU's threads.
+    compile's time, which the scan then does not spend again.  The same
+    probe counts its throws' contact sets (``sets_per_ic``: a throw cut
+    short counted at the rate it had, to the time cap), and the disk and
+    memory estimates add those beyond ``TYPICAL_SETS``.  A scan on a GPU
+    (``defn.device``) is not probed: the probe times the CPU's threads.
     """
     if not isinstance(defn, ScanDefinition):
         raise TypeError(f"defn must be a ScanDefinition, not {type(defn).__name__}")
@@ -144,7 +179,7 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
         n_ics=defn.size, n_chunks=defn.n_chunks, chunks_todo=chunks_todo, ics_todo=ics_todo,
         bytes=ics_todo * disk_per_ic + chunks_todo * BYTES_PER_CHUNK, free_bytes=free,
         chunk_memory=min(defn.chunk, defn.size) * memory_per_ic,
-        threads=nthreads, seconds=None, seconds_bound=bound, device=defn.device,
+        threads=nthreads, seconds=None, seconds_bound=bound, device=defn.device, ic_memory=memory_per_ic,
     )
     if not calibrate or bound <= 30.0 or ics_todo == 0 or defn.device != "cpu":
         return est
@@ -179,7 +214,21 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     per_ic = cpu / len(ids) * (full.sum() / max(steps.sum(), 1.0))
     seen = [x for x in others if x is not None]
     cores, load = effective_cores(nthreads, sum(seen) / len(seen) if seen else None)
+    est = _with_sets(est, defn, res, full / np.maximum(steps, 1.0))
     return replace(est, seconds=ics_todo * per_ic / cores, upper=bool(capped.any()), load=load)
+
+
+def _with_sets(est: ScanEstimate, defn: ScanDefinition, probe, stretch: np.ndarray) -> ScanEstimate:
+    """``est`` with the contact sets the probe's throws recorded: each throw's count times ``stretch`` (its steps
+    to the time cap over the steps the probe ran: 1 where it ended within them), their mean counted beyond
+    ``TYPICAL_SETS`` in the disk and the memory per IC."""
+    sets = float((np.diff(probe.set_offsets) * stretch).mean())
+    extra = max(0.0, sets - TYPICAL_SETS)
+    per_set_disk, per_set_memory = ((BYTES_PER_SET_EVENTS, MEMORY_PER_SET_EVENTS) if defn.events else
+                                    (BYTES_PER_SET, MEMORY_PER_SET))
+    ic_memory = est.ic_memory + int(extra * per_set_memory)
+    return replace(est, sets_per_ic=sets, bytes=est.bytes + int(est.ics_todo * extra * per_set_disk),
+                   ic_memory=ic_memory, chunk_memory=min(defn.chunk, defn.size) * ic_memory)
 
 
 def _running_besides_us() -> float | None:

@@ -17,16 +17,19 @@ Ctrl-C or a kill loses at most the chunks in flight; running the same scan
 again verifies the finished chunks against their checksums (recomputing, with
 a :class:`ScanWarning`, any that are damaged), skips the good ones and ends
 with exactly one row per IC.  The folder holds what the manifest lists:
-anything else in ``rolls/`` is refused by name (:class:`ForeignFileError`),
-and dicetrace's readers read only the listed chunks.  A different definition
-against an existing folder is refused (:class:`ScanMismatchError`), never
-mixed in.  One writer at a time: taking the folder's lock
+anything else in ``rolls/`` (or a chunk file beside the manifest) is refused
+by name (:class:`ForeignFileError`), a chunk not listed yet is adopted only
+once its content is checked to be the chunk's, and dicetrace's readers read
+only the listed chunks, each checked against its checksum and against the
+definition in its own metadata.  A different definition against an existing
+folder is refused (:class:`ScanMismatchError`, compared by value and naming
+what differs), never mixed in.  One writer at a time: taking the folder's lock
 (``.dicetrace-scan.lock``, via ``filelock``) is the first thing a scan does
 to the folder (it makes the folder to hold it), and it holds the lock while
 it writes; a second one waits at most ``wait`` seconds, then refuses
 (:class:`ScanBusyError`), touching nothing.  Nothing removes a lock it does
-not hold: a scan that fails before writing its manifest removes its own lock
-(holding it) and the folders it made.
+not hold: a scan that fails before its first chunk reached a new folder removes
+the manifest it wrote, its own lock (holding it) and the folders it made.
 
 Every reader reads the folder as it is: ``polars.scan_parquet("scan/")``,
 ``pandas.read_parquet("scan")``, DuckDB's ``read_parquet('scan/**/*.parquet')``
@@ -66,8 +69,10 @@ from dicetrace.scan.chunk_files import (
     MANIFEST,
     METADATA_KEY,
     ROLLS_DIR,
+    check_beside,
     check_rolls,
     chunk_files,
+    chunk_identity,
     file_sha256,
     foreign_file,
     move_legacy_parts,
@@ -213,8 +218,15 @@ def _manifest_metadata(path: Path) -> dict:
 
 
 def read_manifest(folder) -> dict:
-    """The scan folder's manifest: its definition (``"definition"``), dicetrace version, size and creation time."""
+    """The scan folder's manifest: its definition (``"definition"``), dicetrace version, size and creation time.
+
+    FileNotFoundError where ``folder`` holds no scan (or does not exist), NotADirectoryError where it is a file
+    (the manifest itself included: the scan is its folder), ValueError where the manifest cannot be read.
+    """
     folder = Path(folder)
+    if folder.exists() and not folder.is_dir():
+        hint = f": give its folder, {str(folder.parent)!r}" if folder.name in (MANIFEST, LEGACY_MANIFEST) else ""
+        raise NotADirectoryError(f"{str(folder)!r} is a file, not a dicetrace scan folder{hint}")
     p = folder / MANIFEST
     if not p.is_file():
         p = folder / LEGACY_MANIFEST
@@ -251,25 +263,72 @@ def read_chunk_log(folder) -> dict[int, dict]:
     It is read from the manifest's metadata; for a folder of an older
     dicetrace, from ``_scan.chunks.jsonl``, where a torn last line (a write
     killed half way) is skipped: that chunk's file was never renamed into place.
+    Only well-formed entries are returned (:func:`read_chunk_log_checked`
+    says what else the log holds).
+    """
+    return read_chunk_log_checked(folder)[0]
+
+
+def read_chunk_log_checked(folder) -> tuple[dict[int, dict], dict[str, str]]:
+    """The chunk log's well-formed entries (see :func:`read_chunk_log`), and what is wrong with the others: its key
+    (the chunk index as written, or ``"*"`` for a log that is not a JSON object at all) → why, in a few words.
+
+    A broken entry lists nothing: its chunk file, if any, is checked by its
+    content as one the log does not list.  A log that cannot be read at all
+    lists nothing (``{"*": why}``).
     """
     p = Path(folder) / MANIFEST
+    broken: dict[str, str] = {}
     if p.is_file():
         try:
-            return {int(c): e for c, e in json.loads(_manifest_metadata(p).get(CHUNK_LOG_KEY, b"{}")).items()}
-        except (OSError, ValueError, AttributeError, pa.ArrowException) as e:
-            raise ValueError(f"{str(p)!r}: unreadable chunk log ({' '.join(str(e).split())})") from None
+            raw = json.loads(_manifest_metadata(p).get(CHUNK_LOG_KEY, b"{}"))
+        except (OSError, ValueError, pa.ArrowException) as e:
+            return {}, {"*": f"unreadable ({' '.join(str(e).split())[:120]})"}
+        if not isinstance(raw, dict):
+            return {}, {"*": f"not a JSON object but {_shown(raw)}"}
+        entries = {}
+        for key, e in raw.items():
+            why = _entry_problem(key, e)
+            if why is None:
+                entries[int(key)] = e
+            else:
+                broken[str(key)] = why
+        return entries, broken
     entries: dict[int, dict] = {}
     try:
         with open(Path(folder) / LEGACY_CHUNK_LOG) as f:
             for line in f:
                 try:
                     e = json.loads(line)
-                    entries[int(e["chunk"])] = e
+                    key = e["chunk"]
                 except (ValueError, KeyError, TypeError):
                     continue
+                if _entry_problem(key, e) is None:
+                    entries[int(key)] = e
     except FileNotFoundError:
         pass
-    return entries
+    return entries, broken
+
+
+def _shown(value) -> str:
+    text = json.dumps(value, default=repr)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _entry_problem(key, e) -> str | None:
+    """Why ``e`` (under ``key`` in the chunk log) is not a chunk-log entry (None: it is one)."""
+    if isinstance(key, bool) or not isinstance(key, (int, str)) or not str(key).isdecimal():
+        return f"key {_shown(key)} is no chunk index"
+    c = int(key)
+    if not isinstance(e, dict):
+        return f"entry of chunk {c} is not an object but {_shown(e)}"
+    for field, kind in (("rows", int), ("bytes", int), ("sha256", str), ("file", str)):
+        v = e.get(field)
+        if isinstance(v, bool) or not isinstance(v, kind) or (kind is int and v < 0):
+            return f"entry of chunk {c} has {field} {_shown(v)}, not {'a count' if kind is int else 'a string'}"
+    if "chunk" in e and (isinstance(e["chunk"], bool) or e["chunk"] != c):
+        return f"entry of chunk {c} says chunk {_shown(e['chunk'])}"
+    return None
 
 
 def _log_name(folder: Path, path: Path) -> str:
@@ -326,16 +385,16 @@ def _check_manifest(folder: Path, defn: ScanDefinition) -> bool:
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise ScanMismatchError(f"{str(folder)!r}: unreadable scan manifest ({e})") from None
     want = defn.to_dict()
-    if json.dumps(have, sort_keys=True) != json.dumps(want, sort_keys=True):
+    diffs = describe_differences(have, want)  # values, not their text: 0 and 0.0 are one number
+    if diffs:
         if isinstance(have, dict) and have.get("device") != want["device"] and \
-                json.dumps({**have, "device": None}, sort_keys=True) == json.dumps({**want, "device": None}, sort_keys=True):
+                not describe_differences({**have, "device": None}, {**want, "device": None}):
             was = str(have.get("device"))
             kind = "" if device_kind(was) == was else f" (device {device_kind(was)!r})"
             raise DeviceMismatchError(
                 f"{str(folder)!r} holds this scan run on {was!r}, this run is on {want['device']!r}: one scan runs on "
                 f"one device (a GPU's throws may differ from the CPU's by rounding): resume it on {was!r}{kind}, "
                 "or use another --out folder")
-        diffs = describe_differences(have, want)
         shown = "; ".join(diffs[:4]) + (f"; and {len(diffs) - 4} more" if len(diffs) > 4 else "")
         raise ScanMismatchError(
             f"{str(folder)!r} holds a different scan ({shown}). "
@@ -391,13 +450,16 @@ def check_folder(folder, defn: ScanDefinition) -> None:
 
     :class:`ScanMismatchError`: it holds another scan; FileExistsError: it
     holds files but no scan; :class:`ForeignFileError`: ``rolls/`` holds
-    something that is none of the scan's chunk files (see :func:`check_rolls`).
+    something that is none of the scan's chunk files (see :func:`check_rolls`),
+    or a chunk file lies beside the manifest (see :func:`check_beside`).
     """
     folder = Path(folder)
     if not folder.is_dir():
         return
     if not _check_manifest(folder, defn):
         _check_empty(folder)
+    if (folder / MANIFEST).is_file():
+        check_beside(folder, read_chunk_log(folder))
     check_rolls(folder, defn)
 
 
@@ -405,20 +467,29 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
     """Create or check the scan folder; return the chunks already finished (and verified).
 
     Call it holding the folder's lock (:func:`scan` does).  Raises
-    :class:`ScanMismatchError` when the folder holds another scan,
+    :class:`ScanMismatchError` when the folder holds another scan (the
+    definitions compared by value, the first fields that differ named),
     FileExistsError when it holds files that are not a dicetrace scan, and
-    :class:`ForeignFileError` (before changing anything) when ``rolls/``
-    holds something that is none of the scan's chunk files: another name,
-    a folder, or a chunk file that the manifest does not list and that is
-    not the scan's own chunk (a copy of another chunk, another scan's).
+    :class:`ForeignFileError` (before changing anything) naming a file
+    that cannot be the scan's: in ``rolls/`` another name, a folder, a
+    chunk file the manifest does not list that is not the scan's own chunk
+    (a copy of another chunk, another scan's, one without the metadata
+    every chunk carries), or a listed chunk whose own metadata or columns
+    say it belongs to another scan (a manifest edited by hand); beside the
+    manifest, a chunk file (:func:`check_beside`).  A chunk the log does
+    not list is adopted only once its columns, ``ic_id``s, grid indices,
+    slice coordinates and metadata are the chunk's.
+
     What it can, it repairs: leftover temporary files of interrupted writes
     are removed; a chunk file the manifest does not list yet (a kill
-    between its rename and the log's next rewrite) is adopted once its
-    content is checked; a listed chunk that no longer matches its logged
-    checksum (or has the wrong number of rows) is deleted, to be
-    recomputed, with a :class:`ScanWarning` naming it; a folder of an
-    older dicetrace gets this version's layout (its JSON manifest and
-    chunk log become the Parquet manifest).
+    between its rename and the log's next rewrite) is adopted once checked;
+    a chunk-log entry that is no entry (not an object, a count that is not
+    an integer) lists nothing, its chunk file checked as an unlisted one and
+    its entry written anew, with one :class:`ScanWarning`; a listed chunk
+    that no longer matches its logged checksum (or has the wrong number of
+    rows) is deleted, to be recomputed, with a :class:`ScanWarning` naming
+    it; a folder of an older dicetrace gets this version's layout (its JSON
+    manifest and chunk log become the Parquet manifest).
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -427,7 +498,12 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
         _LAST_LOG.pop(folder.absolute(), None)
     check_folder(folder, defn)  # refusals first: nothing is changed before them
     listed = has_chunk_log(folder)  # before a JSON manifest is converted: without a chunk log parts go by name
-    log = read_chunk_log(folder)
+    log, broken = read_chunk_log_checked(folder)
+    if broken:
+        first = next(iter(broken.values()))
+        warnings.warn(f"the chunk log in {str(folder / MANIFEST)!r} is broken ({first}"
+                      + (f"; and {len(broken) - 1} more entries" if len(broken) > 1 else "")
+                      + "): the chunk files it does not list are checked by their content", ScanWarning, stacklevel=3)
     done, adopted, damaged, foreign = set(), [], [], []
     for c, p in chunk_files(folder).items():
         if c >= defn.n_chunks:
@@ -435,10 +511,14 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
         start, stop = defn.chunk_range(c)
         if c in log:
             why = verify_chunk(p, log[c], stop - start)
+            if why is not None:
+                damaged.append((p, why))
+                continue
+            why = chunk_identity(p, defn, c)  # the file is the one logged: its footer says whose it is
             if why is None:
                 done.add(c)
             else:
-                damaged.append((p, why))
+                foreign.append((p, f"is listed in {MANIFEST}, but is not chunk {c} of the scan it defines ({why})"))
             continue
         why = verify_unlogged(p, defn, c)
         if why is None:  # the scan's own chunk, not logged yet (or a folder written before checksums were logged)
@@ -447,13 +527,13 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
                             "sha256": digest})
             done.add(c)
         elif listed:
-            foreign.append((p, why))
+            unlisted = "has a broken entry in" if str(c) in broken or "*" in broken else "is not listed in"
+            foreign.append((p, f"{unlisted} {MANIFEST} and is not the scan's own chunk ({why})"))
         else:
             damaged.append((p, why))
     if foreign:
         (p, why), more = foreign[0], len(foreign) - 1
-        raise foreign_file(p, folder, f"is not listed in {MANIFEST} and is not the scan's own chunk ({why})"
-                       + (f"; and {more} more such file(s)" if more else ""))
+        raise foreign_file(p, folder, why + (f"; and {more} more such file(s)" if more else ""))
     if not has_manifest(folder):
         manifest = {
             "format": defn.to_dict()["format"],
@@ -522,16 +602,36 @@ def write_chunk(folder, defn: ScanDefinition, c: int, table: pa.Table) -> Path:
     return path
 
 
+def _forget_unused_manifest(folder: Path) -> None:
+    """Remove the manifest (and ``rolls/``) of a scan that failed before its first chunk reached ``rolls/``.
+
+    Called holding the lock, for a folder that held no manifest before this
+    run: the manifest would record a scan that never ran (its device
+    included), and refuse the next run of another one.
+    """
+    rolls = folder / ROLLS_DIR
+    try:
+        if rolls.is_dir() and any(os.scandir(rolls)):
+            return
+        remove_quietly(folder / MANIFEST)
+        if rolls.is_dir():
+            rolls.rmdir()
+    except OSError:  # what cannot be removed stays: the next run checks it as it checks any folder
+        pass
+
+
 class _FolderLock:
     """The folder's writer lock (``filelock``): the first thing a scan does to the folder.
 
     The folder is made (the lock file lives in it) and locked at once;
     after ``wait`` seconds without the lock it refuses in one line,
     removing nothing: the folder and the lock are the holder's.  Nothing
-    removes a lock it does not hold.  A scan that ends on an error while
-    holding the lock, before it wrote the manifest, removes the lock file
-    (still holding it: a waiter that had opened it sees it unlinked and
-    takes a fresh one) and the folders it made, where empty.
+    removes a lock it does not hold.  A scan that ends on an error (or an
+    interrupt) while holding the lock of a folder that held no manifest
+    before it, and before its first chunk reached ``rolls/``, removes the
+    manifest it wrote and ``rolls/``, then the lock file (still holding it:
+    a waiter that had opened it sees it unlinked and takes a fresh one) and
+    the folders it made, where empty: it leaves no scan that never ran.
     """
 
     #: A folder removed under a waiting scan (by one that failed before writing anything) is made again at most
@@ -565,10 +665,13 @@ class _FolderLock:
                     raise OutputError(f"the scan folder {str(self.folder)!r} keeps disappearing") from None
                 continue
             self.lock = lock
+            self.had_manifest = has_manifest(self.folder)
             return self
 
     def __exit__(self, exc_type, *exc):
         try:
+            if exc_type is not None and not self.had_manifest:
+                _forget_unused_manifest(self.folder)
             if exc_type is not None and not has_manifest(self.folder):  # nothing written: leave nothing behind
                 remove_quietly(self.folder / LOCK)  # ours: we hold it
                 for d in reversed(self.created):

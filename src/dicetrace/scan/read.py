@@ -18,9 +18,9 @@ import pyarrow.dataset as pads
 import pyarrow.parquet as pq
 
 from dicetrace.ics import Grid
-from dicetrace.scan.chunk_files import METADATA_KEY, chunk_files, verify_chunk
+from dicetrace.scan.chunk_files import MANIFEST, METADATA_KEY, chunk_files, chunk_identity, verify_chunk
 from dicetrace.scan.definition import ScanDefinition
-from dicetrace.scan.folder import CorruptChunkError, has_chunk_log, read_chunk_log, read_manifest
+from dicetrace.scan.folder import CorruptChunkError, has_chunk_log, read_chunk_log_checked, read_manifest
 
 #: Fill value of label_grid cells that the (partial) scan has not computed yet.
 MISSING = -2
@@ -49,22 +49,29 @@ def _folder_of(folder) -> Path:
 
 def verified_chunk_files(folder, manifest: dict | None = None) -> list[str]:
     """The chunk files the manifest of a scan folder lists, each checked against the checksum logged when it was
-    written.
+    written and against what its footer says it is (chunk c of this very scan: its columns, its metadata).
 
     Raises :class:`CorruptChunkError` naming the first file that does not
-    match.  Any other file in the folder (one the manifest does not list,
-    a chunk not logged yet) is not read.  Only a folder of a dicetrace
-    older still, without a chunk log, is read by name: its parts of this
-    scan's chunk indices (the decoding names a damaged one).
+    match, or whose entry in the chunk log is broken.  Any other file in
+    the folder (one the manifest does not list, a chunk not logged yet) is
+    not read.  Only a folder of a dicetrace older still, without a chunk
+    log, is read by name: its parts of this scan's chunk indices (the
+    decoding names a damaged one).
     """
     folder = _folder_of(folder)
     manifest = read_manifest(folder) if manifest is None else manifest
     defn = ScanDefinition.from_dict(manifest["definition"])
-    log = read_chunk_log(folder)
+    log, broken = read_chunk_log_checked(folder)
     listed = has_chunk_log(folder)
     files = []
     for c, p in chunk_files(folder).items():
-        if c >= defn.n_chunks or (listed and c not in log):
+        if c >= defn.n_chunks:
+            continue
+        if listed and c not in log:
+            if str(c) in broken or "*" in broken:
+                why = broken.get(str(c)) or broken["*"]
+                raise CorruptChunkError(f"scan chunk {str(p)!r} cannot be trusted: the chunk log in {MANIFEST} is "
+                                        f"broken ({why}); re-run the scan into {str(folder)!r} to check it again")
             continue
         entry = log.get(c)
         start, stop = defn.chunk_range(c)
@@ -72,6 +79,9 @@ def verified_chunk_files(folder, manifest: dict | None = None) -> list[str]:
         if why is not None:
             raise CorruptChunkError(f"scan chunk {str(p)!r} is damaged: {why}; re-run the scan into {str(folder)!r} "
                                     "to recompute it")
+        why = chunk_identity(p, defn, c)
+        if why is not None:
+            raise CorruptChunkError(f"scan chunk {str(p)!r} is not chunk {c} of the scan {MANIFEST} defines: {why}")
         files.append(str(p))
     return files
 

@@ -56,7 +56,11 @@ from dicetrace.scan.folder import (
 
 
 class _Progress:
-    """A rich progress bar: ICs done, rate, ETA (a no-op when disabled)."""
+    """A rich progress bar: ICs done, rate, ETA (a no-op when disabled).
+
+    It never decides the run: a terminal that goes away (a write that fails)
+    ends the bar, not the scan.
+    """
 
     def __init__(self, enabled: bool, total: int, done: int, label: str):
         self.enabled = enabled
@@ -77,8 +81,16 @@ class _Progress:
             console=Console(stderr=True),
             transient=True,
         )
-        self.bar.start()
         self.task = self.bar.add_task(label, total=total, completed=done, rate="")
+        self._guard(self.bar.start)
+
+    def _guard(self, fn, *args, **kwargs) -> None:
+        try:
+            fn(*args, **kwargs)
+        except (OSError, ValueError):  # the terminal went away: no more bar
+            self.enabled = False
+            with contextlib.suppress(OSError, ValueError):
+                self.bar.stop()
 
     def advance(self, n: int, done_total: int) -> None:
         if not self.enabled:
@@ -86,11 +98,13 @@ class _Progress:
         dt = time.perf_counter() - self.t0
         new = done_total - self.base
         rate = f"{new / dt:,.0f} ICs/s" if dt > 0 and new > 0 else ""
-        self.bar.update(self.task, advance=n, rate=rate)
+        self._guard(self.bar.update, self.task, advance=n, rate=rate)
 
     def close(self) -> None:
         if self.enabled:
-            self.bar.stop()
+            self.enabled = False
+            with contextlib.suppress(OSError, ValueError):
+                self.bar.stop()
 
 
 # -- running ---------------------------------------------------------------------------------------

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dicetrace.studies.outputs import write_text, written
 from dicetrace.windows import get_window
 
 #: Default seed of the studies' perturbations and random picks.
@@ -262,7 +263,8 @@ class Output:
             if png.tell() <= MAX_FIG_BYTES:
                 break
             dpi *= 0.8
-        path.write_bytes(png.getvalue())
+        with written(path, "figure") as tmp:
+            tmp.write_bytes(png.getvalue())
         plt.close(fig)
         rel = f"figures/{name}.png"
         self.add_file(rel, key or name, caption)
@@ -287,17 +289,14 @@ class Output:
         self.figures[key] = {"path": rel, "caption": caption, "bytes": p.stat().st_size if p.exists() else None}
 
     def write_csv(self, df, name: str) -> str:
-        df.to_csv(self.res_dir / f"{name}.csv", index=False)
+        with written(self.res_dir / f"{name}.csv", "table") as tmp:
+            df.to_csv(tmp, index=False)
         return f"results/{name}.csv"
 
 
 def write_json(path: Path, obj) -> Path:
-    """Write ``obj`` (numpy types converted, NaN as null) atomically."""
-    path = Path(path)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(jsonable(obj), indent=1, sort_keys=False))
-    os.replace(tmp, path)
-    return path
+    """Write ``obj`` (numpy types converted, NaN as null) atomically (:func:`~dicetrace.studies.outputs.written`)."""
+    return write_text(path, json.dumps(jsonable(obj), indent=1, sort_keys=False), "results file")
 
 
 def jsonable(obj):

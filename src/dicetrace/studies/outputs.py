@@ -12,12 +12,22 @@ can never overwrite them.  The commands that regenerate them are in
     dicetrace analyze accuracy --out analysis/accuracy
     dicetrace analyze stability --out analysis/accuracy
     dicetrace analyze friction --out analysis/accuracy
+
+Every file a study writes (figures, CSV tables, results JSON, REPORT.md) is
+written under a hidden temporary name beside it and renamed into place once
+complete (:func:`written`): a full disk or a kill never leaves a truncated
+file under its final name, and a write that fails is one error naming the
+file.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import uuid
 from pathlib import Path
+
+from dicetrace.sinks._common import OutputError, _reason
 
 #: Default root of the studies' outputs, relative to the current folder.
 RESULTS_ROOT = Path("dicetrace-results")
@@ -69,3 +79,39 @@ def prepare_out(path, *, full: bool, why: str = "") -> Path:
     if not os.access(out, os.W_OK):
         raise ValueError(f"output folder {str(out)!r} is not writable")
     return out
+
+
+@contextlib.contextmanager
+def written(path, what: str = "output"):
+    """Yield a temporary path to write ``path``'s content to; once the block completes it is synced and renamed
+    onto ``path`` (which until then keeps its old content, or does not exist).
+
+    The temporary file is hidden, beside ``path``, with its suffix (a writer
+    that goes by the extension -- matplotlib, Pillow -- still knows the
+    format); it is removed whatever happens.  An OS error while writing (a
+    full disk) becomes an :class:`~dicetrace.sinks._common.OutputError` naming
+    ``what`` and ``path``: ``cannot write figure 'out/figures/a.png': No
+    space left on device``.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    try:
+        yield tmp
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except OSError as e:
+        raise OutputError(f"cannot write {what} {str(path)!r}: {_reason(e)}") from None
+    finally:
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+
+
+def write_text(path, text: str, what: str = "output") -> Path:
+    """Write ``text`` to ``path`` through :func:`written`; returns ``path``."""
+    with written(path, what) as tmp:
+        tmp.write_text(text)
+    return Path(path)

@@ -36,6 +36,8 @@ import sys
 from importlib import resources
 from pathlib import Path
 
+from dicetrace.studies.outputs import write_text
+
 _PH = re.compile(r"\{\{([vtf]):([^}|]+)(?:\|([^}]*))?\}\}")
 QUICK_WARNING = ("> **Quick run.** These numbers come from the CI-sized grids of `dicetrace analyze --quick`; they "
                  "only show that the pipeline works and do not support the text's conclusions. The committed "
@@ -179,6 +181,8 @@ def build(out: Path, template: str | None = None) -> Path:
     out = Path(out)
     results = {}
     for p in sorted((out / "results").glob("*.json")):
+        if p.name.startswith("."):  # a temporary file a killed run left (outputs.written): no study's results
+            continue
         try:
             results[p.stem] = json.loads(p.read_text())
         except ValueError:
@@ -191,10 +195,7 @@ def build(out: Path, template: str | None = None) -> Path:
     if any(results[s].get("quick") for s in have) or (len(have) == len(WRITEUP_STUDIES)
                                                      and any(r.get("quick") for r in results.values())):
         text = QUICK_WARNING + text
-    path = out / "REPORT.md"
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    path = write_text(out / "REPORT.md", text, "report")
     if missing:
         print(f"report: {len(missing)} placeholder(s) without a value, e.g. {missing[:3]}", file=sys.stderr)
     return path

@@ -22,6 +22,7 @@ from dicetrace.devices import device_label, use_device
 from dicetrace.sinks._common import human_bytes
 from dicetrace.studies import WRITEUP_STUDIES, resolve, study_module
 from dicetrace.studies.context import Context, Options, Output, write_json
+from dicetrace.studies.outputs import write_text
 from dicetrace.studies.report import build
 from dicetrace.studies.study_animation import NZ
 
@@ -111,7 +112,7 @@ def run(studies, *, options: Options = Options(), out: Path, report: bool = True
         if prev.get("quick") == options.quick:
             merged = {**prev.get("timings_s", {}), **timings}
             info.update(timings_s=merged, total_s=sum(merged.values()), studies=list(merged))
-    path.write_text(json.dumps(info, indent=1))
+    write_text(path, json.dumps(info, indent=1), "timings file")
     if report:
         build(out)
     print(f"=== done: {', '.join(names)} in {total:.1f} s ===", flush=True)

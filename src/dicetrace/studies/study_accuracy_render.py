@@ -23,6 +23,7 @@ from dicetrace.studies.study_accuracy import (
     T_MAX_S,
     StudyResult,
 )
+from dicetrace.studies.outputs import write_text, written
 from dicetrace.studies.study_accuracy_grids import color
 from dicetrace.studies.study_accuracy_budgets import best_within_budget, budget_table, cheapest_at_target, zero_floor_settings
 from dicetrace.studies.text import fmt, grows, tol_text
@@ -273,7 +274,8 @@ def plot_study(res: StudyResult, path) -> None:
         bx.set_title(f"{preset}: first-impact trajectory error (median)")
         bx.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with written(path, "figure") as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -288,12 +290,13 @@ def write_study(res: StudyResult, out_dir, command: str) -> dict:
         "png": out / "work_precision.png",
         "summary": out / "summary.md",
     }
-    res.table().to_csv(paths["csv"], index=False)
+    for key, table in (("csv", res.table()), ("orders", pd.DataFrame(res.orders)),
+                       ("reference", pd.DataFrame(res.references))):
+        with written(paths[key], "table") as tmp:
+            table.to_csv(tmp, index=False)
     if res.preset_comparison:
-        (out / "presets.json").write_text(json.dumps(res.preset_comparison, indent=1) + "\n")
-        paths["presets"] = out / "presets.json"
-    pd.DataFrame(res.orders).to_csv(paths["orders"], index=False)
-    pd.DataFrame(res.references).to_csv(paths["reference"], index=False)
+        paths["presets"] = write_text(out / "presets.json", json.dumps(res.preset_comparison, indent=1) + "\n",
+                                      "results file")
     plot_study(res, paths["png"])
-    paths["summary"].write_text(summary_markdown(res, command))
+    write_text(paths["summary"], summary_markdown(res, command), "summary")
     return paths

@@ -14,6 +14,7 @@ import numpy as np
 
 from dicetrace.analysis.plot import animate_slices, plot_outcome_map
 from dicetrace.studies.context import MAX_FIG_BYTES, Computed, Context, Output, window_ranges
+from dicetrace.studies.outputs import written
 
 NAME = "animation"
 Z_RANGE = (0.0, 0.25)
@@ -47,8 +48,8 @@ def render(c: Computed, out: Output) -> None:
     path = out.fig_dir / GIF
     ext = list(window_ranges("red-sea"))
     for dpi in (60, 50, 40, 32):
-        with matplotlib.rc_context({"figure.dpi": dpi}):
-            plt.close(animate_slices(g, path, extent=ext, z_values=zs, fps=4, title="red sea, z = {z:.2f}"))
+        with matplotlib.rc_context({"figure.dpi": dpi}), written(path, "figure") as tmp:
+            plt.close(animate_slices(g, tmp, extent=ext, z_values=zs, fps=4, title="red sea, z = {z:.2f}"))
         if path.stat().st_size <= MAX_FIG_BYTES:
             break
     out.add_file(f"figures/{GIF}", "i_gif", caption=f"The red-sea window of the seed 3-D slice, z from "

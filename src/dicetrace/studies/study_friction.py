@@ -41,6 +41,7 @@ import pandas as pd
 
 from dicetrace.analysis.agreement import agreement, counts_chi2_p
 from dicetrace.params import make_config
+from dicetrace.studies.outputs import write_text, written
 from dicetrace.studies.study_accuracy import T_MAX_S, run_batch, sample_ics
 
 V_REGS = (10.0, 3.0, 1.0, 0.3)
@@ -132,7 +133,8 @@ def summarise(rows: list[dict]) -> list[dict]:
 def render(rows: list[dict], summary: list[dict], out: Path, command: str, wall_s: float) -> dict[str, Path]:
     """``v_reg.csv`` (every run) and ``v_reg.md`` (the tables and the answer) in ``out``; their paths."""
     out.mkdir(parents=True, exist_ok=True)
-    pd.DataFrame(rows).to_csv(out / "v_reg.csv", index=False)
+    with written(out / "v_reg.csv", "table") as tmp:
+        pd.DataFrame(rows).to_csv(tmp, index=False)
     n = rows[0]["n"]
     lines = [
         "# Friction regularisation: how near to Coulomb the `physical` die can go",
@@ -168,5 +170,5 @@ def render(rows: list[dict], summary: list[dict], out: Path, command: str, wall_
             f"{p} | {s['mean_settle_time_s']:.3f} |"
         )
     lines += ["", IMPLICIT_RESULT]
-    (out / "v_reg.md").write_text("\n".join(lines) + "\n")
+    write_text(out / "v_reg.md", "\n".join(lines) + "\n", "summary")
     return {"csv": out / "v_reg.csv", "summary": out / "v_reg.md"}

@@ -21,6 +21,7 @@ from dicetrace.ics import SEED_SLICE
 from dicetrace.params import INTEGRATORS, Config, Numerics, convert_l, get_preset
 from dicetrace.stepsize import auto_dt, impact_speed_cm_s
 from dicetrace.status import Status
+from dicetrace.studies.outputs import write_text, written
 from dicetrace.studies.study_accuracy import PRESETS, check_integrators
 from dicetrace.studies.study_accuracy_grids import color
 from dicetrace.studies.text import fmt
@@ -244,7 +245,8 @@ def plot_stability(rows: list[dict], path) -> None:
         ax.set_title(f"{preset}: stable dt over the extreme corpus (x: dt auto)")
         ax.legend(fontsize=6)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    with written(path, "figure") as tmp:
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 
@@ -252,7 +254,8 @@ def write_stability(rows: list[dict], out_dir, command: str) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {"csv": out / "stability.csv", "png": out / "stability.png", "summary": out / "stability.md"}
-    pd.DataFrame(rows, columns=list(STABILITY_COLUMNS)).to_csv(paths["csv"], index=False)
+    with written(paths["csv"], "table") as tmp:
+        pd.DataFrame(rows, columns=list(STABILITY_COLUMNS)).to_csv(tmp, index=False)
     plot_stability(rows, paths["png"])
-    paths["summary"].write_text(stability_markdown(rows, command))
+    write_text(paths["summary"], stability_markdown(rows, command), "summary")
     return paths
