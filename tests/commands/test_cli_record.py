@@ -508,10 +508,10 @@ def test_identical_ics_compared_through_the_cli_diverge_by_exactly_zero(tmp_path
     out = tmp_path / "twins.rrd"
     res = dicetrace_cli("record", "--ic", ic, "--ic", ic, "--out", str(out), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
-    assert res.stdout.count("throw 0:") == 1 and res.stdout.count("throw 1:") == 1
+    assert res.stdout.count("throw 1:") == 1 and res.stdout.count("throw 2:") == 1
     t = read_rrd(out)
-    assert {"/throws/0/body", "/throws/1/body", "/divergence/distance/1"} <= set(t)
-    dist = np.array([row[0] for row in t["/divergence/distance/1"].column("Scalars:scalars").to_pylist()])
+    assert {"/throws/1/body", "/throws/2/body", "/divergence/distance/2"} <= set(t)
+    dist = np.array([row[0] for row in t["/divergence/distance/2"].column("Scalars:scalars").to_pylist()])
     assert len(dist) > 100 and (dist == 0).all()
 
 
