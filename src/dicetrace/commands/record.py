@@ -422,7 +422,19 @@ def register(app: typer.Typer) -> None:
 
         # the recording itself may be on stdout: the summary then goes to stderr
         stream_out = sys.stderr if (dest is not None and dest.kind == "stdout") or sys.stdout is None else sys.stdout
+
+        def summary_line(sent: str = "") -> str:
+            outcomes = []
+            for k, r in enumerate(rolls):
+                o = r.outcome if r.outcome >= 0 else "-1 (not settled)"
+                pre = f"throw {k + 1}: " if comparing else ""  # numbered from 1, as the recording
+                outcomes.append(f"{pre}outcome {o}  status {r.status}  steps {r.steps}  t_settle_s {r.t_settle_s:.6g}  "
+                                f"contact_sequence {r.contact_sequence}")
+            return ("  |  ".join(outcomes) + (f"  wrote {' '.join(written)}" if written else "")
+                    + (f"  {sent}" if sent else ""))
+
         sent = ""
+        said = False
         if mode is not None:
             st = Stream(blueprint)
             try:
@@ -437,6 +449,8 @@ def register(app: typer.Typer) -> None:
                 if mode == "serve":
                     until = "Ctrl-C" if serve_s is None else f"{serve_s:g} s have passed (or Ctrl-C)"
                     try:  # from here on Ctrl-C means "stop serving": a normal end, wherever it lands
+                        print(summary_line(sent), file=stream_out, flush=True)  # the outcome first, then the URL
+                        said = True
                         print(f"serving the web viewer at {web} (gRPC {st.grpc_url}) until {until}", file=stream_out,
                               flush=True)
                         wait_serving(serve_s)
@@ -451,14 +465,8 @@ def register(app: typer.Typer) -> None:
                 except (KeyboardInterrupt, StreamError):  # a Ctrl-C while the server shuts down (serving has ended)
                     pass
 
-        outcomes = []
-        for k, r in enumerate(rolls):
-            o = r.outcome if r.outcome >= 0 else "-1 (not settled)"
-            pre = f"throw {k + 1}: " if comparing else ""  # numbered from 1, as the recording
-            outcomes.append(f"{pre}outcome {o}  status {r.status}  steps {r.steps}  t_settle_s {r.t_settle_s:.6g}  "
-                            f"contact_sequence {r.contact_sequence}")
-        summary = "  |  ".join(outcomes) + (f"  wrote {' '.join(written)}" if written else "") + (f"  {sent}" if sent else "")
-        print(summary, file=stream_out)
+        if not said:
+            print(summary_line(sent), file=stream_out)
         failed = [r for r in rolls if r.status.failed]
         if failed:
             r = failed[0]
