@@ -2,7 +2,9 @@
 
 Skipped, with the reason, where Playwright or a chromium is missing.  With
 ``DICETRACE_SCREENSHOT=PATH`` the zoomed view with two throws compared beside it is also
-saved there (the README's screenshot).
+saved there (the README's screenshot, docs/explore.png)::
+
+    DICETRACE_SCREENSHOT=docs/explore.png pytest tests/explore/test_browser.py -k test_page_map_zoom_and_throw
 """
 
 from __future__ import annotations
@@ -92,8 +94,12 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path, monkeypatch):
     assert two[0] == info and two[1]["ic"] != info["ic"]
     text = page.inner_text("#info")
     assert "throw 2:" in text and "divergence: |ΔIC|" in text and f"outcomes {info['outcome']} vs {two[1]['outcome']}" in text
-    if SHOT:
-        page.wait_for_timeout(15000)  # the viewer draws the comparison
+    if SHOT:  # once the viewer has drawn the comparison, both dice still
+        from dicetrace.sinks.rerun_compare import throw_color
+
+        page.wait_for_function("document.body.dataset.viewerRecording", timeout=120_000)
+        page.wait_for_timeout(3000)
+        _viewer_dice(page, {"throw 1": throw_color(0), "throw 2": throw_color(1)}, "the README's screenshot")
         page.screenshot(path=SHOT, full_page=True)
     assert not [e for e in errors if "rerun" not in e.lower()], errors
 
