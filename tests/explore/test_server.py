@@ -309,6 +309,18 @@ def test_in_a_browser_the_pages_save_works_and_a_foreign_pages_does_not(browser,
         assert sorted(p.name for p in out.iterdir()) == ["from-page"]
 
 
+def _ctrl_c(proc, when: str, within_s: float = 10.0) -> None:
+    """SIGINT to a served explorer (what Ctrl-C sends): it must end within ``within_s`` with exit code 0."""
+    import signal
+
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=within_s)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"the explorer was still running {within_s:g} s after SIGINT {when}")
+    assert proc.returncode == 0, f"exit code {proc.returncode} after SIGINT {when}"
+
+
 #: A map that takes hours at any budget: 64×64 throws at dt 1e-7 s (each throw seconds of kernel time).
 SLOW_MAP = "res=64&dt=1e-7"
 
@@ -326,8 +338,6 @@ def _get_bg(url: str, into: dict, key: str, timeout: float = 600.0) -> threading
 def test_a_slow_map_blocks_no_other_tab_a_newer_view_supersedes_it_and_ctrl_c_stops_the_server(tmp_path):
     """A real ``dicetrace explore`` on 127.0.0.1: while tab A's hours-long map computes, tab B's small map
     answers; A's newer view ends A's old request at once; SIGINT ends the process while a map computes."""
-    import signal
-
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in [os.path.abspath("src"), os.environ.get("PYTHONPATH", "")] if p)}
     proc = subprocess.Popen(
         [sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--window", WINDOW, "--res", str(RES),
@@ -358,12 +368,7 @@ def test_a_slow_map_blocks_no_other_tab_a_newer_view_supersedes_it_and_ctrl_c_st
         slow_c = _get_bg(f"{base}/api/map.png?{SLOW_MAP}&window=red-sea&client=c", got, "c")
         time.sleep(1.0)
         assert slow_c.is_alive()
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pytest.fail("the explorer was still running 10 s after SIGINT")
-        assert proc.returncode == 0
+        _ctrl_c(proc, "while a map computes")
         assert "Traceback" not in proc.stderr.read()
     finally:
         if proc.poll() is None:
@@ -558,7 +563,6 @@ def test_under_a_1024_fd_limit_1030_slow_connections_leave_it_answering_and_ctrl
     "Too many open files" tracebacks, and could stay wedged), answers a normal request while they are open and
     within a second after they close, and SIGINT then stops it at once, with nothing on standard error."""
     import resource
-    import signal
 
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     if hard != resource.RLIM_INFINITY and hard < 1200:
@@ -600,12 +604,8 @@ def test_under_a_1024_fd_limit_1030_slow_connections_leave_it_answering_and_ctrl
         status, _, body = get(f"{base}/api/health", timeout=1.0)
         assert status == 200 and json.loads(body)["ok"] and time.perf_counter() - t0 < 1.0
         t0 = time.perf_counter()
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pytest.fail("the explorer was still running 10 s after SIGINT")
-        assert proc.returncode == 0 and time.perf_counter() - t0 < 5.0
+        _ctrl_c(proc, "after the flood")
+        assert time.perf_counter() - t0 < 5.0
         drain.join(timeout=10)
         assert "Traceback" not in err[0] and "Too many open files" not in err[0], err[0][-3000:]
         assert len(err[0].splitlines()) <= 2, err[0][-3000:]
@@ -621,8 +621,6 @@ def test_under_a_1024_fd_limit_1030_slow_connections_leave_it_answering_and_ctrl
 def test_ctrl_c_during_a_save_stops_at_once_without_a_traceback(tmp_path):
     """Issue 47 B3: Ctrl-C while "save view as scan" computes printed a CancelledError traceback.  Now the save's
     request is answered as the server stops, the process ends at once, and standard error holds no traceback."""
-    import signal
-
     out = tmp_path / "scans"
     proc = subprocess.Popen(
         [sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--window", WINDOW, "--res", str(RES),
@@ -653,12 +651,7 @@ def test_ctrl_c_during_a_save_stops_at_once_without_a_traceback(tmp_path):
         th.start()
         time.sleep(min(1.0, map_s / 3))
         assert th.is_alive(), "the save ended before Ctrl-C (too fast a machine for this test's view)"
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pytest.fail("the explorer was still running 10 s after SIGINT during a save")
-        assert proc.returncode == 0
+        _ctrl_c(proc, "during a save")
         stderr = proc.stderr.read()
         assert "Traceback" not in stderr and "CancelledError" not in stderr, stderr[-3000:]
         th.join(timeout=10)
