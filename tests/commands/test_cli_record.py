@@ -366,8 +366,10 @@ def test_serve_says_its_url_and_stops_after_serve_for(tmp_path):
     )
     assert res.returncode == 0, res.stderr
     lines = res.stdout.strip().splitlines()
-    assert lines[0].startswith(f"serving the web viewer at http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F")
-    assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in lines[-1] or f":{grpc}/proxy" in lines[-1]
+    # issue 46 item 11: the outcome first (it was printed only once serving had ended), then the URL, and no more
+    assert len(lines) == 2, lines
+    assert lines[0].startswith("outcome ") and f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in lines[0]
+    assert lines[1].startswith(f"serving the web viewer at http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F")
     assert list(tmp_path.iterdir()) == []  # no file unless --out/--save is given
 
 
@@ -412,7 +414,9 @@ def serve_and_look(tmp_path, *extra: str):
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     with not_left_running(proc):
-        first = proc.stdout.readline()  # printed once both servers listen and the recording is served
+        outcome = proc.stdout.readline()  # printed once both servers listen and the recording is served: the
+        first = proc.stdout.readline()  # outcome, then the URL
+        assert outcome.startswith("outcome "), outcome
         sockets = listening_sockets(proc.pid)
         page = None
         host = {"--bind": None, **dict(zip(extra[::2], extra[1::2]))}["--bind"] or "127.0.0.1"
@@ -508,10 +512,10 @@ def test_identical_ics_compared_through_the_cli_diverge_by_exactly_zero(tmp_path
     out = tmp_path / "twins.rrd"
     res = dicetrace_cli("record", "--ic", ic, "--ic", ic, "--out", str(out), cwd=tmp_path)
     assert res.returncode == 0, res.stderr
-    assert res.stdout.count("throw 0:") == 1 and res.stdout.count("throw 1:") == 1
+    assert res.stdout.count("throw 1:") == 1 and res.stdout.count("throw 2:") == 1
     t = read_rrd(out)
-    assert {"/throws/0/body", "/throws/1/body", "/divergence/distance/1"} <= set(t)
-    dist = np.array([row[0] for row in t["/divergence/distance/1"].column("Scalars:scalars").to_pylist()])
+    assert {"/throws/1/body", "/throws/2/body", "/divergence/distance/2"} <= set(t)
+    dist = np.array([row[0] for row in t["/divergence/distance/2"].column("Scalars:scalars").to_pylist()])
     assert len(dist) > 100 and (dist == 0).all()
 
 
@@ -547,11 +551,13 @@ def test_serve_hosts_the_web_viewer_until_ctrl_c(tmp_path):
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     with not_left_running(proc):
-        first = proc.stdout.readline()  # printed once the recording is served
+        outcome = proc.stdout.readline()  # printed once the recording is served: its outcome, before serving
+        first = proc.stdout.readline()
+        assert outcome.startswith("outcome ") and f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in outcome, outcome
         assert first.startswith(f"serving the web viewer at http://127.0.0.1:{web}/"), first + proc.stderr.read()
         with urllib.request.urlopen(f"http://127.0.0.1:{web}/", timeout=10) as page:
             assert page.status == 200 and b"<html" in page.read().lower()
         wait_listening(grpc, 5)
         out, err = interrupt(proc, 60)  # the user stops it
     assert proc.returncode == 0, err
-    assert f"sent to rerun+http://127.0.0.1:{grpc}/proxy" in out and "Traceback" not in err
+    assert out == "" and "Traceback" not in err  # nothing more once serving ends

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -229,10 +231,12 @@ def test_the_servers_own_names_are_answered(client):
 
 
 def test_no_cors_headers_for_a_foreign_origin(client):
-    for path in ("/api/throw.rrd", "/api/hover", "/api/map.png", "/api/map.json", "/api/view", "/"):
+    for path in ("/api/throw.rrd", "/api/hover", "/api/map.png", "/api/map.json", "/api/view", "/", "/favicon.ico"):
         r = client.get(path, params={"window": WINDOW, "res": 4, "i": 1, "j": 2},
                        headers={"Origin": "http://evil.example"})
-        assert r.status_code == 200, (path, r.text[:200])
+        # what computes is refused to another origin (test_gets_that_compute_are_refused_to_other_sites); the rest
+        # is answered, and nothing carries a CORS header
+        assert r.status_code == (403 if path.startswith(("/api/throw", "/api/hover", "/api/map")) else 200), path
         assert not [k for k in r.headers if k.lower().startswith("access-control-")], (path, dict(r.headers))
     r = client.options("/api/save", headers={"Origin": "http://evil.example", "Access-Control-Request-Method": "POST"})
     assert not [k for k in r.headers if k.lower().startswith("access-control-")]
@@ -282,9 +286,170 @@ def test_throws_waiting_are_bounded_a_full_queue_is_a_503(client, monkeypatch):
         for path in ("/api/hover", "/api/throw.rrd"):
             r = client.get(path, params={"window": WINDOW, "res": RES, "i": 1, "j": 1})
             assert r.status_code == 503, r.text
-            assert "waiting to be simulated" in r.json()["error"]
+            assert "throws to simulate are waiting already" in r.json()["error"]
     finally:
         release.set()
     for f in waiting:
         f.result(timeout=30)
     assert client.get("/api/hover", params={"window": WINDOW, "res": RES, "i": 1, "j": 1}).status_code == 200
+
+
+# -- issue 47 B1: GETs that compute are the explorer's own page's; a throw record would refuse is refused ----------
+
+COMPUTING_GETS = [("/api/map.png", {}), ("/api/map.json", {}), ("/api/map.strips", {}), ("/api/hover", {"i": 1, "j": 2}),
+                  ("/api/throw.rrd", {"i": 1, "j": 2}),
+                  ("/api/compare.rrd", {"t": [f"window={WINDOW}&res=4&i=1&j=2", f"window={WINDOW}&res=4&i=2&j=1"]})]
+
+
+def _nothing_may_compute(worker, monkeypatch):
+    def boom(*a, **k):
+        raise AssertionError("a refused request computed something")
+
+    monkeypatch.setattr(worker, "submit_map", boom)
+    monkeypatch.setattr(worker, "submit_throw", boom)
+    monkeypatch.setattr(worker, "submit_scan", boom)
+
+
+@pytest.mark.parametrize("path, extra", COMPUTING_GETS, ids=[p for p, _ in COMPUTING_GETS])
+@pytest.mark.parametrize("headers", [
+    {"Sec-Fetch-Site": "cross-site"},  # an <img> or a no-cors fetch of another site's page
+    {"Sec-Fetch-Site": "same-site"},  # a page on another port of this machine
+    {"Origin": "http://evil.example"},  # a browser without Fetch Metadata, a CORS fetch
+], ids=["cross-site", "same-site", "origin"])
+def test_gets_that_compute_are_refused_to_other_sites(client, monkeypatch, path, extra, headers):
+    """Issue 47 B1: any page could make the explorer compute (a map, a 1e-7 s throw) from an <img>; a GET that
+    computes from another site gets a 403, as a POST does, and runs nothing."""
+    _nothing_may_compute(client.app.state.worker, monkeypatch)
+    r = client.get(path, params={"window": WINDOW, "res": 4, **extra}, headers=headers)
+    assert r.status_code == 403, r.text
+    assert r.json()["error"].startswith("cross-origin request refused")
+
+
+@pytest.mark.parametrize("headers", [{"Sec-Fetch-Site": "same-origin", "Origin": "http://127.0.0.1"},
+                                     {"Sec-Fetch-Site": "none"}, {}], ids=["page", "typed-url", "script"])
+def test_gets_that_compute_serve_the_page_a_typed_url_and_a_script(client, headers):
+    for path, extra in COMPUTING_GETS:
+        r = client.get(path, params={"window": WINDOW, "res": 4, **extra}, headers=headers)
+        assert r.status_code == 200, (path, r.text[:200])
+
+
+def test_a_throw_record_would_refuse_for_its_memory_is_refused_before_it_runs(client, monkeypatch, tmp_path,
+                                                                              dicetrace_cli):
+    """Issue 47 B1: ``/api/throw.rrd?dt=1e-7`` took the server past 6 GB; ``record --dt 1e-7`` refuses the same
+    throw up front.  The explorer applies record's bound (its recording may need more memory than is available)
+    before anything runs, to the viewer's throw and to a comparison, a 400 naming dt; below the bound it records."""
+    worker = client.app.state.worker
+    q = {"window": WINDOW, "res": 16, "i": 8, "j": 8}
+    with monkeypatch.context() as mp:  # the issue's throw: 600 million steps at the time cap, terabytes
+        _nothing_may_compute(worker, mp)
+        for path, params in (("/api/throw.rrd", {**q, "dt": "1e-7"}),
+                             ("/api/compare.rrd", {"t": [f"window={WINDOW}&res=16&i=8&j=8&dt=1e-7",
+                                                         f"window={WINDOW}&res=16&i=2&j=8&dt=1e-7"]})):
+            r = client.get(path, params=params)
+            assert r.status_code == 400 and r.json()["param"] == "dt", r.text
+            assert "more than the" in r.json()["error"] and "longer time step (dt)" in r.json()["error"]
+    # the same bound as record's: with 1 GiB available, dt 1e-4 (600,000 steps, 1.39 GiB) is refused by both, before
+    # simulating; dt 1e-3 (60,000 steps, 143 MiB) is recorded by both
+    monkeypatch.setattr("dicetrace.memory.available_memory", lambda: 2**30)
+    r = client.get("/api/throw.rrd", params={**q, "dt": "1e-4"})
+    assert r.status_code == 400 and r.json()["param"] == "dt" and "1.39 GiB of memory, more than the 1 GiB" in r.json()["error"], r.text
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.45,4.1", "--dt", "1e-4", cwd=tmp_path)
+    assert res.returncode == 2 and "1.39 GiB of memory, more than the 1 GiB" in res.stderr, res.stderr
+    assert client.get("/api/throw.rrd", params={**q, "dt": "1e-3"}).status_code == 200
+    res = dicetrace_cli("record", "--slice", "seed", "--at", "1.45,4.1", "--dt", "1e-3", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+
+
+def test_the_favicon_is_served(client):
+    """Issue 46 item 13: no 404 for /favicon.ico; the page names the same icon (a data: URL, no request)."""
+    from dicetrace.sinks.rerun_web import FAVICON_LINK, FAVICON_SVG
+
+    r = client.get("/favicon.ico")
+    assert r.status_code == 200 and r.headers["content-type"].startswith("image/svg+xml") and r.content == FAVICON_SVG
+    assert FAVICON_LINK in client.get("/").text
+
+
+# -- issue 47 B3: saves get the map budget and a bounded queue ------------------------------------------------------
+
+
+def test_a_save_the_map_budget_would_refuse_is_refused_and_writes_nothing(tmp_path):
+    """Issue 47 B3: ``POST /api/save?res=1024&preset=physical&dt=1e-6`` ran for hours on the save thread.  A save is
+    refused (422 naming res) where the view's map would be: here a 32×32 view at dt 1e-4 under a 1 ms budget."""
+    from starlette.testclient import TestClient
+
+    from dicetrace.explore import View, create_app
+    from dicetrace.ics import get_window
+
+    out = tmp_path / "saved"
+    app = create_app(View(window=get_window(WINDOW), res=(RES, RES)), out=out, map_budget_s=0.001)
+    with TestClient(app, base_url="http://127.0.0.1") as c:
+        c.get("/api/map.png", params={"res": 4})  # the kernel compiled (not the point here)
+        r = c.post("/api/save", params={"res": 32, "dt": "1e-4", "name": "big"})
+        assert r.status_code == 422, r.text
+        assert r.json()["param"] == "res" and "more than the explorer's 0.001 s per map" in r.json()["error"]
+        assert not (out / "big").exists()
+        assert c.get("/api/health").json()["over_budget"] == 1
+
+
+def test_saves_waiting_are_bounded_a_full_queue_is_a_503_before_any_computing(client, tmp_path):
+    import threading
+
+    from dicetrace.explore import compute
+
+    worker = client.app.state.worker
+    release, started = threading.Event(), threading.Event()
+
+    def hold():
+        started.set()
+        release.wait(60)
+
+    worker._saves.submit(hold)  # the save thread busy until released
+    try:
+        assert started.wait(30)
+        waiting = [worker._saves.submit(lambda: None) for _ in range(compute.MAX_SAVES_WAITING)]
+        before = worker.computed_count
+        r = client.post("/api/save", params={"window": WINDOW, "res": 8, "name": "queued"})
+        assert r.status_code == 503, r.text
+        assert "saves are waiting already" in r.json()["error"]
+        assert worker.computed_count == before and not (tmp_path / "saved" / "queued").exists()
+    finally:
+        release.set()
+    for f in waiting:
+        f.result(timeout=30)
+    r = client.post("/api/save", params={"window": WINDOW, "res": 8, "name": "queued"})
+    assert r.status_code == 200, r.text
+
+
+def test_stopping_fails_the_throws_and_saves_in_progress_at_once_and_quietly():
+    """What Ctrl-C does first (``Worker.cancel_all``): the requests waiting for a save or a throw answer at once
+    (Cancelled), and the call still running on its thread ends later without an error escaping its thread."""
+    import threading
+
+    from dicetrace.explore import Cancelled, Worker
+
+    w = Worker()
+    release, started = threading.Event(), threading.Event()
+    escaped = []
+    old_hook = threading.excepthook
+    threading.excepthook = lambda a: escaped.append(a.exc_value)
+    try:
+        def hold():
+            started.set()
+            release.wait(60)
+            return "done"
+
+        save = w._saves.submit(hold)
+        queued = w._saves.submit(lambda: "never")
+        throw = w.submit_throw(hold)
+        assert started.wait(30)
+        w.cancel_all()
+        for f in (save, queued, throw):
+            with pytest.raises(Cancelled):
+                f.result(timeout=1)
+        release.set()
+        time.sleep(0.5)  # the held calls return into their settled futures
+        assert not escaped, escaped
+    finally:
+        threading.excepthook = old_hook
+        release.set()
+        w.shutdown()

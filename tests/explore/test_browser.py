@@ -2,11 +2,14 @@
 
 Skipped, with the reason, where Playwright or a chromium is missing.  With
 ``DICETRACE_SCREENSHOT=PATH`` the zoomed view with two throws compared beside it is also
-saved there (the README's screenshot).
+saved there (the README's screenshot, docs/explore.png)::
+
+    DICETRACE_SCREENSHOT=docs/explore.png pytest tests/explore/test_browser.py -k test_page_map_zoom_and_throw
 """
 
 from __future__ import annotations
 
+import json
 import os
 from urllib.parse import parse_qs, urlparse
 
@@ -69,11 +72,11 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path, monkeypatch):
 
     # hover, then click: the throw's details, and Rerun's viewer draws the die
     page.mouse.move(box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
-    page.wait_for_function("document.getElementById('info').textContent.startsWith('hover')", timeout=30_000)
+    page.wait_for_function("document.getElementById('hover').textContent.startsWith('hover')", timeout=30_000)
     page.mouse.click(box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
     page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
     info = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
-    assert f"outcome {info['outcome']}" in page.inner_text("#info")
+    assert page.inner_text("#info").startswith("throw 1: ") and f"outcome {info['outcome']}" in page.inner_text("#info")
     page.wait_for_selector("#viewerbox canvas", timeout=120_000)
     page.wait_for_timeout(8000)  # the wasm viewer loads and draws the recording
     from PIL import Image
@@ -92,8 +95,12 @@ def test_page_map_zoom_and_throw(browser, explorer, tmp_path, monkeypatch):
     assert two[0] == info and two[1]["ic"] != info["ic"]
     text = page.inner_text("#info")
     assert "throw 2:" in text and "divergence: |ΔIC|" in text and f"outcomes {info['outcome']} vs {two[1]['outcome']}" in text
-    if SHOT:
-        page.wait_for_timeout(15000)  # the viewer draws the comparison
+    if SHOT:  # once the viewer has drawn the comparison, both dice still
+        from dicetrace.sinks.rerun_compare import throw_color
+
+        page.wait_for_function("document.body.dataset.viewerRecording", timeout=120_000)
+        page.wait_for_timeout(3000)
+        _viewer_dice(page, {"throw 1": throw_color(0), "throw 2": throw_color(1)}, "the README's screenshot")
         page.screenshot(path=SHOT, full_page=True)
     assert not [e for e in errors if "rerun" not in e.lower()], errors
 
@@ -245,7 +252,8 @@ def test_info_panel_shows_long_lines_whole(browser, explorer):
     box = page.locator("#mapbox").bounding_box()
     at = (box["x"] + box["width"] * best["i"] / (n - 1), box["y"] + box["height"] * (1 - best["j"] / (n - 1)))
     page.mouse.move(*at)
-    page.wait_for_function("document.getElementById('info').textContent.startsWith('hover')", timeout=30_000)
+    page.wait_for_function("document.getElementById('hover').textContent.startsWith('hover')", timeout=30_000)
+    assert best["contact_sequence"] in page.inner_text("#hover").replace("\n", "")
     page.mouse.click(*at)
     page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
     picked = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
@@ -254,16 +262,23 @@ def test_info_panel_shows_long_lines_whole(browser, explorer):
     shift_click(page, box, 0.3, 0.3)
     text = page.inner_text("#info")
     assert best["contact_sequence"] in text.replace("\n", "") and "Lz=" in text and "divergence" in text
-    sizes = page.evaluate("""() => { const el = document.getElementById('info');
-        return {scroll: el.scrollWidth, client: el.clientWidth, right: el.getBoundingClientRect().right,
-                viewer: document.getElementById('viewerbox').getBoundingClientRect().left}; }""")
-    assert sizes["scroll"] <= sizes["client"], f"the info panel clips its lines ({sizes['scroll']} px of text in {sizes['client']} px)"
-    assert sizes["right"] <= sizes["viewer"]  # and stays beside the viewer
-    # every line of the text lies inside the panel
-    inside = page.evaluate("""() => { const el = document.getElementById('info'), r = el.getBoundingClientRect();
-        const range = document.createRange(); range.selectNodeContents(el);
-        return Array.from(range.getClientRects()).every((q) => q.right <= r.right + 0.5 && q.left >= r.left - 0.5); }""")
-    assert inside
+    for panel in ("info", "hover"):
+        sizes = page.evaluate("""(id) => { const el = document.getElementById(id), r = el.getBoundingClientRect();
+            const v = document.getElementById('viewerbox').getBoundingClientRect();
+            return {scroll: el.scrollWidth, client: el.clientWidth, box: [r.left, r.right, r.top, r.bottom],
+                    viewer: [v.left, v.right, v.top, v.bottom]}; }""", panel)
+        assert sizes["scroll"] <= sizes["client"], f"#{panel} clips its lines ({sizes['scroll']} px of text in {sizes['client']} px)"
+        # every line of the text lies inside the panel
+        inside = page.evaluate("""(id) => { const el = document.getElementById(id), r = el.getBoundingClientRect();
+            const range = document.createRange(); range.selectNodeContents(el);
+            return Array.from(range.getClientRects()).every((q) => q.right <= r.right + 0.5 && q.left >= r.left - 0.5); }""",
+                               panel)
+        assert inside, panel
+    # the picks' details above the viewer, as wide as it; the hover under the map, left of the viewer
+    (il, ir, it, ib), (vl, vr, vt, vb) = sizes["box"], sizes["viewer"]
+    info = page.locator("#info").bounding_box()
+    assert abs(info["x"] - vl) <= 1 and abs(info["x"] + info["width"] - vr) <= 1 and info["y"] + info["height"] <= vt
+    assert ir <= vl
 
 
 @pytest.mark.parametrize("stored", [None, "(app_options:(show_metrics:false,check_for_updates_on_startup:true))"],
@@ -273,8 +288,9 @@ def test_the_page_and_its_viewer_request_nothing_beyond_the_local_server(browser
     asks api.github.com for its latest release unless told not to), and the page's connect-src policy blocked none;
     also where a viewer on this origin stored its settings (update check on) before."""
     page = browser.new_page(viewport={"width": 1300, "height": 900})
-    urls = []
+    urls, missing = [], []
     page.on("request", lambda r: urls.append(r.url))
+    page.on("response", lambda r: r.status == 404 and missing.append(r.url))
     page.goto(explorer.url)
     wait_ready(page)
     if stored:
@@ -291,6 +307,7 @@ def test_the_page_and_its_viewer_request_nothing_beyond_the_local_server(browser
     far = [u for u in urls if urlparse(u).scheme not in ("data", "blob") and urlparse(u).hostname != "127.0.0.1"]
     assert not far, f"requests beyond 127.0.0.1: {far}"
     assert not page.evaluate("document.body.dataset.blocked || ''"), "the page's policy had to block a request"
+    assert not missing, f"answered 404: {missing}"  # issue 46 item 13: no /favicon.ico 404 either
     state = page.evaluate("localStorage.getItem('app')")
     assert state.count("check_for_updates_on_startup:false") == 1 and "check_for_updates_on_startup:true" not in state
 
@@ -332,17 +349,26 @@ def test_shift_click_gives_the_viewer_both_throws_in_one_recording(browser, expl
     two = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)")
     assert len(two) == 2 and two[0]["ic"] != two[1]["ic"]
     assert page.evaluate("document.getElementById('info').dataset.viewer") == url
-    assert page.get_attribute("#download", "href") == url + "&download=1"
+    # the viewer's recording frames its camera for the viewer's 3-D view (aspect); the download is record's own
+    base, aspect = url.split("&aspect=")
+    assert 0.2 <= float(aspect) <= 5 and page.get_attribute("#download", "href") == base + "&download=1"
     path = tmp_path / "viewer.rrd"
     path.write_bytes(body)
     temporal, static = read_rrd(path), read_rrd(path, static=True)
-    for k in (0, 1):
+    # issue 46 item 7: one numbering, from 1, in the page and its viewer: the page's throw k is the recording's
+    for k in (1, 2):
         assert any(e.startswith(f"/throws/{k}/") for e in temporal), sorted(temporal)
-    assert "/divergence/log10/1" in temporal and "/divergence/distance/1" in temporal
+        assert static[f"/throws/{k}/body"].column("Boxes3D:labels").to_pylist()[0] == [f"throw {k}"]
+    assert "/throws/0/body" not in static
+    assert "/divergence/log10/2" in temporal and "/divergence/distance/2" in temporal
+    assert static["/divergence/log10/2"].column("SeriesLines:names").to_pylist()[0] == ["log10 distance, throw 2 vs 1"]
     summary = str(static["/summary"].to_pydict())
-    for info in two:
-        assert f"x = {info['coords']['x']!r}, y = {info['coords']['y']!r}" in summary
+    text = page.inner_text("#info")
+    for k, info in enumerate(two, start=1):
+        where = f"x = {info['coords']['x']!r}, y = {info['coords']['y']!r}"
+        assert f"| {k} | seed slice at {where}" in summary and f"throw {k}: {where}" in text
         assert info["contact_sequence"] in summary
+    assert "throw 0" not in summary and "throw 0" not in text
     # only the viewer asked for it (once); the single throw's recording was not asked for again
     assert sum("/api/compare.rrd" in u for u in urls) == 1 and sum("/api/throw.rrd" in u for u in urls) == 1
     # the viewer shows the comparison: its events name that recording as the one on screen, and still do later
@@ -386,7 +412,143 @@ def test_the_viewer_takes_the_room_beside_the_map(browser, explorer):
         left, right, top, bottom = s["box"]
         assert right >= width - 20, s  # to the page's right edge
         w, h = s["inner"]
-        assert abs(h - min(w * 7 / 8, height - 100 - 2)) <= 3, s  # 8:7, within the page's height
+        # 8:7, within the window below its top (under the picked throw's details)
+        assert abs((bottom - top) - max(420, min((right - left) * 7 / 8, height - 8 - top))) <= 3, s
+        assert bottom <= height, s
         assert left <= box["x"] + box["width"] + 90, s  # beside the map
         cl, cr, ct, cb = s["canvas"]
         assert abs((cr - cl) - s["inner"][0]) <= 2 and abs((cb - ct) - s["inner"][1]) <= 2, s  # the canvas fills it
+
+
+# -- issue 46 items 6, 8, 9 ---------------------------------------------------------------------------------------------
+
+
+def test_the_download_link_waits_for_a_pick_and_the_empty_viewer_says_what_to_do(browser, explorer):
+    """Issue 46 item 8: "download this throw (.rrd)" was live before any pick and downloaded the page itself as
+    download.html.  Before a pick it is hidden and the viewer's box says to click a point on the map; after a pick
+    it downloads that throw's recording, as record writes it."""
+    page = browser.new_page(viewport={"width": 1300, "height": 900})
+    page.goto(explorer.url)
+    wait_ready(page)
+    assert not page.is_visible("#download")
+    assert "click a point on the map" in page.inner_text("#viewerbox")
+    assert page.inner_text("#info") == "" and not page.is_visible("#info")  # no details before a pick
+    box = page.locator("#mapbox").bounding_box()
+    page.mouse.click(box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
+    page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
+    assert page.is_visible("#download") and page.inner_text("#download") == "download this throw (.rrd)"
+    info = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
+    with page.expect_download(timeout=120_000) as dl:
+        page.click("#download")
+    name = dl.value.suggested_filename
+    assert name.endswith(".rrd") and name.startswith("seed_x"), name
+    from dicetrace.sinks.rerun import read_rrd_metadata
+
+    meta = read_rrd_metadata(dl.value.path())
+    assert (meta["outcome"], meta["steps"], meta["contact_sequence"]) == (info["outcome"], info["steps"],
+                                                                        info["contact_sequence"])
+    page.wait_for_selector("#viewerbox canvas", timeout=120_000)
+    assert "click a point" not in page.inner_text("#viewerbox")  # the viewer took the box
+
+
+def test_at_1280_by_720_the_picks_details_show_without_scrolling(browser, explorer):
+    """Issue 46 item 9: at 1280×720 the info panel started at y = 636, the throw's details below the fold.  The
+    picked throw's details are beside the map, above the viewer: every line of them inside the window, unscrolled,
+    with the mouse still hovering the map (the hover has its own panel)."""
+    page = browser.new_page(viewport={"width": 1280, "height": 720})
+    page.goto(explorer.url)
+    wait_ready(page)
+    box = page.locator("#mapbox").bounding_box()
+    at = (box["x"] + box["width"] * 0.4, box["y"] + box["height"] * 0.6)
+    page.mouse.move(*at)
+    page.wait_for_function("document.getElementById('hover').textContent.startsWith('hover')", timeout=30_000)
+    page.mouse.click(*at)
+    page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
+    page.mouse.move(at[0] + 20, at[1] + 20)  # still over the map: hovers go on
+    page.wait_for_timeout(1000)
+    info = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)[0]")
+    text = page.inner_text("#info")
+    assert text.startswith("throw 1: ") and info["contact_sequence"] in text.replace("\n", "")
+    assert f"outcome {info['outcome']}" in text and "IC: vx=" in text
+    seen = page.evaluate("""() => { const el = document.getElementById('info'), r = el.getBoundingClientRect();
+        const range = document.createRange(); range.selectNodeContents(el);
+        const lines = Array.from(range.getClientRects());
+        return {scrollY: scrollY, top: r.top, bottom: r.bottom, scrolled: el.scrollTop, overflow: el.scrollHeight - el.clientHeight,
+                lines: lines.length, last: Math.max(...lines.map((q) => q.bottom)), first: Math.min(...lines.map((q) => q.top))}; }""")
+    assert seen["scrollY"] == 0 and seen["scrolled"] == 0 and seen["overflow"] <= 0, seen
+    assert seen["lines"] >= 4 and 0 <= seen["first"] and seen["last"] <= 720 and seen["bottom"] <= 720, seen
+
+
+#: Two grid points of the tests' 16×16 window whose dice rest 14 cm apart (about six sides): a wide frame.
+APART = ((1, 1), (10, 1))
+
+
+def _click_pixel(page, i: int, j: int, shift: bool = False) -> None:
+    page.locator("#mapbox").scroll_into_view_if_needed()  # a screenshot of the viewer below it scrolled the page
+    box = page.locator("#mapbox").bounding_box()
+    x, y = box["x"] + box["width"] * i / (RES - 1), box["y"] + box["height"] * (1 - j / (RES - 1))
+    if shift:
+        page.keyboard.down("Shift")
+    page.mouse.click(x, y)
+    if shift:
+        page.keyboard.up("Shift")
+
+
+def _viewer_dice(page, colours: dict, what: str, timeout_s: int = 180):
+    """The viewer box's screenshot once every die of ``colours`` is drawn and the picture holds still (the
+    recording loads progressively, its time following the end); then each die is checked inside the 3-D view.
+    Returns (image, what :func:`viewer_shot.assert_dice_inside` found)."""
+    import io
+
+    from PIL import Image
+    from viewer_shot import assert_dice_inside, dice_in_view
+
+    last = None
+    for _ in range(timeout_s):
+        img = np.asarray(Image.open(io.BytesIO(page.locator("#viewerbox").screenshot())).convert("RGB")).astype(int)
+        right = int(0.59 * img.shape[1])  # the 3-D view: the layout's left 3/5
+        boxes = [b for _, b, _ in dice_in_view(img, colours, right).values()]
+        if all(b is not None for b in boxes) and boxes == last:
+            return img, assert_dice_inside(img, colours, right, what)
+        last = boxes
+        page.wait_for_timeout(1000)
+    raise AssertionError(f"{what}: the dice never showed still in the viewer: {dice_in_view(img, colours, right)}")
+
+
+@pytest.mark.parametrize("viewport", [(1920, 1080), (1100, 900), (760, 1200)], ids=["wide", "narrow", "portrait"])
+def test_every_resting_die_is_inside_the_viewers_3d_view_at_any_window_shape(browser, explorer, viewport):
+    """Issue 46 item 6: the die was cut at the right edge of the explorer's 3-D view (one throw, and the second die
+    of a comparison half outside at 1400×900 and 1920×1080): the camera framed a square, and the 3-D view is
+    narrower than it is tall.  The page gives the viewer's recording the aspect of its 3-D view, and the camera
+    frames for it.  On screenshots at a wide, a narrow and a portrait window (the viewer below the map there),
+    both dice of a comparison resting far apart (their rims) are whole inside the 3-D view, with room to its
+    edges; in the narrow one, one throw's die (its face plates) first."""
+    from viewer_shot import view3d_rect
+
+    from dicetrace.sinks.rerun import FACE_COLORS
+    from dicetrace.sinks.rerun_compare import throw_color
+
+    w, h = viewport
+    page = browser.new_page(viewport={"width": w, "height": h})
+    page.goto(explorer.url)
+    wait_ready(page)
+    _click_pixel(page, *APART[0])
+    page.wait_for_function("document.getElementById('info').dataset.throws", timeout=60_000)
+    one = page.evaluate("JSON.parse(document.getElementById('info').dataset.throws)")
+    assert [(t["i"], t["j"]) for t in one] == [APART[0]]
+    if w < h:  # the viewer below the map
+        assert page.locator("#viewerbox").bounding_box()["y"] > page.locator("#mapbox").bounding_box()["y"] + 512
+    first = None
+    if viewport == (1100, 900):
+        page.wait_for_selector("#viewerbox canvas", timeout=120_000)
+        _viewer_dice(page, {"the die": FACE_COLORS.tolist()}, f"one throw at {w}×{h}")
+        first = page.evaluate("document.body.dataset.viewerRecording")
+    _click_pixel(page, *APART[1], shift=True)
+    page.wait_for_function("JSON.parse(document.getElementById('info').dataset.throws).length === 2", timeout=60_000)
+    page.wait_for_function(f"document.body.dataset.viewerRecording && document.body.dataset.viewerRecording !== {json.dumps(first)}"
+                           " && document.getElementById('info').dataset.viewer.includes('compare.rrd')", timeout=120_000)
+    img, _ = _viewer_dice(page, {"throw 1": throw_color(0), "throw 2": throw_color(1)}, f"two throws at {w}×{h}")
+    # the aspect the page asked the camera to frame for is its 3-D view's, as drawn
+    top, bottom, left, right = view3d_rect(img, int(0.59 * img.shape[1]))
+    asked = float(page.evaluate("document.getElementById('info').dataset.viewer").split("&aspect=")[1])
+    assert (right - left + 1) / (bottom - top + 1) == pytest.approx(asked, rel=0.08)

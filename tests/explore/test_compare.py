@@ -33,11 +33,11 @@ def test_compare_recording_holds_every_picked_throw(client, tmp_path):
     path = tmp_path / "compare.rrd"
     path.write_bytes(r.content)
     temporal, static = read_rrd(path), read_rrd(path, static=True)
-    for k in range(3):  # every die, with its path
+    for k in (1, 2, 3):  # every die, with its path, numbered from 1 as the page numbers its picks
         assert any(e.startswith(f"/throws/{k}/") for e in temporal), sorted(temporal)
-    for k in (1, 2):  # the divergence from throw 0 of each other
+    for k in (2, 3):  # the divergence from throw 1 of each other
         assert f"/divergence/distance/{k}" in temporal
-    assert "/throws/3/body" not in temporal
+    assert "/throws/0/body" not in temporal and "/throws/4/body" not in temporal
     summary = str(static["/summary"].to_pydict())
     for h in infos:  # each throw's grid point, outcome and contact sequence, as the page's hover gave them
         assert f"x = {h['coords']['x']!r}, y = {h['coords']['y']!r}" in summary
@@ -72,7 +72,7 @@ def test_a_comparison_past_its_time_is_a_504_naming_t(client, monkeypatch):
 
     release = threading.Event()
     monkeypatch.setattr(compare, "COMPARE_TIMEOUT_S", 0.2)
-    monkeypatch.setattr(compare, "compare_rrd", lambda throws, activate: release.wait(30))
+    monkeypatch.setattr(compare, "compare_rrd", lambda throws, activate, aspect=None: release.wait(30))
     try:
         r = _compare(client, _throw(1, 1), _throw(2, 2))
     finally:

@@ -243,9 +243,12 @@ def test_real_server_refuses_foreign_origins_and_host_names(tmp_path):
                                                                         "Content-Length": "0"})
             assert status == 400
         assert not out.exists() or not any(out.iterdir())
-        # no CORS header for a foreign page
-        status, headers, _ = _request(ex.port, "GET", f"/api/throw.rrd?window={WINDOW}&res={RES}&i=2&j=3",
-                                      {"Host": own, "Origin": "http://evil.example"})
+        # a GET that computes, from a foreign page: refused (issue 47 B1), and no CORS header
+        for site in ({"Origin": "http://evil.example"}, {"Sec-Fetch-Site": "cross-site"}):
+            status, headers, _ = _request(ex.port, "GET", f"/api/throw.rrd?window={WINDOW}&res={RES}&i=2&j=3&dt=1e-7",
+                                          {"Host": own, **site})
+            assert status == 403 and not [k for k in headers if k.startswith("access-control-")], headers
+        status, headers, _ = _request(ex.port, "GET", "/api/view", {"Host": own, "Origin": "http://evil.example"})
         assert status == 200 and not [k for k in headers if k.startswith("access-control-")], headers
         # the page's own flow: its origin, by either name it is reached by
         for host in (own, f"localhost:{ex.port}"):
@@ -306,6 +309,18 @@ def test_in_a_browser_the_pages_save_works_and_a_foreign_pages_does_not(browser,
         assert sorted(p.name for p in out.iterdir()) == ["from-page"]
 
 
+def _ctrl_c(proc, when: str, within_s: float = 10.0) -> None:
+    """SIGINT to a served explorer (what Ctrl-C sends): it must end within ``within_s`` with exit code 0."""
+    import signal
+
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=within_s)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"the explorer was still running {within_s:g} s after SIGINT {when}")
+    assert proc.returncode == 0, f"exit code {proc.returncode} after SIGINT {when}"
+
+
 #: A map that takes hours at any budget: 64×64 throws at dt 1e-7 s (each throw seconds of kernel time).
 SLOW_MAP = "res=64&dt=1e-7"
 
@@ -323,8 +338,6 @@ def _get_bg(url: str, into: dict, key: str, timeout: float = 600.0) -> threading
 def test_a_slow_map_blocks_no_other_tab_a_newer_view_supersedes_it_and_ctrl_c_stops_the_server(tmp_path):
     """A real ``dicetrace explore`` on 127.0.0.1: while tab A's hours-long map computes, tab B's small map
     answers; A's newer view ends A's old request at once; SIGINT ends the process while a map computes."""
-    import signal
-
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in [os.path.abspath("src"), os.environ.get("PYTHONPATH", "")] if p)}
     proc = subprocess.Popen(
         [sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--window", WINDOW, "--res", str(RES),
@@ -355,12 +368,7 @@ def test_a_slow_map_blocks_no_other_tab_a_newer_view_supersedes_it_and_ctrl_c_st
         slow_c = _get_bg(f"{base}/api/map.png?{SLOW_MAP}&window=red-sea&client=c", got, "c")
         time.sleep(1.0)
         assert slow_c.is_alive()
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pytest.fail("the explorer was still running 10 s after SIGINT")
-        assert proc.returncode == 0
+        _ctrl_c(proc, "while a map computes")
         assert "Traceback" not in proc.stderr.read()
     finally:
         if proc.poll() is None:
@@ -489,3 +497,167 @@ w.shutdown()
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.split() == ["(16,", "16)", "2304", "(24,", "24)"]
+
+
+# -- issue 47 B2: connections are bounded, slow headers time out, Ctrl-C works, no tracebacks ----------------------
+
+
+def _cli_env():
+    return {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in [os.path.abspath("src"), os.environ.get("PYTHONPATH", "")] if p)}
+
+
+def _partial(port: int) -> socket.socket:
+    """A connection that sends the start of a request and never its end (a slow or stuck client)."""
+    s = socket.create_connection(("127.0.0.1", port), timeout=10)
+    s.sendall(b"GET /api/health HTTP/1.1\r\nHost: 127.0.0.1\r\n")
+    return s
+
+
+def _closed_by_server(s: socket.socket, within: float) -> bool:
+    s.settimeout(within)
+    try:
+        return s.recv(1) == b""
+    except socket.timeout:
+        return False
+    except ConnectionResetError:
+        return True
+
+
+@pytest.mark.slow
+def test_headers_that_never_end_are_closed_and_the_oldest_waiting_connection_makes_room(monkeypatch):
+    """A connection gets HEADER_TIMEOUT_S for a request's headers (uvicorn's keep-alive timeout starts only after a
+    response); past MAX_CONNECTIONS the oldest connection not in a request is closed to make room."""
+    from dicetrace.explore import Explorer, server
+
+    monkeypatch.setattr(server, "HEADER_TIMEOUT_S", 0.6)
+    monkeypatch.setattr(server, "MAX_CONNECTIONS", 8)
+    with Explorer(window=WINDOW, res=RES) as ex:
+        assert ex._server.max_connections == 8
+        slow = _partial(ex.port)
+        assert not _closed_by_server(slow, 0.2)  # still within its time
+        assert _closed_by_server(slow, 5.0), "a client that never ended its headers was not closed"
+        slow.close()
+        held = [_partial(ex.port) for _ in range(8)]
+        try:
+            t0 = time.perf_counter()
+            status, _, body = get(f"http://127.0.0.1:{ex.port}/api/health", timeout=5)
+            assert status == 200 and json.loads(body)["ok"]
+            assert time.perf_counter() - t0 < 1.0  # not after the slow ones timed out: one of them made room
+            assert _closed_by_server(held[0], 0.5), "the oldest waiting connection was not the one closed"
+            # a keep-alive connection gets the same time for its next request's headers after a response
+            import http.client
+
+            conn = http.client.HTTPConnection("127.0.0.1", ex.port, timeout=5)
+            conn.request("GET", "/api/health")
+            assert conn.getresponse().read()
+            assert _closed_by_server(conn.sock, 6.0)
+            conn.close()
+        finally:
+            for h in held:
+                h.close()
+
+
+@pytest.mark.slow
+def test_under_a_1024_fd_limit_1030_slow_connections_leave_it_answering_and_ctrl_c_stops_it(tmp_path):
+    """Issue 47 B2 (its acceptance): the real ``dicetrace explore`` under ``ulimit -n 1024``; 1030 clients each send
+    the start of a request and nothing more.  It never runs out of file descriptors (it answered nothing, with 160
+    "Too many open files" tracebacks, and could stay wedged), answers a normal request while they are open and
+    within a second after they close, and SIGINT then stops it at once, with nothing on standard error."""
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard != resource.RLIM_INFINITY and hard < 1200:
+        pytest.skip(f"this test needs to open 1030 connections (the hard limit of open files is {hard})")
+    if soft != resource.RLIM_INFINITY and soft < 1200:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (min(4096, hard) if hard != resource.RLIM_INFINITY else 4096, hard))
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--window", WINDOW, "--res", str(RES)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_cli_env(), preexec_fn=limit,
+    )
+    err: list = []
+    drain = threading.Thread(target=lambda: err.append(proc.stderr.read()), daemon=True)  # a full pipe would block it
+    drain.start()
+    socks = []
+    try:
+        line = proc.stdout.readline()
+        assert "serving http://127.0.0.1:" in line, line
+        base = line.split("serving ", 1)[1].split()[0].split("/?")[0]
+        port = int(base.rsplit(":", 1)[1])
+        assert get(f"{base}/api/health", timeout=60)[0] == 200
+        for _ in range(1030):
+            try:
+                socks.append(_partial(port))
+            except OSError:  # refused or timed out: the server shed it, as it may
+                pass
+        assert len(socks) > 900  # the clients did connect (most of them were closed by the server since)
+        fds = len(os.listdir(f"/proc/{proc.pid}/fd"))
+        assert fds < 1024 - 64, f"the server holds {fds} file descriptors under a limit of 1024"
+        status, _, _ = get(f"{base}/api/health", timeout=5)  # while they are open
+        assert status == 200
+        for s in socks:
+            s.close()
+        socks = []
+        t0 = time.perf_counter()
+        status, _, body = get(f"{base}/api/health", timeout=1.0)
+        assert status == 200 and json.loads(body)["ok"] and time.perf_counter() - t0 < 1.0
+        t0 = time.perf_counter()
+        _ctrl_c(proc, "after the flood")
+        assert time.perf_counter() - t0 < 5.0
+        drain.join(timeout=10)
+        assert "Traceback" not in err[0] and "Too many open files" not in err[0], err[0][-3000:]
+        assert len(err[0].splitlines()) <= 2, err[0][-3000:]
+    finally:
+        for s in socks:
+            s.close()
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=30)
+
+
+@pytest.mark.slow
+def test_ctrl_c_during_a_save_stops_at_once_without_a_traceback(tmp_path):
+    """Issue 47 B3: Ctrl-C while "save view as scan" computes printed a CancelledError traceback.  Now the save's
+    request is answered as the server stops, the process ends at once, and standard error holds no traceback."""
+    out = tmp_path / "scans"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--window", WINDOW, "--res", str(RES),
+         "--out", str(out), "--map-budget", "1e9", "--threads", "1"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_cli_env(),
+    )
+    try:
+        line = proc.stdout.readline()
+        assert "serving http://127.0.0.1:" in line, (line, proc.stderr.read() if proc.poll() is not None else "")
+        base = line.split("serving ", 1)[1].split()[0].split("/?")[0]
+        view = "res=96&dt=1e-4"  # 9,216 throws of 6,000 steps: seconds on one thread
+        t0 = time.perf_counter()
+        assert get(f"{base}/api/map.png?{view}", timeout=300)[0] == 200  # its map first: the save's budget check
+        map_s = time.perf_counter() - t0
+        got: dict = {}
+
+        def save():
+            req = urllib.request.Request(f"{base}/api/save?{view}&name=big", method="POST")
+            try:
+                with urllib.request.urlopen(req, timeout=300) as r:
+                    got["status"] = r.status
+            except urllib.error.HTTPError as e:
+                got["status"] = e.code
+            except OSError as e:  # the server went away
+                got["status"] = repr(e)
+
+        th = threading.Thread(target=save, daemon=True)
+        th.start()
+        time.sleep(min(1.0, map_s / 3))
+        assert th.is_alive(), "the save ended before Ctrl-C (too fast a machine for this test's view)"
+        _ctrl_c(proc, "during a save")
+        stderr = proc.stderr.read()
+        assert "Traceback" not in stderr and "CancelledError" not in stderr, stderr[-3000:]
+        th.join(timeout=10)
+        assert got.get("status") != 200
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=30)

@@ -384,10 +384,21 @@ def in_camera(eye: dict, points: np.ndarray) -> np.ndarray:
     return np.stack([rel @ right, rel @ up, rel @ fwd], axis=-1)
 
 
+def in_view(seen: np.ndarray, aspect: float, fill: float = 1.0) -> np.ndarray:
+    """Which points (camera frame, :func:`in_camera`) a 3-D view of width/height ``aspect`` shows within ``fill`` of
+    its half-widths: Rerun's field of view is vertical, the view shows ``aspect`` times as much across."""
+    tan = np.tan(np.radians(VIEWER_FOV_Y_DEG) / 2) * fill
+    return (seen[:, 2] > 0) & (np.abs(seen[:, 0]) <= tan * aspect * seen[:, 2]) & (np.abs(seen[:, 1]) <= tan * seen[:, 2])
+
+
 def test_camera_frames_the_resting_die_and_its_path_large(roll, rrd):
     """The blueprint's camera (read from the .rrd) sees the resting die and the whole path from its first bounce,
-    every node of it, and from as close as that allows: the resting die spans at least a sixth of the view
-    (it was about a tenth, framing the whole drop from across the travel)."""
+    every node of it, in a 3-D view as narrow as the camera frames for (``VIEW_ASPECT``, width/height 0.6: the
+    recording's 3-D view in a viewer window of about 800×900; at 1100×900 it is 0.82), and from as close as that
+    allows: the resting die spans at least a sixth of that view's width (it was about a tenth, framing the whole
+    drop from across the travel)."""
+    from dicetrace.sinks.rerun_view import VIEW_ASPECT
+
     rows = blueprint_rows(rrd)
     (eye,) = [v for k, v in rows.items() if k.endswith("/EyeControls3D")]
     assert eye["EyeControls3D:eye_up"][0] == [0.0, 0.0, 1.0]
@@ -398,12 +409,12 @@ def test_camera_frames_the_resting_die_and_its_path_large(roll, rrd):
     assert 100 < first < roll.steps  # the drop is before it
     seen = in_camera(eye, nodes[first:].reshape(-1, 3))
     tan = np.tan(np.radians(VIEWER_FOV_Y_DEG) / 2)
-    assert (seen[:, 2] > 0).all()
-    assert (np.abs(seen[:, :2]) <= tan * seen[:, 2:3]).all(), "a node of the path from the first bounce is out of view"
+    assert in_view(seen, VIEW_ASPECT).all(), "a node of the path from the first bounce is out of view"
+    assert VIEW_ASPECT <= 0.82 * 0.9  # a viewer window of 1100×900 shows it with room
     rest = in_camera(eye, nodes[-1])
-    ys, depth = rest[:, :2], rest[:, 2]
-    size = (ys.max(axis=0) - ys.min(axis=0)).max() / (2 * tan * depth.mean())  # of the view's height
-    assert size > 1 / 6, f"the resting die spans {size:.3f} of the view"
+    xs, depth = rest[:, 0], rest[:, 2]
+    size = (xs.max() - xs.min()) / (2 * tan * VIEW_ASPECT * depth.mean())  # of the view's width
+    assert size > 1 / 6, f"the resting die spans {size:.3f} of the view's width"
     # the camera looks down, and orbits around the point of its axis at the resting die's depth
     centre = in_camera(eye, tr.cm_pos[-1][None, :])[0]
     target = in_camera(eye, np.array(eye["EyeControls3D:look_target"]))[0]
@@ -510,7 +521,7 @@ def test_compare_recording_holds_each_throw_in_its_colour_and_the_divergence(rol
     eps, other, path = nudged
     temporal, static = read_rrd(path), read_rrd(path, static=True)
     colours = []
-    for k, r in enumerate((roll, other)):
+    for k, r in enumerate((roll, other), start=1):  # numbered from 1, as the explorer's page numbers its picks
         body = temporal[f"/throws/{k}/body"]
         centres = values(body, "Boxes3D:centers", 3)[:, 0]
         # Rerun stores positions as float32; a throw that settled first keeps its last state
@@ -519,15 +530,15 @@ def test_compare_recording_holds_each_throw_in_its_colour_and_the_divergence(rol
         colours.append(tuple(static[f"/throws/{k}/body"].column("Boxes3D:colors").to_pylist()[0]))
         assert f"/throws/{k}/cm_path" in temporal and f"/throws/{k}/nodes" in temporal
     assert colours[0] != colours[1]
-    steps, dist = _scalars(temporal, "/divergence/distance/1")
+    steps, dist = _scalars(temporal, "/divergence/distance/2")
     assert steps[0] == 0 and len(steps) == max(roll.steps, other.steps) + 1
     # at t = 0 positions and orientations agree; U and L differ by exactly the nudge (relative)
     assert dist[0] == pytest.approx(eps, rel=1e-8)
-    lsteps, logd = _scalars(temporal, "/divergence/log10/1")
+    lsteps, logd = _scalars(temporal, "/divergence/log10/2")
     np.testing.assert_allclose(logd, np.log10(dist[lsteps]))
     # the position part against the two simulations directly, while both still run
     n = min(roll.steps, other.steps) + 1
-    _, dpos = _scalars(temporal, "/divergence/position_cm/1")
+    _, dpos = _scalars(temporal, "/divergence/position_cm/2")
     np.testing.assert_allclose(dpos[:n], np.linalg.norm(roll.trace.cm_pos[:n] - other.trace.cm_pos[:n], axis=1))
     # chaos: the red-sea throw's 1e-6 nudge changes its contact sequence, the states end far apart
     assert roll.contact_sequence != other.contact_sequence
@@ -563,7 +574,7 @@ def test_compare_dice_keep_faces_and_pips_labels_on_hover_and_nest_without_z_fig
     temporal, static = read_rrd(path), read_rrd(path, static=True)
     extents = []
     for k, r in enumerate((roll, other)):
-        base = f"/throws/{k}"
+        base = f"/throws/{k + 1}"
         plates = static[f"{base}/faces"]
         np.testing.assert_array_equal(_rgb(plates, "Boxes3D:colors"), FACE_COLORS)
         assert plates.column("Boxes3D:labels").to_pylist()[0] == ["1", "2", "3", "4", "5", "6"]
@@ -587,10 +598,10 @@ def test_compare_dice_keep_faces_and_pips_labels_on_hover_and_nest_without_z_fig
     margin = 0.005 * roll.config.preset.half_side_cm
     assert b1 < b0 - margin and w1 < w0 - margin and r1 < r0 - margin  # nested, never coplanar
     # coinciding paths: the later one thinner and lifted by a fixed amount, never the same surface
-    paths = [static[f"/throws/{k}/cm_path"].column("LineStrips3D:radii").to_pylist()[0][0] for k in (0, 1)]
+    paths = [static[f"/throws/{k}/cm_path"].column("LineStrips3D:radii").to_pylist()[0][0] for k in (1, 2)]
     assert paths[1] < 0.8 * paths[0]
     ends = [np.asarray(temporal[f"/throws/{k}/cm_path"].column("LineStrips3D:strips").to_pylist()[-1][0])
-            for k in (0, 1)]
+            for k in (1, 2)]
     np.testing.assert_allclose(ends[1][0] - ends[0][0], [0, 0, ends[1][0][2] - ends[0][0][2]])
     assert ends[1][0][2] - ends[0][0][2] > margin
 
@@ -603,14 +614,14 @@ def test_side_layout_puts_the_dice_apart_and_keeps_the_divergence(roll, nudged, 
     path.write_bytes(encode_compare_rrd([roll, other], ["a", "b"], layout="side"))
     side, over = read_rrd(path), read_rrd(overlay)
     half = roll.config.preset.half_side_cm
-    a = values(side["/throws/0/nodes"], "Points3D:positions", 3).astype(np.float64)
-    b = values(side["/throws/1/nodes"], "Points3D:positions", 3).astype(np.float64)
+    a = values(side["/throws/1/nodes"], "Points3D:positions", 3).astype(np.float64)
+    b = values(side["/throws/2/nodes"], "Points3D:positions", 3).astype(np.float64)
     # every node of one die stays farther from every node of the other than a die's size, at every step
     gaps = np.linalg.norm(a[:, :, None, :] - b[:, None, :, :], axis=-1).min(axis=(1, 2))
     assert gaps.min() > 2 * half
     # the shift is a constant, horizontal, to the right as the recording's camera sees it (across its line of
     # sight: the dice side by side on the screen); the divergence is that of the real states
-    shift = values(side["/throws/1/body"], "Boxes3D:centers", 3)[:, 0] - values(over["/throws/1/body"], "Boxes3D:centers", 3)[:, 0]
+    shift = values(side["/throws/2/body"], "Boxes3D:centers", 3)[:, 0] - values(over["/throws/2/body"], "Boxes3D:centers", 3)[:, 0]
     np.testing.assert_allclose(shift, np.broadcast_to(shift[0], shift.shape), atol=1e-4)
     (eye,) = [v for k, v in blueprint_rows(path).items() if k.endswith("/EyeControls3D")]
     right, up, depth = (in_camera(eye, shift[0][None, :].astype(np.float64)) - in_camera(eye, np.zeros((1, 3))))[0]
@@ -619,7 +630,7 @@ def test_side_layout_puts_the_dice_apart_and_keeps_the_divergence(roll, nudged, 
     seen = in_camera(eye, np.concatenate([a[-1], b[-1]]))
     assert (np.abs(seen[:, :2]) <= np.tan(np.radians(VIEWER_FOV_Y_DEG) / 2) * seen[:, 2:3]).all()
     for key in ("distance", "log10"):
-        np.testing.assert_array_equal(_scalars(side, f"/divergence/{key}/1")[1], _scalars(over, f"/divergence/{key}/1")[1])
+        np.testing.assert_array_equal(_scalars(side, f"/divergence/{key}/2")[1], _scalars(over, f"/divergence/{key}/2")[1])
 
 
 def test_identical_throws_have_exactly_zero_divergence(roll, tmp_path):
@@ -629,9 +640,9 @@ def test_identical_throws_have_exactly_zero_divergence(roll, tmp_path):
     path = tmp_path / "twins.rrd"
     path.write_bytes(encode_compare_rrd([roll, twin], ["a", "a"]))
     temporal = read_rrd(path)
-    _, dist = _scalars(temporal, "/divergence/distance/1")
+    _, dist = _scalars(temporal, "/divergence/distance/2")
     assert len(dist) == roll.steps + 1 and (dist == 0).all()
-    assert "/divergence/log10/1" not in temporal  # log10(0): nothing to plot
+    assert "/divergence/log10/2" not in temporal  # log10(0): nothing to plot
 
 
 def test_compare_blueprint_shows_the_throws_and_the_log_divergence():
@@ -640,6 +651,86 @@ def test_compare_blueprint_shows_the_throws_and_the_log_divergence():
     bp = compare_blueprint()
     views = {type(v).__name__: v for v in _walk(bp.root_container)}
     assert "Spatial3DView" in views and "TimeSeriesView" in views
+
+
+def test_compare_recording_numbers_its_throws_from_1_as_the_explorers_page_does(roll, nudged):
+    """Issue 46 item 7: the page says "throw 1, throw 2 … divergence from throw 1"; the viewer said "throw 1 vs 0 …
+    divergence from throw 0".  One numbering, from 1: the dice, their series, the plot's name, the summary."""
+    eps, other, path = nudged
+    temporal, static = read_rrd(path), read_rrd(path, static=True)
+    assert {e.split("/")[2] for e in temporal if e.startswith("/throws/")} == {"1", "2"}
+    assert static["/throws/1/body"].column("Boxes3D:labels").to_pylist()[0] == ["throw 1"]
+    assert static["/throws/2/body"].column("Boxes3D:labels").to_pylist()[0] == ["throw 2"]
+    assert [e for e in temporal if e.startswith("/divergence/")] and all(
+        e.endswith("/2") for e in temporal if e.startswith("/divergence/"))
+    names = {e: static[e].column("SeriesLines:names").to_pylist()[0][0] for e in static if e.startswith("/divergence/")}
+    assert names["/divergence/log10/2"] == "log10 distance, throw 2 vs 1"
+    assert all(n.endswith("throw 2 vs 1") for n in names.values()), names
+    view_names = [v["ViewBlueprint:display_name"][0] for v in blueprint_rows(path).values() if "ViewBlueprint:display_name" in v]
+    assert "log10 divergence from throw 1" in view_names and not [n for n in view_names if "throw 0" in n]
+    summary = str(static["/summary"].to_pydict())
+    assert "| 1 | a |" in summary and "| 2 | b |" in summary and "throw 0" not in summary
+
+
+def _lab(rgb) -> np.ndarray:
+    """sRGB (0..255) to CIELAB (D65): the colour distance a viewer sees (ΔE, CIE76)."""
+    c = np.asarray(rgb, dtype=np.float64) / 255
+    c = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    xyz = c @ np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]).T
+    xyz = xyz / np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > 216 / 24389, np.cbrt(xyz), (24389 / 27 * xyz + 16) / 116)
+    return np.stack([116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], axis=-1)
+
+
+def test_throw_colours_are_no_face_plates_colours_and_differ_from_each_other(roll, nudged):
+    """Issue 46 item 10: a throw drawn blue made face 1 (a blue plate) hard to see in comparisons.  Every throw's
+    colour is at least 30 ΔE (CIELAB) from every face colour and from the ground, and 25 from every other throw's
+    (the old blue was 25 from face 1, its green 8 from face 2); the recording draws each die in its throw's."""
+    from dicetrace.sinks.rerun import GROUND_COLOR
+    from dicetrace.sinks.rerun_compare import THROW_COLORS, throw_color
+
+    throws, faces = _lab(THROW_COLORS), _lab(FACE_COLORS)
+    to_faces = np.linalg.norm(throws[:, None, :] - faces[None, :, :], axis=-1)
+    assert to_faces.min() >= 30, np.round(to_faces, 1)
+    assert np.linalg.norm(throws - _lab(GROUND_COLOR), axis=-1).min() >= 25
+    pairs = np.linalg.norm(throws[:, None, :] - throws[None, :, :], axis=-1)[np.triu_indices(len(throws), 1)]
+    assert pairs.min() >= 25, np.round(pairs, 1)
+    _, _, path = nudged
+    static = read_rrd(path, static=True)
+    for k in (1, 2):
+        assert tuple(_rgb(static[f"/throws/{k}/body"], "Boxes3D:colors")[0]) == throw_color(k - 1)
+
+
+@pytest.mark.parametrize("aspect", [0.3, 0.6, 0.82, 1.6, 3.0])
+def test_the_camera_frames_every_resting_die_for_the_views_aspect(roll, nudged, aspect, tmp_path):
+    """Issue 46 item 6: the die was cut at the right edge of a view narrower than it is tall: the camera framed a
+    square.  Rerun's field of view is vertical: a view of width/height ``aspect`` shows that much across.  For
+    each aspect, every node of every resting die (one throw, and the dice of a comparison), and the path from
+    the first bounce, lie within the frame's 90 % (FRAME_FILL), for a narrow, a portrait and a wide view alike."""
+    from dicetrace.sinks.rerun import encode_rrd_of
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd
+    from dicetrace.sinks.rerun_view import FRAME_FILL
+
+    _, other, _ = nudged
+    half = roll.config.preset.half_side_cm
+    one, two = tmp_path / "one.rrd", tmp_path / "two.rrd"
+    one.write_bytes(encode_rrd_of(roll, aspect=aspect))
+    two.write_bytes(encode_compare_rrd([roll, other], ["a", "b"], aspect=aspect))
+    for rolls, path in (([roll], one), ([roll, other], two)):
+        (eye,) = [v for k, v in blueprint_rows(path).items() if k.endswith("/EyeControls3D")]
+        for r in rolls:
+            tr = r.trace
+            nodes = tr.cm_pos[:, None, :] + tr.node_offsets
+            first = int(np.flatnonzero(tr.cm_pos[:, 2] <= np.sqrt(3) * half)[0])
+            rest = in_camera(eye, nodes[-1])
+            assert in_view(rest, aspect, FRAME_FILL * 1.001).all(), f"a resting die's corner is out of the frame at {aspect}"
+            assert in_view(in_camera(eye, tr.cm_pos[first:]), aspect, FRAME_FILL * 1.001).all()
+        # and tight: no farther than that needs, some node of a resting die or of the path near the frame's edge
+        framed = np.concatenate([in_camera(eye, (r.trace.cm_pos[:, None, :] + r.trace.node_offsets).reshape(-1, 3))
+                                 [np.repeat(r.trace.cm_pos[:, 2] <= np.sqrt(3) * half, 8)] for r in rolls])
+        tan = np.tan(np.radians(VIEWER_FOV_Y_DEG) / 2)
+        reach = np.maximum(np.abs(framed[:, 0]) / (tan * aspect), np.abs(framed[:, 1]) / tan) / framed[:, 2]
+        assert reach.max() > 0.75 * FRAME_FILL, f"the camera is farther than it needs: {reach.max():.3f}"
 
 
 def _walk(node):

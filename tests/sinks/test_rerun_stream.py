@@ -34,12 +34,14 @@ def test_served_web_viewer_reads_the_recording_and_asks_nothing_beyond_this_mach
         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:
-        first = proc.stdout.readline()
+        outcome, first = proc.stdout.readline(), proc.stdout.readline()  # the outcome first, then the URL
+        assert outcome.startswith("outcome 3 "), outcome
         assert first.startswith(f"serving the web viewer at http://127.0.0.1:{web}/"), first
         url = first.split(" at ", 1)[1].split(" ", 1)[0]
         page = browser.new_page(viewport={"width": 1200, "height": 800})
-        requests, errors = [], []
+        requests, errors, missing = [], [], []
         page.on("request", lambda r: requests.append(r.url))
+        page.on("response", lambda r: r.status == 404 and missing.append(r.url))
         page.on("pageerror", lambda e: errors.append(str(e)))
         page.goto(url)
         page.wait_for_function("document.body.dataset.ready === '1'", timeout=180_000)  # the viewer started
@@ -55,5 +57,6 @@ def test_served_web_viewer_reads_the_recording_and_asks_nothing_beyond_this_mach
         assert hosts <= {("127.0.0.1", web), ("127.0.0.1", grpc)}, hosts
         assert page.evaluate("document.body.dataset.blocked || ''") == ""  # and nothing had to be blocked
         assert not errors, errors
+        assert not missing, f"answered 404: {missing}"  # issue 46 item 13: no /favicon.ico 404 either
     finally:
         interrupt(proc, 60)

@@ -14,7 +14,8 @@ import pytest
 
 from dicetrace.sinks.rerun_stream import Stream, StreamError
 from dicetrace.sinks.rerun_view import default_blueprint
-from dicetrace.sinks.rerun_web import VIEWER_ASSETS, WebViewerError, WebViewerServer, viewer_assets_folder
+from dicetrace.sinks.rerun_web import (FAVICON_LINK, FAVICON_SVG, VIEWER_ASSETS, WebViewerError, WebViewerServer,
+                                      viewer_assets_folder)
 
 pytestmark = pytest.mark.skipif(viewer_assets_folder() is None, reason="rerun-notebook (Rerun's web viewer) is missing")
 
@@ -44,6 +45,10 @@ def test_serves_the_page_and_the_viewer_files_and_nothing_else():
             status, headers, body = _get(f"http://127.0.0.1:{port}{path}")
             assert (status, headers["Content-Type"]) == (200, ctype)
             assert body == (folder / path.lstrip("/")).read_bytes()
+        # the page's icon: named in the page (a data: URL) and served where a browser looks for one (issue 46 item 13)
+        assert FAVICON_LINK in page
+        status, headers, body = _get(f"http://127.0.0.1:{port}/favicon.ico")
+        assert (status, headers["Content-Type"], body) == (200, "image/svg+xml", FAVICON_SVG)
         status, headers, body = _get(f"http://127.0.0.1:{port}/widget.js", method="HEAD")
         assert status == 200 and body == b"" and int(headers["Content-Length"]) > 0
         with pytest.raises(urllib.error.HTTPError) as err:

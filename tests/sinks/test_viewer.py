@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from viewer_shot import RERUN, XVFB, screenshot
+from viewer_shot import RERUN, XVFB, assert_dice_inside, screenshot
 
 pytestmark = [pytest.mark.viewer, pytest.mark.slow]
 
@@ -176,10 +176,14 @@ def test_viewer_screenshot_shows_the_die_on_the_ground(tmp_path):
     # the face numbers as pips: at rest faces 1, 2 and 3 (up) are turned towards the camera
     facing = assert_pips_show_the_facing_numbers(roll, im)
     assert 3 in facing and 4 not in facing and 2 <= len(facing) <= 3, facing  # 1 and 3 from the default camera
-    # the die is large: its visible face plates alone span more than an eighth of the 3-D view's width (the
-    # whole die spanned about a tenth of it before the camera framed the resting place; now about a fifth)
+    # the die is large for the view the camera frames for: its visible face plates alone span more than a seventh of
+    # the width of a 3-D view as narrow as VIEW_ASPECT (the view's height times it).  In this wider window the view
+    # shows more across than that, not the die larger (Rerun's field of view is vertical): here about a tenth of
+    # its width (a square frame made it a fifth, and cut the die in a view narrower than it is tall)
+    from dicetrace.sinks.rerun_view import VIEW_ASPECT
+
     width = die_width(view, facing)
-    assert width > view.shape[1] / 8, f"the resting die's plates span {width} of {view.shape[1]} px"
+    assert width > view.shape[0] * VIEW_ASPECT / 7, f"the resting die's plates span {width} px, the view {view.shape[:2]}"
 
 
 @pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
@@ -213,7 +217,7 @@ def test_viewer_screenshot_shows_the_compare_view(tmp_path):
     a = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True))
     b = simulate(a.ic * (1 + 1e-6), record=Record(states=True, energy=True))
     rrd = tmp_path / "compare.rrd"
-    rrd.write_bytes(encode_compare_rrd([a, b], ["throw 0", "nudged"]))
+    rrd.write_bytes(encode_compare_rrd([a, b], ["throw 1", "nudged"]))
     png = screenshot(rrd, tmp_path)
     im = np.asarray(Image.open(png).convert("RGB")).astype(int)
     h, w, _ = im.shape
@@ -228,7 +232,7 @@ def test_viewer_screenshot_shows_the_compare_view(tmp_path):
         assert near(view, throw_color(k)) > 0.0003 * npx, f"throw {k}'s die is not visible"
     plot = im[int(0.05 * h) : int(0.6 * h), int(0.62 * w) :]
     assert near(plot, throw_color(1), tol=40) > 200, "the divergence curve (throw 1's colour) is not drawn"
-    # the dice keep their faces: at rest throw 0's faces turned towards the camera carry their pips, and nothing
+    # the dice keep their faces: at rest throw 1's faces turned towards the camera carry their pips, and nothing
     # else shows on them (no node label, no face of the nudged die coinciding with it: no z-fighting)
     from dicetrace.sinks.rerun import FACE_COLORS
 
@@ -236,3 +240,32 @@ def test_viewer_screenshot_shows_the_compare_view(tmp_path):
     seen = pips_seen(im[int(0.07 * h) : int(0.95 * h), : int(0.55 * w)], FACE_COLORS, facing, throw_color(1))
     assert 3 in facing and all(n == k for k, (n, _) in seen.items()), f"faces {facing}: pips seen {seen}"
     assert all(f <= 0.01 for _, f in seen.values()), f"foreign pixels on the plates (face: count, fraction): {seen}"
+
+
+@pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
+@pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+def test_in_a_1100_by_900_viewer_every_resting_die_is_inside_the_3d_view(tmp_path):
+    """Issue 46 item 6, the real viewer's part: at 1100×900 the 3-D view (the layout's left 3/5) is narrower than it
+    is tall, and the die was cut at its right edge (the camera framed a square).  On the screenshot, one throw's die
+    (its face plates) and both dice of a comparison whose dice rest 10 cm apart (their rims) are whole inside the
+    view, with room to its edges."""
+    from PIL import Image
+
+    from dicetrace.ics import seed_slice
+    from dicetrace.simulate import Record, simulate
+    from dicetrace.sinks.rerun import FACE_COLORS, write_rrd
+    from dicetrace.sinks.rerun_compare import encode_compare_rrd, throw_color
+
+    a = simulate(seed_slice(1.65, 3.9), record=Record(states=True, energy=True))
+    b = simulate(seed_slice(1.432, 3.95), record=Record(states=True, energy=True))
+    assert np.linalg.norm(a.trace.cm_pos[-1, :2] - b.trace.cm_pos[-1, :2]) > 10  # far apart: a wide frame
+    one, two = tmp_path / "one", tmp_path / "two"
+    one.mkdir()
+    two.mkdir()
+    (two / "compare.rrd").write_bytes(encode_compare_rrd([a, b], ["a", "b"]))
+    for folder, rrd, dice in ((one, write_rrd(a, one / "throw.rrd"), {"the die": FACE_COLORS.tolist()}),
+                              (two, two / "compare.rrd", {"throw 1": throw_color(0), "throw 2": throw_color(1)})):
+        im = np.asarray(Image.open(screenshot(rrd, folder, size=(1100, 900))).convert("RGB")).astype(int)
+        h, w, _ = im.shape
+        assert w / h == pytest.approx(1100 / 900, rel=0.01)
+        assert_dice_inside(im, dice, right=int(0.59 * w), what=f"{rrd.name} at 1100×900")

@@ -132,22 +132,15 @@ def check_output_folder(path: Path) -> Path:
     return path
 
 
-#: Peak memory of ``record`` per step of the throw, in units of its trace arrays (the trace, the
-#: recording's per-step arrays while logging, the encoded recording).
-RECORD_MEMORY_FACTOR = 8.0
-
-
 def check_record_size(cfg, n_throws: int = 1, forces: bool = False) -> None:
     """Refuse, before running, throws whose recording could exceed the available memory.
 
-    The worst case is throws that run to the time cap: max_steps + 1 rows each.
+    The worst case is throws that run to the time cap (:func:`dicetrace.sinks.rerun.recording_memory`, the
+    bound the explorer's viewer applies too).
     """
-    # lazy: keeps `dicetrace --help` fast (imports numba)
-    from dicetrace.simulate import Record, available_memory, trace_bytes
+    from dicetrace.sinks.rerun import recording_memory  # lazy: keeps `dicetrace --help` fast
 
-    steps = cfg.numerics.max_steps
-    need = trace_bytes(steps + 1, Record(states=True, energy=True, forces=forces)) * RECORD_MEMORY_FACTOR * n_throws
-    avail = available_memory()
+    steps, need, avail = recording_memory(cfg, n_throws, forces)
     if avail is not None and need > avail:
         fail(f"--dt {fmt_num(cfg.numerics.dt_s)} / --t-max {fmt_num(cfg.numerics.t_max_s)}: a throw may run to the "
              f"time cap, {steps:,} steps, whose recording needs up to {human_bytes(need)} of memory, more than the "
@@ -357,7 +350,7 @@ def register(app: typer.Typer) -> None:
             labels = [ic_label(the_ic, coords, desc)] + [ic_label(v, None, {"kind": "ic"}) for v in all_ics[1:]]
         if eps is not None:
             all_ics.append(all_ics[0] * (1.0 + eps))
-            labels.append(f"throw 0's IC × (1 + {eps:g})")
+            labels.append(f"throw 1's IC × (1 + {eps:g})")
         if scan is None:
             cfg = build_config(model, integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
                                tol_growth=tol_growth)
@@ -433,7 +426,19 @@ def register(app: typer.Typer) -> None:
 
         # the recording itself may be on stdout: the summary then goes to stderr
         stream_out = sys.stderr if (dest is not None and dest.kind == "stdout") or sys.stdout is None else sys.stdout
+
+        def summary_line(sent: str = "") -> str:
+            outcomes = []
+            for k, r in enumerate(rolls):
+                o = r.outcome if r.outcome >= 0 else "-1 (not settled)"
+                pre = f"throw {k + 1}: " if comparing else ""  # numbered from 1, as the recording
+                outcomes.append(f"{pre}outcome {o}  status {r.status}  steps {r.steps}  t_settle_s {r.t_settle_s:.6g}  "
+                                f"contact_sequence {r.contact_sequence}")
+            return ("  |  ".join(outcomes) + (f"  wrote {' '.join(written)}" if written else "")
+                    + (f"  {sent}" if sent else ""))
+
         sent = ""
+        said = False
         if mode is not None:
             st = Stream(blueprint)
             try:
@@ -448,6 +453,8 @@ def register(app: typer.Typer) -> None:
                 if mode == "serve":
                     until = "Ctrl-C" if serve_s is None else f"{serve_s:g} s have passed (or Ctrl-C)"
                     try:  # from here on Ctrl-C means "stop serving": a normal end, wherever it lands
+                        print(summary_line(sent), file=stream_out, flush=True)  # the outcome first, then the URL
+                        said = True
                         print(f"serving the web viewer at {web} (gRPC {st.grpc_url}) until {until}", file=stream_out,
                               flush=True)
                         wait_serving(serve_s)
@@ -462,14 +469,8 @@ def register(app: typer.Typer) -> None:
                 except (KeyboardInterrupt, StreamError):  # a Ctrl-C while the server shuts down (serving has ended)
                     pass
 
-        outcomes = []
-        for k, r in enumerate(rolls):
-            o = r.outcome if r.outcome >= 0 else "-1 (not settled)"
-            pre = f"throw {k}: " if comparing else ""
-            outcomes.append(f"{pre}outcome {o}  status {r.status}  steps {r.steps}  t_settle_s {r.t_settle_s:.6g}  "
-                            f"contact_sequence {r.contact_sequence}")
-        summary = "  |  ".join(outcomes) + (f"  wrote {' '.join(written)}" if written else "") + (f"  {sent}" if sent else "")
-        print(summary, file=stream_out)
+        if not said:
+            print(summary_line(sent), file=stream_out)
         failed = [r for r in rolls if r.status.failed]
         if failed:
             r = failed[0]

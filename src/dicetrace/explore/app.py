@@ -17,12 +17,14 @@ Endpoints::
     GET  /api/compare.rrd?t=&t= picked throws in one compare recording (:mod:`dicetrace.explore.compare`)
     POST /api/save?name=        the view as a scan dataset (as ``dicetrace scan`` writes it) in the start-up folder
     GET  /rerun/widget.js, /rerun/re_viewer_bg.wasm   Rerun's web viewer (shipped by rerun-notebook)
+    GET  /favicon.ico           the page's icon (a die face, SVG)
 
 Only the server's own names are served (starlette's ``TrustedHostMiddleware``:
 127.0.0.1, localhost, [::1] and the address it listens on; another ``Host:``, as
 a DNS-rebinding page sends, gets a 400), a request that changes something
-(``POST``) from another origin is refused with a 403 (:class:`SameOriginWrites`),
-and no response carries CORS headers, so no other site's page can read one.
+(``POST``) or computes (the maps, hovers, throws: :data:`COMPUTING_PATHS`) from
+another origin is refused with a 403 (:class:`SameOriginOnly`), and no response
+carries CORS headers, so no other site's page can read one.
 """
 
 from __future__ import annotations
@@ -45,12 +47,13 @@ from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Respon
 from starlette.routing import Route
 
 from dicetrace.explore.compare import compare_endpoint
-from dicetrace.explore.compute import Busy, OverBudget, Worker, scan_folder_for, throw_info, throw_rrd
+from dicetrace.explore.compute import (Busy, OverBudget, Worker, check_recording, scan_folder_for, throw_aspect,
+                                       throw_info, throw_rrd)
 from dicetrace.explore.outcome_map import Cancelled, strip_rows
 from dicetrace.explore.page import page_html
 from dicetrace.explore.view import MAX_RES, MIN_RES, View, ViewError, _num, view_from_query
 from dicetrace.scan.colours import outcome_rgb_table
-from dicetrace.sinks.rerun_web import rerun_notebook_static
+from dicetrace.sinks.rerun_web import FAVICON_SVG, rerun_notebook_static
 
 #: The passes of a view and their resolution divisors: the page asks for each in turn.
 PASSES = {"preview": 16, "coarse": 4, "fine": 1}
@@ -62,8 +65,12 @@ STRIP_POLL_S = 0.03
 
 #: The names a browser on this machine reaches a loopback server by (the Host header's name, IPv6 in brackets).
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "[::1]")
-#: Methods that only read (a browser's cross-origin check applies to the others).
+#: Methods that only read (a browser's cross-origin check applies to the others, and to :data:`COMPUTING_PATHS`).
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+#: Paths whose GET computes (a map, a throw): any page could ask for one from an ``<img>``, so they are
+#: answered to the explorer's own page only, as the writes are.
+COMPUTING_PATHS = frozenset({"/api/map.png", "/api/map.json", "/api/map.strips", "/api/hover", "/api/throw.rrd",
+                             "/api/compare.rrd"})
 
 
 def allowed_hosts(hosts=()) -> list[str]:
@@ -83,8 +90,9 @@ def allowed_hosts(hosts=()) -> list[str]:
     return list(dict.fromkeys(names))
 
 
-class SameOriginWrites:
-    """ASGI middleware: a request that may change state (not GET/HEAD/OPTIONS) from another origin gets a 403.
+class SameOriginOnly:
+    """ASGI middleware: a request that may change state (not GET/HEAD/OPTIONS), or that computes (a GET of
+    :data:`COMPUTING_PATHS`: a map, a hover, a throw), from another origin gets a 403 and runs nothing.
 
     The check browsers make possible (the design of Go's ``http.CrossOriginProtection``
     and of Jupyter's ``check_origin``): a browser marks every request with
@@ -101,7 +109,7 @@ class SameOriginWrites:
         self.app = app
 
     async def __call__(self, scope, receive, send):
-        if scope["type"] == "http" and scope["method"] not in SAFE_METHODS:
+        if scope["type"] == "http" and (scope["method"] not in SAFE_METHODS or scope.get("path") in COMPUTING_PATHS):
             why = self.refusal(scope)
             if why is not None:
                 await JSONResponse({"error": f"cross-origin request refused: {why}", "param": None},
@@ -300,8 +308,11 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         v = _view(request, default)
         i, j = _point(request, v)
         download = bool(request.query_params.get("download"))
-        # for the viewer, record's blueprint made active
-        name, data, summary = await _throw_within(worker.submit_throw(throw_rrd, v, i, j, not download))
+        # for the download, record's file as it is; for the viewer, record's blueprint made active, its camera
+        # framing for the 3-D view's aspect the page gives
+        aspect = None if download else throw_aspect(request.query_params.get("aspect"))
+        check_recording(v)  # what `record --dt` refuses (its memory), refused before anything runs
+        name, data, summary = await _throw_within(worker.submit_throw(throw_rrd, v, i, j, not download, aspect))
         # no CORS header: the page's viewer fetches this from the page's own origin
         headers = {"X-Dicetrace-Outcome": str(summary["outcome"]), "X-Dicetrace-Status": summary["status"]}
         if download:
@@ -315,6 +326,10 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         v = _view(request, default)
         name = request.query_params.get("name", "")
         scan_folder_for(out, name)
+        worker.check_save_room()  # a full queue of saves is a 503 before any computing
+        # the map budget: the view's map first (the cache's when the page has shown it), on the map worker's
+        # turns: a view whose map would be refused for its cost (OverBudget, a 422) is not saved either
+        await asyncio.wrap_future(worker.submit_map(v))
         try:
             summary = await asyncio.wrap_future(worker.submit_scan(v, out, name))
         except (ValueError, OSError) as e:  # a folder holding another scan, a full disk, ...
@@ -336,6 +351,9 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
 
         return ep
 
+    async def favicon(request: Request) -> Response:
+        return Response(FAVICON_SVG, media_type="image/svg+xml", headers={"Cache-Control": "max-age=86400"})
+
     async def on_error(request: Request, exc: Exception) -> Response:
         return JSONResponse({"error": f"internal error: {type(exc).__name__}: {exc}", "param": None}, status_code=500)
 
@@ -353,6 +371,7 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
         Route("/rerun/widget.js", asset("widget.js", "text/javascript")),
         Route("/rerun/re_viewer_bg.wasm", asset("re_viewer_bg.wasm", "application/wasm")),
         Route("/rerun/widget.css", asset("widget.css", "text/css")),
+        Route("/favicon.ico", favicon),
     ]
     @contextlib.asynccontextmanager
     async def lifespan(app):
@@ -362,7 +381,7 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
             worker.shutdown()
 
     middleware = [Middleware(TrustedHostMiddleware, allowed_hosts=allowed_hosts(hosts), www_redirect=False),
-                  Middleware(SameOriginWrites)]
+                  Middleware(SameOriginOnly)]
     def answer(status: int):
         async def handler(request: Request, exc: Exception) -> Response:
             return _error(exc, status)

@@ -4,9 +4,11 @@
 query string of one throw as ``/api/throw.rrd`` takes it (its view's parameters and its grid point
 ``i``, ``j``), URL-encoded, so throws picked in different views (after a zoom or a pan) can be compared.
 The throws must share their configuration (preset, integrator, γ, dt): the comparison steps them together.
-The recording is :func:`dicetrace.sinks.rerun_compare.compare_logger`'s, throw 0 (the first picked)
+The recording is :func:`dicetrace.sinks.rerun_compare.compare_logger`'s, throw 1 (the first picked)
 the reference, with :func:`~dicetrace.sinks.rerun_compare.compare_blueprint` made active for Rerun's
-web viewer (``download=1``: default only, as ``record`` writes it).
+web viewer, its camera framing for the viewer's ``aspect`` (``download=1``: default only and the default
+camera, as ``record`` writes it).  Throws that ``record`` would refuse for their recording's memory
+(a tiny ``dt``) are refused, a 400 naming ``dt``, before anything runs.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ import hashlib
 
 import numpy as np
 
-from dicetrace.explore.compute import point_ic, throw_name
+from dicetrace.explore.compute import check_recording, point_ic, throw_aspect, throw_name
 from dicetrace.explore.view import View, ViewError, view_from_query
 from dicetrace.simulate import Record, simulate
 from dicetrace.sinks.rerun import encode_rrd
@@ -55,8 +57,10 @@ def parse_throws(values, default: View) -> list[tuple[View, int, int]]:
     return out
 
 
-def compare_rrd(throws: list[tuple[View, int, int]], activate: bool = False) -> tuple[str, bytes, dict]:
-    """The compare recording of ``throws`` ((view, i, j) each, one configuration): (name, bytes, summary)."""
+def compare_rrd(throws: list[tuple[View, int, int]], activate: bool = False,
+                aspect: float | None = None) -> tuple[str, bytes, dict]:
+    """The compare recording of ``throws`` ((view, i, j) each, one configuration): (name, bytes, summary);
+    ``aspect``: the width/height of the 3-D view its camera frames for (None: the recording's default)."""
     cfg = throws[0][0].config()
     rolls, labels, ics, names = [], [], [], []
     for v, i, j in throws:
@@ -67,7 +71,7 @@ def compare_rrd(throws: list[tuple[View, int, int]], activate: bool = False) -> 
         names.append(throw_name(v, coords))
     digest = hashlib.sha1(np.ascontiguousarray(np.stack(ics), dtype="<f8").tobytes()).hexdigest()[:8]
     name = f"compare{len(throws)}_{names[0]}_{digest}"  # as `dicetrace record` names a comparison
-    data = encode_rrd(compare_logger(rolls, labels, name=name), compare_blueprint(rolls), activate=activate)
+    data = encode_rrd(compare_logger(rolls, labels, name=name), compare_blueprint(rolls, aspect=aspect), activate=activate)
     return name, data, {"outcomes": [r.outcome for r in rolls], "statuses": [r.status.label for r in rolls]}
 
 
@@ -76,12 +80,14 @@ async def compare_endpoint(request):
     a 504 a comparison past :data:`COMPARE_TIMEOUT_S`."""
     from starlette.responses import JSONResponse, Response  # starlette: the server stack, imported only when serving
 
+    download = bool(request.query_params.get("download"))
     try:
         throws = parse_throws(request.query_params.getlist("t"), request.app.state.default)
+        aspect = None if download else throw_aspect(request.query_params.get("aspect"))
+        check_recording(throws[0][0], len(throws))  # what `record --dt` refuses (its memory), before anything runs
     except ViewError as e:
         return JSONResponse({"error": str(e), "param": e.param}, status_code=400)
-    download = bool(request.query_params.get("download"))
-    fut = request.app.state.worker.submit_throw(compare_rrd, throws, not download)
+    fut = request.app.state.worker.submit_throw(compare_rrd, throws, not download, aspect)
     try:
         name, data, summary = await asyncio.wait_for(asyncio.wrap_future(fut), COMPARE_TIMEOUT_S)
     except TimeoutError:

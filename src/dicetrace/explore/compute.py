@@ -23,7 +23,7 @@ import re
 import threading
 import time
 from collections import OrderedDict, deque
-from concurrent.futures import Future
+from concurrent.futures import Future, InvalidStateError
 from dataclasses import replace
 from pathlib import Path
 
@@ -46,6 +46,9 @@ CHUNK_S = 0.2
 MAX_JOBS = 32
 #: Hovers and viewer throws waiting for one of their two threads, all clients together (more: :class:`Busy`).
 MAX_THROWS_WAITING = 16
+#: Saves waiting for the save thread, all clients together (more: :class:`Busy`).  Each save's view has passed the
+#: map budget first (its map computed, or the cache's), so a save takes about a map's computing at most.
+MAX_SAVES_WAITING = 2
 #: Threads that compute maps.  One computes while the pieces are short; when every running piece has run
 #: longer than ``STUCK_S`` (a throw of a tiny dt can take minutes, and no kernel call can be cut), the next
 #: lane takes the next map, so clients with slow maps hold up at most this many minus one lanes.
@@ -101,11 +104,42 @@ def throw_name(view: View, coords) -> str:
     return "_".join(parts)
 
 
-def throw_rrd(view: View, i: int, j: int, activate: bool = False) -> tuple[str, bytes, dict]:
+def check_recording(view: View, n_throws: int = 1) -> None:
+    """Refuse (:class:`ViewError` naming ``dt``), before anything runs, ``n_throws`` recorded throws of ``view``'s
+    configuration that ``dicetrace record`` would refuse: their recording may need more memory than is available
+    (:func:`dicetrace.sinks.rerun.recording_memory`: throws that run to the time cap)."""
+    from dicetrace.sinks._common import human_bytes
+    from dicetrace.sinks.rerun import recording_memory  # lazy: `import dicetrace.explore` does not load rerun
+
+    cfg = view.config()
+    steps, need, avail = recording_memory(cfg, n_throws)
+    if avail is not None and need > avail:
+        what = "a throw" if n_throws == 1 else f"{n_throws} throws"
+        raise ViewError("dt", f"at dt {cfg.numerics.dt_s:g} s {what} may run to the time cap of "
+                              f"{cfg.numerics.t_max_s:g} s, {steps:,} steps, whose recording needs up to "
+                              f"{human_bytes(need)} of memory, more than the {human_bytes(avail)} available "
+                              "(as dicetrace record refuses it): choose a longer time step (dt)")
+
+
+def throw_aspect(text) -> float | None:
+    """The ``aspect`` query parameter (the width/height of the viewer's 3-D view, which its camera frames for;
+    absent: None, the recording's default) as a float, or :class:`ViewError` naming ``aspect``."""
+    if text is None or text == "":
+        return None
+    from dicetrace.sinks.rerun_view import check_aspect  # lazy: `import dicetrace.explore` does not load scipy
+
+    try:
+        return check_aspect(str(text)[:40])
+    except ValueError as e:
+        raise ViewError("aspect", str(e).removeprefix("aspect ")) from None
+
+
+def throw_rrd(view: View, i: int, j: int, activate: bool = False, aspect: float | None = None) -> tuple[str, bytes, dict]:
     """The Rerun recording of grid point (i, j), made as ``dicetrace record`` makes one: (name, bytes, summary).
 
     ``activate``: record's blueprint is also made the active one, for Rerun's web viewer
-    (:func:`dicetrace.sinks.rerun.encode_rrd`).
+    (:func:`dicetrace.sinks.rerun.encode_rrd`); ``aspect``: the width/height of the 3-D view its camera frames
+    for (None: the recording's default, :data:`dicetrace.sinks.rerun_view.VIEW_ASPECT`).
     """
     from dicetrace.simulate import Record, simulate  # lazy: imports numba; `import dicetrace.explore` does not
     from dicetrace.sinks.rerun import encode_rrd_of
@@ -114,7 +148,7 @@ def throw_rrd(view: View, i: int, j: int, activate: bool = False) -> tuple[str, 
     roll = simulate(ic, config=view.config(), record=Record(states=True, energy=True))
     name = throw_name(view, coords)
     label = f"{view.slice} slice at " + ", ".join(f"{a} = {c!r}" for a, c in zip("xyz", coords))
-    data = encode_rrd_of(roll, name=name, ic_label=label, activate=activate)
+    data = encode_rrd_of(roll, name=name, ic_label=label, activate=activate, aspect=aspect)
     return name, data, {"outcome": roll.outcome, "status": roll.status.label, "steps": roll.steps}
 
 
@@ -135,12 +169,14 @@ class _DaemonPool:
     """A few daemon threads running submitted calls (futures): unlike ThreadPoolExecutor's, nobody waits for
     them when the interpreter exits, so a throw or a save in progress does not keep a stopped server alive."""
 
-    def __init__(self, n: int, name: str, max_waiting: int | None = None):
+    def __init__(self, n: int, name: str, max_waiting: int | None = None, what: str = "calls"):
         self._q: "queue.SimpleQueue" = queue.SimpleQueue()
         self._stopped = False
         self._max_waiting = max_waiting
+        self._what = what
         self._waiting = 0
         self._count_lock = threading.Lock()
+        self._futures: set = set()  # submitted and not settled: failed at once by cancel_all
         for k in range(n):
             threading.Thread(target=self._run, name=f"{name}-{k}", daemon=True).start()
 
@@ -152,25 +188,54 @@ class _DaemonPool:
             fut, fn, args = item
             with self._count_lock:
                 self._waiting -= 1
-            if not fut.set_running_or_notify_cancel():
+            try:  # False: cancelled while it waited; done (or RuntimeError, in a race): failed by cancel_all
+                run = not fut.done() and fut.set_running_or_notify_cancel()
+            except RuntimeError:
+                run = False
+            if not run:
+                self._settled(fut)
                 continue
             try:
-                fut.set_result(fn(*args))
+                result = fn(*args)
             except BaseException as e:
-                fut.set_exception(e)
+                with contextlib.suppress(InvalidStateError):  # failed already by cancel_all
+                    fut.set_exception(e)
+            else:
+                with contextlib.suppress(InvalidStateError):
+                    fut.set_result(result)
+            self._settled(fut)
+
+    def _settled(self, fut: Future) -> None:
+        with self._count_lock:
+            self._futures.discard(fut)
+
+    def check_room(self) -> None:
+        """:class:`Busy` when as many calls wait as may."""
+        with self._count_lock:
+            if self._max_waiting is not None and self._waiting >= self._max_waiting:
+                raise Busy(f"{self._waiting} {self._what} are waiting already (at most {self._max_waiting}): "
+                           "try again in a moment")
 
     def submit(self, fn, *args) -> Future:
         fut: Future = Future()
         if self._stopped:
             fut.set_exception(Cancelled("the explorer is stopping"))
             return fut
+        self.check_room()
         with self._count_lock:
-            if self._max_waiting is not None and self._waiting >= self._max_waiting:
-                raise Busy(f"{self._waiting} throws are waiting to be simulated already (at most "
-                           f"{self._max_waiting}): try again in a moment")
             self._waiting += 1
+            self._futures.add(fut)
         self._q.put((fut, fn, args))
         return fut
+
+    def cancel_all(self) -> None:
+        """Every call submitted and not settled fails with :class:`Cancelled` now, so whoever waits for it answers
+        at once; a call being run ends on its own thread, its result dropped."""
+        with self._count_lock:
+            futures, self._futures = list(self._futures), set()
+        for fut in futures:
+            with contextlib.suppress(InvalidStateError):
+                fut.set_exception(Cancelled("the explorer is stopping"))
 
     def shutdown(self, n: int) -> None:
         self._stopped = True
@@ -236,8 +301,9 @@ class Worker:
         self._cache: OrderedDict[tuple, OutcomeMap] = OrderedDict()
         self._cache_nbytes = 0
         self._stopped = False
-        self._throws = _DaemonPool(2, "dicetrace-explore-throw", max_waiting=MAX_THROWS_WAITING)
-        self._saves = _DaemonPool(1, "dicetrace-explore-save")
+        self._throws = _DaemonPool(2, "dicetrace-explore-throw", max_waiting=MAX_THROWS_WAITING,
+                                   what="throws to simulate")
+        self._saves = _DaemonPool(1, "dicetrace-explore-save", max_waiting=MAX_SAVES_WAITING, what="saves")
         self.cancelled_count = 0
         self.computed_count = 0
         self.refused_count = 0
@@ -437,7 +503,13 @@ class Worker:
         return self._throws.submit(fn, *args)
 
     def submit_scan(self, view: View, folder: Path, name: str) -> Future:
+        """A future of the save of ``view`` as a scan into ``folder/name``; :class:`Busy` when
+        :data:`MAX_SAVES_WAITING` saves wait already."""
         return self._saves.submit(self._save, view, folder, name)
+
+    def check_save_room(self) -> None:
+        """:class:`Busy` when :data:`MAX_SAVES_WAITING` saves wait already (checked before a save's map is made)."""
+        self._saves.check_room()
 
     def _save(self, view: View, folder: Path, name: str) -> dict:
         with self._kernel_gate():
@@ -452,11 +524,15 @@ class Worker:
         return contextlib.nullcontext() if _concurrent_kernels_ok() else self._serial
 
     def cancel_all(self) -> None:
-        """Every map in the making fails with :class:`Cancelled` now (its piece being computed is the last)."""
+        """Every map in the making, and every throw and save waiting or running, fails with :class:`Cancelled` now, so
+        the requests waiting for them answer at once (a map's piece, a throw or a save being computed ends on its own
+        thread: a save leaves a resumable scan folder)."""
         with self._lock:
             for job in list(self._jobs.values()):
                 self._drop(job, Cancelled("the explorer is stopping"))
             self._queue.clear()
+        self._throws.cancel_all()
+        self._saves.cancel_all()
 
     def shutdown(self) -> None:
         """Cancel every map, stop the threads; waits for nothing (a piece being computed ends on its own thread)."""

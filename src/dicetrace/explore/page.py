@@ -5,9 +5,10 @@ back button and the page's back/reset walk the history of views), loads a
 preview (about 1/16 of the resolution), a coarse map (about 1/4) and then the
 refined one, drawn into one canvas strip by strip as the server computes it (a
 newer view cancels the older on the server), zooms on a dragged box or the
-mouse wheel, pans with the arrow buttons, shows hover info, and on click loads
-that throw into Rerun's web viewer beside the map (shift-click adds a second
-throw to compare).
+mouse wheel, pans with the arrow buttons, shows hover info under the map, and
+on click shows that throw's details beside the map and loads it into Rerun's
+web viewer below them (shift-click adds a throw to compare), its camera framed
+for the shape of the viewer's 3-D view.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from dicetrace.ics import SLICES
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.params import PRESETS
 from dicetrace.scan.colours import OUTCOME_NAMES, OUTCOME_RGB, outcome_rgb_table
+from dicetrace.sinks.rerun_web import FAVICON_LINK
 
 
 def _options(names, selected) -> str:
@@ -43,6 +45,7 @@ def page_html(default: View, *, can_save: bool, device: str = "cpu") -> str:
         .replace("%PRESETS%", _options(PRESETS, default.preset))
         .replace("%INTEGRATORS%", '<option value="">(preset\'s)</option>' + _options(INTEGRATORS, default.integrator))
         .replace("%DEVICE%", html.escape(device))
+        .replace("%FAVICON%", FAVICON_LINK)
         .replace("%CONFIG%", json.dumps(cfg))
     )
 
@@ -50,11 +53,12 @@ def page_html(default: View, *, can_save: bool, device: str = "cpu") -> str:
 _TEMPLATE = r"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>dicetrace explore</title>
 <meta http-equiv="Content-Security-Policy" content="connect-src 'self'">
+%FAVICON%
 <style>
  body{font-family:system-ui,sans-serif;margin:8px;font-size:13px;color:#222}
  #top{display:flex;gap:8px;flex-wrap:wrap;align-items:center;margin-bottom:6px}
  #top label{white-space:nowrap} input.num{width:6em}
- #main{display:flex;gap:10px;align-items:flex-start}
+ #main{display:flex;flex-wrap:wrap;gap:10px;align-items:flex-start}
  #mapbox{position:relative;width:512px;height:512px;border:1px solid #888;background:#ddd;cursor:crosshair;user-select:none}
  #map{width:100%;height:100%;image-rendering:pixelated;display:block}
  #sel{position:absolute;border:1px dashed #000;background:rgba(255,255,255,.25);display:none;pointer-events:none}
@@ -68,8 +72,13 @@ _TEMPLATE = r"""<!doctype html>
  #error{color:#b00;font-weight:bold;white-space:pre-wrap}
  #status{display:inline-block;width:22em;white-space:nowrap;overflow:hidden;text-overflow:ellipsis;vertical-align:middle} .busy::before{content:"⏳ "}
  .key{margin-right:8px;white-space:nowrap}.sw{display:inline-block;width:11px;height:11px;border:1px solid #555;margin-right:3px;vertical-align:middle}
- #info{font-family:monospace;font-size:11px;white-space:pre-wrap;overflow-wrap:anywhere;min-height:9em;max-height:24em;border:1px solid #ccc;padding:4px;width:576px;box-sizing:border-box;overflow-x:hidden;overflow-y:auto}
- #viewerbox{flex:1 1 640px;min-width:480px;aspect-ratio:8/7;min-height:0;max-height:max(560px,calc(100vh - 100px));overflow:hidden;border:1px solid #888}
+ .panel{font-family:monospace;font-size:11px;white-space:pre-wrap;overflow-wrap:anywhere;border:1px solid #ccc;padding:4px;box-sizing:border-box;overflow-x:hidden;overflow-y:auto}
+ #hover{min-height:5em;max-height:24em;width:576px}
+ #side{flex:1 1 600px;min-width:600px;display:flex;flex-direction:column;gap:6px}
+ #info{max-height:max(7em,30vh);flex:none}
+ #info:empty{display:none}
+ #viewerbox{width:100%;height:420px;overflow:hidden;border:1px solid #888;box-sizing:border-box;flex:none}
+ #viewerhint{margin:0;height:100%;display:flex;align-items:center;justify-content:center;color:#666;font-size:15px;background:#f4f4f4}
 </style></head><body>
 <div id="top">
  <label>slice <select id="slice">%SLICES%</select></label>
@@ -84,7 +93,7 @@ _TEMPLATE = r"""<!doctype html>
  <button id="zout">zoom out</button>
  <button data-pan="-1,0">◀</button><button data-pan="1,0">▶</button><button data-pan="0,1">▲</button><button data-pan="0,-1">▼</button>
  <span id="savebox"><input id="scanname" placeholder="scan name" size="10"><button id="save">save view as scan</button></span>
- <a id="download" href="#" download>download this throw (.rrd)</a>
+ <a id="download" href="#" download hidden>download this throw (.rrd)</a>
  <span id="status"></span>
 </div>
 <div id="error" role="alert"></div>
@@ -95,9 +104,12 @@ _TEMPLATE = r"""<!doctype html>
    <div id="mapbox"><canvas id="map" aria-label="outcome map"></canvas><div id="sel"></div></div>
    <div></div><div id="xaxis" class="ax" aria-label="x axis"></div></div>
   <div id="axisnote" class="ax"></div>
-  <div id="info"></div>
+  <div id="hover" class="panel"></div>
  </div>
- <div id="viewerbox"></div>
+ <div id="side">
+  <div id="info" class="panel" aria-label="picked throws"></div>
+  <div id="viewerbox"><p id="viewerhint">click a point on the map to see its throw here (shift-click to compare)</p></div>
+ </div>
 </div>
 <script type="module">
 const CFG = %CONFIG%;
@@ -283,10 +295,9 @@ function describe(j) {
 async function hover(x, y) {
   const r = await fetch("/api/hover?" + qs(view, {x, y}));
   const j = await r.json();
-  if (!r.ok) { $("info").textContent = j.error; return; }
-  $("info").dataset.hover = JSON.stringify(j);
-  const picked = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n");
-  $("info").textContent = "hover: " + describe(j) + (picked ? "\n\n" + picked + compare() : "");
+  if (!r.ok) { $("hover").textContent = j.error; return; }
+  $("hover").dataset.hover = JSON.stringify(j);
+  $("hover").textContent = "hover: " + describe(j);
 }
 
 function ensureViewer() {  // one viewer, however many picks come while it loads
@@ -311,14 +322,18 @@ async function makeViewer() {
   const handlers = {};
   const box = $("viewerbox");
   const model = {
-    get: (k) => ({_url: null, _panel_states: {top: "collapsed"}, _width: box.clientWidth, _height: box.clientHeight,
+    get: (k) => ({_url: null, _panel_states: {top: "collapsed", time: "collapsed"}, _width: box.clientWidth, _height: box.clientHeight,
                   _fallback_token: null, _theme: "light"})[k],
     on: (ev, f) => { (handlers[ev] = handlers[ev] || []).push(f); },
     send: (m) => { if (m === "ready") model.ready = true; else viewerEvent(m); },
   };
+  $("viewerhint").remove();
   mod.default.render({model, el: box});
   // the viewer takes the page's width beside the map (8:7, as tall as the page allows): it follows the window
-  new ResizeObserver(() => (handlers["change:_width"] || []).forEach((f) => f(null, box.clientWidth))).observe(box);
+  new ResizeObserver(() => {
+    (handlers["change:_width"] || []).forEach((f) => f(null, box.clientWidth));
+    (handlers["change:_height"] || []).forEach((f) => f(null, box.clientHeight));
+  }).observe(box);
   for (let k = 0; k < 600 && !model.ready; k++) await new Promise((r) => setTimeout(r, 100));
   return {open: (url) => handlers["msg:custom"].forEach((f) => f({type: "open_url", url})),
           close: (url) => handlers["msg:custom"].forEach((f) => f({type: "close_url", url}))};
@@ -356,14 +371,17 @@ async function pick(x, y, add) {
   const my = ++picks;
   if (!add) throws = [];
   throws.push({x, y, info, view: {...view}, q, url: absolute("/api/throw.rrd?" + q)});
-  const url = throws.length > 1 ? absolute("/api/compare.rrd?" + throws.map((t) => "t=" + encodeURIComponent(t.q)).join("&"))
-                                : throws[0].url;
-  $("download").href = url + "&download=1";
+  const base = throws.length > 1 ? absolute("/api/compare.rrd?" + throws.map((t) => "t=" + encodeURIComponent(t.q)).join("&"))
+                                 : throws[0].url;
+  $("download").href = base + "&download=1";
   $("download").textContent = throws.length > 1 ? `download these ${throws.length} throws (.rrd)` : "download this throw (.rrd)";
+  $("download").hidden = false;
   $("info").dataset.throws = JSON.stringify(throws.map((t) => t.info));
-  $("info").dataset.viewer = url;
   tellParent("throws", {throws: throws.map((t) => t.info)});
   $("info").textContent = throws.map((t, k) => `throw ${k + 1}: ` + describe(t.info)).join("\n\n") + compare();
+  fitViewer();   // the details above it took their room: the viewer's size, then its 3-D view's shape
+  const url = base + "&aspect=" + view3dAspect().toFixed(3);   // its camera frames the dice for that shape
+  $("info").dataset.viewer = url;
   const v = await ensureViewer().catch((e) => { showError("Rerun viewer: " + e); return null; });
   if (!v || my !== picks) return;
   const gone = opened.filter((u) => u !== url);
@@ -386,6 +404,23 @@ function compare() {  // each later throw against throw 1, as the compare record
            `; outcomes ${a.outcome} vs ${b.outcome}`;
   }).join("") + "\n\nthe viewer shows them in one recording: every die, and each one's divergence from throw 1";
 }
+
+// The viewer: the width of the column beside the map (below it on a narrow page; at least 600 px wide: Rerun's
+// viewer hides its time panel, the throw's replay, when narrower), 8:7, no taller than what the window shows below
+// its top (at least VIEWER_MIN_H).  Its 3-D view is the recording's layout's left 3/5 (the blueprint's column
+// shares 3:2) under its title bar, above the time panel: the shape its camera frames for.
+const VIEWER_MIN_H = 420, VIEW3D = {share: 3 / 5, bars: 60};
+function fitViewer() {
+  const box = $("viewerbox"), w = box.getBoundingClientRect().width, top = box.getBoundingClientRect().top + scrollY;
+  const room = innerHeight - 8 - (top < innerHeight / 2 ? top : 0);   // below the map: as tall as the window
+  box.style.height = Math.round(Math.max(VIEWER_MIN_H, Math.min(w * 7 / 8, room))) + "px";
+}
+function view3dAspect() {
+  const box = $("viewerbox");
+  return Math.min(5, Math.max(0.2, (box.clientWidth * VIEW3D.share) / Math.max(1, box.clientHeight - VIEW3D.bars)));
+}
+window.addEventListener("resize", fitViewer);
+fitViewer();
 
 $("apply").onclick = () => {
   const q = {...view};

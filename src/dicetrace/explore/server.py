@@ -10,12 +10,16 @@ an anywidget whose picked throws and view come back to Python.  ``stop()``
 
 from __future__ import annotations
 
+import asyncio
 import html
 import ipaddress
+import logging
 import math
 import socket
+import sys
 import threading
 import time
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -90,23 +94,174 @@ def bind_socket(host: str = DEFAULT_HOST, port: int = 0) -> socket.socket:
 
 #: Longest the server waits, once told to stop, for requests in progress (a throw being simulated) before it cancels them, s.
 GRACEFUL_S = 1.0
+#: Most connections open at once (fewer where the process may open fewer files: :func:`connection_limit`).  A
+#: browser opens about 6 per server; a connection beyond the limit closes the oldest one that is not in a request
+#: (a slow client's, an idle keep-alive one), or is answered 503 and closed when every one is in a request.
+MAX_CONNECTIONS = 256
+#: File descriptors kept for everything but connections (the listening socket, numba's cache, saved scans, pipes).
+FD_RESERVE = 64
+#: Seconds a connection may take to send a request's headers (from its opening, or from the end of its previous
+#: response): a client that sends them slowly, or never, is closed after that.
+HEADER_TIMEOUT_S = 10.0
+#: Bytes of a request's headers held while they arrive (h11's bound; a longer request line or headers: a 400).
+MAX_HEADER_BYTES = 16 * 1024
+#: Seconds between two lines on standard error about one kind of trouble of the event loop (out of file descriptors).
+LOOP_ERROR_EVERY_S = 10.0
 
 
-def make_server(app, sock: socket.socket):
-    """A uvicorn server of ``app`` that, told to stop (Ctrl-C, ``should_exit``), first cancels every map in the making,
-    so the requests waiting for them answer at once, and cancels what is still running after ``GRACEFUL_S``."""
+def connection_limit() -> int:
+    """Connections open at once: :data:`MAX_CONNECTIONS`, or fewer where the process's limit of open files
+    (``ulimit -n``) leaves less room: half of what :data:`FD_RESERVE` leaves (a connection may hold a file it
+    sends, Rerun's viewer, and connections just accepted come in bursts: :func:`accept_burst`), at least 8."""
+    try:
+        import resource
+    except ImportError:  # pragma: no cover - not on POSIX
+        return MAX_CONNECTIONS
+    soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    if soft == resource.RLIM_INFINITY:
+        return MAX_CONNECTIONS
+    return max(8, min(MAX_CONNECTIONS, (soft - FD_RESERVE) // 2))
+
+
+def accept_burst(limit: int) -> int:
+    """The listening socket's backlog for a server of ``limit`` connections: at most a quarter of them, and 64.
+
+    asyncio accepts up to the backlog's number of connections each time the socket is ready, before any of them
+    reaches the protocol that counts them, so the file descriptors open stay below ``limit`` plus about two such
+    bursts (:func:`connection_limit` leaves that room).
+    """
+    return max(4, min(64, limit // 4))
+
+
+def guarded_protocol(limit: int, header_timeout_s: float):
+    """uvicorn's h11 protocol with two bounds uvicorn itself lacks: at most ``limit`` connections open (its
+    ``limit_concurrency`` answers 503 to requests beyond it, but accepts every connection: a flood of clients that
+    never send a whole request would hold every file descriptor), and ``header_timeout_s`` to send a request's
+    headers (its keep-alive timeout starts only after a response)."""
+    from uvicorn.protocols.http.h11_impl import H11Protocol  # the server stack: imported only when serving
+
+    open_: dict = {}  # the connections of this server, oldest first
+
+    class GuardedH11Protocol(H11Protocol):
+        _header_timer = None
+
+        def connection_made(self, transport) -> None:
+            super().connection_made(transport)
+            live = [c for c in open_ if not c.transport.is_closing()]
+            if len(live) >= limit:
+                idle = next((c for c in live if not c.in_request()), None)
+                if idle is None:  # every connection is in a request: this one is refused
+                    body = b'{"error": "the explorer has as many connections open as it may: try again in a moment", "param": null}'
+                    transport.write(b"HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\n"
+                                    b"content-length: " + str(len(body)).encode() + b"\r\nconnection: close\r\n\r\n" + body)
+                    transport.close()
+                    return
+                idle.transport.close()  # the oldest one not in a request makes room
+            open_[self] = None
+            self._arm_header_timer()
+
+        def connection_lost(self, exc) -> None:
+            open_.pop(self, None)
+            if self._header_timer is not None:
+                self._header_timer.cancel()
+                self._header_timer = None
+            super().connection_lost(exc)
+
+        def on_response_complete(self) -> None:
+            super().on_response_complete()
+            self._arm_header_timer()  # the next request's headers are due within the same time
+
+        def in_request(self) -> bool:
+            """Whether a request's headers have arrived and its response is not complete."""
+            return self.cycle is not None and not self.cycle.response_complete
+
+        def _arm_header_timer(self) -> None:
+            if self._header_timer is not None:
+                self._header_timer.cancel()
+            self._header_timer = self.loop.call_later(header_timeout_s, self._headers_late)
+
+        def _headers_late(self) -> None:
+            self._header_timer = None
+            if not self.in_request() and not self.transport.is_closing():
+                self.transport.close()
+
+    return GuardedH11Protocol
+
+
+class _OneLineLogs(logging.Filter):
+    """uvicorn's error log without tracebacks: a request cancelled because the server stops is not logged (its
+    client is being disconnected), any other error is one line (its message, the exception and where it rose)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if not record.exc_info:
+            return True
+        exc = record.exc_info[1]
+        if isinstance(exc, asyncio.CancelledError):
+            return False
+        tb = traceback.extract_tb(exc.__traceback__) if exc is not None else []
+        where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+        record.msg = f"{record.getMessage().strip()}: {type(exc).__name__}: {exc}{where}"
+        record.args, record.exc_info, record.exc_text = (), None, None
+        return True
+
+
+_ONE_LINE = _OneLineLogs()
+
+
+def _loop_errors(stream=None):
+    """An event loop's exception handler printing one line per kind of trouble at most every
+    :data:`LOOP_ERROR_EVERY_S` (asyncio's own prints a traceback each time: a thousand a second when the process
+    is out of file descriptors and the listening socket has connections waiting)."""
+    last: dict = {}
+
+    def handler(loop, context) -> None:
+        exc = context.get("exception")
+        kind = (context.get("message"), type(exc).__name__, getattr(exc, "errno", None))
+        now = time.monotonic()
+        if now - last.get(kind, -math.inf) < LOOP_ERROR_EVERY_S:
+            return
+        last[kind] = now
+        text = context.get("message") or "event loop error"
+        if exc is not None:
+            text += f": {type(exc).__name__}: {exc}"
+        print(f"dicetrace explore: {text} (said at most every {LOOP_ERROR_EVERY_S:g} s)", file=stream or sys.stderr,
+              flush=True)
+
+    return handler
+
+
+def make_server(app, sock: socket.socket, *, max_connections: int | None = None,
+                header_timeout_s: float | None = None):
+    """A uvicorn server of ``app`` that, told to stop (Ctrl-C, ``should_exit``), first cancels every map, throw and
+    save in the making, so the requests waiting for them answer at once, and cancels what is still running after
+    ``GRACEFUL_S``; with at most ``max_connections`` connections (default :func:`connection_limit`), each given
+    ``header_timeout_s`` (default :data:`HEADER_TIMEOUT_S`) for a request's headers (:func:`guarded_protocol`);
+    no tracebacks on standard error (:class:`_OneLineLogs`, :func:`_loop_errors`)."""
     import uvicorn  # the server stack: imported only when serving
 
     class Server(uvicorn.Server):
+        async def startup(self, sockets=None):
+            asyncio.get_running_loop().set_exception_handler(_loop_errors())
+            await super().startup(sockets)
+
         async def shutdown(self, sockets=None):
             worker = getattr(getattr(app, "state", None), "worker", None)
             if worker is not None:
                 worker.cancel_all()
             await super().shutdown(sockets)
 
+    limit = connection_limit() if max_connections is None else int(max_connections)
+    # backlog: the listening socket's queue, and how many connections asyncio accepts in one go before any of them
+    # is counted (uvicorn's default, 2048, would take every file descriptor in one burst)
     config = uvicorn.Config(app, log_level="warning", lifespan="on", access_log=False,
-                            timeout_graceful_shutdown=GRACEFUL_S)
-    return Server(config)
+                            timeout_graceful_shutdown=GRACEFUL_S, http=guarded_protocol(limit, HEADER_TIMEOUT_S if header_timeout_s is None else header_timeout_s),
+                            h11_max_incomplete_event_size=MAX_HEADER_BYTES, backlog=accept_burst(limit))
+    server = Server(config)
+    server.max_connections = limit
+    uvicorn_log = logging.getLogger("uvicorn.error")
+    if _ONE_LINE not in uvicorn_log.filters:
+        uvicorn_log.addFilter(_ONE_LINE)
+    return server
 
 
 def make_view(slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,

@@ -99,6 +99,27 @@ ENERGY_SERIES = (
 MAX_TRAIL_UPDATES = 300
 
 
+#: Peak memory of recording a throw, per step, in units of its trace arrays (the trace, the recording's per-step
+#: arrays while logging, the encoded recording).
+RECORD_MEMORY_FACTOR = 8.0
+
+
+def recording_memory(cfg, n_throws: int = 1, forces: bool = False) -> tuple[int, int, int | None]:
+    """What recording ``n_throws`` throws of configuration ``cfg`` may need, before any is simulated:
+    (the time cap in steps, bytes of memory, bytes available now or None where unknown).
+
+    The worst case is throws that run to the time cap: max_steps + 1 rows each, states and energies (and
+    forces), times :data:`RECORD_MEMORY_FACTOR`.  ``dicetrace record`` refuses what needs more than is
+    available, and so do the explorer's viewer throws and comparisons.
+    """
+    from dicetrace.memory import available_memory
+    from dicetrace.simulate import Record, trace_bytes  # lazy: imports numba
+
+    steps = cfg.numerics.max_steps
+    need = trace_bytes(steps + 1, Record(states=True, energy=True, forces=forces)) * RECORD_MEMORY_FACTOR * n_throws
+    return steps, int(need), available_memory()
+
+
 def write_rrd(
     roll,
     path,
@@ -160,13 +181,15 @@ def encode_rrd_of(
     trail_every: int | None = None,
     application_id: str = "dicetrace",
     activate: bool = False,
+    aspect: float | None = None,
 ) -> bytes:
-    """The bytes of :func:`write_rrd`'s recording of ``roll`` (nothing is written); ``activate``: as :func:`encode_rrd`."""
+    """The bytes of :func:`write_rrd`'s recording of ``roll`` (nothing is written); ``activate``: as :func:`encode_rrd`;
+    ``aspect``: the width/height of the 3-D view its camera frames for (:func:`~dicetrace.sinks.rerun_view.default_blueprint`)."""
     tr = roll.trace
     if tr is None or tr.node_offsets is None or tr.energy is None:
         raise ValueError("write_rrd needs a roll with states and energy: simulate(..., record=Record(states=True, energy=True))")
-    return encode_rrd(roll_logger(roll, name=name, ic_label=ic_label, trail_every=trail_every), default_blueprint(roll),
-                      application_id=application_id, activate=activate)
+    return encode_rrd(roll_logger(roll, name=name, ic_label=ic_label, trail_every=trail_every),
+                      default_blueprint(roll, aspect=aspect), application_id=application_id, activate=activate)
 
 
 def roll_logger(roll, *, name: str = "dicetrace", ic_label: str | None = None, trail_every: int | None = None,

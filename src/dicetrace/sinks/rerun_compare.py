@@ -3,13 +3,17 @@
 Entities (world frame: z up, cm):
 
 ``world/ground``               the ground plane (as in a single-throw recording)
-``throws/<k>/body``            throw k's die, a solid box in its own colour (:data:`THROW_COLORS`): the rim
-                               around its face plates, so each die keeps its faces and shows its throw
+Throws are numbered from 1, in the order given (the explorer's page numbers its picks the same way);
+throw 1 is the reference.
+
+``throws/<k>/body``            throw k's die, a solid box in its own colour (:data:`THROW_COLORS`, none
+                               of them a face's): the rim around its face plates, so each die keeps its
+                               faces and shows its throw
 ``throws/<k>/faces``           its six face plates in the writeup's colours, numbered on hover, and
 ``throws/<k>/faces/pips``      their pips, as in a single recording (one transform per step)
 ``throws/<k>/nodes``           its eight corner nodes in its colour, labelled 1..8 on hover
 ``throws/<k>/cm_path``         its centre-of-mass path so far
-``divergence/log10/<k>``       log10 of the phase-space distance of throw k from throw 0 (k ≥ 1);
+``divergence/log10/<k>``       log10 of the phase-space distance of throw k from throw 1 (k ≥ 2);
                                steps where the distance is exactly 0 are left out (no logarithm)
 ``divergence/distance/<k>``    the distance itself (dimensionless), every step
 ``divergence/position_cm/<k>`` |Δ centre of mass|, cm
@@ -17,9 +21,9 @@ Entities (world frame: z up, cm):
 ``summary``                    text document: each throw's IC, outcome and contact sequence
 
 The distance (:func:`divergence`) is the max norm of four relative parts,
-each scaled by throw 0's initial values: |Δx| / side, the rotation angle
+each scaled by throw 1's initial values: |Δx| / side, the rotation angle
 between the orientations (rad), |ΔU| / |U₀| and |ΔL| / |L₀|.  At t = 0 the
-positions and orientations agree, so for a throw whose IC is throw 0's
+positions and orientations agree, so for a throw whose IC is throw 1's
 scaled by (1 + ε) (``--nudge ε``) it is exactly ε up to rounding.
 Rerun 0.41 plots have no logarithmic axis, hence the log10 series.  A throw
 that settles before another keeps its last state.
@@ -41,13 +45,16 @@ from dicetrace.sinks.rerun_view import framed_points, framing_eye, layout_bluepr
 # rerun is imported in the functions that log or lay out, not here: heavy at import, and it must not load before a
 # streaming sink has set its log level (rerun_stream.quiet_sdk_logs)
 
-#: One colour per throw (cycled): blue, orange, green, purple, brown, pink.
+#: One colour per throw (cycled): orange, cyan, pink, brown, lavender, tan.  None is a face plate's colour
+#: (``dicetrace.sinks.rerun.FACE_COLORS``: blue, green, red, magenta, yellow, black), so a die's rim never
+#: reads as a face: each is at least 38 CIELAB ΔE from every face colour and 32 from the others.
 THROW_COLORS = np.array(
-    [[31, 119, 180], [255, 127, 14], [44, 160, 44], [148, 103, 189], [140, 86, 75], [227, 119, 194]], dtype=np.uint8
+    [[255, 127, 14], [23, 190, 207], [227, 119, 194], [140, 86, 75], [180, 160, 240], [210, 180, 140]], dtype=np.uint8
 )
 
 
 def throw_color(k: int) -> tuple[int, int, int]:
+    """The colour of the throw at index ``k`` (0: throw 1, the reference), cycled."""
     return tuple(int(c) for c in THROW_COLORS[k % len(THROW_COLORS)])
 
 
@@ -94,7 +101,7 @@ def divergence(ref: dict, other: dict, *, side_cm: float, u0: float, l0: float) 
 
 
 def compare_series(rolls) -> tuple[np.ndarray, np.ndarray, list[dict]]:
-    """(step, t_s, [divergence of throw k from throw 0 for k ≥ 1])."""
+    """(step, t_s, [divergence of each later throw from the first: throw 2, 3, ... from throw 1])."""
     n = common_length(rolls)
     dt = rolls[0].dt_s
     states = [_padded(r, n) for r in rolls]
@@ -110,10 +117,10 @@ def compare_series(rolls) -> tuple[np.ndarray, np.ndarray, list[dict]]:
 def compare_summary(rolls, labels) -> str:
     lines = ["# dicetrace: throws compared", "",
              "Divergence: max norm of |Δx|/side, rotation angle (rad), |ΔU|/|U₀|, |ΔL|/|L₀| "
-             "(throw 0's initial values), against throw 0; plotted as log10.", "",
+             "(throw 1's initial values), against throw 1; plotted as log10.", "",
              "| throw | IC | outcome | status | steps | contact sequence |", "|---|---|---|---|---|---|"]
     for k, (r, lab) in enumerate(zip(rolls, labels)):
-        lines.append(f"| {k} | {lab} | {r.outcome} | {r.status} | {r.steps} | `{r.contact_sequence}` |")
+        lines.append(f"| {k + 1} | {lab} | {r.outcome} | {r.status} | {r.steps} | `{r.contact_sequence}` |")
     return "\n".join(lines)
 
 
@@ -123,7 +130,7 @@ LAYOUTS = ("overlay", "side")
 #: coincide (a small nudge, before it grows) the first one is seen whole instead of flickering surfaces.
 SHRINK = 0.03
 MAX_SHRUNK = 10
-#: The centre-of-mass path's radius (throw 0, in half sides), and the factor per throw after it; the lift of throw
+#: The centre-of-mass path's radius (throw 1, in half sides), and the factor per throw after it; the lift of throw
 #: k's path per k, in half sides (overlay): where paths coincide each shows as a band around the next one.
 PATH_RADIUS = 0.03
 PATH_THIN = 0.6
@@ -181,12 +188,12 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
 
     for k, s in enumerate(states):
         color = throw_color(k)
-        base = f"throws/{k}"
+        base = f"throws/{k + 1}"
         index = idx(steps, t_s)
         h = drawn_half(half, k)
         cm = s["cm"] + shifts[k]
         rec.log(f"{base}/body", rr.Boxes3D.from_fields(half_sizes=[[h, h, h]], colors=[color], fill_mode="solid",
-                                                       labels=[f"throw {k}"], show_labels=False), static=True)
+                                                       labels=[f"throw {k + 1}"], show_labels=False), static=True)
         rec.send_columns(f"{base}/body", indexes=index, columns=rr.Boxes3D.columns(centers=cm, quaternions=s["quat"]))
         log_faces(rec, f"{base}/faces", h, index, cm, s["quat"])
         rec.log(f"{base}/nodes", rr.Points3D.from_fields(radii=[0.07 * h], colors=[color],
@@ -201,26 +208,27 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
         _log_trail(rec, rr, cm + lift, steps, t_s, None, entity=f"{base}/cm_path", color=color,
                    radius=PATH_RADIUS * half * PATH_THIN ** min(k, MAX_SHRUNK))
 
-    for k, d in enumerate(divs, start=1):
-        color = throw_color(k)
+    for k, d in enumerate(divs, start=2):  # throw k (numbered from 1) against throw 1
+        color = throw_color(k - 1)
         dist = d["distance"]
         pos = dist > 0
-        rec.log(f"divergence/log10/{k}", rr.SeriesLines(names=[f"log10 distance, throw {k} vs 0"], colors=[color]),
+        rec.log(f"divergence/log10/{k}", rr.SeriesLines(names=[f"log10 distance, throw {k} vs 1"], colors=[color]),
                 static=True)
         if pos.any():
             rec.send_columns(f"divergence/log10/{k}", indexes=idx(steps[pos], t_s[pos]),
                              columns=rr.Scalars.columns(scalars=np.log10(dist[pos])))
         for key in ("distance", "position_cm", "angle_rad"):
-            rec.log(f"divergence/{key}/{k}", rr.SeriesLines(names=[f"{key}, throw {k} vs 0"], colors=[color]),
+            rec.log(f"divergence/{key}/{k}", rr.SeriesLines(names=[f"{key}, throw {k} vs 1"], colors=[color]),
                     static=True)
             rec.send_columns(f"divergence/{key}/{k}", indexes=idx(steps, t_s), columns=rr.Scalars.columns(scalars=d[key]))
 
 
-def compare_blueprint(rolls=None, layout: str = "overlay"):
+def compare_blueprint(rolls=None, layout: str = "overlay", aspect: float | None = None):
     """3-D view of all throws, the log10 divergence plot and the summary.
 
     With ``rolls``, the 3-D camera frames every die's resting place and path from its first bounce (as
-    ``layout`` places them; :func:`dicetrace.sinks.rerun_view.framing_eye`), orbiting at their mean resting place.
+    ``layout`` places them; :func:`dicetrace.sinks.rerun_view.framing_eye`, for a 3-D view of width/height
+    ``aspect``, default :data:`~dicetrace.sinks.rerun_view.VIEW_ASPECT`), orbiting at their mean resting place.
     """
     import rerun.blueprint as rrb  # rerun is slow to import: only when used
 
@@ -233,10 +241,10 @@ def compare_blueprint(rolls=None, layout: str = "overlay"):
         framed = [framed_points(s["cm"] + o, half) for s, o in zip(states, shifts)]  # each die's path and rest
         cm0 = states[0]["cm"]
         eye = framing_eye(np.concatenate([pts for pts, _ in framed] + [np.array([r for _, r in framed])]),
-                          np.mean([r for _, r in framed], axis=0), cm0[-1, :2] - cm0[0, :2], half)
+                          np.mean([r for _, r in framed], axis=0), cm0[-1, :2] - cm0[0, :2], half, aspect)
     view3d = rrb.Spatial3DView(origin="/", contents=["/world/**", "/throws/**"], name="throws", eye_controls=eye,
                                background=(250, 250, 250), line_grid=rrb.LineGrid3D(visible=False))
-    div = rrb.TimeSeriesView(origin="/divergence/log10", name="log10 divergence from throw 0",
+    div = rrb.TimeSeriesView(origin="/divergence/log10", name="log10 divergence from throw 1",
                              plot_legend=rrb.PlotLegend(corner="RightBottom"))
     pos = rrb.TimeSeriesView(origin="/divergence/position_cm", name="|Δ centre of mass| (cm)",
                              plot_legend=rrb.PlotLegend(corner="LeftTop"))
@@ -263,7 +271,8 @@ def compare_logger(rolls, labels, *, name: str = "dicetrace compare", layout: st
 
 
 def encode_compare_rrd(rolls, labels, *, name: str = "dicetrace compare", application_id: str = "dicetrace",
-                       layout: str = "overlay") -> bytes:
-    """The bytes of the compare recording of ``rolls`` (throw 0 the reference; ``layout``: :data:`LAYOUTS`)."""
-    return encode_rrd(compare_logger(rolls, labels, name=name, layout=layout), compare_blueprint(rolls, layout),
-                      application_id=application_id)
+                       layout: str = "overlay", aspect: float | None = None, activate: bool = False) -> bytes:
+    """The bytes of the compare recording of ``rolls`` (throw 1, the first, the reference; ``layout``: :data:`LAYOUTS`;
+    ``aspect``: as :func:`compare_blueprint`; ``activate``: as :func:`~dicetrace.sinks.rerun.encode_rrd`)."""
+    return encode_rrd(compare_logger(rolls, labels, name=name, layout=layout), compare_blueprint(rolls, layout, aspect),
+                      application_id=application_id, activate=activate)

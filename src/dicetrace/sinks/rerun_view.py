@@ -8,6 +8,11 @@ shares with the compare recording (:mod:`dicetrace.sinks.rerun_compare`).
 The 3-D camera (:func:`framing_eye`) looks back along the throw's travel from beyond the resting
 place, and is placed by a linear programme (``scipy.optimize.linprog``) as close to the resting die
 as keeps the path from its first bounce, with the whole die around every point, inside the view.
+Rerun's field of view is vertical (55°): how much the view shows across depends on the view's own
+width/height, its aspect, which a recording cannot know.  The camera frames for an aspect
+(``aspect``, default :data:`VIEW_ASPECT`: the default layout's 3-D view in a viewer window as narrow
+as about 800×900), so in any view at least that wide for its height every die is inside with a margin;
+the explorer passes the aspect of the view its page shows.
 The recording's own Rerun grid is off: the ground carries a grid of its own
 (:func:`dicetrace.sinks.rerun.log_ground`).
 """
@@ -26,6 +31,28 @@ EYE_AZIMUTH_DEG = 35.0
 EYE_ELEVATION_DEG = 30.0
 #: Most path points the framing looks at (the path is subsampled above it).
 FRAME_POINTS = 400
+#: The width/height of the 3-D view the default camera frames for when the view's own is not known (a
+#: recording opened in Rerun's viewer): the default layout's 3-D view (3/5 of the window's width, the height
+#: less the viewer's bars) is 0.82 in a 1100×900 window (0.85 in the viewer's default 1600×1200), 0.67 at
+#: 900×900, 0.6 at 800×900.  Narrower is safer, and draws the dice smaller in a wide window (a die is drawn at
+#: the same size whatever the width: Rerun's field of view is vertical).
+VIEW_ASPECT = 0.6
+#: The aspects a camera may be framed for.
+ASPECT_RANGE = (0.2, 5.0)
+
+
+def check_aspect(aspect) -> float:
+    """``aspect`` (None: :data:`VIEW_ASPECT`) as a float in :data:`ASPECT_RANGE`, or ValueError."""
+    if aspect is None:
+        return VIEW_ASPECT
+    try:
+        a = float(aspect)
+    except (TypeError, ValueError):
+        raise ValueError(f"aspect must be a number (the 3-D view's width/height), got {aspect!r}") from None
+    if not ASPECT_RANGE[0] <= a <= ASPECT_RANGE[1]:  # NaN fails too
+        raise ValueError(f"aspect must be in [{ASPECT_RANGE[0]:g}, {ASPECT_RANGE[1]:g}] (the 3-D view's "
+                         f"width/height), got {aspect!r}")
+    return a
 
 
 def framed_points(cm: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray]:
@@ -59,13 +86,14 @@ def view_axes(travel: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, 
     return fwd, right, np.cross(right, fwd)
 
 
-def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: float):
+def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: float, aspect: float | None = None):
     """The camera closest to ``rest`` that sees every point of ``points`` with the whole die around it.
 
     It looks from beyond the resting place back along the ``travel`` (horizontal, start to rest),
     :data:`EYE_AZIMUTH_DEG` to its side and :data:`EYE_ELEVATION_DEG` from above; its distance is
     the solution of a linear programme: every point's sphere of the die's circumradius lies within
-    :data:`FRAME_FILL` of the view's field of view (:data:`VIEW_FOV_Y_DEG`, both ways), as close to
+    :data:`FRAME_FILL` of the view's field of view (:data:`VIEW_FOV_Y_DEG` up and down, and across
+    as much as a view of width/height ``aspect`` shows, default :data:`VIEW_ASPECT`), as close to
     the resting die as that allows; a second one centres the view at that distance (the tightest
     side of the frame gets the most room).  It orbits around the point in front of it at the
     resting die's depth.
@@ -76,13 +104,16 @@ def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: 
     from scipy.optimize import linprog
 
     fwd, right, up = view_axes(travel, half)
-    k = np.tan(np.radians(VIEW_FOV_Y_DEG) / 2) * FRAME_FILL
-    rho = np.sqrt(3.0) * half * np.sqrt(1 + k * k)  # a die's circumsphere kept inside each side of the frustum
-    # for each point p and side a: a·(p - E) - k·fwd·(p - E) <= -rho  (p's sphere inside that side)
+    ky = np.tan(np.radians(VIEW_FOV_Y_DEG) / 2) * FRAME_FILL  # up and down: the vertical field of view
+    kx = ky * check_aspect(aspect)  # across: as much as the view's width shows
+    # for each point p and side a (slope k): a·(p - E) - k·fwd·(p - E) <= -rho_k, p's sphere of the die's
+    # circumradius inside that side of the frustum (rho_k: the radius over the side plane's normal's cosine)
     sides = np.stack([right, -right, up, -up])
+    ks = np.array([kx, kx, ky, ky])
+    rhos = np.sqrt(3.0) * half * np.sqrt(1 + ks * ks)
     pts = np.vstack([points, rest[None, :]])
-    a_ub = np.repeat(k * fwd[None, :] - sides, len(pts), axis=0)
-    b_ub = np.concatenate([-(pts @ (a - k * fwd)) - rho for a in sides])
+    a_ub = np.repeat(ks[:, None] * fwd[None, :] - sides, len(pts), axis=0)
+    b_ub = np.concatenate([-(pts @ (a - k * fwd)) - rho for a, k, rho in zip(sides, ks, rhos)])
     res = linprog(-fwd, A_ub=a_ub, b_ub=b_ub, bounds=[(None, None)] * 3, method="highs")
     if res.status != 0:  # pragma: no cover - a bounded, feasible programme
         raise RuntimeError(f"framing the die: {res.message}")
@@ -101,25 +132,27 @@ def framing_eye(points: np.ndarray, rest: np.ndarray, travel: np.ndarray, half: 
     return rrb.EyeControls3D(position=eye, look_target=target, eye_up=[0.0, 0.0, 1.0])
 
 
-def _eye_for(cm: np.ndarray, half: float):
-    """The default camera of a throw whose centre of mass follows ``cm`` (:func:`framing_eye`); None without a path."""
+def _eye_for(cm: np.ndarray, half: float, aspect: float | None = None):
+    """The default camera of a throw whose centre of mass follows ``cm`` (:func:`framing_eye`, for a 3-D view of
+    width/height ``aspect``); None without a path."""
     cm = cm[np.isfinite(cm).all(axis=1)]
     if len(cm) == 0:
         return None
     points, rest = framed_points(cm, half)
-    return framing_eye(points, rest, cm[-1, :2] - cm[0, :2], half)
+    return framing_eye(points, rest, cm[-1, :2] - cm[0, :2], half, aspect)
 
 
-def default_blueprint(roll=None, channels=()):
+def default_blueprint(roll=None, channels=(), aspect: float | None = None):
     """3-D view of the world, energy plots, the contact log and the summary (and plots of scalar ``channels``).
 
-    With a ``roll``, the 3-D camera frames its path.
+    With a ``roll``, the 3-D camera frames its path, for a 3-D view of width/height ``aspect`` (default
+    :data:`VIEW_ASPECT`).
     """
     import rerun.blueprint as rrb  # rerun only when a blueprint is made (heavy; its log level is set first)
 
     eye = None
     if roll is not None and roll.trace is not None and roll.trace.cm_pos is not None:
-        eye = _eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm))
+        eye = _eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm), aspect)
 
     view3d = rrb.Spatial3DView(
         origin="/world",

@@ -19,6 +19,17 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 
+#: The pages' icon (the explorer's and ``record --serve``'s): a die's face three in the writeup's red, SVG.  Both
+#: pages name it in a ``<link rel="icon">`` (:data:`FAVICON_LINK`) and serve it at ``/favicon.ico`` too, so a
+#: browser asks for nothing that is not there.
+FAVICON_SVG = (b'<svg xmlns="http://www.w3.org/2000/svg" viewBox="0 0 16 16">'
+               b'<rect x="1" y="1" width="14" height="14" rx="3" fill="#dc1e1e"/>'
+               b'<g fill="#fff"><circle cx="4.5" cy="4.5" r="1.6"/><circle cx="8" cy="8" r="1.6"/>'
+               b'<circle cx="11.5" cy="11.5" r="1.6"/></g></svg>')
+#: The ``<link>`` that gives a page :data:`FAVICON_SVG` (a data: URL: no request at all).
+FAVICON_LINK = f'<link rel="icon" type="image/svg+xml" href="data:image/svg+xml,{urllib.parse.quote(FAVICON_SVG)}">'
+
+
 class WebViewerError(RuntimeError):
     """The web viewer cannot be served: its files are missing, or its address cannot be listened on."""
 
@@ -31,6 +42,7 @@ class WebViewerError(RuntimeError):
 VIEWER_PAGE = """<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>dicetrace record: Rerun viewer</title>
 <meta http-equiv="Content-Security-Policy" content="connect-src 'self' http://*:__GRPC_PORT__">
+__FAVICON__
 <link rel="stylesheet" href="widget.css">
 <style>html, body { margin: 0; height: 100%; overflow: hidden; } #viewer { width: 100vw; height: 100vh; }</style>
 </head><body><div id="viewer"></div>
@@ -90,7 +102,8 @@ def viewer_assets_folder() -> Path | None:
 class WebViewerServer:
     """Rerun's web viewer over HTTP on ``host:port`` (threads of this process), opening ``grpc_url`` by default.
 
-    Serves the page and the viewer's three files, nothing else (GET and HEAD); :meth:`close` stops it.
+    Serves the page, the viewer's three files and the page's icon (``/favicon.ico``), nothing else (GET and HEAD);
+    :meth:`close` stops it.
     Raises :class:`WebViewerError` (one line) when the viewer's files are missing or ``host:port`` cannot be listened on.
     """
 
@@ -100,7 +113,8 @@ class WebViewerServer:
             raise WebViewerError("Rerun's web viewer was not found (install rerun-notebook, as dicetrace's "
                                  "dependencies do)")
         grpc_port = urllib.parse.urlsplit(grpc_url).port
-        page = VIEWER_PAGE.replace("__GRPC_URL__", grpc_url).replace("__GRPC_PORT__", str(grpc_port)).encode()
+        page = (VIEWER_PAGE.replace("__GRPC_URL__", grpc_url).replace("__GRPC_PORT__", str(grpc_port))
+                .replace("__FAVICON__", FAVICON_LINK).encode())
 
         class Handler(BaseHTTPRequestHandler):
             server_version = "dicetrace-record"
@@ -119,6 +133,10 @@ class WebViewerServer:
                         self._send(len(page), "text/html; charset=utf-8")
                         if not head:
                             self.wfile.write(page)
+                    elif path == "/favicon.ico":
+                        self._send(len(FAVICON_SVG), "image/svg+xml")
+                        if not head:
+                            self.wfile.write(FAVICON_SVG)
                     elif path in VIEWER_ASSETS:
                         file = folder / path.lstrip("/")
                         self._send(file.stat().st_size, VIEWER_ASSETS[path])
