@@ -278,7 +278,7 @@ def register(app: typer.Typer) -> None:
         ),
         url: Optional[str] = typer.Option(
             None, "--url", help="With --connect: its address, rerun+http://HOST:PORT/proxy or a port "
-            "(default: rerun+http://127.0.0.1:9876/proxy, the SDK's default)."
+            "(default: the SDK's, HOST 127.0.0.1 and PORT 9876)."
         ),
         serve: bool = typer.Option(
             False, "--serve", help="Serve the recording over gRPC and the web viewer over HTTP (the URL is printed) "

@@ -74,7 +74,7 @@ WINDOW_HELP = (
     "Window: a name (home, zoom-out, more-out, most-out, red-sea, red-sea-2, party, green-island) "
     "or x0,x1,y0,y1[,z0,z1] with x1 > x0, y1 > y0, z1 > z0 (an axis of one grid point may be a single value)."
 )
-RES_HELP = "Grid points per axis: N (every axis), NX,NY or NX,NY,NZ (the program's formula x0+(p-1)/(n-1)(x1-x0))."
+RES_HELP = "Grid points per axis: N (every axis), NX,NY or NX,NY,NZ (the program's formula x0 + (x1 - x0)(p - 1)/(n - 1))."
 #: A run estimated to take longer than this (s) needs --yes.
 MAX_UNCONFIRMED_S = 3600.0
 #: A run estimated to take longer than this (s), or to write more than LARGE_SCAN_BYTES, says so first.
