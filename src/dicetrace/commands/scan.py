@@ -47,6 +47,7 @@ from typing import List, Optional
 import numpy as np
 import typer
 
+from dicetrace.compile_clock import rate_text
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
 from dicetrace.commands.options import (
     DEVICE_HELP,
@@ -421,7 +422,7 @@ def register(app: typer.Typer) -> None:
         if not quiet:
             msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (a Parquet dataset: read the folder as it is)  "
                    f"({report.chunks_computed:,} computed, {report.chunks_skipped:,} already there; "
-                   f"{report.ics_computed:,} ICs in {report.wall_s:.1f} s, {report.rate_ics_s:,.0f} ICs/s)")
+                   f"{rate_text(report.ics_computed, 'ICs', report.wall_s, report.compile_s, ' ICs/s')})")
             print(msg, file=sys.stderr)
             if done < report.n_chunks:
                 print(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish", file=sys.stderr)
