@@ -49,6 +49,7 @@ from dicetrace.commands._common import fail
 from dicetrace.commands.accuracy import command_line, run_accuracy, run_friction, run_stability
 from dicetrace.commands.options import IntegratorsAlias, config_errors, either
 from dicetrace.devices import resolve_device
+from dicetrace.extras import require
 from dicetrace.studies import INTEGRATOR_STUDIES, INTEGRATOR_TITLES, LETTERS, TITLES, resolve
 from dicetrace.studies import runner as studies_runner
 from dicetrace.studies import study_accuracy as acc
@@ -188,6 +189,7 @@ def register(app: typer.Typer) -> None:
         except ValueError as e:
             fail(f"{e}; or one of {', '.join(INTEGRATOR_STUDIES)}, alone")
         _not_taken("writeup", "", given)
+        require("analysis", "dicetrace analyze (its writeup studies)")
         options = _checked_options(names, quick=quick, res=res, seed=seed, integrator=integrator, tol=tol,
                                    device=device, no_cache=no_cache)
         why = ", ".join(w for w, on in (("--quick", quick), ("--res", res is not None),

@@ -43,6 +43,7 @@ import numpy as np
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
 from dicetrace.commands import options as opts
 from dicetrace.commands.options import AT_HELP, IC_HELP, PRESET_HELP, build_config, fmt_num, ic_from_options, preset_or_fail
+from dicetrace.extras import require
 from dicetrace.params import Numerics
 from dicetrace.sinks._common import Staging, human_bytes
 from dicetrace.sinks.rerun_channels import CHANNELS, parse_channels
@@ -234,6 +235,8 @@ def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, w
         fail("--bind needs --spawn or --serve (with --connect give --url)")
     check_port(port, "--port")
     check_port(web_port, "--web-port")
+    if mode == "serve":  # its web viewer is rerun-notebook's build, which the explore extra brings
+        require("explore", "record --serve (Rerun's web viewer)")
     return mode
 
 

@@ -47,7 +47,6 @@ from typing import List, Optional
 import numpy as np
 import typer
 
-from dicetrace.compile_clock import rate_text
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats
 from dicetrace.commands.options import (
     DEVICE_HELP,
@@ -63,7 +62,9 @@ from dicetrace.commands.options import (
     fmt_num,
     preset_or_fail,
 )
+from dicetrace.compile_clock import rate_text
 from dicetrace.devices import DeviceError, check_device
+from dicetrace.extras import require
 from dicetrace.ics import SLICES, Grid, Points, Sample, Slice
 from dicetrace.memory import available_memory
 from dicetrace.sinks._common import Staging, human_bytes
@@ -348,6 +349,8 @@ def register(app: typer.Typer) -> None:
             fail("give --dask (a local cluster) or --scheduler ADDRESS, not both")
         if workers is not None and not dask:
             fail("--workers sets the size of the --dask cluster: add --dask")
+        if dask or scheduler is not None:
+            require("dask", "--dask" if dask else "--scheduler")
         if scheduler is not None:
             try:
                 check_scheduler_address(scheduler)
