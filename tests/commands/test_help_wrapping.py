@@ -143,3 +143,15 @@ def test_the_integrator_studies_still_take_integrators_but_list_only_integrator(
     assert res.returncode == 2 and res.stderr.startswith("dicetrace: error: --integrator: unknown integrator nonsense")
     assert "--integrators" not in _help(dicetrace_cli, tmp_path, monkeypatch, args[0], 200)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("command", COMMANDS[1:])
+def test_help_shows_every_word_of_the_description(dicetrace_cli, tmp_path, monkeypatch, command):
+    """Nothing of a description is lost to rich's markup (``[analysis]`` in a help text is a style tag, not text)."""
+    import typer.main
+
+    from dicetrace.cli import app
+
+    described = typer.main.get_command(app).commands[command].help.split()
+    shown = _tokens(_help(dicetrace_cli, tmp_path, monkeypatch, command, 1000))
+    assert [w for w in described if w not in shown] == []

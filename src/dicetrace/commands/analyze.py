@@ -86,6 +86,8 @@ output folder (default ./dicetrace-results/analysis) and its REPORT.md:
 
 {STUDIES_HELP}
 
+The writeup studies need dicetrace's analysis extra (scikit-image).
+
 The integrator studies, each run alone with options of its own (default
 output ./dicetrace-results/NAME):
 

@@ -63,7 +63,10 @@ def register(app: typer.Typer) -> None:
             None, "--map-budget", help="Seconds of computing one map may take (default 60); a map that would take "
             "longer is refused with a message (fewer pixels or a longer dt)."),
     ) -> None:
-        """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer."""
+        """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer.
+
+        Needs dicetrace's explore extra (the web server and Rerun's web viewer).
+        """
         require("explore", "dicetrace explore")  # before anything else: one line naming the extra
         try:
             view = make_view(slice_name, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)

@@ -285,7 +285,7 @@ def register(app: typer.Typer) -> None:
         ),
         serve: bool = typer.Option(
             False, "--serve", help="Serve the recording over gRPC and the web viewer over HTTP (the URL is printed) "
-            "until Ctrl-C or --serve-for seconds."
+            "until Ctrl-C or --serve-for seconds. Needs the explore extra (its web viewer)."
         ),
         serve_for: Optional[str] = typer.Option(None, "--serve-for", help="With --serve: stop after this many seconds."),
         port: Optional[int] = typer.Option(

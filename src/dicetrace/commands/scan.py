@@ -309,8 +309,8 @@ def register(app: typer.Typer) -> None:
                                             "262144 on a GPU, whose launches want that many throws)."),
         threads: Optional[int] = typer.Option(None, "--threads", help="numba threads (default: all cores)."),
         device: str = typer.Option("cpu", "--device", help=DEVICE_HELP + " A scan resumes only on the device it started on."),
-        dask: bool = typer.Option(False, "--dask", help="Run the chunks on a local Dask cluster."),
-        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the chunks on the Dask scheduler at ADDRESS."),
+        dask: bool = typer.Option(False, "--dask", help="Run the chunks on a local Dask cluster (the dask extra)."),
+        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the chunks on the Dask scheduler at ADDRESS (the dask extra)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes of the --dask cluster (default: one per GPU for a GPU scan, else one per core)."),
         max_chunks: Optional[int] = typer.Option(None, "--max-chunks", help="Stop after this many new chunks (resumable)."),
         rrd: Optional[Path] = typer.Option(None, "--rrd", help="Also write the scan map for the Rerun viewer (.rrd; "
