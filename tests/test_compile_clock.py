@@ -14,7 +14,7 @@ import time
 import numba
 import pytest
 
-from dicetrace.compile_clock import CompileClock, rate_text, running_rate
+from dicetrace.compile_clock import CompileClock, rate_text, running_rate, time_text
 
 
 def _fresh_compile() -> None:
@@ -114,3 +114,8 @@ def test_a_study_logs_its_grids_compile_apart(tmp_path, monkeypatch, capsys):
     assert m, out
     wall, comp, run = map(float, m.groups()[:3])
     assert comp > 0 and 25 / (run + 0.1) <= float(m.group(4).replace(",", "")) <= 25 / max(run - 0.1, 1e-3)
+
+
+def test_time_text_says_compile_apart():
+    assert time_text(3.14) == "3.1 s"
+    assert time_text(12.4, 10.2, ".0f") == "12 s (10 s compiling the kernels, 2 s running)"

@@ -14,16 +14,15 @@ refusals, and the list of what got installed.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import tomllib
-import venv
 from pathlib import Path
 
 import pytest
 
 from dicetrace import extras
+from fresh_install import install_sources
 
 REPO = Path(__file__).resolve().parents[1]
 #: What the extras bring that the base must not need (top-level module names; click: typer no longer needs it).
@@ -141,20 +140,7 @@ print(" ".join(said))
 @pytest.mark.skipif(os.environ.get("DICETRACE_INSTALL_TEST") != "1",
                     reason="minutes: set DICETRACE_INSTALL_TEST=1 to pip install the base into a new environment")
 def test_the_base_install_records_and_refuses_the_explorer(tmp_path):
-    src = tmp_path / "source"
-    src.mkdir()
-    for name in ("pyproject.toml", "README.md"):
-        shutil.copy2(REPO / name, src / name)
-    shutil.copytree(REPO / "src", src / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info"))
-    env_dir = tmp_path / "venv"
-    venv.EnvBuilder(with_pip=True).create(env_dir)
-    py, exe = env_dir / "bin" / "python", env_dir / "bin" / "dicetrace"
-    proc = subprocess.run([str(py), "-m", "pip", "install", "-q", str(src)], capture_output=True, text=True,
-                          timeout=1800, cwd=tmp_path)
-    if proc.returncode != 0 and "No matching distribution" in proc.stderr:
-        pytest.skip("the dependencies cannot be installed here (no package index)")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    py, exe, _, env = install_sources(tmp_path)  # the base: no extra
     work = tmp_path / "work"
     work.mkdir()
     installed = subprocess.run([str(py), "-m", "pip", "list", "--format=freeze"], capture_output=True, text=True,

@@ -75,11 +75,15 @@ def running_rate(n: float, wall_s: float, compile_s: float = 0.0) -> float:
     return n / run if run > 0 and n > 0 else 0.0
 
 
+def time_text(wall_s: float, compile_s: float = 0.0, spec: str = ".1f") -> str:
+    """``"3.1 s"``, or with a compile ``"134.1 s (131.0 s compiling the kernels, 3.1 s running)"``."""
+    if compile_s >= 0.05:
+        return (f"{wall_s:{spec}} s ({compile_s:{spec}} s compiling the kernels, "
+                f"{max(wall_s - compile_s, 0.0):{spec}} s running)")
+    return f"{wall_s:{spec}} s"
+
+
 def rate_text(n: int, unit: str, wall_s: float, compile_s: float = 0.0, rate_unit: str = "/s") -> str:
     """``"441 throws in 3.1 s, 142/s"``, or with a compile ``"441 throws in 134.1 s (131.0 s compiling the kernels,
     3.1 s running), 142/s"``: the rate is always over the running time."""
-    rate = running_rate(n, wall_s, compile_s)
-    if compile_s >= 0.05:
-        return (f"{n:,} {unit} in {wall_s:.1f} s ({compile_s:.1f} s compiling the kernels, "
-                f"{max(wall_s - compile_s, 0.0):.1f} s running), {rate:,.0f}{rate_unit}")
-    return f"{n:,} {unit} in {wall_s:.1f} s, {rate:,.0f}{rate_unit}"
+    return f"{n:,} {unit} in {time_text(wall_s, compile_s)}, {running_rate(n, wall_s, compile_s):,.0f}{rate_unit}"
