@@ -14,6 +14,7 @@ refusals, and the list of what got installed.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import tomllib
@@ -155,3 +156,18 @@ def test_the_base_install_records_and_refuses_the_explorer(tmp_path):
     res = subprocess.run([str(exe), "explore", "--no-browser"], cwd=work, env=env, capture_output=True, text=True,
                          timeout=600)
     _one_line_naming(res, "explore")
+
+
+def test_the_readme_quotes_the_measured_install_sizes():
+    import json
+
+    measured = json.loads((REPO / "benchmarks" / "results" / "install_sizes.json").read_text())
+    rows = {r["extra"]: r for r in measured["installs"]}
+    readme = (REPO / "README.md").read_text()
+    table = {m.group(1): m.group(0) for m in re.finditer(r"^\| `(?:pip install -e )?'?\.(?:\[(\w+)\])?'?` \|.*$",
+                                                              readme, re.M)}
+    assert f"{rows['base']['disk_mib']:.0f} MiB, {rows['base']['distributions']} packages" in table[None]
+    for extra in ("explore", "jupyter", "dask", "analysis", "all"):
+        assert f"+{rows[extra]['adds_mib']:.0f} MiB" in table[extra], extra
+    assert f"({rows['all']['disk_mib']:.0f} MiB in all)" in table["all"]
+    assert measured["date"] in readme
