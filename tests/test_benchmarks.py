@@ -190,3 +190,16 @@ def test_explore_bench_writes_its_figures_for_the_device_it_ran_on(tmp_path):
         t = got["windows"][w]
         assert 0 < t["first_image_s"] <= t["coarse_s"] <= t["first_strip_s"] <= t["refined_s"]
     assert got["batch_alone_s"] > 0 and got["machine"]["cores"] >= 1
+
+
+@pytest.mark.parametrize("ndim, connectivity, k", [(2, "face", 6), (2, "full", 6), (3, "face", 4), (2, "face", 300)])
+def test_bench_cells_compares_two_routes_to_the_same_cells(ndim, connectivity, k):
+    """bench_cells.py times scipy's ndimage.label label by label against label_cells' one scikit-image pass: both
+    give the same cells, numbered alike, so the timing compares like with like."""
+    from dicetrace.analysis import label_cells
+
+    bench = _load("bench_cells")
+    g = bench._blocks(60 if ndim == 2 else 16, k, ndim, np.random.default_rng(k))
+    ids, n = label_cells(g, connectivity=connectivity)
+    ids_sp, n_sp = bench.scipy_label_cells(g, connectivity)
+    assert n > 10 and n_sp == n and np.array_equal(ids_sp, ids)

@@ -102,3 +102,58 @@ def test_the_first_command_records_a_roll_in_a_fresh_clone(tmp_path):
     status = subprocess.run(["git", "status", "--porcelain"], cwd=clone, capture_output=True, text=True, check=True)
     assert status.stdout == "", status.stdout  # outputs are ignored, nothing tracked changed
     assert shlex.split(parts[-1])[0] == ".venv/bin/dicetrace"
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+def test_the_first_screen_says_what_it_is_shows_it_gives_the_commands_and_the_contents():
+    head, first_block, rest = README.split("\n```", 2)
+    assert head.startswith("# dicetrace\n\n**dicetrace** is ") and len(head.splitlines()) <= 10
+    assert "](docs/first-screen.png)" in head and (REPO / "docs" / "first-screen.png").exists()
+    assert first_block.startswith("bash\n") and "bash .ci/run" in first_block
+    contents = rest[rest.index("**Contents:**"):].split("\n\n", 1)[0]
+    assert rest.index("**Contents:**") < 10 and rest.index("**Contents:**") < rest.index("\n## ")
+    headings = {_slug(h) for h in re.findall(r"^## (.+)$", README, re.M)}
+    links = re.findall(r"\]\(([^)]+)\)", contents)
+    assert len(links) >= 12
+    for link in links:
+        if link.startswith("#"):
+            assert link[1:] in headings, link
+        else:
+            assert (REPO / link).exists(), link
+    assert {f"#{h}" for h in headings} <= set(links)  # every section is listed
+    for internal in ("scripts/test.sh", "Xvfb", "compile_kernels"):  # the CI's internals live in CONTRIBUTING.md
+        assert internal not in README.split("\n## ", 1)[0], internal
+
+
+def test_the_first_picture_is_the_committed_map_beside_the_committed_viewer_shot():
+    """docs/first-screen.png is what scripts/first_screen.py makes of docs/red-sea.png and docs/viewer.png (run it
+    again when either changes)."""
+    import importlib.util
+
+    import numpy as np
+    from PIL import Image
+
+    spec = importlib.util.spec_from_file_location("first_screen", REPO / "scripts" / "first_screen.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    made = np.asarray(mod.compose())
+    with Image.open(REPO / "docs" / "first-screen.png") as im:
+        committed = np.asarray(im.convert("RGB"))
+    assert made.shape == committed.shape and np.array_equal(made, committed)
+
+
+def test_the_numbers_of_contributing_md_are_held_by_results_files():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("report_figures", REPO / "tests" / "studies" / "test_report_figures.py")
+    rf = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(rf)
+    values = rf.held_values()
+    found = rf.figures((REPO / "CONTRIBUTING.md").read_text())
+    assert {"630.2", "149.0", "429.5"} <= {f for f, _ in found}
+    unheld = [(f, line) for f, line in found if f not in rf.EXCEPTIONS and not rf.is_held(f, values)]
+    assert not unheld, unheld

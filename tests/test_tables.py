@@ -42,3 +42,24 @@ def test_node_events_take_the_exact_times_where_the_throws_have_them():
     row, step, t_s, node, entered = node_events(_batch(["0-6-68-8"], [[0, 10, 12, 15]], times))
     np.testing.assert_array_equal(t_s, [0.0093, 0.0111, 0.0142])
     np.testing.assert_array_equal(step, [10, 12, 15])
+
+
+def test_trajectory_files_hold_no_negative_zero(tmp_path):
+    """Zeros are written as 0.0, never -0.0: a drop with no spin on the physical preset (its L, the program's
+    negated, is -0.0 once the die lands) read back from trajectory.parquet."""
+    import pyarrow.parquet as pq
+
+    from dicetrace.simulate import Record, simulate
+    from dicetrace.sinks.parquet import write_tables
+
+    roll = simulate([0.0, 0.0, -100.0, 0.0, 0.0, 0.0], preset="physical", t_max_s=0.2,
+                    record=Record(states=True, energy=True))
+    assert np.signbit(roll.trace.L).any()  # what the table must not pass on
+    write_tables(tmp_path, roll)
+    table = pq.read_table(tmp_path / "trajectory.parquet")
+    t = table.column("t_s").to_numpy()
+    assert t[0] == 0.0 and not np.signbit(t[0])
+    for name in table.column_names:
+        col = table.column(name).to_numpy()
+        if col.dtype.kind == "f":
+            assert not ((col == 0) & np.signbit(col)).any(), name

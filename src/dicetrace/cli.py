@@ -9,7 +9,9 @@ imported covers the loading of the modules (the console script and
 dicetrace`` itself loads nothing heavy), then ``run_app`` takes over.  ``--help`` shows no
 type column where typer's default says nothing the help does not (``<bool>``
 on a flag, ``<str>``, ``<path>``); numbers, choices and explicit metavars
-stay.
+stay.  Each command's description is re-wrapped for the terminal's width when ``--help`` prints it
+(:func:`reflow`): prose paragraphs flow as one text, and the rows of an indented table keep their
+hanging indent.
 """
 
 from __future__ import annotations
@@ -68,11 +70,14 @@ _occupy_closed_std_fds()
 _LOADING = _catch_interrupts_while_loading()
 
 import importlib  # noqa: E402  (the imports after the handler: typer, rich, the commands' modules)
+import inspect  # noqa: E402
 import platform  # noqa: E402
+import re  # noqa: E402
+import textwrap  # noqa: E402
 from importlib import metadata  # noqa: E402
 
 import typer  # noqa: E402
-from typer.core import TyperGroup  # noqa: E402
+from typer.core import TyperCommand, TyperGroup  # noqa: E402
 
 import dicetrace  # noqa: E402
 from dicetrace.commands._common import run_app  # noqa: E402
@@ -93,7 +98,65 @@ def tidy_params(params, ctx) -> list:
     return params
 
 
-class _Group(TyperGroup):
+#: The fields of a table row before its last one: words each followed by two or more spaces.
+_ROW_HEAD = re.compile(r"^(\s*(?:\S+(?: \S+)*\s{2,})+)(?=\S)")
+
+
+def _wrap(text: str, width: int, first: str = "", rest: str = "") -> list[str]:
+    return textwrap.wrap(text, width=width, initial_indent=first, subsequent_indent=rest,
+                         break_long_words=False, break_on_hyphens=False) or [first.rstrip()]
+
+
+def reflow(help_text: str, width: int) -> str:
+    """``help_text`` laid out for ``width`` columns: its prose paragraphs (separated by blank lines) joined
+    and wrapped at word boundaries, and the rows of a table (a paragraph whose lines are indented) each
+    wrapped with a hanging indent under its last field.  The first paragraph is only joined: typer shows
+    it as the command's title and wraps it itself."""
+    paragraphs = inspect.cleandoc(help_text).split("\n\n")
+    out = [" ".join(paragraphs[0].split())]
+    width = max(width, 20)
+    for para in paragraphs[1:]:
+        lines = para.splitlines()
+        if lines and all(ln[:1].isspace() for ln in lines):  # a table: one row a line
+            rows = []
+            for ln in lines:
+                lead = ln[: len(ln) - len(ln.lstrip())]
+                head = _ROW_HEAD.match(ln)
+                if head and len(head.group(1)) <= width // 2:  # the last field hangs under its own start
+                    rows += _wrap(ln[head.end(1):], width, head.group(1), " " * len(head.group(1)))
+                else:
+                    rows += _wrap(ln.lstrip(), width, lead, lead + "    ")
+            out.append("\n".join(rows))
+        else:
+            out.append("\n".join(_wrap(" ".join(para.split()), width)))
+    return "\n\n".join(out)
+
+
+def _help_width() -> int:
+    """The columns typer's help gives a command's description: the console's width less its padding of 1 a side."""
+    from typer import rich_utils
+
+    return rich_utils._get_rich_console().width - 2
+
+
+class _Reflowed:
+    """``format_help`` with the description re-wrapped for this terminal (:func:`reflow`)."""
+
+    def format_help(self, ctx, formatter):
+        original = self.help
+        if original:
+            self.help = reflow(original, _help_width())
+        try:
+            return super().format_help(ctx, formatter)
+        finally:
+            self.help = original
+
+
+class _Command(_Reflowed, TyperCommand):
+    """A ``dicetrace`` sub-command: typer's, its description re-wrapped for the terminal."""
+
+
+class _Group(_Reflowed, TyperGroup):
     """The ``dicetrace`` group: its own and every sub-command's parameters shown without the noise labels."""
 
     def get_params(self, ctx):
@@ -154,6 +217,9 @@ def _register() -> None:
                 raise
             continue
         mod.register(app)
+    for info in app.registered_commands:  # every sub-command's --help re-wrapped for the terminal
+        if info.cls in (None, TyperCommand):
+            info.cls = _Command
 
 
 _register()

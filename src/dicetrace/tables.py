@@ -466,6 +466,8 @@ def trajectory_table(roll, *, ic_id: int = 0, metadata: Mapping | None = None) -
             cols[f"n{k + 1}_{a}_cm"] = nodes[:, k, j]
     for key, col in _ENERGY_COLUMNS:
         cols[col] = np.asarray(tr.energy[key])[rows]
-    arrays = [pa.array(np.ascontiguousarray(cols[f.name]), type=f.type) for f in TRAJECTORY_SCHEMA]
+    # + 0.0 turns a negative zero (a sign flipped on 0, as the L convention does) into 0.0: readers print -0.0
+    arrays = [pa.array(np.ascontiguousarray(cols[f.name]) + 0.0 if pa.types.is_floating(f.type) else cols[f.name],
+                       type=f.type) for f in TRAJECTORY_SCHEMA]
     table = pa.Table.from_arrays(arrays, schema=TRAJECTORY_SCHEMA)
     return _with_metadata(table, metadata_json(roll.config, roll.ic, extra=metadata))

@@ -1,9 +1,9 @@
 """The studies run from an installed (not editable) package, from a folder outside the repository.
 
-``pip install`` of the package's sources (``pyproject.toml``, ``README.md``
-and ``src/``, copied, so that the build leaves nothing in the checkout and
-nothing else of the repository is at hand) into a fresh virtual environment;
-then,
+``pip install`` of the package's sources with the studies' extra (``analysis``;
+``pyproject.toml``, ``README.md`` and ``src/``, copied, so that the build
+leaves nothing in the checkout and nothing else of the repository is at hand)
+into a fresh virtual environment; then,
 through the installed entry point and with a temporary folder as the current
 directory, ``dicetrace analyze all --quick --out DIR``, ``dicetrace accuracy
 --quick --out DIR`` (the alias), a small ``dicetrace analyze stability --quick``,
@@ -21,14 +21,13 @@ from __future__ import annotations
 import csv
 import json
 import os
-import shutil
 import subprocess
-import venv
 from pathlib import Path
 
 import pytest
 
 from dicetrace.studies import WRITEUP_STUDIES
+from fresh_install import install_sources
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -64,20 +63,7 @@ def _check_accuracy(out: Path) -> None:
     reason="a 5-15 min release check: set DICETRACE_INSTALL_TEST=1 to install the package afresh and run the studies",
 )
 def test_installed_package_runs_the_studies_from_any_folder(tmp_path):
-    src = tmp_path / "source"
-    src.mkdir()
-    for name in ("pyproject.toml", "README.md"):
-        shutil.copy2(REPO / name, src / name)
-    shutil.copytree(REPO / "src", src / "src", ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "*.nbi", "*.nbc"))
-    env_dir = tmp_path / "venv"
-    venv.EnvBuilder(with_pip=True).create(env_dir)
-    py, exe = env_dir / "bin" / "python", env_dir / "bin" / "dicetrace"
-    proc = subprocess.run([str(py), "-m", "pip", "install", "-q", str(src)], capture_output=True, text=True,
-                          timeout=1800, cwd=tmp_path)
-    if proc.returncode != 0 and "No matching distribution" in proc.stderr:
-        pytest.skip("the dependencies cannot be installed here (no package index)")
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    py, exe, src, env = install_sources(tmp_path, "analysis")  # the writeup studies need the analysis extra
     work = tmp_path / "elsewhere"
     work.mkdir()
 

@@ -19,7 +19,8 @@ from collections.abc import Hashable, Iterable, Sequence
 import numpy as np
 import pandas as pd
 from scipy import ndimage
-from skimage import measure
+
+from dicetrace.extras import require
 
 from ._grid import as_label_grid, encode_labels, structure
 
@@ -62,8 +63,12 @@ def label_cells(
         valid = (codes >= 0) & ~np.isin(codes, excl_codes)
     if not valid.any():
         return np.zeros(arr.shape, dtype=np.int64), 0
-    # one pass of scikit-image's labelling: neighbours of equal value join; the
-    # background value (0 after the shift) marks the nodes without a cell
+    # one pass of scikit-image's labelling (the analysis extra; faster than scipy's ndimage.label label by label:
+    # benchmarks/bench_cells.py): neighbours of equal value join; the background value (0 after the shift) marks
+    # the nodes without a cell
+    require("analysis", "analysis.label_cells")
+    from skimage import measure  # the analysis extra: imported where it labels
+
     lo, hi = int(codes.min()), int(codes.max())
     vals = (codes - lo + 1).astype(np.int32 if hi - lo < 2**31 - 2 else np.int64)  # int32: a faster labelling
     vals[~valid] = 0

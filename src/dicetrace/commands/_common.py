@@ -18,15 +18,19 @@ import sys
 import warnings
 from pathlib import Path
 
-import click
 import typer
 
 try:  # typer >= 0.20 vendors its own click
     from typer._click import exceptions as _typer_click
 except ImportError:  # pragma: no cover - older typer uses click itself
     _typer_click = None
+try:  # click itself: not a dependency of typer >= 0.20 (nor of the base install), but installed by others
+    import click
+except ImportError:
+    click = None
 
 from dicetrace.commands._compiling import compile_notice
+from dicetrace.extras import MissingExtra
 from dicetrace.sinks._common import OutputError, destination, output_folder, staged
 
 EXIT_BAD_INPUT = 2
@@ -53,7 +57,9 @@ def one_line(text) -> str:
 
 def _click_exceptions():
     """(UsageError, ClickException, Exit) classes of both click and typer's vendored click."""
-    usage, cexc, exits = [click.exceptions.UsageError], [click.exceptions.ClickException], [click.exceptions.Exit]
+    usage, cexc, exits = [], [], []
+    if click is not None:
+        usage, cexc, exits = [click.exceptions.UsageError], [click.exceptions.ClickException], [click.exceptions.Exit]
     if _typer_click is not None:
         usage.append(_typer_click.UsageError)
         cexc.append(_typer_click.ClickException)
@@ -215,7 +221,7 @@ def run_app(app: typer.Typer) -> None:
                 except OSError as e:  # stdout is a full device, a closed pipe, ...
                     _silence_stdout()
                     raise BadInput(f"cannot write standard output: {e.strerror or e}") from None
-            except (BadInput, ValueError) as e:  # ValueError: validation in params/ics/simulate (and OutputError)
+            except (BadInput, ValueError, MissingExtra) as e:  # ValueError: validation in params/ics/simulate (and OutputError)
                 error(e)
             except usage as e:
                 if type(e).__name__ == "NoArgsIsHelpError":  # bare `dicetrace`: help was printed

@@ -32,6 +32,7 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail, parse_floats
+from dicetrace.commands.options import IntegratorsAlias, either
 from dicetrace.integrators import REMOVED, unknown_integrator
 from dicetrace.params import INTEGRATORS, PRESETS
 from dicetrace.studies import study_accuracy as acc
@@ -41,7 +42,7 @@ from dicetrace.studies.outputs import default_out, prepare_out
 from dicetrace.studies.study_accuracy_render import write_study
 from dicetrace.windows import get_window
 
-_REGENERATE = ("Default ./dicetrace-results/{name}; the committed results: --out analysis/accuracy "
+_REGENERATE = ("Default: {name} in ./dicetrace-results; the committed results: --out analysis/accuracy "
                "(full runs only).")
 
 
@@ -172,7 +173,8 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(acc.DEFAULT_SEED, "--seed", help="Seed of the IC sample and the perturbations."),
         quick: bool = typer.Option(False, "--quick", help="CI size: few ICs, each integrator's quick steps, coarser reference."),
         presets: Optional[str] = typer.Option(None, "--presets", help="Comma-separated presets (default seed,physical)."),
-        integrators: Optional[str] = typer.Option(None, "--integrator", "--integrators", help="Comma-separated integrators (default: all)."),
+        integrators: Optional[str] = typer.Option(None, "--integrator", help="Comma-separated integrators (default: all)."),
+        integrators_alias: IntegratorsAlias = None,
         threads: int = typer.Option(2, "--threads", help="numba threads for the untimed reference runs (timed runs use one)."),
         out: Optional[Path] = typer.Option(None, "--out", help="Output folder: study.csv, orders.csv, reference.csv, "
                                            "work_precision.png, summary.md. " + _REGENERATE.format(name="accuracy")),
@@ -186,14 +188,16 @@ def register(app: typer.Typer) -> None:
         analysis/accuracy` (from the repository root); a reduced run (--quick, --n,
         --seed, --window, --presets, --integrator) into analysis/ is refused.
         """
-        run_accuracy(window=window, n=n, seed=seed, quick=quick, presets=presets, integrators=integrators,
-                     threads=threads, out=out, quiet=quiet, command=command_line("accuracy"))
+        run_accuracy(window=window, n=n, seed=seed, quick=quick, presets=presets,
+                     integrators=either(integrators, integrators_alias), threads=threads, out=out, quiet=quiet,
+                     command=command_line("accuracy"))
 
     @app.command("stability")
     def stability_cmd(
         quick: bool = typer.Option(False, "--quick", help="CI size: two stiffnesses, five corpus ICs, three bisections."),
         presets: Optional[str] = typer.Option(None, "--presets", help="Comma-separated presets (default seed,physical)."),
-        integrators: Optional[str] = typer.Option(None, "--integrator", "--integrators", help="Comma-separated integrators (default: all)."),
+        integrators: Optional[str] = typer.Option(None, "--integrator", help="Comma-separated integrators (default: all)."),
+        integrators_alias: IntegratorsAlias = None,
         k_values: Optional[str] = typer.Option(None, "--k", help="Comma-separated stiffnesses k (1/s²; default 5e5 … 5e7)."),
         out: Optional[Path] = typer.Option(None, "--out", help="Output folder: stability.csv, stability.png, stability.md. "
                                            + _REGENERATE.format(name="stability")),
@@ -207,5 +211,5 @@ def register(app: typer.Typer) -> None:
         stability --out analysis/accuracy` (from the repository root); a reduced run
         (--quick, --presets, --integrator, --k) into analysis/ is refused.
         """
-        run_stability(quick=quick, presets=presets, integrators=integrators, k_values=k_values, out=out, quiet=quiet,
-                      command=command_line("stability"))
+        run_stability(quick=quick, presets=presets, integrators=either(integrators, integrators_alias),
+                      k_values=k_values, out=out, quiet=quiet, command=command_line("stability"))

@@ -47,8 +47,9 @@ import typer
 
 from dicetrace.commands._common import fail
 from dicetrace.commands.accuracy import command_line, run_accuracy, run_friction, run_stability
-from dicetrace.commands.options import config_errors
+from dicetrace.commands.options import IntegratorsAlias, config_errors, either
 from dicetrace.devices import resolve_device
+from dicetrace.extras import require
 from dicetrace.studies import INTEGRATOR_STUDIES, INTEGRATOR_TITLES, LETTERS, TITLES, resolve
 from dicetrace.studies import runner as studies_runner
 from dicetrace.studies import study_accuracy as acc
@@ -58,8 +59,10 @@ from dicetrace.studies.report import build as build_report
 from dicetrace.studies.study_converged import check_overrides
 
 #: The studies as ``analyze --help`` lists them: letter (writeup studies), name, what it is about.
-STUDIES_HELP = "\n".join(f"  {letter}  {name:<11} {TITLES[name]}" for letter, name in LETTERS.items())
-INTEGRATOR_HELP = "\n".join(f"     {name:<11} {INTEGRATOR_TITLES[name]}" for name in INTEGRATOR_STUDIES)
+#: (Two spaces at least between the fields: ``--help`` wraps each row with its title hanging under its start.)
+_NAME_W = max(map(len, [*LETTERS.values(), *INTEGRATOR_STUDIES])) + 2
+STUDIES_HELP = "\n".join(f"  {letter}  {name:<{_NAME_W}}{TITLES[name]}" for letter, name in LETTERS.items())
+INTEGRATOR_HELP = "\n".join(f"     {name:<{_NAME_W}}{INTEGRATOR_TITLES[name]}" for name in INTEGRATOR_STUDIES)
 
 #: The options each kind of study takes ("writeup": every writeup study; the others by name).
 TAKES = {
@@ -71,7 +74,7 @@ TAKES = {
 
 
 def _takes_help() -> str:
-    return "\n".join(f"  {kind + ':':<11} {' '.join(opts)}" for kind, opts in TAKES.items())
+    return "\n".join(f"  {kind + ':':<11}  {' '.join(opts)}" for kind, opts in TAKES.items())
 
 
 def _help() -> str:
@@ -82,6 +85,8 @@ figures, figures/a_*.png ...), several at once, or give all; they share one
 output folder (default ./dicetrace-results/analysis) and its REPORT.md:
 
 {STUDIES_HELP}
+
+The writeup studies need dicetrace's analysis extra (scikit-image).
 
 The integrator studies, each run alone with options of its own (default
 output ./dicetrace-results/NAME):
@@ -116,19 +121,20 @@ def register(app: typer.Typer) -> None:
         study: Optional[list[str]] = typer.Argument(None, help="Study names or letters (listed above), or all.",
                                             metavar="STUDY"),
         quick: bool = typer.Option(False, "--quick", help="Small sizes (the CI run: seconds per writeup study)."),
-        out: Optional[Path] = typer.Option(None, "--out", help="Output folder; default ./dicetrace-results/analysis "
-                                           "(writeup studies: figures/, results/, REPORT.md) or "
-                                           "./dicetrace-results/NAME (integrator studies). The committed results: "
+        out: Optional[Path] = typer.Option(None, "--out", help="Output folder; default: analysis (writeup studies: "
+                                           "figures/, results/, REPORT.md) or NAME (integrator studies) in "
+                                           "./dicetrace-results. The committed results: "
                                            "--out analysis, --out analysis/accuracy (full runs only)."),
         res: Optional[int] = typer.Option(None, "--res", help="Writeup studies: override each study's main grid size "
                                          "(points per axis, >= 3; refused when its largest grid would not fit the "
                                          "memory available)."),
         seed: Optional[int] = typer.Option(None, "--seed", help="Random seed of perturbations and picks, and of "
                                           "accuracy's IC sample (an integer in [0, 2**64))."),
-        integrator: Optional[str] = typer.Option(None, "--integrator", "--integrators",
+        integrator: Optional[str] = typer.Option(None, "--integrator",
                                                  help="Writeup study l (converged): the integrator of its converged "
                                                  "models (default: each model's own). accuracy, stability: "
                                                  "comma-separated integrators (default: all)."),
+        integrators_alias: IntegratorsAlias = None,
         tol: Optional[float] = typer.Option(None, "--tol", help="Writeup study l (converged): the tolerance of its "
                                             "converged models (adaptive integrators); default: each model's own."),
         window: Optional[str] = typer.Option(None, "--window", help="accuracy: window of the seed slice, a name "
@@ -152,6 +158,7 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet", "-q", help="Integrator studies: no progress lines."),
     ) -> None:
         # every option is checked before anything touches the disk or computes
+        integrator = either(integrator, integrators_alias)
         given = {"--quick": quick, "--out": out is not None, "--res": res is not None, "--seed": seed is not None,
                  "--integrator": integrator is not None, "--tol": tol is not None, "--window": window is not None,
                  "--n": n is not None, "--presets": presets is not None, "--k": k_values is not None,
@@ -184,6 +191,7 @@ def register(app: typer.Typer) -> None:
         except ValueError as e:
             fail(f"{e}; or one of {', '.join(INTEGRATOR_STUDIES)}, alone")
         _not_taken("writeup", "", given)
+        require("analysis", "dicetrace analyze (its writeup studies)")
         options = _checked_options(names, quick=quick, res=res, seed=seed, integrator=integrator, tol=tol,
                                    device=device, no_cache=no_cache)
         why = ", ".join(w for w, on in (("--quick", quick), ("--res", res is not None),

@@ -33,6 +33,7 @@ from dicetrace.commands._common import fail, output_dir
 from dicetrace.commands.options import DEVICE_HELP, INTEGRATOR_HELP, PRESET_HELP, device_or_fail
 from dicetrace.explore.server import check_budget, check_host, check_port, check_threads, make_view, serve_forever
 from dicetrace.explore.view import ViewError
+from dicetrace.extras import require
 
 WINDOW_HELP = "Start window: a name (red-sea, home, party, green-island, ...) or x0,x1,y0,y1."
 
@@ -62,7 +63,11 @@ def register(app: typer.Typer) -> None:
             None, "--map-budget", help="Seconds of computing one map may take (default 60); a map that would take "
             "longer is refused with a message (fewer pixels or a longer dt)."),
     ) -> None:
-        """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer."""
+        """Explore the outcome map live: zoom recomputes, hover tells the throw, click shows it in Rerun's viewer.
+
+        Needs dicetrace's explore extra (the web server and Rerun's web viewer).
+        """
+        require("explore", "dicetrace explore")  # before anything else: one line naming the extra
         try:
             view = make_view(slice_name, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
         except ViewError as e:

@@ -88,6 +88,15 @@ TMaxOption = Annotated[Optional[str], typer.Option("--t-max", help=T_MAX_HELP)]
 TolOption = Annotated[Optional[str], typer.Option("--tol", help=TOL_HELP)]
 TolGrowthOption = Annotated[Optional[str], typer.Option("--tol-growth", help=TOL_GROWTH_HELP)]
 SliceOption = Annotated[Optional[str], typer.Option("--slice", help=SLICE_HELP)]
+#: ``--integrators``: the integrator studies' other spelling of ``--integrator``, still taken but not listed by
+#: ``--help`` (two names side by side make an option column that a narrow terminal cannot show whole).
+IntegratorsAlias = Annotated[Optional[str], typer.Option("--integrators", hidden=True)]
+
+
+def either(value: str | None, alias: str | None) -> str | None:
+    """An option's value, else the value given under its other spelling."""
+    return value if value is not None else alias
+
 
 EVENTS_HELP = ("Record the exact contact events (the contact integrators only, e.g. the physical preset's): the contact "
                "sequence is then the sets inside the integrator's sub-steps, located where nodes enter or leave the "

@@ -43,6 +43,7 @@ import numpy as np
 from dicetrace.commands._common import EXIT_NUMERICAL_FAILURE, fail, output_dir, output_file, parse_floats, say
 from dicetrace.commands import options as opts
 from dicetrace.commands.options import AT_HELP, IC_HELP, PRESET_HELP, build_config, fmt_num, ic_from_options, preset_or_fail
+from dicetrace.extras import require
 from dicetrace.params import Numerics
 from dicetrace.sinks._common import Staging, human_bytes
 from dicetrace.sinks.rerun_channels import CHANNELS, parse_channels
@@ -228,6 +229,8 @@ def check_sinks(spawn: bool, connect: bool, serve: bool, url, serve_for, port, w
         fail("--bind needs --spawn or --serve (with --connect give --url)")
     check_port(port, "--port")
     check_port(web_port, "--web-port")
+    if mode == "serve":  # its web viewer is rerun-notebook's build, which the explore extra brings
+        require("explore", "record --serve (Rerun's web viewer)")
     return mode
 
 
@@ -272,11 +275,11 @@ def register(app: typer.Typer) -> None:
         ),
         url: Optional[str] = typer.Option(
             None, "--url", help="With --connect: its address, rerun+http://HOST:PORT/proxy or a port "
-            "(default: rerun+http://127.0.0.1:9876/proxy, the SDK's default)."
+            "(default: the SDK's, HOST 127.0.0.1 and PORT 9876)."
         ),
         serve: bool = typer.Option(
             False, "--serve", help="Serve the recording over gRPC and the web viewer over HTTP (the URL is printed) "
-            "until Ctrl-C or --serve-for seconds."
+            "until Ctrl-C or --serve-for seconds. Needs the explore extra (its web viewer)."
         ),
         serve_for: Optional[str] = typer.Option(None, "--serve-for", help="With --serve: stop after this many seconds."),
         port: Optional[int] = typer.Option(

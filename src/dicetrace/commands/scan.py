@@ -78,7 +78,9 @@ from dicetrace.commands.options import (
     fmt_num,
     preset_or_fail,
 )
+from dicetrace.compile_clock import rate_text
 from dicetrace.devices import DeviceError, check_device
+from dicetrace.extras import require
 from dicetrace.ics import SLICES, Grid, Points, Sample, Slice
 from dicetrace.memory import available_memory
 from dicetrace.sinks._common import Staging, human_bytes
@@ -90,7 +92,7 @@ WINDOW_HELP = (
     "Window: a name (home, zoom-out, more-out, most-out, red-sea, red-sea-2, party, green-island) "
     "or x0,x1,y0,y1[,z0,z1] with x1 > x0, y1 > y0, z1 > z0 (an axis of one grid point may be a single value)."
 )
-RES_HELP = "Grid points per axis: N (every axis), NX,NY or NX,NY,NZ (the program's formula x0+(p-1)/(n-1)(x1-x0))."
+RES_HELP = "Grid points per axis: N (every axis), NX,NY or NX,NY,NZ (the program's formula x0 + (x1 - x0)(p - 1)/(n - 1))."
 #: A run estimated to take longer than this (s) needs --yes.
 MAX_UNCONFIRMED_S = 3600.0
 #: A run estimated to take longer than this (s), or to write more than LARGE_SCAN_BYTES, says so first.
@@ -345,8 +347,8 @@ def register(app: typer.Typer) -> None:
                                             "262144 on a GPU, whose launches want that many throws)."),
         threads: Optional[int] = typer.Option(None, "--threads", help="numba threads (default: all cores)."),
         device: str = typer.Option("cpu", "--device", help=DEVICE_HELP + " A scan resumes only on the device it started on."),
-        dask: bool = typer.Option(False, "--dask", help="Run the chunks on a local Dask cluster."),
-        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the chunks on the Dask scheduler at ADDRESS."),
+        dask: bool = typer.Option(False, "--dask", help="Run the chunks on a local Dask cluster (the dask extra)."),
+        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Run the chunks on the Dask scheduler at ADDRESS (the dask extra)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Worker processes of the --dask cluster (default: one per GPU for a GPU scan, else one per core)."),
         max_chunks: Optional[int] = typer.Option(None, "--max-chunks", help="Stop after this many new chunks (resumable)."),
         rrd: Optional[Path] = typer.Option(None, "--rrd", help="Also write the scan map for the Rerun viewer (.rrd; "
@@ -385,6 +387,8 @@ def register(app: typer.Typer) -> None:
             fail("give --dask (a local cluster) or --scheduler ADDRESS, not both")
         if workers is not None and not dask:
             fail("--workers sets the size of the --dask cluster: add --dask")
+        if dask or scheduler is not None:
+            require("dask", "--dask" if dask else "--scheduler")
         if scheduler is not None:
             try:
                 check_scheduler_address(scheduler)
@@ -462,7 +466,7 @@ def register(app: typer.Typer) -> None:
         if not quiet:
             msg = (f"{report.n_ics:,} ICs in {report.n_chunks:,} chunks → {out} (a Parquet dataset: read the folder as it is)  "
                    f"({report.chunks_computed:,} computed, {report.chunks_skipped:,} already there; "
-                   f"{report.ics_computed:,} ICs in {report.wall_s:.1f} s, {report.rate_ics_s:,.0f} ICs/s)")
+                   f"{rate_text(report.ics_computed, 'ICs', report.wall_s, report.compile_s, ' ICs/s')})")
             say(msg)
             if done < report.n_chunks:
                 say(f"{report.n_chunks - done:,} chunks left: re-run the same command to finish")

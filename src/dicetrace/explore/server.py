@@ -26,6 +26,7 @@ import numpy as np
 
 from dicetrace.devices import resolve_device
 from dicetrace.explore.view import View, view_from_query
+from dicetrace.extras import require
 
 #: The address the explorer listens on unless told otherwise.
 DEFAULT_HOST = "127.0.0.1"
@@ -318,6 +319,7 @@ class Explorer:
     def start(self) -> "Explorer":
         if self.running:
             return self
+        require("explore", "Explorer")
         from dicetrace.explore.app import create_app  # starlette, and numba through dicetrace.scan: only when serving
 
         self._sock = bind_socket(self.host, self.port)
@@ -358,6 +360,7 @@ class Explorer:
         ``on_pick(info)`` is called with the hover info of each throw picked on the page:
         :class:`~dicetrace.explore.widget.ExplorerWidget`.
         """
+        require("jupyter", "Explorer.widget()")
         from dicetrace.explore.widget import ExplorerWidget  # anywidget: imported only for a widget
 
         w = ExplorerWidget(url=self.start().url, height=self.height)
@@ -382,6 +385,7 @@ def serve_forever(view: View, *, host: str = DEFAULT_HOST, port: int = 0, out=No
 
     ``device``: where the maps run (cpu, cuda, auto), resolved before anything listens.
     """
+    require("explore", "the explorer")
     from dicetrace.explore.app import create_app  # starlette, and numba through dicetrace.scan: only when serving
 
     host, port, threads = check_host(host), check_port(port), check_threads(threads)

@@ -24,6 +24,7 @@ from collections.abc import Iterable, Iterator
 import pyarrow as pa
 
 from dicetrace.devices import device_label, gpu_unavailable_reason, resolve_device
+from dicetrace.extras import require
 from dicetrace.scan.definition import ScanDefinition, device_kind
 
 from dicetrace.scan.folder import _chunk_task
@@ -37,6 +38,8 @@ class SchedulerError(ConnectionError):
 
 
 def _check_dask(dask) -> None:
+    if dask is not None and dask is not False:
+        require("dask", "a scan on Dask")
     if dask is None or isinstance(dask, bool) or isinstance(dask, str):
         if isinstance(dask, str):
             check_scheduler_address(dask)

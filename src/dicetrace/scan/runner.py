@@ -30,6 +30,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
+from dicetrace.compile_clock import CompileClock, running_rate
 from dicetrace.devices import check_device, device_label, resolve_device
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.memory import available_memory
@@ -62,8 +63,9 @@ class _Progress:
     ends the bar, not the scan.
     """
 
-    def __init__(self, enabled: bool, total: int, done: int, label: str):
+    def __init__(self, enabled: bool, total: int, done: int, label: str, clock: CompileClock | None = None):
         self.enabled = enabled
+        self.clock = clock
         self.t0 = time.perf_counter()
         self.base = done
         if not enabled:
@@ -97,7 +99,8 @@ class _Progress:
             return
         dt = time.perf_counter() - self.t0
         new = done_total - self.base
-        rate = f"{new / dt:,.0f} ICs/s" if dt > 0 and new > 0 else ""
+        compiling = self.clock.seconds if self.clock is not None else 0.0  # a rate of the throws, not the compiler
+        rate = f"{running_rate(new, dt, compiling):,.0f} ICs/s" if dt > compiling and new > 0 else ""
         self._guard(self.bar.update, self.task, advance=n, rate=rate)
 
     def close(self) -> None:
@@ -127,9 +130,12 @@ class ScanReport:
 
     @property
     def rate_ics_s(self) -> float:
-        return 0.0 if self.wall_s <= 0 else self.ics_computed / self.wall_s
+        """ICs computed per second of the time not spent compiling the kernels."""
+        return running_rate(self.ics_computed, self.wall_s, self.compile_s)
 
     ics_computed: int = 0
+    #: Of ``wall_s``, the seconds numba spent compiling in this process (a first run on a cold kernel cache).
+    compile_s: float = 0.0
 
 
 _SPACES = (Grid, Sample, Points)
@@ -325,6 +331,7 @@ def scan(
         if folder is not None:
             check_folder(folder, defn)  # refuse at once, without waiting for a lock (read only)
     client, closers = _open_dask(dask, n_workers, device=device or defn.device) if dask else (None, [])
+    clock = CompileClock().start()  # what of the wall time was compiling, told apart in the report's rate
     try:
         if client is not None:
             defn = _on_device(defn, device, client)
@@ -339,19 +346,21 @@ def scan(
                                           "l_convention": defn.config.preset.l_convention})
         with _FolderLock(folder, float(wait)):  # made and locked at once: nothing touches it before
             return _run_into(folder, defn, t0, threads=threads, progress=progress, client=client,
-                             max_chunks=max_chunks)
+                             max_chunks=max_chunks, clock=clock)
     finally:
+        clock.stop()
         for x in closers:
             x.close()
 
 
-def _run_into(folder: Path, defn: ScanDefinition, t0: float, *, threads, progress, client, max_chunks):
+def _run_into(folder: Path, defn: ScanDefinition, t0: float, *, threads, progress, client, max_chunks,
+              clock: CompileClock):
     done = prepare_folder(folder, defn)
     todo: Iterable[int] = (c for c in range(defn.n_chunks) if c not in done)
     if max_chunks is not None:
         todo = itertools.islice(todo, max_chunks)
     ics_done = sum(stop - start for start, stop in map(defn.chunk_range, done))
-    bar = _Progress(progress, defn.size, int(ics_done), f"scan {folder.name}")
+    bar = _Progress(progress, defn.size, int(ics_done), f"scan {folder.name}", clock)
     computed = 0
     ics_now = 0
     pending: deque = deque()
@@ -395,6 +404,7 @@ def _run_into(folder: Path, defn: ScanDefinition, t0: float, *, threads, progres
         chunks_computed=computed,
         wall_s=time.perf_counter() - t0,
         ics_computed=ics_now,
+        compile_s=clock.seconds,
     )
 
 

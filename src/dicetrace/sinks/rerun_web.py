@@ -110,8 +110,8 @@ class WebViewerServer:
     def __init__(self, host: str, port: int, grpc_url: str) -> None:
         folder = viewer_assets_folder()
         if folder is None:
-            raise WebViewerError("Rerun's web viewer was not found (install rerun-notebook, as dicetrace's "
-                                 "dependencies do)")
+            raise WebViewerError("Rerun's web viewer was not found: it comes with rerun-notebook, in the explore "
+                                 "extra (pip install 'dicetrace[explore]')")
         grpc_port = urllib.parse.urlsplit(grpc_url).port
         page = (VIEWER_PAGE.replace("__GRPC_URL__", grpc_url).replace("__GRPC_PORT__", str(grpc_port))
                 .replace("__FAVICON__", FAVICON_LINK).encode())

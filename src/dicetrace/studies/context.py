@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dicetrace.compile_clock import CompileClock, rate_text
 from dicetrace.studies.outputs import write_text, written
 from dicetrace.windows import get_window
 
@@ -125,11 +126,12 @@ class Context:
                 return cached
             print(f"dicetrace: warning: cache file {str(path)!r} ignored ({cached}): simulating its grid again",
                   file=sys.stderr, flush=True)
-        s = sample_window(win, res_t, slice_spec=slice_spec, sequences=sequences, **overrides)
+        with CompileClock() as clock:  # a first run's compiling is told apart from the throws' own time
+            s = sample_window(win, res_t, slice_spec=slice_spec, sequences=sequences, **overrides)
         self.n_throws += s.labels.size
         write_cached_sample(path, key, s)
         self.log(f"simulated {window if isinstance(window, str) else win} at {res_t} "
-                 f"({s.labels.size} throws, {s.wall_s:.1f} s, {s.labels.size / max(s.wall_s, 1e-9):.0f}/s)")
+                 f"({rate_text(s.labels.size, 'throws', s.wall_s, clock.seconds)})")
         return s
 
 

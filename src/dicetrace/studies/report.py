@@ -14,6 +14,11 @@ Placeholders in the template (``dicetrace/studies/REPORT.template.md``):
 ``{{f:STUDY.KEY}}``
     The figure ``figures[KEY]``: an image link relative to the report, and
     its caption in italics.
+``{{s:STUDY.NAME}}``
+    A sentence that compares numbers, written from them when the report is
+    assembled: ``SENTENCES[NAME](results)`` of the study's module (so
+    "higher" is said only where the numbers are higher, whatever run they
+    come from).
 
 A placeholder whose value is missing renders as ``n/a`` (and is listed on
 stderr). When any study ran with ``--quick`` the report starts with a
@@ -38,7 +43,7 @@ from pathlib import Path
 
 from dicetrace.studies.outputs import write_text
 
-_PH = re.compile(r"\{\{([vtf]):([^}|]+)(?:\|([^}]*))?\}\}")
+_PH = re.compile(r"\{\{([vtfs]):([^}|]+)(?:\|([^}]*))?\}\}")
 QUICK_WARNING = ("> **Quick run.** These numbers come from the CI-sized grids of `dicetrace analyze --quick`; they "
                  "only show that the pipeline works and do not support the text's conclusions. The committed "
                  "`analysis/REPORT.md` comes from the full run.\n\n")
@@ -110,6 +115,10 @@ def render(template: str, results: dict[str, dict]) -> tuple[str, list[str]]:
                 return _fmt(_walk(res, rest.split(".")), spec)
             if kind == "t":
                 return drop_from_table(res["tables"][rest], spec)
+            if kind == "s":
+                from dicetrace.studies import study_module
+
+                return study_module(study).SENTENCES[rest](res)
             fig = res["figures"][rest]
             return f"![{rest}]({fig['path']})\n\n*{fig.get('caption', '')}*"
         except (KeyError, IndexError, ValueError, TypeError):

@@ -24,7 +24,7 @@ from dicetrace.analysis.plot import plot_settle_map
 from dicetrace.analysis.settle import border_pairs, divergence_summary, fit_border, free_pivot_rate
 from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
 from dicetrace.studies.context import Computed, Context, Output
-from dicetrace.studies.text import md_table, pm
+from dicetrace.studies.text import compared, md_table, pm
 
 NAME = "settle"
 #: (key, preset, integrator, borders in the full run, in the quick run, description)
@@ -34,6 +34,8 @@ RUNS = (
     ("physical-substep", "physical", "contact-substep", 30, 2,
      "the physical preset (per-node Coulomb friction), contact-substep RK4"),
 )
+#: Two interquartile ranges closer than this fraction of the larger are called "about as broad".
+SPREAD_TIE = 0.1
 #: Window whose borders are located, and the maps drawn.
 BORDER_WINDOW = "red-sea-2"
 MAP_WINDOWS = ("red-sea", "home")
@@ -132,3 +134,33 @@ def render(c: Computed, out: Output) -> None:
         ("preset", "run", ""), ("desc", "model and integrator", ""), ("n", "sides fitted", "d"),
         ("med", "median λ (1/s) ± bootstrap se", ""), ("iqr", "interquartile range", ""),
         ("nc", "clean fits (r < −0.995)", "d"), ("cm", "mean λ of clean fits ± se", "")])
+
+
+def rate_comparison(other: dict, base: dict, subject: str, base_name: str) -> str:
+    """A sentence comparing two runs' fitted rates from their summaries (``median``, ``median_stderr``, ``q25``,
+    ``q75``, ``n_clean``, ``n_fits``): higher or lower where the medians differ by more than two standard errors
+    of the difference, the spread by the interquartile ranges, the clean fits by their share of the sides."""
+    med, med0 = other["median"], base["median"]
+    err = math.hypot(other.get("median_stderr") or 0.0, base.get("median_stderr") or 0.0)
+    rate = compared(med, med0, ("a higher rate than", "a lower rate than", "a rate not told apart from that of"),
+                    err=err)
+    iqr, iqr0 = other["q75"] - other["q25"], base["q75"] - base["q25"]
+    spread = compared(iqr, iqr0, ("a broader spread", "a narrower spread", "a spread about as broad"), rel=SPREAD_TIE)
+    share, share0 = other["n_clean"] / max(other["n_fits"], 1), base["n_clean"] / max(base["n_fits"], 1)
+    clean = compared(share, share0, ("more", "fewer", "as many"))
+    return (f"{subject} gives {rate} {base_name} (median {pm(med, other.get('median_stderr'), '.1f')} against "
+            f"{pm(med0, base.get('median_stderr'), '.1f')} /s), {spread} (interquartile range {iqr:.1f} against "
+            f"{iqr0:.1f} /s) and {clean} clean fits ({other['n_clean']} of {other['n_fits']} sides against "
+            f"{base['n_clean']} of {base['n_fits']})")
+
+
+def physical_vs_seed(results: dict) -> str:
+    """The report's comparison of the ``physical`` run with the discrete model, from this study's results."""
+    runs = results["runs"]
+    return rate_comparison(runs["physical-substep"]["summary"], runs["seed"]["summary"],
+                           "The `physical` preset (Coulomb friction per node)", "the discrete model")
+
+
+#: The sentences of the report that this study writes from its numbers when the report is assembled
+#: (``{{s:settle.NAME}}`` in the template).
+SENTENCES = {"physical_vs_seed": physical_vs_seed}

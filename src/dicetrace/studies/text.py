@@ -37,6 +37,16 @@ def md_table(rows: list[dict], columns: list[tuple[str, str, str]]) -> str:
     return "\n".join(lines)
 
 
+def compared(a: float, b: float, words: tuple[str, str, str], *, err: float | None = None,
+             rel: float = 0.0) -> str:
+    """The word of ``words`` = (more, less, same) that says how ``a`` stands against ``b``: ``same`` when they differ
+    by no more than ``2·err`` (two standard errors of the difference) or by no more than ``rel`` of the larger."""
+    tie = max(2.0 * err if err is not None and math.isfinite(err) else 0.0, rel * max(abs(a), abs(b)))
+    if abs(a - b) <= tie:
+        return words[2]
+    return words[0] if a > b else words[1]
+
+
 def pm(v, e, spec=".3f") -> str:
     """'v ± e' with None/NaN shown as '–'."""
     if v is None or not math.isfinite(v):
