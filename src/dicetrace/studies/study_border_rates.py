@@ -55,6 +55,7 @@ from dicetrace.analysis.border_rates import (
     tolerance_stability,
 )
 from dicetrace.analysis.corner import corner_balance
+from dicetrace.analysis.robustness import one_sided_z, range_scan, stat_syst, syst_note
 from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
 from dicetrace.params import make_config
 from dicetrace.studies import LETTERS
@@ -79,6 +80,11 @@ DISTS = np.logspace(-11, -3, 33)
 SLOPE_WINDOW = 5
 #: The near-border range ends where the pooled local slope departs from its reference by more than this.
 FLAT_REL = 0.02
+#: The range scan: nested ranges from d_lo to every distance from SLOPE_WINDOW − 1 quarter decades (one decade)
+#: above it up to the last; the ranges inside the near-border range give the range systematic.
+SCAN_MIN_POINTS = SLOPE_WINDOW
+#: The alternative estimator of the sides' λ at the quoted range: the mean without this fraction at either end.
+TRIM = 0.1
 #: Borders per window, lines per window and points per line (full run, quick run).
 N_BORDERS = (32, 2)
 N_LINES = (16, 2)
@@ -230,6 +236,7 @@ def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> 
 
     near_l = fit_sides(DISTS, br, prof, d_lo, d_hi)
     near = summary(near_l)
+    limit = _range_limit(br, prof, check, d_lo, d_hi, n, np.random.default_rng([seed, 1]))  # its own stream
     alt_check = summary(fit_sides(DISTS, br, check, d_lo, d_hi))
     alt_short = summary(fit_sides(DISTS, br, prof, d_lo, max(d_hi / 10, d_lo * 10 ** 0.75)))
     all_l = fit_sides(DISTS, br, prof, d_lo, DISTS[-1])
@@ -239,6 +246,9 @@ def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> 
     whole.update(d_lo=d_lo, d_hi=float(DISTS[-1]))
     cfg = _config(MODELS[numerics["preset"]])
     saddle = edge_saddle(config=cfg)
+    limit.update(minus_edge=limit["value"] - saddle.rate,
+                 z_edge=one_sided_z(limit["value"], limit["stat"], limit["syst_lo_total"], limit["syst_hi_total"],
+                                    saddle.rate))
     by_window = {}
     sides_win = np.concatenate([raw["windows"], raw["windows"]])
     for w in WINDOWS:
@@ -262,12 +272,50 @@ def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> 
                  "rel": FLAT_REL, "window": SLOPE_WINDOW, "d_max": d_hi, "median_slope": flat["median_slope"],
                  "count": flat["count"], "d_mid": d_mid, "q25_slope": _nanq(slopes, 0.25),
                  "q75_slope": _nanq(slopes, 0.75)},
-        "near": near, "near_check_tol": alt_check, "near_short": alt_short, "all_range": whole,
+        "limit": limit, "near": near, "near_check_tol": alt_check, "near_short": alt_short, "all_range": whole,
         "near_minus_edge": near["median"] - saddle.rate,
         "near_z_edge": (near["median"] - saddle.rate) / near["total"] if near["total"] else None,
         "all_minus_edge": whole["median"] - saddle.rate,
         "by_window": by_window, "lambdas_near": near_l, "lambdas_all": all_l,
     }
+
+
+def _range_limit(br, prof, check, d_lo: float, d_hi: float, n: int, rng) -> dict:
+    """λ (median over sides, bootstrap error over borders) fitted over nested ranges from ``d_lo`` to every distance
+    from one decade above it to the last (:func:`~dicetrace.analysis.robustness.range_scan`): the shortest range's
+    λ, the limit as the range shrinks, with the ranges inside the near-border range ``d_hi`` and the straight-line
+    extrapolation to zero width as its one-sided range systematic; beside it, the shift at that range when the
+    profiles integrated at tol/10 are fitted instead (tolerance) and when the sides' λ are pooled by their trimmed
+    mean instead of their median (estimator: each side's λ over a decade is quantised by the settle time's 1 ms
+    resolution, which the median keeps), each on both sides in quadrature with the range's."""
+    from scipy.stats import trim_mean
+
+    i0 = int(np.argmin(np.abs(np.log(DISTS / d_lo))))
+    his = DISTS[i0 + SCAN_MIN_POINTS - 1:]
+    ranges = [(float(d_lo), float(h)) for h in his]
+    n_in = max(1, int(np.sum(his <= d_hi * (1 + 1e-9))))
+    seeds = iter(rng.integers(2**31, size=len(ranges)))
+
+    def fit(lo, hi):
+        b = border_bootstrap(fit_sides(DISTS, br, prof, lo, hi), n, seed=int(next(seeds)))
+        return b.get("median", math.nan), b.get("median_stderr")
+
+    scan = range_scan(fit, ranges, syst_over=n_in, extrapolate=True)
+    lo, hi = ranges[0]
+    at_check = fit_sides(DISTS, br, check, lo, hi)
+    at = fit_sides(DISTS, br, prof, lo, hi)
+    tol_shift = float(np.nanmedian(at_check)) - scan.value
+    est_shift = float(trim_mean(at[np.isfinite(at)], TRIM)) - scan.value
+    out = scan.as_dict()
+    out.update(d_lo=lo, d_hi=hi, syst_d_hi=ranges[n_in - 1][1], near_d_hi=float(d_hi), tol_shift=tol_shift,
+               estimator_shift=est_shift, trim=TRIM,
+               syst_lo_total=math.sqrt(scan.syst_lo**2 + min(tol_shift, 0.0)**2 + min(est_shift, 0.0)**2),
+               syst_hi_total=math.sqrt(scan.syst_hi**2 + max(tol_shift, 0.0)**2 + max(est_shift, 0.0)**2))
+    out["syst_total"] = max(out["syst_lo_total"], out["syst_hi_total"])
+    out["syst_dominates_total"] = bool(out["syst_total"] > (out["stat"] or 0.0))
+    out["text"] = stat_syst(scan.value, scan.stat, scan.syst_lo, scan.syst_hi)
+    out["note"] = syst_note(scan.stat, scan.syst, "fit-range")
+    return out
 
 
 def _numerics(key: str, cfg, chk) -> dict:
@@ -327,6 +375,53 @@ def _draw_local_slope(ax, key: str, r: dict) -> None:
     ax.set_xlabel("distance d from the border (slice units)")
 
 
+def _draw_range(ax, key: str, r: dict) -> None:
+    """One preset's panel of λ against the width of the fit range (the range scan)."""
+    lim = r["limit"]
+    w = np.asarray(lim["widths"], float)
+    v = np.asarray([math.nan if x is None else x for x in lim["values"]], float)
+    e = np.asarray([math.nan if x is None else x for x in lim["stderrs"]], float)
+    k = lim["n_syst"]
+    ax.errorbar(w[:k], v[:k], yerr=e[:k], fmt="o", ms=4, color=COLOURS[key], label="inside the near-border range")
+    ax.errorbar(w[k:], v[k:], yerr=e[k:], fmt="o", ms=4, mfc="none", color=COLOURS[key], label="beyond it")
+    inside = np.isfinite(v[:k])
+    if lim.get("extrapolated") is not None and lim.get("trend") is not None and inside.sum() >= 2:
+        ww = np.array([0.0, w[k - 1]])
+        ax.plot(ww, lim["extrapolated"] + lim["trend"] * ww, ":", color=COLOURS[key],
+                label=f"extrapolated to w = 0: {lim['extrapolated']:.2f} /s")
+    ax.axhspan(lim["value"] - lim["syst_lo"], lim["value"] + lim["syst_hi"], color=COLOURS[key], alpha=0.12,
+               label=f"shortest range {lim['value']:.2f} /s, range systematic")
+    ax.axhline(r["analytic"]["edge"], color="k", lw=1, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
+    ax.set_xlim(0, None)
+    ax.set_ylim(r["analytic"]["edge"] - 0.6, r["analytic"]["edge"] + 1.4)
+    ax.set_title(f"{key}: λ against the fit range from d_lo = {lim['d_lo']:.1e}", fontsize=10)
+    ax.set_xlabel("width of the fit range w (decades of d)")
+
+
+def _signed(v: float) -> str:
+    """A shift with its sign, to two decimals (no negative zero)."""
+    return f"{v:+.2f}".replace("-0.00", "+0.00")
+
+
+def range_table(R: dict) -> str:
+    """λ against the width of the fit range, both presets side by side (every half decade, and the ranges that end
+    the systematic and the near-border range)."""
+    rows = {}
+    for key in MODELS:
+        lim = R[key]["limit"]
+        for i, (w, v, e) in enumerate(zip(lim["widths"], lim["values"], lim["stderrs"])):
+            half = abs(w * 2 - round(w * 2)) < 1e-6
+            if not half and i != lim["n_syst"] - 1:
+                continue
+            row = rows.setdefault(round(w, 2), {"w": w})
+            row[key] = pm(v, e, ".2f") + (" (syst.)" if i < lim["n_syst"] else "")
+            row[f"{key}_d"] = f"{lim['ranges'][i][1]:.1e}"
+    return md_table([rows[k] for k in sorted(rows)], [
+        ("w", "range width (decades above d_lo)", ".2f"), ("seed_d", "`seed`: up to d", ""),
+        ("seed", "`seed`: λ (1/s)", ""), ("physical_d", "`physical`: up to d", ""),
+        ("physical", "`physical`: λ (1/s)", "")])
+
+
 def _draw_lambdas(ax, key: str, r: dict) -> None:
     """One preset's panel of the histograms of every side's λ, near the border and over the whole range."""
     near = np.asarray(r["lambdas_near"], float)
@@ -342,12 +437,12 @@ def _draw_lambdas(ax, key: str, r: dict) -> None:
 
 
 def _save_by_preset(out: Output, results: dict, draw, name: str, key: str, *, height: float, ylabel: str,
-                    caption: str) -> None:
+                    caption: str, sharey: bool = True) -> None:
     """A figure of one panel a preset side by side on one y axis: ``draw(ax, preset, its results)`` fills each
     (title and x label too), then each gets a legend and the first the y label."""
     import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
-    fig, axes = plt.subplots(1, len(MODELS), figsize=(12, height), sharey=True)
+    fig, axes = plt.subplots(1, len(MODELS), figsize=(12, height), sharey=sharey)
     for ax, preset in zip(axes, MODELS):
         draw(ax, preset, results[preset])
         ax.legend(fontsize=7)
@@ -367,6 +462,12 @@ def render(c: Computed, out: Output) -> None:
                     "(least squares over a sliding decade, median over every side of every border of home and "
                     "zoom-out; band: interquartile range). Grey: the near-border fit range (stable at tol/10, slope "
                     "within 2 % of its value at the smallest stable distances).")
+    _save_by_preset(out, R, _draw_range, f"{L}_range", "range", height=4.2, ylabel="λ (1/s), median over sides",
+                    caption="λ fitted from the smallest stable distance d_lo to d_lo·10^w against the width w of the "
+                    "range (decades; median over every side, bootstrap error over borders). Filled: the ranges inside "
+                    "the near-border range (local slope within 2 %), which give the range systematic; line: their "
+                    "straight-line extrapolation to zero width; band: the shortest range's value with its one-sided "
+                    "range systematic; black: the edge saddle.", sharey=False)
     _save_by_preset(out, R, _draw_lambdas, f"{L}_lambdas", "lambdas", height=4.0, ylabel="sides",
                     caption="λ of every side fitted near the border (filled) and over the whole range from the same "
                     "smallest distance to 1e-3 (outline), with the analytic edge saddle of each preset.")
@@ -374,21 +475,29 @@ def render(c: Computed, out: Output) -> None:
     rows = []
     for key in MODELS:
         r = R[key]
+        lim = r["limit"]
         rows.append({
             "model": key, "num": f"{r['numerics']['integrator']}, tol {r['numerics']['tol']:g} uniform",
             "edge": r["analytic"]["edge"], "corner": r["analytic"].get("corner"),
+            "lrange": f"{lim['d_lo']:.0e} – {lim['d_hi']:.0e}",
+            "limit": lim["value"], "stat": lim["stat"],
+            "rsyst": f"+{lim['syst_hi']:.2f} / −{lim['syst_lo']:.2f}",
+            "tol": _signed(lim["tol_shift"]), "est": _signed(lim["estimator_shift"]), "z": lim["z_edge"],
             "range": f"{r['near']['d_lo']:.0e} – {r['near']['d_hi']:.0e}" if r["near"].get("d_hi") else "–",
-            "near": pm(r["near"]["median"], r["near"]["total"], ".2f"),
-            "parts": f"{r['near']['median_stderr']:.2f} / {r['near']['syst']:.2f}",
+            "near": pm(r["near"]["median"], r["near"]["median_stderr"], ".2f"),
             "all": pm(r["all_range"]["median"], r["all_range"]["median_stderr"], ".2f"),
             "sides": f"{r['near']['n_sides']} ({r['n_borders']} borders)",
             "ends": f"{r['ends']['n_changed']}/{r['ends']['n_ends']}",
         })
     out.tables["rates"] = md_table(rows, [
         ("model", "model", ""), ("num", "numerics", ""), ("edge", "edge saddle (1/s)", ".2f"),
-        ("corner", "corner balance (1/s)", ".2f"), ("range", "near-border d range", ""),
-        ("near", "λ near the border (1/s)", ""), ("parts", "stat / syst", ""),
+        ("corner", "corner balance (1/s)", ".2f"), ("lrange", "shortest range d", ""),
+        ("limit", "λ, shortest range (1/s)", ".2f"), ("stat", "stat", ".2f"),
+        ("rsyst", "range syst (+ / −)", ""), ("tol", "shift at tol/10", ""),
+        ("est", "shift, trimmed mean", ""), ("z", "z vs edge saddle", ".1f"),
+        ("range", "2 % range d", ""), ("near", "λ over the 2 % range (1/s)", ""),
         ("all", "λ whole range (1/s)", ""), ("sides", "sides", ""), ("ends", "bracket ends changed at tol/10", "")])
+    out.tables["range"] = range_table(R)
     rows = []
     for key in MODELS:
         for w, b in R[key]["by_window"].items():
