@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from dicetrace.analysis.robustness import (common_scale, one_sided_z, range_scan, relocate, stat_syst,
-                                           syst_note)
+from dicetrace.analysis.robustness import (common_scale, group_spread, one_sided_z, range_scan, relocate,
+                                           stat_syst, syst_note)
 
 
 def _linear_in_width(v0: float, a: float, e: float):
@@ -30,7 +30,7 @@ def test_a_trend_with_the_range_is_a_one_sided_systematic_and_the_extrapolation_
     s = range_scan(_linear_in_width(22.80, 0.04, 0.01), ranges, extrapolate=True)
     assert s.value == pytest.approx(22.84) and s.stat == 0.01
     assert s.syst_hi == pytest.approx(0.16) and s.syst_lo == pytest.approx(0.04)
-    assert s.extrapolated == pytest.approx(22.80, abs=1e-9)
+    assert s.extrapolated == pytest.approx(22.80, abs=1e-9) and s.trend == pytest.approx(0.04)
     # the line's error at W = 0 from the fits' errors (taken as independent): 0.01·√(Σw²/(nΣw² − (Σw)²))
     w = np.arange(1.0, 5.01, 0.5)
     assert s.extrapolated_stderr == pytest.approx(0.01 * math.sqrt((w**2).sum() / (len(w) * (w**2).sum() - w.sum()**2)))
@@ -139,6 +139,9 @@ def test_common_scale_is_where_every_integrator_still_sees_the_references_faces(
     assert common_scale(scales, seen, reference="contact-adaptive") == 1e-8
     assert common_scale(scales, {k: v for k, v in seen.items() if k != "contact-dop853"},
                         reference="contact-adaptive") == 1e-10  # they agree on one face too
+    # requiring three faces: all three agree on one face at 1e-10, which is not the point's three
+    three = {k: [len(v) == 3 for v in obs] for k, obs in seen.items() if k != "contact-dop853"}
+    assert common_scale(scales, three, reference="contact-adaptive", require=True) == 1e-9
     seen["contact-dop853"][0] = (1, 3)
     assert common_scale(scales, seen, reference="contact-adaptive") is None
     with pytest.raises(ValueError, match="descending"):
@@ -156,3 +159,14 @@ def test_the_text_of_two_errors_and_the_one_sided_comparison():
     assert one_sided_z(22.843, 0.009, 0.04, 0.10, 22.797) == pytest.approx(0.046 / math.hypot(0.009, 0.04))
     assert one_sided_z(22.843, 0.009, 0.04, 0.10, 23.0) == pytest.approx(-0.157 / math.hypot(0.009, 0.10))
     assert math.isnan(one_sided_z(1.0, 0.0, 0.0, 0.0, 1.0))
+
+
+def test_group_spread_is_the_scatter_between_groups():
+    # three windows joining 2/9, 15/28 and 18/24 of their cells: mean 0.5026, sample sd 0.2654, over √3: 0.1532
+    g = group_spread([2 / 9, 15 / 28, 18 / 24])
+    assert g["n"] == 3 and g["mean"] == pytest.approx((2 / 9 + 15 / 28 + 18 / 24) / 3)
+    assert g["std"] == pytest.approx(np.std([2 / 9, 15 / 28, 18 / 24], ddof=1))
+    assert g["spread"] == pytest.approx(g["std"] / math.sqrt(3)) and g["min"] == pytest.approx(2 / 9)
+    one = group_spread([0.4, math.nan])
+    assert one["n"] == 1 and one["mean"] == 0.4 and math.isnan(one["spread"])
+    assert group_spread([])["n"] == 0

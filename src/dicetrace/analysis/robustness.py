@@ -21,6 +21,9 @@ quotes both, side by side, and says so where the second exceeds the first.
 * :func:`common_scale`: the smallest of a descending series of scales down to
   which every integrator sees what the reference sees (the faces on a circle
   about a located point, say), from the largest scale on.
+* :func:`group_spread`: a number measured in several groups (windows of a
+  map, say): the spread between the groups, which a pooled count's error
+  leaves out.
 * :func:`stat_syst` and :func:`syst_note` write the two errors and the verdict
   note; :func:`one_sided_z` compares a value with a target using the
   systematic of the side the target lies on.
@@ -34,8 +37,8 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["RangeScan", "range_scan", "Relocation", "relocate", "common_scale", "stat_syst", "syst_note",
-           "one_sided_z"]
+__all__ = ["RangeScan", "range_scan", "Relocation", "relocate", "common_scale", "group_spread", "stat_syst",
+           "syst_note", "one_sided_z"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -48,7 +51,8 @@ class RangeScan:
     fit and its statistical error; ``syst_lo``/``syst_hi`` (≥ 0): how far below
     and above ``value`` the ranges that enter the systematic (and the
     extrapolation) go; ``extrapolated``: the weighted straight line through
-    those ranges' values against their widths, at width 0 (NaN without it).
+    those ranges' values against their widths, at width 0, and ``trend`` its
+    slope per unit of width (NaN without it).
     """
 
     ranges: tuple[tuple[float, float], ...]
@@ -63,6 +67,7 @@ class RangeScan:
     n_syst: int
     extrapolated: float
     extrapolated_stderr: float
+    trend: float
 
     @property
     def syst(self) -> float:
@@ -86,7 +91,8 @@ class RangeScan:
                 "reference": self.reference, "value": num(self.value), "stat": num(self.stat),
                 "syst_lo": num(self.syst_lo), "syst_hi": num(self.syst_hi), "syst": num(self.syst),
                 "syst_dominates": self.syst_dominates, "n_syst": self.n_syst,
-                "extrapolated": num(self.extrapolated), "extrapolated_stderr": num(self.extrapolated_stderr)}
+                "extrapolated": num(self.extrapolated), "extrapolated_stderr": num(self.extrapolated_stderr),
+                "trend": num(self.trend)}
 
 
 def _widths(ranges) -> np.ndarray:
@@ -96,12 +102,12 @@ def _widths(ranges) -> np.ndarray:
     return r[:, 1] - r[:, 0]
 
 
-def _line_at_zero(w: np.ndarray, v: np.ndarray, e: np.ndarray) -> tuple[float, float]:
-    """Weighted least squares of ``v`` against ``w`` (weights 1/e², equal weights where an error is missing or 0),
-    its value at w = 0 and that value's standard error from the fit's covariance (NaN with fewer than three
-    points)."""
+def _line_at_zero(w: np.ndarray, v: np.ndarray, e: np.ndarray) -> tuple[float, float, float]:
+    """Weighted least squares of ``v`` against ``w`` (weights 1/e², equal weights where an error is missing or 0):
+    its value at w = 0, that value's standard error from the fit's covariance, and its slope (NaN with fewer than
+    three points)."""
     if len(w) < 3 or np.ptp(w) == 0:
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan
     good = np.isfinite(e) & (e > 0)
     wt = 1.0 / e**2 if good.all() else np.ones_like(v)
     A = np.column_stack([np.ones_like(w), w])
@@ -111,8 +117,8 @@ def _line_at_zero(w: np.ndarray, v: np.ndarray, e: np.ndarray) -> tuple[float, f
     dof = len(w) - 2
     scale = float(resid @ (wt * resid)) / dof if dof > 0 else 1.0
     if not good.all():  # unweighted: the covariance is the residuals' only
-        return float(coef[0]), float(math.sqrt(cov[0, 0] * scale))
-    return float(coef[0]), float(math.sqrt(cov[0, 0] * max(scale, 1.0)))
+        return float(coef[0]), float(math.sqrt(cov[0, 0] * scale)), float(coef[1])
+    return float(coef[0]), float(math.sqrt(cov[0, 0] * max(scale, 1.0))), float(coef[1])
 
 
 def range_scan(fit: Callable[[float, float], object], ranges: Sequence[tuple[float, float]], *,
@@ -155,15 +161,15 @@ def range_scan(fit: Callable[[float, float], object], ranges: Sequence[tuple[flo
     n = len(rs) if syst_over is None else max(1, min(int(syst_over), len(rs)))
     used = np.isfinite(values[:n])
     others = list(values[:n][used])
-    ext, ext_se = math.nan, math.nan
+    ext, ext_se, trend = math.nan, math.nan, math.nan
     if extrapolate:
-        ext, ext_se = _line_at_zero(w[:n][used], values[:n][used], stderrs[:n][used])
+        ext, ext_se, trend = _line_at_zero(w[:n][used], values[:n][used], stderrs[:n][used])
         if math.isfinite(ext) and not abs(ext - value) <= ext_se:  # a trend, not the fits' noise
             others.append(ext)
     others = np.array(others)
     lo = float(max(0.0, value - others.min())) if others.size else 0.0
     hi = float(max(0.0, others.max() - value)) if others.size else 0.0
-    return RangeScan(rs, w, values, stderrs, ref, value, stat, lo, hi, int(used.sum()), ext, ext_se)
+    return RangeScan(rs, w, values, stderrs, ref, value, stat, lo, hi, int(used.sum()), ext, ext_se, trend)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -211,21 +217,37 @@ def relocate(points: Mapping[str, Sequence[float] | None], *, reference: str, bo
     return Relocation(names, reference, P, found, d, float(box), spread, max(float(box), spread))
 
 
-def common_scale(scales: Sequence[float], seen: Mapping[str, Sequence], *, reference: str) -> float | None:
+def common_scale(scales: Sequence[float], seen: Mapping[str, Sequence], *, reference: str,
+                 require=None) -> float | None:
     """The smallest of the descending ``scales`` down to which every integrator's observation (``seen``: name ->
     one observation per scale, compared with ``==``) is the reference's at that scale and every larger one; None
-    when they differ at the largest."""
+    when they differ at the largest.  ``require``: every observation must also equal it (say, True for "three
+    sectors of the point's faces"), not merely agree with the reference's."""
     s = [float(v) for v in scales]
     if any(b >= a for a, b in zip(s, s[1:])):
         raise ValueError("scales must be strictly descending")
     ref = list(seen[reference])
     best = None
     for i, sc in enumerate(s):
-        if all(list(obs)[i] == ref[i] for obs in seen.values()):
+        if all(list(obs)[i] == ref[i] for obs in seen.values()) and (require is None or ref[i] == require):
             best = sc
         else:
             break
     return best
+
+
+def group_spread(values: Sequence[float]) -> dict:
+    """The groups' values (NaN dropped): their mean, the standard error of that mean from their scatter (the spread
+    between groups: sample standard deviation over √groups), the standard deviation, and the range; NaN where fewer
+    than two groups have a value."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    n = int(v.size)
+    if n == 0:
+        return {"n": 0, "mean": math.nan, "spread": math.nan, "std": math.nan, "min": math.nan, "max": math.nan}
+    sd = float(v.std(ddof=1)) if n > 1 else math.nan
+    return {"n": n, "mean": float(v.mean()), "spread": sd / math.sqrt(n) if n > 1 else math.nan, "std": sd,
+            "min": float(v.min()), "max": float(v.max())}
 
 
 def stat_syst(value: float, stat: float, syst_lo: float, syst_hi: float, spec: str = ".2f",
