@@ -240,6 +240,8 @@ def test_hazard_shape_tells_a_rise_from_a_dip_and_from_noise():
     # a fall of 2.5σ that never recovers beyond 3σ: not monotone, no rise claimed
     wob = dt.hazard_shape([10.0, 7.5, 9.0], [0.5, 0.9, 0.9])
     assert wob["shape"] == "not monotone"
+    # up, a fall of 4.6σ, up again, all above the first window: not a dip below the start, not monotone either
+    assert dt.hazard_shape([5.0, 51.1, 30.3, 37.5], [0.3, 3.7, 3.6, 6.9])["shape"] == "not monotone"
     # constant within the errors: flat; exponential lifetimes give a flat hazard
     rng = np.random.default_rng(9)
     w = dt.hazard_windows(rng.exponential(1 / 4.0, 50_000))
@@ -248,6 +250,8 @@ def test_hazard_shape_tells_a_rise_from_a_dip_and_from_noise():
     w = dt.hazard_windows(rng.weibull(2.0, 80_000))
     assert dt.hazard_shape(w.h, w.stderr)["shape"] == "rises"
     assert dt.hazard_shape([5.0], [0.1])["shape"] == "undetermined"
+    # section q's preset in home: 8.8 → 17.8 through every window, but 2.7σ from first to last: a weak rise
+    assert dt.hazard_shape([8.8, 13.3, 15.9, 17.8], [0.6, 1.1, 1.9, 3.3])["shape"] == "rises weakly"
 
 
 def test_tail_scan_of_exponential_lifetimes_has_no_systematic_beyond_noise_and_finds_a_rising_tail():
@@ -276,3 +280,17 @@ def test_tail_scan_without_enough_events_past_the_reference_has_no_value():
     s = dt.tail_scan(rng.exponential(1.0, 300), min_events=20)  # 9 events past the 97 % quantile
     assert s["value"] is None and s["syst"] is None
     assert s["values"][0] is None and s["values"][1] is None and s["values"][3] is not None  # 30 past the 90 %
+
+
+def test_tail_scan_from_windows_is_the_tail_scan_of_the_lifetimes():
+    # Weibull(2) lifetimes: the hazard past a quantile from the windows alone equals the one from the lifetimes
+    rng = np.random.default_rng(12)
+    t = rng.weibull(2.0, 60_000)
+    w = dt.hazard_windows(t).as_dict()
+    s = dt.tail_scan_windows(w)
+    assert s["starts"] == [0.97, 0.9, 0.75, 0.5]
+    assert s["value"] == pytest.approx(w["h"][-1]) and s["stat"] == pytest.approx(w["stderr"][-1])
+    past90 = dt.hazard_curve(t, [np.quantile(t, 0.9), np.nextafter(t.max(), np.inf)])
+    assert s["values"][1] == pytest.approx(past90.h[0], rel=1e-9)
+    assert s["syst_lo"] > 3 * s["stat"] and s["syst_hi"] == 0.0  # a rising hazard: earlier tails lie below
+    assert dt.tail_scan_windows({"h": [1.0, 2.0], "events": [10, 10]})["value"] is None  # a window was dropped

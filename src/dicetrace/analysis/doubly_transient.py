@@ -40,7 +40,7 @@ from dicetrace.simulate import Record, simulate, simulate_batch
 __all__ = ["LocalSlopes", "local_slopes", "Crossover", "crossover_fit", "Hazard", "hazard_curve", "hazard_windows",
            "discrete_hazard", "covariate_hazard", "FACE_NODE_MASK", "commit_steps", "perturbed", "floor_test", "throw_floor",
            "pair_divergence", "compare", "pair_outcomes", "pair_verdicts", "hazard_summary", "hazard_shape",
-           "tail_scan"]
+           "tail_scan", "tail_scan_windows"]
 
 #: Bit mask of the four nodes of each face (face 1..6; bit k-1 is node k; docs/model.md §3).
 FACE_NODE_MASK = {1: 0b00001111, 2: 0b00110011, 3: 0b01010101, 4: 0b10101010, 5: 0b11001100, 6: 0b11110000}
@@ -439,8 +439,10 @@ DIP_Z, FALL_Z, RISE_Z = 3.0, 2.0, 3.0
 def hazard_shape(h, stderr) -> dict:
     """The shape of a hazard across successive windows (``h`` ± ``stderr``, earliest first): each step's difference,
     error and z-score, and ``shape``: ``"rises"`` (the last above the first by more than RISE_Z errors and no step
-    falling by more than FALL_Z), ``"dips, then rises"`` (a step falls by more than DIP_Z errors, and the last lies
-    above the lowest by more than RISE_Z), ``"not monotone"`` (a step falls by more than FALL_Z otherwise),
+    falling by more than FALL_Z), ``"dips, then rises"`` (a step falls by more than DIP_Z errors to a lowest window
+    after the first, and the last lies above the lowest by more than RISE_Z), ``"not monotone"`` (a step falls by
+    more than FALL_Z otherwise), ``"rises weakly"`` (no step falls by more than FALL_Z, the last lies above the first by
+    FALL_Z to RISE_Z errors),
     ``"flat"`` (no step, and the ends, differ by FALL_Z errors) or ``"undetermined"`` (anything else, or fewer
     than two windows)."""
     h, se = np.asarray(h, float), np.asarray(stderr, float)
@@ -456,12 +458,14 @@ def hazard_shape(h, stderr) -> dict:
     low = int(np.argmin(h))
     after_low = compare(float(h[-1]), float(se[-1]), float(h[low]), float(se[low]))["z"]
     zs = np.array([s["z"] for s in steps])
-    if zs.min() < -DIP_Z and after_low > RISE_Z:
+    if zs.min() < -DIP_Z and low > 0 and after_low > RISE_Z:
         shape = "dips, then rises"
     elif zs.min() < -FALL_Z:
         shape = "not monotone"
     elif rise > RISE_Z:
         shape = "rises"
+    elif rise > FALL_Z:
+        shape = "rises weakly"
     elif abs(rise) < FALL_Z and np.all(np.abs(zs) < FALL_Z):
         shape = "flat"
     else:
@@ -502,4 +506,30 @@ def tail_scan(lifetimes, *, censored=None, starts=(0.99, 0.97, 0.95, 0.9), refer
                                     "extrapolated", "extrapolated_stderr", "trend")}}
     out.update(starts=qs, reference_start=float(reference),
                from_s=[float(np.quantile(t, q)) for q in qs])
+    return out
+
+
+def tail_scan_windows(windows, *, quantiles=(0.5, 0.75, 0.9, 0.97)) -> dict:
+    """:func:`tail_scan` from a hazard's quantile windows alone (``windows``: :meth:`Hazard.as_dict` of
+    :func:`hazard_windows`, whose bins start at ``quantiles``): the hazard past each window's start is the events of
+    that window and the later ones over their exposure (each window's events over its rate), its error that over
+    √events; the last window (past the last quantile) is quoted, the earlier starts give the one-sided
+    systematic.  Every field is None where the windows do not match ``quantiles`` (a window was dropped)."""
+    from .robustness import range_scan
+
+    h, ev = np.asarray(windows["h"], float), np.asarray(windows["events"], float)
+    qs = [float(q) for q in quantiles]
+    if len(h) != len(qs) or not np.all(np.isfinite(h)) or np.any(h <= 0):
+        return {k: None for k in ("value", "stat", "syst_lo", "syst_hi", "syst", "syst_dominates", "values",
+                                  "stderrs", "ranges", "starts")}
+    expo = ev / h
+    start_of = {q: i for i, q in enumerate(qs)}
+
+    def fit(lo, hi):
+        i = start_of[lo]
+        e, x = ev[i:].sum(), expo[i:].sum()
+        return float(e / x), float(e / x / math.sqrt(e))
+
+    out = range_scan(fit, [(q, 1.0) for q in qs[::-1]], widths=[1.0 - q for q in qs[::-1]]).as_dict()
+    out["starts"] = qs[::-1]
     return out
