@@ -108,10 +108,13 @@ def _line_at_zero(w: np.ndarray, v: np.ndarray, e: np.ndarray) -> tuple[float, f
     three points)."""
     if len(w) < 3 or np.ptp(w) == 0:
         return math.nan, math.nan, math.nan
-    good = np.isfinite(e) & (e > 0)
+    good = np.isfinite(e) & (e > 1e-12 * np.maximum(np.abs(v), 1e-300))  # an error of rounding size is no weight
     wt = 1.0 / e**2 if good.all() else np.ones_like(v)
     A = np.column_stack([np.ones_like(w), w])
-    cov = np.linalg.inv(A.T @ (A * wt[:, None]))
+    try:
+        cov = np.linalg.inv(A.T @ (A * wt[:, None]))
+    except np.linalg.LinAlgError:
+        return math.nan, math.nan, math.nan
     coef = cov @ (A.T @ (wt * v))
     resid = v - A @ coef
     dof = len(w) - 2

@@ -28,7 +28,16 @@ range from the same smallest distance to 1e-3 (for comparison), and the
 median over sides gets a bootstrap error over borders (both sides of a
 border resampled together) and a systematic error (the larger shift of the
 median when the profile is integrated at tol/10 or the range is cut a decade
-shorter).  The rates are compared with the analytic edge saddle of each
+shorter).
+
+λ moves with the fit range even inside the near-border range, so the number
+quoted is the limit as the range shrinks (:func:`_range_limit`): λ over
+nested ranges from d_lo, one decade (five distances) up to the whole range,
+through :func:`dicetrace.analysis.robustness.range_scan`; the shortest range's
+median with its bootstrap error, and as a one-sided range systematic how far
+the ranges inside the near-border range and their straight-line extrapolation
+to zero width lie from it; beside it the shifts at tol/10 and with a trimmed
+mean.  The rates are compared with the analytic edge saddle of each
 preset (:func:`dicetrace.analysis.border_rates.edge_saddle`) and the corner
 balance's (:func:`dicetrace.analysis.corner.corner_balance`).
 """
@@ -60,7 +69,7 @@ from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
 from dicetrace.params import make_config
 from dicetrace.studies import LETTERS
 from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
-from dicetrace.studies.text import md_table, pm
+from dicetrace.studies.text import fmt, md_table, pm
 
 NAME = "border_rates"
 #: The raw measurements (``results/<RAW_CSV>.csv``): every border, side and distance (in a folder of their own:
@@ -89,6 +98,15 @@ TRIM = 0.1
 N_BORDERS = (32, 2)
 N_LINES = (16, 2)
 LINE_POINTS = (64, 24)
+#: Border rates against the friction: the `physical` die with its pivot's slip coefficient c = μ m g / v_reg moved,
+#: through v_reg and through μ (v_reg 20 and μ 0.6 share one c: only c enters the linearisation), each setting's
+#: near-border λ against its own slipping-pivot root.  Borders per window (full, quick), the profile's distances
+#: (1e-11 … 1e-6) and the widths (decades above d_lo) of the nested fit ranges.
+FRICTION = {"v_reg 2.5": {"v_reg_cm_s": 2.5}, "v_reg 5": {"v_reg_cm_s": 5.0}, "v_reg 20": {"v_reg_cm_s": 20.0},
+            "v_reg 40": {"v_reg_cm_s": 40.0}, "μ 0.6": {"mu": 0.6}}
+FRICTION_BORDERS, FRICTION_LINES, FRICTION_POINTS = (8, 1), (8, 2), (48, 16)
+FRICTION_DISTS = DISTS[:21]
+FRICTION_WIDTHS = (1.0, 1.5, 2.0, 2.5, 3.0)
 
 
 def _config(opts: dict, tol: float | None = None):
@@ -342,7 +360,71 @@ def compute(ctx: Context) -> Computed:
                 f"{r['ends']['n_ends']}, stable from d = {r['near']['d_lo']:.1e}, flat to {r['near']['d_hi']:.1e}; "
                 f"λ near {r['near']['median']:.2f} ± {r['near']['total']:.2f}, all-range "
                 f"{r['all_range']['median']:.2f}, edge saddle {r['analytic']['edge']:.2f} /s")
+    results["friction"] = friction_sweep(ctx, None if not ctx.quick else dict(list(FRICTION.items())[-2:-1]))
+    results["friction_summary"] = friction_summary(results)
     return Computed(results, plot)
+
+
+def friction_sweep(ctx: Context, settings: dict | None = None) -> dict:
+    """Each FRICTION setting of the `physical` die at the uniform tolerance: borders of home and zoom-out bisected to
+    BISECT_WIDTH, their settle-time profiles at FRICTION_DISTS at the tolerance and a tenth of it, the smallest
+    stable distance d_lo (:func:`~dicetrace.analysis.border_rates.tolerance_stability`), and λ over nested ranges from
+    d_lo (:func:`~dicetrace.analysis.robustness.range_scan`: the shortest range quoted, the others as its one-sided
+    range systematic) against the setting's slipping-pivot root (:func:`edge_saddle`), with the one-sided z."""
+    rng = np.random.default_rng([ctx.options.seed, 44])  # its own stream: the presets' numbers do not move
+    out = {}
+    for name, over in (settings or FRICTION).items():
+        opts = {**MODELS["physical"], **over}
+        cfg, chk = _config(opts), _config(opts, CHECK_TOL)
+        classify, settle = classify_on_slice("seed", config=cfg), settle_on_slice("seed", config=cfg)
+        settle_chk = settle_on_slice("seed", config=chk)
+        brs = []
+        for w in WINDOWS:
+            starts, ends = _lines(window_ranges(w), ctx.pick(*FRICTION_LINES), rng)
+            pairs = line_crossings(classify, starts, ends, ctx.pick(*FRICTION_POINTS))
+            pick = rng.choice(len(pairs), size=min(ctx.pick(*FRICTION_BORDERS), len(pairs)), replace=False)
+            brs.append(bisect_many(classify, [pairs[i] for i in pick], tol=BISECT_WIDTH))
+        br = _concat(brs)
+        prof, check = profiles(settle, br, FRICTION_DISTS), profiles(settle_chk, br, FRICTION_DISTS)
+        ctx.n_throws += classify.n_evals + settle.n_evals + settle_chk.n_evals
+        saddle = edge_saddle(config=cfg)
+        row = {"setting": name, "overrides": over, "mu": cfg.preset.mu, "v_reg_cm_s": cfg.preset.v_reg_cm_s,
+               "slip_c": saddle.slip_c, "edge": saddle.rate, "edge_rigid": saddle.rate_rigid,
+               "edge_free": saddle.rate_free, "n_borders": int(len(br.p_lo)), **_friction_fit(br, prof, check, rng)}
+        if row.get("value") is not None:
+            row["minus_edge"] = row["value"] - saddle.rate
+            row["z_edge"] = one_sided_z(row["value"], row["stat"], row["syst_lo"], row["syst_hi"], saddle.rate)
+            row["z_rigid"] = one_sided_z(row["value"], row["stat"], row["syst_lo"], row["syst_hi"], saddle.rate_rigid)
+        out[name] = row
+        ctx.log(f"friction {name} (c = {saddle.slip_c:.1f}): {row['n_borders']} borders, d_lo {row.get('d_lo')}, λ "
+                f"{row.get('text')} against the slipping pivot's {saddle.rate:.2f} /s (z {row.get('z_edge')})")
+    return out
+
+
+def _friction_fit(br, prof, check, rng) -> dict:
+    """One friction setting's λ from its profiles: d_lo, and the range scan from it (module docstring)."""
+    n = len(br.p_lo)
+    stab = tolerance_stability(FRICTION_DISTS, br, prof, check, t_res=1e-3)
+    if stab["d_min"] is None:
+        return {"d_lo": None, "value": None, "error": "no distance is stable at tol/10"}
+    d_lo = stab["d_min"]
+    ranges = [(d_lo, d_lo * 10**w) for w in FRICTION_WIDTHS if d_lo * 10**w <= FRICTION_DISTS[-1] * (1 + 1e-9)]
+    if not ranges:
+        return {"d_lo": d_lo, "value": None, "error": "no fit range above the stable distance"}
+    seeds = iter(rng.integers(2**31, size=len(ranges)))
+
+    def fit(lo, hi):
+        b = border_bootstrap(fit_sides(FRICTION_DISTS, br, prof, lo, hi), n, seed=int(next(seeds)))
+        return b.get("median", math.nan), b.get("median_stderr")
+
+    try:
+        scan = range_scan(fit, ranges)
+    except ValueError as e:
+        return {"d_lo": d_lo, "value": None, "error": str(e)}
+    out = scan.as_dict()
+    out.update(d_lo=d_lo, flips=int(stab["flips"].sum()), text=stat_syst(scan.value, scan.stat, scan.syst_lo,
+                                                                          scan.syst_hi))
+    return out
 
 
 def _letter() -> str:
@@ -396,6 +478,67 @@ def _draw_range(ax, key: str, r: dict) -> None:
     ax.set_ylim(r["analytic"]["edge"] - 0.6, r["analytic"]["edge"] + 1.4)
     ax.set_title(f"{key}: λ against the fit range from d_lo = {lim['d_lo']:.1e}", fontsize=10)
     ax.set_xlabel("width of the fit range w (decades of d)")
+
+
+def friction_summary(R: dict) -> dict:
+    """The friction sweep's verdict from its rows and the `physical` preset's own (v_reg 10): how many settings
+    agree with their slipping-pivot root (|z| < 2), disagree (|z| > 3), and the range of the roots spanned."""
+    rows = [dict(v, setting=k) for k, v in R["friction"].items() if v.get("value") is not None]
+    ph = R["physical"]
+    rows.append({"setting": "v_reg 10 (the preset)", "edge": ph["analytic"]["edge"], "value": ph["limit"]["value"],
+                 "z_edge": ph["limit"]["z_edge"]})
+    z = [abs(r["z_edge"]) for r in rows if r.get("z_edge") is not None and math.isfinite(r["z_edge"])]
+    n_ok, n_bad = sum(v < 2 for v in z), sum(v > 3 for v in z)
+    verdict = ("supported" if z and n_ok == len(z) else "refuted" if n_bad else "undetermined")
+    return {"n_settings": len(rows), "n_consistent": n_ok, "n_inconsistent": n_bad, "verdict": verdict,
+            "edge_min": min(r["edge"] for r in rows), "edge_max": max(r["edge"] for r in rows),
+            "value_min": min(r["value"] for r in rows), "value_max": max(r["value"] for r in rows),
+            "failed": [k for k, v in R["friction"].items() if v.get("value") is None],
+            "failed_text": ", ".join(f"{k} ({v.get('error')})" for k, v in R["friction"].items()
+                                     if v.get("value") is None) or "none"}
+
+
+def _friction_render(R: dict, out: Output, letter: str) -> None:
+    """The friction sweep's table and figure (measured against predicted λ, each setting)."""
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
+
+    rows = []
+    for name, v in R["friction"].items():
+        rows.append({"s": name, "mu": v["mu"], "v": v["v_reg_cm_s"], "c": v["slip_c"], "edge": v["edge"],
+                     "n": v["n_borders"], "dlo": fmt(v.get("d_lo"), ".1e"),
+                     "lam": v.get("text") or f"– ({v.get('error')})", "z": v.get("z_edge"), "zr": v.get("z_rigid")})
+    ph = R["physical"]
+    rows.insert(0, {"s": "v_reg 10 (the preset; above)", "mu": 1.2, "v": 10.0, "c": ph["analytic"]["slip_c"],
+                    "edge": ph["analytic"]["edge"], "n": ph["n_borders"], "dlo": f"{ph['limit']['d_lo']:.1e}",
+                    "lam": ph["limit"]["text"], "z": ph["limit"]["z_edge"], "zr": None})
+    out.tables["friction"] = md_table(rows, [
+        ("s", "setting", ""), ("mu", "μ", "g"), ("v", "v_reg (cm/s)", "g"), ("c", "slip coefficient c", ".1f"),
+        ("edge", "slipping-pivot root (1/s)", ".2f"), ("n", "borders", "d"), ("dlo", "d_lo", ""),
+        ("lam", "λ near the border, shortest range (1/s)", ""), ("z", "z vs its root", ".1f"),
+        ("zr", "z vs the held pivot", ".1f")])
+    fig, ax = plt.subplots(figsize=(5.6, 4.6))
+    pts = [(r["edge"], R["friction"][r["s"]] if r["s"] in R["friction"] else None, r) for r in rows]
+    for edge, v, r in pts:
+        if v is None:
+            val, st, lo, hi = ph["limit"]["value"], ph["limit"]["stat"], ph["limit"]["syst_lo"], ph["limit"]["syst_hi"]
+        elif v.get("value") is None:
+            continue
+        else:
+            val, st, lo, hi = v["value"], v["stat"] or 0.0, v["syst_lo"], v["syst_hi"]
+        ax.errorbar([edge], [val], yerr=[[math.hypot(st, lo)], [math.hypot(st, hi)]], fmt="o", capsize=3)
+        ax.annotate(r["s"].split(" (")[0], (edge, val), textcoords="offset points", xytext=(5, -10), fontsize=7)
+    lo_, hi_ = 22.0, max(p[0] for p in pts) + 2.0
+    ax.plot([lo_, hi_], [lo_, hi_], "k-", lw=0.8, label="measured = slipping-pivot root")
+    ax.axhline(R["seed"]["analytic"]["edge_rigid"], color="0.5", ls=":", lw=1, label="held pivot")
+    ax.set_xlabel("slipping-pivot root of the setting (1/s)")
+    ax.set_ylabel("λ near the border (1/s)")
+    ax.set_title("border rates against the friction (physical, contact-tsit5 1e-13)", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    out.save_fig(fig, f"{letter}_friction", key="friction", caption=(
+        "λ near the border (shortest fit range, bars: statistical and range errors in quadrature) of the `physical` "
+        "die with its friction's slip coefficient c = μ m g / v_reg moved through v_reg and μ, against each setting's "
+        "slipping-pivot root from the linearisation (docs/model.md, \"Balances linearised\"); line: equality."))
 
 
 def _signed(v: float) -> str:
@@ -498,6 +641,8 @@ def render(c: Computed, out: Output) -> None:
         ("range", "2 % range d", ""), ("near", "λ over the 2 % range (1/s)", ""),
         ("all", "λ whole range (1/s)", ""), ("sides", "sides", ""), ("ends", "bracket ends changed at tol/10", "")])
     out.tables["range"] = range_table(R)
+    if R.get("friction"):
+        _friction_render(R, out, L)
     rows = []
     for key in MODELS:
         for w, b in R[key]["by_window"].items():
@@ -526,8 +671,33 @@ def rerender(out) -> Path:
         new = analyse_preset(raw_from_frame(df, key), old["numerics"], found, seed=old["bootstrap_seed"])
         new.update(bootstrap_seed=old["bootstrap_seed"], bisect_n_evals=old.get("bisect_n_evals"))
         results[key] = new
+    if results.get("friction"):  # derived from the sweep's rows and the preset's (just recomputed)
+        results["friction_summary"] = friction_summary(results)
     output = Output(out)
     render(Computed(results), output)
     results["figures"], results["tables"] = output.figures, output.tables
     write_json(path, results)
     return path
+
+
+def add_friction(out, options=None) -> Path:
+    """Run the friction sweep (:func:`friction_sweep`, the full run's settings) into a finished run in ``out`` and
+    redraw its tables and figures from the raw profiles (:func:`rerender`): the presets' numbers do not move (the sweep
+    draws from its own random stream), so the results are those a full run gives.  Its time is kept in
+    ``friction_s`` and added to ``wall_s``."""
+    import time
+
+    from dicetrace.studies.context import Options
+
+    out = Path(out)
+    path = out / "results" / f"{NAME}.json"
+    results = json.loads(path.read_text())
+    ctx = Context(NAME, options or Options(), out / "cache")
+    t0 = time.perf_counter()
+    results["friction"] = friction_sweep(ctx)
+    results["friction_s"] = time.perf_counter() - t0
+    results["friction_n_throws"] = int(ctx.n_throws)
+    results["wall_s"] = results.get("wall_s", 0.0) + results["friction_s"]
+    results["n_throws_simulated"] = results.get("n_throws_simulated", 0) + ctx.n_throws
+    write_json(path, results)
+    return rerender(out)
