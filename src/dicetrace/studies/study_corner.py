@@ -420,6 +420,8 @@ def reproducibility(points: list) -> dict:
             "spread_max": max(spreads, default=None), "spread_min": min(spreads, default=None),
             "radius_coarsest": max(radii, default=None), "radius_finest": min(radii, default=None),
             "n_without_common_radius": sum(r["reproducible_radius"] is None for r in rp),
+            "n_with_common_radius": sum(r["reproducible_radius"] is not None for r in rp),
+            "largest_radius": max((max(r["radii"]) for r in rp), default=None),
             "box_max": max((p["size"] for p in points if p.get("reproduced")), default=None)}
 
 

@@ -58,13 +58,13 @@ def verdict(R: dict) -> str:
     d_v = [p["throw"]["d_min"] for p in clean]
     if "range_syst_lo" in ph:
         z = ph["sigmas"]
-        word = ("matches" if abs(z) < 2 else "agrees to that level with, but at this precision is undetermined against,"
-                if abs(z) <= 3 else "differs from")
+        word = ("consistent" if abs(z) < 2 else "undetermined at that level" if abs(z) <= 3 else "a difference")
         rate = (f"{ph['rate']:.9f} /s (spread over directions {ph['stat']:.0e}, step cap and tolerance "
                 f"{ph['numerics_syst']:.0e}, fit range +{ph['range_syst_hi']:.1e} / −{ph['range_syst_lo']:.1e} /s) lies "
-                f"{ph['relative']:.1e} of itself from the slipping pivot's {ph['analytic']:.9f} /s and {word} it "
-                f"({fmt(z, '+.1f')} σ of the side it lies on; the fit range moves the rate by up to "
-                f"{ph['range_syst_relative']:.0e} of itself, the step cap and tolerance by far less)")
+                f"{abs(ph['relative']):.1e} of itself {'below' if ph['relative'] < 0 else 'above'} the slipping pivot's "
+                f"root {ph['analytic']:.9f} /s; the fit range moves it by up to {ph['range_syst_relative']:.0e} of "
+                f"itself, the step cap and tolerance by far less, and the offset is {fmt(z, '+.1f')} σ of the side it "
+                f"lies on: {word}")
     else:  # results written before the error budget
         rate = (f"{ph['rate']:.9f} ± {ph['error']:.1e} /s matches the slipping pivot's {ph['analytic']:.9f} /s "
                 f"({fmt(ph['sigmas'], '+.1f')} σ)")
@@ -88,16 +88,20 @@ def verdict(R: dict) -> str:
     rs = R["triple"].get("reproducibility") or {}
     if rs.get("n_points"):
         names = " and ".join(f"`{k}`" for k in R["triple"].get("independent", {}))
-        where = (f"every integrator sees the three faces on circles down to {rs['radius_coarsest']:.0e} of the window "
-                 f"about every point ({rs['radius_finest']:.0e} about the best), not below"
-                 if rs.get("radius_coarsest") is not None else "no circle shows the three faces to every integrator")
-        spread = (f", {rs['spread_min']:.0e} … {rs['spread_max']:.0e} of the window from the hunt's point"
+        n_with, n_without = rs.get("n_with_common_radius", rs["n_points"]), rs.get("n_without_common_radius", 0)
+        where = (f"about {n_with} of them every integrator sees the three faces on circles down to "
+                 f"{rs['radius_coarsest']:.0e} of the window, not below" if rs.get("radius_coarsest") is not None
+                 else "about none of them do all integrators see the three faces on one circle")
+        if n_without and rs.get("radius_coarsest") is not None:
+            where += (f", and about {n_without} not even on the largest circle "
+                      f"({rs.get('largest_radius', 1e-7):.0e} of the window)")
+        spread = (f", {rs['spread_min']:.1e} … {rs['spread_max']:.1e} of the window from the hunt's point"
                   if rs.get("spread_max") is not None else "")
         parts.append(
             f"Located again by {names} (10× tighter), {rs['n_found_by_all']} of the {rs['n_points']} points are found "
             f"by every integrator with the same three faces{spread}; {where}. The location is reproducible across "
-            f"integrators to that scale, not to the hunt's box of {rs['box_max']:.0e} (slice units), which is one "
-            "integrator's bisection.")
+            f"integrators to about the integrators' spread, not to the hunt's box of {rs['box_max']:.0e} (slice "
+            "units), which is one integrator's bisection.")
     if clean:
         med_c = float(np.median(ctrl)) if ctrl else math.nan
         same = sum(p["labels"] == faces_up(p["throw"]["node"]) for p in clean)
@@ -273,14 +277,15 @@ def _reproduced_table(R: dict, out: Output) -> None:
             k = rel["names"].index(name)
             rows.append({"window": p["window"], "point": f"{p['x']:.9f}, {p['y']:.9f}",
                          "who": "hunt's" if name == "hunt" else name,
-                         "faces": " | ".join(" ".join(str(f) for f in fs) for fs in rp["faces"][name]),
+                         "faces": " / ".join(" ".join(str(f) for f in fs) for fs in rp["faces"][name]),
                          "dist": "–" if name == "hunt" else (f"{rel['distances'][k]:.1e}" if rel["found"][k]
                                                            else "not found"),
                          "box": p["size"] if name == "hunt" else (rp["relocated"][name].get("size")),
                          "scale": rp["reproducible_radius"] if name == "hunt" else None})
     out.tables["reproduced"] = md_table(rows, [
         ("window", "window", ""), ("point", "point (hunt's)", ""), ("who", "integrator", ""),
-        ("faces", "faces around the circles " + " | ".join(f"{r:.0e}" for r in R["triple"].get("repro_radii", [])), ""),
+        ("faces", "faces around the circles of " + " / ".join(f"{r:.0e}" for r in R["triple"].get("repro_radii", []))
+         + " of the window", ""),
         ("dist", "located again: distance from the hunt's point", ""), ("box", "its bisection box", ".1e"),
         ("scale", "every integrator sees the three faces down to (of the window)", ".0e")])
 
