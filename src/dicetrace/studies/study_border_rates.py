@@ -495,7 +495,19 @@ def friction_summary(R: dict) -> dict:
             "value_min": min(r["value"] for r in rows), "value_max": max(r["value"] for r in rows),
             "failed": [k for k, v in R["friction"].items() if v.get("value") is None],
             "failed_text": ", ".join(f"{k} ({v.get('error')})" for k, v in R["friction"].items()
-                                     if v.get("value") is None) or "none"}
+                                     if v.get("value") is None) or "none",
+            "failed_d_lo": [v.get("d_lo") for v in R["friction"].values() if v.get("value") is None],
+            "same_c": _same_c(rows)}
+
+
+def _same_c(rows: list[dict]) -> list[dict]:
+    """Groups of settings that reach one slip coefficient by different means (v_reg and μ): their λ side by side."""
+    by: dict = {}
+    for r in rows:
+        if "slip_c" in r:
+            by.setdefault(round(r["slip_c"], 6), []).append(r)
+    return [{"slip_c": c, "settings": [r["setting"] for r in g], "values": [r["value"] for r in g]}
+            for c, g in by.items() if len(g) > 1]
 
 
 def _friction_render(R: dict, out: Output, letter: str) -> None:
