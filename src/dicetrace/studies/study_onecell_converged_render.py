@@ -229,9 +229,14 @@ def verdicts(R: dict) -> dict:
     g = group_spread([w["n_joined"] / w["n_cells"] if w["n_cells"] else math.nan for w in last["windows"]])
     moving = ("has stopped moving by k5's rule (the last three levels within 2σ)" if st["verdict"] == "converged"
               else "still moves by k5's rule")
+    if g["n"] > 1:
+        between = (f" ± {g['spread']:.3f} (between the windows: {per}, from {g['min']:.2f} to {g['max']:.2f}); the "
+                   "spread between windows " + ("exceeds" if g["spread"] > last["stderr"] else "is within")
+                   + " the binomial error")
+    else:
+        between = f" (one window: {per})"
     s = (f"*Verdict.* The join fraction of the stacks' grid nodes: {series}. At {last['res']}³ it is "
-         f"{_pm(last['fraction'], last['stderr'])} (binomial, pooled) ± {g['spread']:.3f} (between the windows: "
-         f"{per}, from {g['min']:.2f} to {g['max']:.2f}); the spread between windows exceeds the binomial error. "
+         f"{_pm(last['fraction'], last['stderr'])} (binomial, pooled){between}. "
          f"The series {moving}, but what it counts is not what the writeup asks. A join is a path through grid "
          "nodes of one face; between two neighbouring nodes the face is not known, and the borders are fractal "
          "far below the grid's spacing, so a path through the grid is not shown to be a path in IC space. The join "
