@@ -47,7 +47,7 @@ from dicetrace.analysis.robustness import one_sided_z
 from dicetrace.analysis.settle import edge_balance_rate
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
+from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
 from dicetrace.studies.text import fmt
 from dicetrace.studies.study_doubly_transient_render import render as _render
 
@@ -307,8 +307,9 @@ def rerender(out) -> dict:
     r = json.loads(path.read_text())
     for row in r["rows"]:  # a pure function of the stored windows: derived again with the code
         if "hazard_shape" in row:
-            row["hazard_shape"] = {k: hazard_shape(row["hazard"][k]["windows"]["h"], row["hazard"][k]["windows"]["stderr"])
-                                   for k in ("commit", "settle")}
+            row["hazard_shape"] = jsonable({k: hazard_shape(row["hazard"][k]["windows"]["h"],
+                                                            row["hazard"][k]["windows"]["stderr"])
+                                            for k in ("commit", "settle")})
     r["by"] = {row["condition"]: row for row in r["rows"]}
     output = Output(Path(out))
     render(Computed(r), output)

@@ -45,7 +45,7 @@ from dicetrace.analysis.simulator import run_on_slice, window_points
 from dicetrace.analysis.wada import wada_merge_test
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
+from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
 from dicetrace.studies.study_doubly_transient import FLOOR_SHARE, MIN_CHANGED, TOL, TOL_FLOOR
 from dicetrace.studies.study_sweeps_render import render as _render
 from dicetrace.studies.text import CONVERGED_MIN
@@ -305,7 +305,7 @@ def _summary(rows) -> dict:
             "n_hazard_rise": len(rise), "hazard_rise_z_min": min(rise) if rise else None,
             "hazard_rise_z_max": max(rise) if rise else None, "n_hazard_rise_z2": sum(z > 2 for z in rise),
             "n_hazard_rise_z3": sum(z > 3 for z in rise),
-            "hazards": hr, "floor_flips_max": FLOOR_FLIPS_MAX, "n_numerics_converged": len(conv),
+            "hazards": jsonable(hr), "floor_flips_max": FLOOR_FLIPS_MAX, "n_numerics_converged": len(conv),
             "numerics_converged": [f"{h['condition']} / {h['window']}" for h in conv],
             "n_converged_rise_z2": sum(z > 2 for z in crise), "n_converged_rise_z3": sum(z > 3 for z in crise),
             "converged_rise_z_min": min(crise) if crise else None,
