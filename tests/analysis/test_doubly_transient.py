@@ -227,3 +227,70 @@ def test_a_hazards_record_is_its_curve():
     h = dt.hazard_curve(t, np.array([0.0, 0.3, 1.1]))
     d = h.as_dict()
     assert d["events"] == h.events.tolist() == [3, 3] and d["h"] == h.h.tolist() and d["t0"] == [0.0, 0.3]
+
+
+def test_hazard_shape_tells_a_rise_from_a_dip_and_from_noise():
+    # the windows of section n as measured: `physical` rises step by step; `seed` falls 17.1 → 14.4 (z ≈ −5.4) before
+    # it rises past its first window
+    phys = dt.hazard_shape([7.5, 10.1, 11.9, 14.9], [0.1, 0.3, 0.5, 0.9])
+    assert phys["shape"] == "rises" and phys["min_step_z"] > 0 and len(phys["steps"]) == 3
+    seed = dt.hazard_shape([17.1, 14.4, 21.6, 27.3], [0.3, 0.4, 0.8, 1.6])
+    assert seed["shape"] == "dips, then rises" and seed["min_step_z"] == pytest.approx(-2.7 / 0.5)
+    assert seed["lowest_window"] == 1
+    # a fall of 2.5σ that never recovers beyond 3σ: not monotone, no rise claimed
+    wob = dt.hazard_shape([10.0, 7.5, 9.0], [0.5, 0.9, 0.9])
+    assert wob["shape"] == "not monotone"
+    # up, a fall of 4.6σ, up again, all above the first window: not a dip below the start, not monotone either
+    assert dt.hazard_shape([5.0, 51.1, 30.3, 37.5], [0.3, 3.7, 3.6, 6.9])["shape"] == "not monotone"
+    # constant within the errors: flat; exponential lifetimes give a flat hazard
+    rng = np.random.default_rng(9)
+    w = dt.hazard_windows(rng.exponential(1 / 4.0, 50_000))
+    assert dt.hazard_shape(w.h, w.stderr)["shape"] == "flat"
+    # Weibull(2) lifetimes: h = 2t rises through every window
+    w = dt.hazard_windows(rng.weibull(2.0, 80_000))
+    assert dt.hazard_shape(w.h, w.stderr)["shape"] == "rises"
+    assert dt.hazard_shape([5.0], [0.1])["shape"] == "undetermined"
+    # section q's preset in home: 8.8 → 17.8 through every window, but 2.7σ from first to last: a weak rise
+    assert dt.hazard_shape([8.8, 13.3, 15.9, 17.8], [0.6, 1.1, 1.9, 3.3])["shape"] == "rises weakly"
+
+
+def test_tail_scan_of_exponential_lifetimes_has_no_systematic_beyond_noise_and_finds_a_rising_tail():
+    rng = np.random.default_rng(10)
+    t = rng.exponential(1 / 4.0, 100_000)
+    s = dt.tail_scan(t)
+    assert s["starts"] == [0.99, 0.97, 0.95, 0.9] and s["reference"] == 1
+    assert abs(s["value"] - 4.0) < 3 * s["stat"]  # memoryless: every tail has the rate 4
+    assert s["syst"] < 3 * s["stat"]
+    assert s["from_s"][1] == pytest.approx(-math.log(0.03) / 4.0, rel=0.03)  # the 97 % quantile of Exp(4)
+    # Weibull(2): h = 2t, so a later tail has a larger hazard: the 99 % tail lies above the 97 % one (syst_hi), the
+    # 90 % one below (syst_lo)
+    w = rng.weibull(2.0, 100_000)
+    s = dt.tail_scan(w)
+    assert s["syst_hi"] > 3 * s["stat"] and s["syst_lo"] > 3 * s["stat"]
+    # the maximum-likelihood hazard past t_q: the events, a share exp(−t_q²), over the time at risk, ∫ S = (√π/2)·erfc(t_q)
+    tq = math.sqrt(-math.log(0.03))
+    assert abs(s["value"] - 0.03 / (math.sqrt(math.pi) / 2 * math.erfc(tq))) < 3 * s["stat"]
+    # too few events in the shortest tail: that tail has no value, the others still do
+    s = dt.tail_scan(rng.exponential(1.0, 1000), min_events=20)
+    assert s["values"][0] is None and s["value"] is not None
+
+
+def test_tail_scan_without_enough_events_past_the_reference_has_no_value():
+    rng = np.random.default_rng(11)
+    s = dt.tail_scan(rng.exponential(1.0, 300), min_events=20)  # 9 events past the 97 % quantile
+    assert s["value"] is None and s["syst"] is None
+    assert s["values"][0] is None and s["values"][1] is None and s["values"][3] is not None  # 30 past the 90 %
+
+
+def test_tail_scan_from_windows_is_the_tail_scan_of_the_lifetimes():
+    # Weibull(2) lifetimes: the hazard past a quantile from the windows alone equals the one from the lifetimes
+    rng = np.random.default_rng(12)
+    t = rng.weibull(2.0, 60_000)
+    w = dt.hazard_windows(t).as_dict()
+    s = dt.tail_scan_windows(w)
+    assert s["starts"] == [0.97, 0.9, 0.75, 0.5]
+    assert s["value"] == pytest.approx(w["h"][-1]) and s["stat"] == pytest.approx(w["stderr"][-1])
+    past90 = dt.hazard_curve(t, [np.quantile(t, 0.9), np.nextafter(t.max(), np.inf)])
+    assert s["values"][1] == pytest.approx(past90.h[0], rel=1e-9)
+    assert s["syst_lo"] > 3 * s["stat"] and s["syst_hi"] == 0.0  # a rising hazard: earlier tails lie below
+    assert dt.tail_scan_windows({"h": [1.0, 2.0], "events": [10, 10]})["value"] is None  # a window was dropped

@@ -199,6 +199,32 @@ WITHDRAWN = [
     (r"κ/λ[^|\n]{0,40}1\.14|1\.14 ± 0\.01", None),
     (r"so every disagreement is numerical", "### k2."),
     (r"not chaotic at that scale", "### k2."),
+    # issue 44: the border rate of one fit range (section o quotes it once, as what it was)
+    (r"22\.95 ± 0\.06", "## o."),
+    # issue 44: the seed edge release as a bound, and the edge test on the commit clock
+    (r"27\.3 ± 1\.6 vs 22\.66", None),
+    (r"so the final saddle is not shown to be the edge balance", None),
+    (r"inconsistent \(z = -11\.1\)", None),
+    # issue 44: the triple point's bisection box read as its location, and a refutation of the 6-D statement
+    (r"\| located to \|", None),
+    (r"closed on a point \(to 1e-11\)", None),
+    (r"no vertex in IC⁶\) is refuted", None),
+    (r"IC space has no vertices is refuted", None),
+    # issue 44: doubly transient "in every model", a rise "through the whole tail", a saddle bound on λ₁
+    (r"doubly transient \(supported, in every model\)", None),
+    (r"rises through the whole tail", None),
+    (r"rises from 17\.1 to 27\.3", None),
+    (r"which no saddle with one\s+unstable direction allows", None),
+    (r"ε_c ≈ [\d.e-]+ \(± [\d.]+ dex, at the floor's edge\)", None),
+    # issue 44: the join fraction of grid paths as a lower bound, and sequences below the 0.99 rule as an answer
+    (r"\*\*Fewer cells than regions\*\*", None),
+    (r"a path in a stack is (?:one|a path) in IC space", None),
+    (r"\*\*No\*\* \(physical, contact-tsit5", None),
+    # issue 44: the sweep's commit hazard called a settling hazard, counted over unconverged conditions
+    (r"settling hazard", None),
+    (r"in 14 of\s+15 \(z > 2\)", None),
+    # issue 44: section l's all-range λ rows with a verdict
+    (r"settle-time divergence λ, all sides \(1/s\) \|[^\n]*\*\*changed\*\*", None),
 ]
 
 

@@ -36,6 +36,14 @@ def test_quick_run_uses_uniform_tight_numerics_and_finds_the_edge_saddles(quick_
         assert near["median"] == pytest.approx(m["analytic"]["edge"], rel=0.03)
         assert whole["median"] > near["median"] + 3 * near["total"]
     assert r["physical"]["analytic"]["edge"] > r["seed"]["analytic"]["edge"]  # the slipping pivot is faster
+    for key in ("seed", "physical"):  # the limit as the range shrinks: one decade from d_lo, a range systematic
+        lim = r[key]["limit"]
+        assert lim["d_lo"] == r[key]["near"]["d_lo"] and lim["d_hi"] == pytest.approx(10 * lim["d_lo"])
+        assert lim["value"] == pytest.approx(r[key]["analytic"]["edge"], rel=0.05) and lim["syst"] >= 0
+    # the friction sweep's quick setting (v_reg 40): its own slipping-pivot root, far from the held pivot's
+    (name, f), = r["friction"].items()
+    assert name == "v_reg 40" and f["edge"] > r["seed"]["analytic"]["edge"] + 5
+    assert f["value"] == pytest.approx(f["edge"], rel=0.03)
 
 
 @pytest.mark.slow
@@ -53,5 +61,40 @@ def test_reanalysis_from_the_raw_profiles_gives_the_same_numbers(quick_run, tmp_
     for key in ("seed", "physical"):
         for part in ("near", "all_range", "stability", "ends", "flat"):
             assert again[key][part] == results["border_rates"][key][part]
-    assert set(again["figures"]) == {"local_slope", "lambdas"}
+    assert set(again["figures"]) == {"local_slope", "range", "lambdas", "friction"}
+    assert again["seed"]["limit"] == results["border_rates"]["seed"]["limit"]
+    assert again["friction"] == results["border_rates"]["friction"]
     assert all((mine / f["path"]).stat().st_size > 0 for f in again["figures"].values())
+
+
+def test_the_limit_as_the_range_shrinks_finds_the_rate_at_the_border_and_the_bias_of_longer_ranges():
+    # Synthetic borders: T(d) = T0 − ln(d)/λ + ln(1 + d/d_c)/λ, quantised to 1 ms: the local rate is λ near the border
+    # and rises toward d_c. The shortest range (one decade from d_lo) gives λ; the longer ranges lie above it
+    # (a one-sided range systematic), as the fits over the whole range do for the die.
+    import numpy as np
+
+    from dicetrace.analysis.border_rates import bisect_many, profiles
+    from dicetrace.studies import study_border_rates as sbr
+
+    lam, d_c = 24.4, 1e-6
+
+    def classify(pts):
+        return np.where(np.atleast_2d(pts)[:, 0] < 0.0123456789, 2, 5)
+
+    def settle(pts):
+        pts = np.atleast_2d(pts)
+        d = np.abs(pts[:, 0] - 0.0123456789)
+        t = 1.0 - np.log(d) / lam + np.log1p(d / d_c) / lam
+        return classify(pts), np.round(t / 1e-3) * 1e-3
+
+    rng = np.random.default_rng(1)
+    pairs = [(np.array([0.0123456789 - u, y]), np.array([0.0123456789 + v, y])) for u, v, y in rng.uniform(1e-4, 2e-3, (12, 3))]
+    br = bisect_many(classify, pairs, tol=1e-12)
+    prof = profiles(settle, br, sbr.DISTS)
+    lim = sbr._range_limit(br, prof, prof, 1e-10, 1e-8, len(br.p_lo), np.random.default_rng(2))
+    assert lim["d_lo"] == pytest.approx(1e-10) and lim["d_hi"] == pytest.approx(1e-9)
+    assert lim["value"] == pytest.approx(lam, rel=0.01)
+    assert lim["syst_hi"] > lim["syst_lo"] and lim["tol_shift"] == 0.0  # longer ranges are biased upward
+    v = np.array([x for x in lim["values"] if x is not None])
+    assert v[-1] > lam * 1.2  # the whole range, to 1e-3 ≫ d_c: the approach's bias
+    assert lim["text"].startswith(f"{lim['value']:.2f} ± ")

@@ -64,3 +64,27 @@ def test_verdict_follows_the_evidence():
     r2 = copy.deepcopy(r)
     r2["triple"]["points"][0]["three_on_every_circle"] = False  # a point without three sectors on every circle
     assert "**Refuted:**" not in verdict(r2)
+
+
+def test_verdict_quotes_the_rate_budget_and_the_reproducibility_across_integrators():
+    r = _results(True)
+    r["rates"]["physical"].update(rate=23.126695561, analytic=23.126695596, stat=4e-14, numerics_syst=2e-10,
+                                  range_syst_hi=1.4e-8, range_syst_lo=1.2e-7, relative=-1.5e-9,
+                                  range_syst_relative=5e-9, sigmas=-2.4)
+    r["triple"]["independent"] = {"contact-dop853": "seed, contact-dop853 tol 1e-10 uniform",
+                                  "contact-tsit5": "seed, contact-tsit5 tol 1e-10 uniform"}
+    r["triple"]["reproducibility"] = {"n_points": 3, "n_found_by_all": 3, "spread_min": 7e-9, "spread_max": 4e-8,
+                                      "radius_coarsest": 1e-7, "radius_finest": 1e-8, "box_max": 4.2e-11,
+                                      "n_with_common_radius": 2, "n_without_common_radius": 1, "largest_radius": 1e-7}
+    v = verdict(r)
+    # the budget: no regression error, the fit range's systematic, an offset undetermined at 2.4 σ
+    assert "fit range +1.4e-08 / −1.2e-07 /s" in v and "undetermined at that level" in v and "-2.4 σ" in v
+    assert "1.5e-09 of itself below the slipping pivot's" in v
+    # the location: reproducible to the integrators' common scale, not to one integrator's box
+    assert "3 of the 3 points are found by every integrator" in v and "7.0e-09 … 4.0e-08 of the window" in v
+    assert "about 2 of them every integrator sees the three faces on circles down to 1e-07 of the window" in v
+    assert "about 1 not even on the largest circle" in v and "not to the hunt's box of 4e-11" in v
+    # what is refuted: the 2-D statement, not the 6-D one
+    assert "the writeup's conclusion that a 2-D map has no triple points" in v
+    assert "vertices of the 6-D space itself" in v and "untouched" in v
+    assert "IC⁶ joining 7 cells. " not in v

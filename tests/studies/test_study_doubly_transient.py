@@ -12,6 +12,7 @@ import math
 import numpy as np
 import pytest
 
+from dicetrace.analysis.border_rates import edge_saddle
 from dicetrace.studies import LETTERS, resolve
 from dicetrace.studies import study_doubly_transient as dts
 
@@ -69,6 +70,15 @@ def test_quick_run_writes_every_measure(quick):
         lam = row["lambda"]["survivors"]
         assert lam["n"] >= 3 and 0 < lam["mean"] < 100 and lam["stderr"] > 0
         assert row["edge_rate"]["rate"] == pytest.approx(row["edge_rate_analytic"], rel=0.15)
+        # the edge tests use the preset's analytic edge saddle (held pivot for seed, slipping for physical) and the
+        # settle clock; the commit clock's test is gone
+        assert row["edge_saddle"] == pytest.approx(edge_saddle(config=dts._config(row["condition"], dts.TOL)).rate)
+        assert "edge_late_hazard" not in row["tests"] and "edge_settle" in row["tests"]
+        assert row["tests"]["edge_settle"]["y"] == pytest.approx(row["alpha_fine"] * row["edge_saddle"], nan_ok=True)
+        assert row["hazard_shape"]["commit"]["shape"] in ("rises", "rises weakly", "dips, then rises", "not monotone",
+                                                          "flat", "undetermined")
+        assert row["tail"]["settle"]["starts"] == [0.99, 0.97, 0.95, 0.9]
+        assert row["eps_c_resolved"] in (True, False)
         for t in row["tests"].values():
             assert t["verdict"] in ("consistent", "inconsistent", "undetermined")
             if t["verdict"] != "undetermined":
@@ -81,3 +91,30 @@ def test_rerender_from_the_results_changes_no_number(quick):
     again = dts.rerender(out)
     assert again["tables"] == r["tables"] and again["rows"] == r["rows"]
     assert set(again["figures"]) == set(r["figures"])
+
+
+def test_compare_with_syst_adds_the_systematic_of_the_targets_side():
+    # κ_late 14.1 ± 0.8 with a tail systematic +1.0 / −3.0 against 20.5 ± 3.0: the target lies above, so the upper
+    # side counts: z = −6.4 / √(0.8² + 1.0² + 3.0²) = −1.98, consistent; from the statistics alone z = −2.06
+    c = dts.compare_with_syst(14.1, 0.8, 3.0, 1.0, 20.5, 3.0)
+    assert c["z"] == pytest.approx(-6.4 / math.sqrt(0.64 + 1.0 + 9.0)) and c["verdict"] == "consistent"
+    assert c["z_stat"] == pytest.approx(-6.4 / math.hypot(0.8, 3.0)) and c["syst_dominates"] is True
+    assert dts.compare_with_syst(30.0, 0.8, 3.0, 1.0, 20.0, 0.5)["z"] == pytest.approx(10.0 / math.sqrt(0.64 + 9 + 0.25))
+    assert dts.compare_with_syst(None, None, None, None, 20.0, 0.5)["verdict"] == "undetermined"
+
+
+@pytest.mark.slow
+def test_the_seed_release_is_set_by_its_start_not_by_its_tilt(monkeypatch):
+    # released 1e-7 and 1e-5 rad off its edge, the seed die has nearly the same tilt 0.1 s later (the release's first
+    # steps, not the tilt, set the motion), so the fit from ten times the start tilt measures that transient and
+    # moves by more than 1 /s; fitted from 0.1 s on, both give the held pivot's rate to 0.5 %
+    monkeypatch.setattr(dts, "RELEASE_DTS", (1e-4,))
+    monkeypatch.setattr(dts, "RELEASE_TILTS", (1e-7, 1e-5))
+    d = dts.release_diagnosis(dts._config("seed", dts.TOL))
+    a, b = d["rows"]
+    assert 0.5 < a["tilt_at_0_1_s"] / b["tilt_at_0_1_s"] < 2.0
+    assert abs(a["rate"] - b["rate"]) > 1.0
+    held = edge_saddle(preset="seed").rate
+    for r in (a, b):
+        assert r["late"][0]["rate"] == pytest.approx(held, rel=0.005)
+    assert d["rate_min"] < held < d["rate_max"]

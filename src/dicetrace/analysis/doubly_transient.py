@@ -20,7 +20,11 @@ basin borders look fractal only down to a crossover scale ε_c, below which they
 * :func:`commit_steps`: when a throw commits to its final face (its last contact with a node
   off the face it lands on) and how many landings came before, from its contact sets;
 * :func:`pair_divergence`: a throw and its neighbour, their distance and the throw's energy;
-* :func:`compare`: two measured values with errors, their z-score and a verdict.
+* :func:`compare`: two measured values with errors, their z-score and a verdict;
+* :func:`hazard_shape`: whether a hazard across its quantile windows rises steadily, dips before it rises, or is
+  not monotone (each step's z-score);
+* :func:`tail_scan`: the late hazard past a quantile of the lifetimes, over nested tails, with the choice of
+  the tail's start as its systematic (:func:`dicetrace.analysis.robustness.range_scan`).
 """
 
 from __future__ import annotations
@@ -35,7 +39,8 @@ from dicetrace.simulate import Record, simulate, simulate_batch
 
 __all__ = ["LocalSlopes", "local_slopes", "Crossover", "crossover_fit", "Hazard", "hazard_curve", "hazard_windows",
            "discrete_hazard", "covariate_hazard", "FACE_NODE_MASK", "commit_steps", "perturbed", "floor_test", "throw_floor",
-           "pair_divergence", "compare", "pair_outcomes", "pair_verdicts", "hazard_summary"]
+           "pair_divergence", "compare", "pair_outcomes", "pair_verdicts", "hazard_summary", "hazard_shape",
+           "tail_scan", "tail_scan_windows"]
 
 #: Bit mask of the four nodes of each face (face 1..6; bit k-1 is node k; docs/model.md §3).
 FACE_NODE_MASK = {1: 0b00001111, 2: 0b00110011, 3: 0b01010101, 4: 0b10101010, 5: 0b11001100, 6: 0b11110000}
@@ -424,3 +429,107 @@ def hazard_summary(t_settle, t_commit, landings, t_cap) -> dict:
     bh = discrete_hazard(landings)
     res["bounce"] = {k: v.tolist() for k, v in bh.items()}
     return res
+
+
+#: A step between neighbouring windows is a fall where its z-score is below −DIP_Z (a dip), and counts against a
+#: monotone rise where it is below −FALL_Z; the hazard rises where the last window exceeds the first by RISE_Z.
+DIP_Z, FALL_Z, RISE_Z = 3.0, 2.0, 3.0
+
+
+def hazard_shape(h, stderr) -> dict:
+    """The shape of a hazard across successive windows (``h`` ± ``stderr``, earliest first): each step's difference,
+    error and z-score, and ``shape``: ``"rises"`` (the last above the first by more than RISE_Z errors and no step
+    falling by more than FALL_Z), ``"dips, then rises"`` (a step falls by more than DIP_Z errors to a lowest window
+    after the first, and the last lies above the lowest by more than RISE_Z), ``"not monotone"`` (a step falls by
+    more than FALL_Z otherwise), ``"rises weakly"`` (no step falls by more than FALL_Z, the last lies above the first by
+    FALL_Z to RISE_Z errors),
+    ``"flat"`` (no step, and the ends, differ by FALL_Z errors) or ``"undetermined"`` (anything else, or fewer
+    than two windows)."""
+    h, se = np.asarray(h, float), np.asarray(stderr, float)
+    steps = []
+    for a, b, ea, eb in zip(h[:-1], h[1:], se[:-1], se[1:]):
+        c = compare(float(b), float(eb), float(a), float(ea))
+        steps.append({"diff": c["diff"], "diff_err": c["diff_err"], "z": c["z"]})
+    out = {"steps": steps, "min_step_z": min((s["z"] for s in steps), default=math.nan)}
+    if len(h) < 2 or not np.all(np.isfinite(h)) or not np.all(np.isfinite(se)):
+        out.update(shape="undetermined", rise_z=math.nan)
+        return out
+    rise = compare(float(h[-1]), float(se[-1]), float(h[0]), float(se[0]))["z"]
+    low = int(np.argmin(h))
+    after_low = compare(float(h[-1]), float(se[-1]), float(h[low]), float(se[low]))["z"]
+    zs = np.array([s["z"] for s in steps])
+    if zs.min() < -DIP_Z and low > 0 and after_low > RISE_Z:
+        shape = "dips, then rises"
+    elif zs.min() < -FALL_Z:
+        shape = "not monotone"
+    elif rise > RISE_Z:
+        shape = "rises"
+    elif rise > FALL_Z:
+        shape = "rises weakly"
+    elif abs(rise) < FALL_Z and np.all(np.abs(zs) < FALL_Z):
+        shape = "flat"
+    else:
+        shape = "undetermined"
+    out.update(shape=shape, rise_z=rise, lowest_window=low, rise_from_lowest_z=after_low)
+    return out
+
+
+def tail_scan(lifetimes, *, censored=None, starts=(0.99, 0.97, 0.95, 0.9), reference: float = 0.97,
+              min_events: int = 20) -> dict:
+    """The hazard past the quantile ``q`` of the lifetimes for each of ``starts`` (later starts first: nested tails,
+    the shortest first), through :func:`~dicetrace.analysis.robustness.range_scan`: the value at ``reference``
+    with its Poisson error, and how far the other tails move it (one-sided).  A tail with fewer than
+    ``min_events`` events gives no value; where the reference tail has none, the value, its errors and the
+    systematic are None (``values`` still lists the other tails)."""
+    from .robustness import range_scan
+
+    t, cen = _lifetimes(lifetimes, censored)
+    top = float(np.nextafter(t.max(), np.inf))
+    qs = [float(q) for q in starts]
+
+    def fit(lo, hi):
+        t0 = float(np.quantile(t, lo))
+        hz = hazard_curve(t, [t0, top], censored=cen)
+        if hz.events[0] < min_events:
+            return math.nan
+        return float(hz.h[0]), float(hz.stderr[0])
+
+    ranges = [(q, 1.0) for q in qs]
+    try:
+        out = range_scan(fit, ranges, widths=[1.0 - q for q in qs], reference=qs.index(reference)).as_dict()
+    except ValueError:  # too few events past the reference quantile: no value, the other tails still listed
+        vals = [fit(*r) for r in ranges]
+        out = {"ranges": [list(r) for r in ranges], "widths": [1.0 - q for q in qs],
+               "values": [v[0] if isinstance(v, tuple) else None for v in vals],
+               "stderrs": [v[1] if isinstance(v, tuple) else None for v in vals], "reference": qs.index(reference),
+               **{k: None for k in ("value", "stat", "syst_lo", "syst_hi", "syst", "syst_dominates", "n_syst",
+                                    "extrapolated", "extrapolated_stderr", "trend")}}
+    out.update(starts=qs, reference_start=float(reference),
+               from_s=[float(np.quantile(t, q)) for q in qs])
+    return out
+
+
+def tail_scan_windows(windows, *, quantiles=(0.5, 0.75, 0.9, 0.97)) -> dict:
+    """:func:`tail_scan` from a hazard's quantile windows alone (``windows``: :meth:`Hazard.as_dict` of
+    :func:`hazard_windows`, whose bins start at ``quantiles``): the hazard past each window's start is the events of
+    that window and the later ones over their exposure (each window's events over its rate), its error that over
+    √events; the last window (past the last quantile) is quoted, the earlier starts give the one-sided
+    systematic.  Every field is None where the windows do not match ``quantiles`` (a window was dropped)."""
+    from .robustness import range_scan
+
+    h, ev = np.asarray(windows["h"], float), np.asarray(windows["events"], float)
+    qs = [float(q) for q in quantiles]
+    if len(h) != len(qs) or not np.all(np.isfinite(h)) or np.any(h <= 0):
+        return {k: None for k in ("value", "stat", "syst_lo", "syst_hi", "syst", "syst_dominates", "values",
+                                  "stderrs", "ranges", "starts")}
+    expo = ev / h
+    start_of = {q: i for i, q in enumerate(qs)}
+
+    def fit(lo, hi):
+        i = start_of[lo]
+        e, x = ev[i:].sum(), expo[i:].sum()
+        return float(e / x), float(e / x / math.sqrt(e))
+
+    out = range_scan(fit, [(q, 1.0) for q in qs[::-1]], widths=[1.0 - q for q in qs[::-1]]).as_dict()
+    out["starts"] = qs[::-1]
+    return out

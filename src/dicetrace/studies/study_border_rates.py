@@ -28,7 +28,16 @@ range from the same smallest distance to 1e-3 (for comparison), and the
 median over sides gets a bootstrap error over borders (both sides of a
 border resampled together) and a systematic error (the larger shift of the
 median when the profile is integrated at tol/10 or the range is cut a decade
-shorter).  The rates are compared with the analytic edge saddle of each
+shorter).
+
+λ moves with the fit range even inside the near-border range, so the number
+quoted is the limit as the range shrinks (:func:`_range_limit`): λ over
+nested ranges from d_lo, one decade (five distances) up to the whole range,
+through :func:`dicetrace.analysis.robustness.range_scan`; the shortest range's
+median with its bootstrap error, and as a one-sided range systematic how far
+the ranges inside the near-border range and their straight-line extrapolation
+to zero width lie from it; beside it the shifts at tol/10 and with a trimmed
+mean.  The rates are compared with the analytic edge saddle of each
 preset (:func:`dicetrace.analysis.border_rates.edge_saddle`) and the corner
 balance's (:func:`dicetrace.analysis.corner.corner_balance`).
 """
@@ -55,11 +64,12 @@ from dicetrace.analysis.border_rates import (
     tolerance_stability,
 )
 from dicetrace.analysis.corner import corner_balance
+from dicetrace.analysis.robustness import one_sided_z, range_scan, stat_syst, syst_note
 from dicetrace.analysis.simulator import classify_on_slice, settle_on_slice
 from dicetrace.params import make_config
 from dicetrace.studies import LETTERS
 from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
-from dicetrace.studies.text import md_table, pm
+from dicetrace.studies.text import fmt, md_table, pm
 
 NAME = "border_rates"
 #: The raw measurements (``results/<RAW_CSV>.csv``): every border, side and distance (in a folder of their own:
@@ -79,10 +89,24 @@ DISTS = np.logspace(-11, -3, 33)
 SLOPE_WINDOW = 5
 #: The near-border range ends where the pooled local slope departs from its reference by more than this.
 FLAT_REL = 0.02
+#: The range scan: nested ranges from d_lo to every distance from SLOPE_WINDOW − 1 quarter decades (one decade)
+#: above it up to the last; the ranges inside the near-border range give the range systematic.
+SCAN_MIN_POINTS = SLOPE_WINDOW
+#: The alternative estimator of the sides' λ at the quoted range: the mean without this fraction at either end.
+TRIM = 0.1
 #: Borders per window, lines per window and points per line (full run, quick run).
 N_BORDERS = (32, 2)
 N_LINES = (16, 2)
 LINE_POINTS = (64, 24)
+#: Border rates against the friction: the `physical` die with its pivot's slip coefficient c = μ m g / v_reg moved,
+#: through v_reg and through μ (v_reg 20 and μ 0.6 share one c: only c enters the linearisation), each setting's
+#: near-border λ against its own slipping-pivot root.  Borders per window (full, quick), the profile's distances
+#: (1e-11 … 1e-6) and the widths (decades above d_lo) of the nested fit ranges.
+FRICTION = {"v_reg 2.5": {"v_reg_cm_s": 2.5}, "v_reg 5": {"v_reg_cm_s": 5.0}, "v_reg 20": {"v_reg_cm_s": 20.0},
+            "v_reg 40": {"v_reg_cm_s": 40.0}, "μ 0.6": {"mu": 0.6}}
+FRICTION_BORDERS, FRICTION_LINES, FRICTION_POINTS = (8, 1), (8, 2), (48, 16)
+FRICTION_DISTS = DISTS[:21]
+FRICTION_WIDTHS = (1.0, 1.5, 2.0, 2.5, 3.0)
 
 
 def _config(opts: dict, tol: float | None = None):
@@ -230,6 +254,7 @@ def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> 
 
     near_l = fit_sides(DISTS, br, prof, d_lo, d_hi)
     near = summary(near_l)
+    limit = _range_limit(br, prof, check, d_lo, d_hi, n, np.random.default_rng([seed, 1]))  # its own stream
     alt_check = summary(fit_sides(DISTS, br, check, d_lo, d_hi))
     alt_short = summary(fit_sides(DISTS, br, prof, d_lo, max(d_hi / 10, d_lo * 10 ** 0.75)))
     all_l = fit_sides(DISTS, br, prof, d_lo, DISTS[-1])
@@ -239,6 +264,9 @@ def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> 
     whole.update(d_lo=d_lo, d_hi=float(DISTS[-1]))
     cfg = _config(MODELS[numerics["preset"]])
     saddle = edge_saddle(config=cfg)
+    limit.update(minus_edge=limit["value"] - saddle.rate,
+                 z_edge=one_sided_z(limit["value"], limit["stat"], limit["syst_lo_total"], limit["syst_hi_total"],
+                                    saddle.rate))
     by_window = {}
     sides_win = np.concatenate([raw["windows"], raw["windows"]])
     for w in WINDOWS:
@@ -262,12 +290,50 @@ def analyse_preset(raw: dict, numerics: dict, found: dict, *, seed: int = 0) -> 
                  "rel": FLAT_REL, "window": SLOPE_WINDOW, "d_max": d_hi, "median_slope": flat["median_slope"],
                  "count": flat["count"], "d_mid": d_mid, "q25_slope": _nanq(slopes, 0.25),
                  "q75_slope": _nanq(slopes, 0.75)},
-        "near": near, "near_check_tol": alt_check, "near_short": alt_short, "all_range": whole,
+        "limit": limit, "near": near, "near_check_tol": alt_check, "near_short": alt_short, "all_range": whole,
         "near_minus_edge": near["median"] - saddle.rate,
         "near_z_edge": (near["median"] - saddle.rate) / near["total"] if near["total"] else None,
         "all_minus_edge": whole["median"] - saddle.rate,
         "by_window": by_window, "lambdas_near": near_l, "lambdas_all": all_l,
     }
+
+
+def _range_limit(br, prof, check, d_lo: float, d_hi: float, n: int, rng) -> dict:
+    """λ (median over sides, bootstrap error over borders) fitted over nested ranges from ``d_lo`` to every distance
+    from one decade above it to the last (:func:`~dicetrace.analysis.robustness.range_scan`): the shortest range's
+    λ, the limit as the range shrinks, with the ranges inside the near-border range ``d_hi`` and the straight-line
+    extrapolation to zero width as its one-sided range systematic; beside it, the shift at that range when the
+    profiles integrated at tol/10 are fitted instead (tolerance) and when the sides' λ are pooled by their trimmed
+    mean instead of their median (estimator: each side's λ over a decade is quantised by the settle time's 1 ms
+    resolution, which the median keeps), each on both sides in quadrature with the range's."""
+    from scipy.stats import trim_mean
+
+    i0 = int(np.argmin(np.abs(np.log(DISTS / d_lo))))
+    his = DISTS[i0 + SCAN_MIN_POINTS - 1:]
+    ranges = [(float(d_lo), float(h)) for h in his]
+    n_in = max(1, int(np.sum(his <= d_hi * (1 + 1e-9))))
+    seeds = iter(rng.integers(2**31, size=len(ranges)))
+
+    def fit(lo, hi):
+        b = border_bootstrap(fit_sides(DISTS, br, prof, lo, hi), n, seed=int(next(seeds)))
+        return b.get("median", math.nan), b.get("median_stderr")
+
+    scan = range_scan(fit, ranges, syst_over=n_in, extrapolate=True)
+    lo, hi = ranges[0]
+    at_check = fit_sides(DISTS, br, check, lo, hi)
+    at = fit_sides(DISTS, br, prof, lo, hi)
+    tol_shift = float(np.nanmedian(at_check)) - scan.value
+    est_shift = float(trim_mean(at[np.isfinite(at)], TRIM)) - scan.value
+    out = scan.as_dict()
+    out.update(d_lo=lo, d_hi=hi, syst_d_hi=ranges[n_in - 1][1], near_d_hi=float(d_hi), tol_shift=tol_shift,
+               estimator_shift=est_shift, trim=TRIM,
+               syst_lo_total=math.sqrt(scan.syst_lo**2 + min(tol_shift, 0.0)**2 + min(est_shift, 0.0)**2),
+               syst_hi_total=math.sqrt(scan.syst_hi**2 + max(tol_shift, 0.0)**2 + max(est_shift, 0.0)**2))
+    out["syst_total"] = max(out["syst_lo_total"], out["syst_hi_total"])
+    out["syst_dominates_total"] = bool(out["syst_total"] > (out["stat"] or 0.0))
+    out["text"] = stat_syst(scan.value, scan.stat, scan.syst_lo, scan.syst_hi)
+    out["note"] = syst_note(scan.stat, scan.syst, "fit-range")
+    return out
 
 
 def _numerics(key: str, cfg, chk) -> dict:
@@ -294,7 +360,71 @@ def compute(ctx: Context) -> Computed:
                 f"{r['ends']['n_ends']}, stable from d = {r['near']['d_lo']:.1e}, flat to {r['near']['d_hi']:.1e}; "
                 f"λ near {r['near']['median']:.2f} ± {r['near']['total']:.2f}, all-range "
                 f"{r['all_range']['median']:.2f}, edge saddle {r['analytic']['edge']:.2f} /s")
+    results["friction"] = friction_sweep(ctx, None if not ctx.quick else dict(list(FRICTION.items())[-2:-1]))
+    results["friction_summary"] = friction_summary(results)
     return Computed(results, plot)
+
+
+def friction_sweep(ctx: Context, settings: dict | None = None) -> dict:
+    """Each FRICTION setting of the `physical` die at the uniform tolerance: borders of home and zoom-out bisected to
+    BISECT_WIDTH, their settle-time profiles at FRICTION_DISTS at the tolerance and a tenth of it, the smallest
+    stable distance d_lo (:func:`~dicetrace.analysis.border_rates.tolerance_stability`), and λ over nested ranges from
+    d_lo (:func:`~dicetrace.analysis.robustness.range_scan`: the shortest range quoted, the others as its one-sided
+    range systematic) against the setting's slipping-pivot root (:func:`edge_saddle`), with the one-sided z."""
+    rng = np.random.default_rng([ctx.options.seed, 44])  # its own stream: the presets' numbers do not move
+    out = {}
+    for name, over in (settings or FRICTION).items():
+        opts = {**MODELS["physical"], **over}
+        cfg, chk = _config(opts), _config(opts, CHECK_TOL)
+        classify, settle = classify_on_slice("seed", config=cfg), settle_on_slice("seed", config=cfg)
+        settle_chk = settle_on_slice("seed", config=chk)
+        brs = []
+        for w in WINDOWS:
+            starts, ends = _lines(window_ranges(w), ctx.pick(*FRICTION_LINES), rng)
+            pairs = line_crossings(classify, starts, ends, ctx.pick(*FRICTION_POINTS))
+            pick = rng.choice(len(pairs), size=min(ctx.pick(*FRICTION_BORDERS), len(pairs)), replace=False)
+            brs.append(bisect_many(classify, [pairs[i] for i in pick], tol=BISECT_WIDTH))
+        br = _concat(brs)
+        prof, check = profiles(settle, br, FRICTION_DISTS), profiles(settle_chk, br, FRICTION_DISTS)
+        ctx.n_throws += classify.n_evals + settle.n_evals + settle_chk.n_evals
+        saddle = edge_saddle(config=cfg)
+        row = {"setting": name, "overrides": over, "mu": cfg.preset.mu, "v_reg_cm_s": cfg.preset.v_reg_cm_s,
+               "slip_c": saddle.slip_c, "edge": saddle.rate, "edge_rigid": saddle.rate_rigid,
+               "edge_free": saddle.rate_free, "n_borders": int(len(br.p_lo)), **_friction_fit(br, prof, check, rng)}
+        if row.get("value") is not None:
+            row["minus_edge"] = row["value"] - saddle.rate
+            row["z_edge"] = one_sided_z(row["value"], row["stat"], row["syst_lo"], row["syst_hi"], saddle.rate)
+            row["z_rigid"] = one_sided_z(row["value"], row["stat"], row["syst_lo"], row["syst_hi"], saddle.rate_rigid)
+        out[name] = row
+        ctx.log(f"friction {name} (c = {saddle.slip_c:.1f}): {row['n_borders']} borders, d_lo {row.get('d_lo')}, λ "
+                f"{row.get('text')} against the slipping pivot's {saddle.rate:.2f} /s (z {row.get('z_edge')})")
+    return out
+
+
+def _friction_fit(br, prof, check, rng) -> dict:
+    """One friction setting's λ from its profiles: d_lo, and the range scan from it (module docstring)."""
+    n = len(br.p_lo)
+    stab = tolerance_stability(FRICTION_DISTS, br, prof, check, t_res=1e-3)
+    if stab["d_min"] is None:
+        return {"d_lo": None, "value": None, "error": "no distance is stable at tol/10"}
+    d_lo = stab["d_min"]
+    ranges = [(d_lo, d_lo * 10**w) for w in FRICTION_WIDTHS if d_lo * 10**w <= FRICTION_DISTS[-1] * (1 + 1e-9)]
+    if not ranges:
+        return {"d_lo": d_lo, "value": None, "error": "no fit range above the stable distance"}
+    seeds = iter(rng.integers(2**31, size=len(ranges)))
+
+    def fit(lo, hi):
+        b = border_bootstrap(fit_sides(FRICTION_DISTS, br, prof, lo, hi), n, seed=int(next(seeds)))
+        return b.get("median", math.nan), b.get("median_stderr")
+
+    try:
+        scan = range_scan(fit, ranges)
+    except ValueError as e:
+        return {"d_lo": d_lo, "value": None, "error": str(e)}
+    out = scan.as_dict()
+    out.update(d_lo=d_lo, flips=int(stab["flips"].sum()), text=stat_syst(scan.value, scan.stat, scan.syst_lo,
+                                                                          scan.syst_hi))
+    return out
 
 
 def _letter() -> str:
@@ -327,6 +457,126 @@ def _draw_local_slope(ax, key: str, r: dict) -> None:
     ax.set_xlabel("distance d from the border (slice units)")
 
 
+def _draw_range(ax, key: str, r: dict) -> None:
+    """One preset's panel of λ against the width of the fit range (the range scan)."""
+    lim = r["limit"]
+    w = np.asarray(lim["widths"], float)
+    v = np.asarray([math.nan if x is None else x for x in lim["values"]], float)
+    e = np.asarray([math.nan if x is None else x for x in lim["stderrs"]], float)
+    k = lim["n_syst"]
+    ax.errorbar(w[:k], v[:k], yerr=e[:k], fmt="o", ms=4, color=COLOURS[key], label="inside the near-border range")
+    ax.errorbar(w[k:], v[k:], yerr=e[k:], fmt="o", ms=4, mfc="none", color=COLOURS[key], label="beyond it")
+    inside = np.isfinite(v[:k])
+    if lim.get("extrapolated") is not None and lim.get("trend") is not None and inside.sum() >= 2:
+        ww = np.array([0.0, w[k - 1]])
+        ax.plot(ww, lim["extrapolated"] + lim["trend"] * ww, ":", color=COLOURS[key],
+                label=f"extrapolated to w = 0: {lim['extrapolated']:.2f} /s")
+    ax.axhspan(lim["value"] - lim["syst_lo"], lim["value"] + lim["syst_hi"], color=COLOURS[key], alpha=0.12,
+               label=f"shortest range {lim['value']:.2f} /s, range systematic")
+    ax.axhline(r["analytic"]["edge"], color="k", lw=1, label=f"edge saddle {r['analytic']['edge']:.2f} /s")
+    ax.set_xlim(0, None)
+    ax.set_ylim(r["analytic"]["edge"] - 0.6, r["analytic"]["edge"] + 1.4)
+    ax.set_title(f"{key}: λ against the fit range from d_lo = {lim['d_lo']:.1e}", fontsize=10)
+    ax.set_xlabel("width of the fit range w (decades of d)")
+
+
+def friction_summary(R: dict) -> dict:
+    """The friction sweep's verdict from its rows and the `physical` preset's own (v_reg 10): how many settings
+    agree with their slipping-pivot root (|z| < 2), disagree (|z| > 3), and the range of the roots spanned."""
+    rows = [dict(v, setting=k) for k, v in R["friction"].items() if v.get("value") is not None]
+    ph = R["physical"]
+    rows.append({"setting": "v_reg 10 (the preset)", "edge": ph["analytic"]["edge"], "value": ph["limit"]["value"],
+                 "z_edge": ph["limit"]["z_edge"]})
+    z = [abs(r["z_edge"]) for r in rows if r.get("z_edge") is not None and math.isfinite(r["z_edge"])]
+    n_ok, n_bad = sum(v < 2 for v in z), sum(v > 3 for v in z)
+    verdict = ("supported" if z and n_ok == len(z) else "refuted" if n_bad else "undetermined")
+    return {"n_settings": len(rows), "n_consistent": n_ok, "n_inconsistent": n_bad, "verdict": verdict,
+            "edge_min": min(r["edge"] for r in rows), "edge_max": max(r["edge"] for r in rows),
+            "value_min": min(r["value"] for r in rows), "value_max": max(r["value"] for r in rows),
+            "failed": [k for k, v in R["friction"].items() if v.get("value") is None],
+            "failed_text": ", ".join(f"{k} ({v.get('error')})" for k, v in R["friction"].items()
+                                     if v.get("value") is None) or "none",
+            "failed_d_lo": [v.get("d_lo") for v in R["friction"].values() if v.get("value") is None],
+            "same_c": _same_c(rows)}
+
+
+def _same_c(rows: list[dict]) -> list[dict]:
+    """Groups of settings that reach one slip coefficient by different means (v_reg and μ): their λ side by side."""
+    by: dict = {}
+    for r in rows:
+        if "slip_c" in r:
+            by.setdefault(round(r["slip_c"], 6), []).append(r)
+    return [{"slip_c": c, "settings": [r["setting"] for r in g], "values": [r["value"] for r in g]}
+            for c, g in by.items() if len(g) > 1]
+
+
+def _friction_render(R: dict, out: Output, letter: str) -> None:
+    """The friction sweep's table and figure (measured against predicted λ, each setting)."""
+    import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
+
+    rows = []
+    for name, v in R["friction"].items():
+        rows.append({"s": name, "mu": v["mu"], "v": v["v_reg_cm_s"], "c": v["slip_c"], "edge": v["edge"],
+                     "n": v["n_borders"], "dlo": fmt(v.get("d_lo"), ".1e"),
+                     "lam": v.get("text") or f"– ({v.get('error')})", "z": v.get("z_edge"), "zr": v.get("z_rigid")})
+    ph = R["physical"]
+    rows.insert(0, {"s": "v_reg 10 (the preset; above)", "mu": 1.2, "v": 10.0, "c": ph["analytic"]["slip_c"],
+                    "edge": ph["analytic"]["edge"], "n": ph["n_borders"], "dlo": f"{ph['limit']['d_lo']:.1e}",
+                    "lam": ph["limit"]["text"], "z": ph["limit"]["z_edge"], "zr": None})
+    out.tables["friction"] = md_table(rows, [
+        ("s", "setting", ""), ("mu", "μ", "g"), ("v", "v_reg (cm/s)", "g"), ("c", "slip coefficient c", ".1f"),
+        ("edge", "slipping-pivot root (1/s)", ".2f"), ("n", "borders", "d"), ("dlo", "d_lo", ""),
+        ("lam", "λ near the border, shortest range (1/s)", ""), ("z", "z vs its root", ".1f"),
+        ("zr", "z vs the held pivot", ".1f")])
+    fig, ax = plt.subplots(figsize=(5.6, 4.6))
+    pts = [(r["edge"], R["friction"][r["s"]] if r["s"] in R["friction"] else None, r) for r in rows]
+    for edge, v, r in pts:
+        if v is None:
+            val, st, lo, hi = ph["limit"]["value"], ph["limit"]["stat"], ph["limit"]["syst_lo"], ph["limit"]["syst_hi"]
+        elif v.get("value") is None:
+            continue
+        else:
+            val, st, lo, hi = v["value"], v["stat"] or 0.0, v["syst_lo"], v["syst_hi"]
+        ax.errorbar([edge], [val], yerr=[[math.hypot(st, lo)], [math.hypot(st, hi)]], fmt="o", capsize=3)
+        ax.annotate(r["s"].split(" (")[0], (edge, val), textcoords="offset points", xytext=(5, -10), fontsize=7)
+    lo_, hi_ = 22.0, max(p[0] for p in pts) + 2.0
+    ax.plot([lo_, hi_], [lo_, hi_], "k-", lw=0.8, label="measured = slipping-pivot root")
+    ax.axhline(R["seed"]["analytic"]["edge_rigid"], color="0.5", ls=":", lw=1, label="held pivot")
+    ax.set_xlabel("slipping-pivot root of the setting (1/s)")
+    ax.set_ylabel("λ near the border (1/s)")
+    ax.set_title("border rates against the friction (physical, contact-tsit5 1e-13)", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    out.save_fig(fig, f"{letter}_friction", key="friction", caption=(
+        "λ near the border (shortest fit range, bars: statistical and range errors in quadrature) of the `physical` "
+        "die with its friction's slip coefficient c = μ m g / v_reg moved through v_reg and μ, against each setting's "
+        "slipping-pivot root from the linearisation (docs/model.md, \"Balances linearised\"); line: equality."))
+
+
+def _signed(v: float) -> str:
+    """A shift with its sign, to two decimals (no negative zero)."""
+    return f"{v:+.2f}".replace("-0.00", "+0.00")
+
+
+def range_table(R: dict) -> str:
+    """λ against the width of the fit range, both presets side by side (every half decade, and the ranges that end
+    the systematic and the near-border range)."""
+    rows = {}
+    for key in MODELS:
+        lim = R[key]["limit"]
+        for i, (w, v, e) in enumerate(zip(lim["widths"], lim["values"], lim["stderrs"])):
+            half = abs(w * 2 - round(w * 2)) < 1e-6
+            if not half and i != lim["n_syst"] - 1:
+                continue
+            row = rows.setdefault(round(w, 2), {"w": w})
+            row[key] = pm(v, e, ".2f") + (" (syst.)" if i < lim["n_syst"] else "")
+            row[f"{key}_d"] = f"{lim['ranges'][i][1]:.1e}"
+    return md_table([rows[k] for k in sorted(rows)], [
+        ("w", "range width (decades above d_lo)", ".2f"), ("seed_d", "`seed`: up to d", ""),
+        ("seed", "`seed`: λ (1/s)", ""), ("physical_d", "`physical`: up to d", ""),
+        ("physical", "`physical`: λ (1/s)", "")])
+
+
 def _draw_lambdas(ax, key: str, r: dict) -> None:
     """One preset's panel of the histograms of every side's λ, near the border and over the whole range."""
     near = np.asarray(r["lambdas_near"], float)
@@ -342,12 +592,12 @@ def _draw_lambdas(ax, key: str, r: dict) -> None:
 
 
 def _save_by_preset(out: Output, results: dict, draw, name: str, key: str, *, height: float, ylabel: str,
-                    caption: str) -> None:
+                    caption: str, sharey: bool = True) -> None:
     """A figure of one panel a preset side by side on one y axis: ``draw(ax, preset, its results)`` fills each
     (title and x label too), then each gets a legend and the first the y label."""
     import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
-    fig, axes = plt.subplots(1, len(MODELS), figsize=(12, height), sharey=True)
+    fig, axes = plt.subplots(1, len(MODELS), figsize=(12, height), sharey=sharey)
     for ax, preset in zip(axes, MODELS):
         draw(ax, preset, results[preset])
         ax.legend(fontsize=7)
@@ -367,6 +617,12 @@ def render(c: Computed, out: Output) -> None:
                     "(least squares over a sliding decade, median over every side of every border of home and "
                     "zoom-out; band: interquartile range). Grey: the near-border fit range (stable at tol/10, slope "
                     "within 2 % of its value at the smallest stable distances).")
+    _save_by_preset(out, R, _draw_range, f"{L}_range", "range", height=4.2, ylabel="λ (1/s), median over sides",
+                    caption="λ fitted from the smallest stable distance d_lo to d_lo·10^w against the width w of the "
+                    "range (decades; median over every side, bootstrap error over borders). Filled: the ranges inside "
+                    "the near-border range (local slope within 2 %), which give the range systematic; line: their "
+                    "straight-line extrapolation to zero width; band: the shortest range's value with its one-sided "
+                    "range systematic; black: the edge saddle.", sharey=False)
     _save_by_preset(out, R, _draw_lambdas, f"{L}_lambdas", "lambdas", height=4.0, ylabel="sides",
                     caption="λ of every side fitted near the border (filled) and over the whole range from the same "
                     "smallest distance to 1e-3 (outline), with the analytic edge saddle of each preset.")
@@ -374,21 +630,31 @@ def render(c: Computed, out: Output) -> None:
     rows = []
     for key in MODELS:
         r = R[key]
+        lim = r["limit"]
         rows.append({
             "model": key, "num": f"{r['numerics']['integrator']}, tol {r['numerics']['tol']:g} uniform",
             "edge": r["analytic"]["edge"], "corner": r["analytic"].get("corner"),
+            "lrange": f"{lim['d_lo']:.0e} – {lim['d_hi']:.0e}",
+            "limit": lim["value"], "stat": lim["stat"],
+            "rsyst": f"+{lim['syst_hi']:.2f} / −{lim['syst_lo']:.2f}",
+            "tol": _signed(lim["tol_shift"]), "est": _signed(lim["estimator_shift"]), "z": lim["z_edge"],
             "range": f"{r['near']['d_lo']:.0e} – {r['near']['d_hi']:.0e}" if r["near"].get("d_hi") else "–",
-            "near": pm(r["near"]["median"], r["near"]["total"], ".2f"),
-            "parts": f"{r['near']['median_stderr']:.2f} / {r['near']['syst']:.2f}",
+            "near": pm(r["near"]["median"], r["near"]["median_stderr"], ".2f"),
             "all": pm(r["all_range"]["median"], r["all_range"]["median_stderr"], ".2f"),
             "sides": f"{r['near']['n_sides']} ({r['n_borders']} borders)",
             "ends": f"{r['ends']['n_changed']}/{r['ends']['n_ends']}",
         })
     out.tables["rates"] = md_table(rows, [
         ("model", "model", ""), ("num", "numerics", ""), ("edge", "edge saddle (1/s)", ".2f"),
-        ("corner", "corner balance (1/s)", ".2f"), ("range", "near-border d range", ""),
-        ("near", "λ near the border (1/s)", ""), ("parts", "stat / syst", ""),
+        ("corner", "corner balance (1/s)", ".2f"), ("lrange", "shortest range d", ""),
+        ("limit", "λ, shortest range (1/s)", ".2f"), ("stat", "stat", ".2f"),
+        ("rsyst", "range syst (+ / −)", ""), ("tol", "shift at tol/10", ""),
+        ("est", "shift, trimmed mean", ""), ("z", "z vs edge saddle", ".1f"),
+        ("range", "2 % range d", ""), ("near", "λ over the 2 % range (1/s)", ""),
         ("all", "λ whole range (1/s)", ""), ("sides", "sides", ""), ("ends", "bracket ends changed at tol/10", "")])
+    out.tables["range"] = range_table(R)
+    if R.get("friction"):
+        _friction_render(R, out, L)
     rows = []
     for key in MODELS:
         for w, b in R[key]["by_window"].items():
@@ -417,8 +683,33 @@ def rerender(out) -> Path:
         new = analyse_preset(raw_from_frame(df, key), old["numerics"], found, seed=old["bootstrap_seed"])
         new.update(bootstrap_seed=old["bootstrap_seed"], bisect_n_evals=old.get("bisect_n_evals"))
         results[key] = new
+    if results.get("friction"):  # derived from the sweep's rows and the preset's (just recomputed)
+        results["friction_summary"] = friction_summary(results)
     output = Output(out)
     render(Computed(results), output)
     results["figures"], results["tables"] = output.figures, output.tables
     write_json(path, results)
     return path
+
+
+def add_friction(out, options=None) -> Path:
+    """Run the friction sweep (:func:`friction_sweep`, the full run's settings) into a finished run in ``out`` and
+    redraw its tables and figures from the raw profiles (:func:`rerender`): the presets' numbers do not move (the sweep
+    draws from its own random stream), so the results are those a full run gives.  Its time is kept in
+    ``friction_s`` and added to ``wall_s``."""
+    import time
+
+    from dicetrace.studies.context import Options
+
+    out = Path(out)
+    path = out / "results" / f"{NAME}.json"
+    results = json.loads(path.read_text())
+    ctx = Context(NAME, options or Options(), out / "cache")
+    t0 = time.perf_counter()
+    results["friction"] = friction_sweep(ctx)
+    results["friction_s"] = time.perf_counter() - t0
+    results["friction_n_throws"] = int(ctx.n_throws)
+    results["wall_s"] = results.get("wall_s", 0.0) + results["friction_s"]
+    results["n_throws_simulated"] = results.get("n_throws_simulated", 0) + ctx.n_throws
+    write_json(path, results)
+    return rerender(out)

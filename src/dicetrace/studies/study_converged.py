@@ -200,6 +200,24 @@ def _alpha_pert_change(by: dict) -> str:
     return f"by {z['home']:.1f} and {z['zoom-out']:.1f} standard errors, {verdict}"
 
 
+def retable(out) -> Path:
+    """Write the tables of a finished run in ``out`` again from ``results/converged.json`` alone (no grid, no
+    simulation, no number changed; the figures, drawn from the grids, are kept as they are)."""
+    from dicetrace.studies.study_converged_render import changes_text, window_table
+
+    path = Path(out) / "results" / f"{NAME}.json"
+    results = json.loads(path.read_text())
+    by, windows, models = results["by"], tuple(results["windows"]), tuple(results["models"])
+    sigma = results.get("change_sigma", CHANGE_SIGMA)
+    tables = dict(results.get("tables", {}))
+    for w in windows:
+        tables[f"window_{w}"] = window_table(by[w], models, sigma)
+    tables["changes"] = changes_text(by, windows, sigma)
+    results["tables"] = tables
+    write_json(path, results)
+    return path
+
+
 def rerender(out, options: Options = Options()) -> Path:
     """Redraw the figures and tables of a finished run in ``out`` without simulating.
 

@@ -43,6 +43,13 @@ def _model_header(r: dict) -> str:
     return f"{r['model']} ({_numerics(r)})"
 
 
+#: The label of the rows that section o supersedes (λ fitted over every distance, `physical` at its graded tolerance):
+#: they keep their numbers as what those fits gave, without a verdict.
+SUPERSEDED = "superseded by section o, no verdict"
+#: The change keys those rows had.
+SUPERSEDED_KEYS = ("lambda",)
+
+
 def window_table(rows: dict, models, sigma: float = CHANGE_SIGMA) -> str:
     """One window's measures, one column per model, and the discrete → converged change in standard errors."""
     ms = [rows[m] for m in models]
@@ -96,10 +103,10 @@ def window_table(rows: dict, models, sigma: float = CHANGE_SIGMA) -> str:
         line("unsettled throws", [str(r["settle"]["n_unsettled"]) for r in ms]),
         line("escape rate κ (1/s)", [pm(r["settle"].get("kappa"), r["settle"].get("kappa_stderr"), ".1f") for r in ms],
              "kappa"),
-        line("settle-time divergence λ, all sides (1/s)", [
+        line(f"settle-time divergence λ, all sides (1/s): {SUPERSEDED}", [
             f"{pm(r['divergence'].get('mean'), r['divergence'].get('mean_stderr'), '.1f')} "
-            f"({r['divergence']['n_fits']} sides)" for r in ms], "lambda"),
-        line("λ median ± bootstrap / clean fits (1/s)", [
+            f"({r['divergence']['n_fits']} sides)" for r in ms]),
+        line(f"λ median ± bootstrap / clean fits (1/s): {SUPERSEDED}", [
             f"{pm(r['divergence'].get('median'), r['divergence'].get('median_stderr'), '.1f')} / "
             f"{pm(r['divergence'].get('clean_mean'), r['divergence'].get('clean_stderr'), '.1f')} "
             f"({r['divergence']['n_clean']})" for r in ms]),
@@ -122,14 +129,15 @@ def changes_text(by: dict, windows, sigma: float = CHANGE_SIGMA) -> str:
     """A list, per window, of the measures that change from the discrete to the converged model."""
     lines = []
     for w in windows:
-        ch = by[w]["changes"]
+        ch = [c for c in by[w]["changes"] if c["key"] not in SUPERSEDED_KEYS]
         yes = [c for c in ch if c["changed"]]
         no = [c for c in ch if not c["changed"]]
         conv = by[w]["converged"]
         tag = "" if conv["converged"] else " (the converged map is **not certified**: read with care)"
         desc = "; ".join(f"{c['measure']} {_fmt_change(c)}" for c in yes) or "nothing beyond the error bars"
         lines.append(f"- **{w}**{tag}: changed: {desc}. Unchanged within {sigma:g} σ: "
-                     f"{', '.join(c['measure'] for c in no) or 'none'}.")
+                     f"{', '.join(c['measure'] for c in no) or 'none'}. (The settle-time divergence λ over every "
+                     "distance is superseded by section o and judged there.)")
     return "\n".join(lines)
 
 

@@ -12,10 +12,12 @@ three faces meet.  Here:
    several directions, the tilt's growth fitted over the linear range, at a
    uniform tight tolerance (``physical``: ``contact-tsit5`` at 10⁻¹⁰, no
    growth; the ``seed`` force law with ``contact-adaptive`` at 10⁻⁹, released
-   turning because its friction law has no direction at rest); error bars
-   from the spread over directions, alternative fit ranges and a 10× tighter
-   tolerance.  The program's own integrator (``seed``, semi-implicit Euler)
-   is run too.
+   turning because its friction law has no direction at rest).  ``physical``'s
+   error budget: the spread over directions, the shift when the output step
+   (which caps the sub-steps) and the tolerance change together, and the fit
+   range's one-sided systematic (:func:`~dicetrace.analysis.robustness.range_scan`
+   over the fit's end and start).  The program's own integrator (``seed``,
+   semi-implicit Euler) is run too.
 2. **The face map around the balance**: releases on rings of tilt 10⁻⁸ …
    10⁻² rad and every direction, which face comes up; the borders between
    the sectors bisected in direction to 10⁻⁹ rad.
@@ -27,7 +29,11 @@ three faces meet.  Here:
    10⁻¹¹ (slice units), three sectors checked on circles of radius 10⁻³ … 10⁻⁷ of
    the window, and how close each point's throw comes to a corner balance
    (:func:`~dicetrace.analysis.corner_slice.corner_distance`) against random
-   throws and throws on two-face borders.
+   throws and throws on two-face borders.  Each located point is examined
+   again by two independent integrators (:func:`reproduce`): the faces on
+   circles of 10⁻⁷ … 10⁻¹⁰ of the window, and the point located again, whose
+   spread against the hunt's bisection box says to what scale the location is
+   the model's and not one integrator's.
 
 The figures and tables are drawn by :mod:`dicetrace.studies.study_corner_render`.
 """
@@ -51,7 +57,8 @@ from dicetrace.analysis.corner import (
     face_map,
     sector_boundaries,
 )
-from dicetrace.analysis.corner_slice import circle_sectors, clean_junctions, corner_distance, refine_triple
+from dicetrace.analysis.corner_slice import arcs, circle_sectors, clean_junctions, corner_distance, refine_triple
+from dicetrace.analysis.robustness import common_scale, one_sided_z, range_scan, relocate
 from dicetrace.analysis.simulator import classify_on_slice
 from dicetrace.analysis.transient import certify_map, converged_verdict
 from dicetrace.ics import seed_slice
@@ -69,6 +76,16 @@ RINGS = {"physical": ((1e-8, 0.0), (1e-6, 0.0), (1e-4, 0.0), (1e-2, 0.0), (1e-6,
          "seed-discrete": ((1e-8, 0.0), (1e-6, 0.0), (1e-4, 0.0), (1e-2, 0.0))}
 #: Circle radii about a located point, as fractions of the window's width.
 RADII = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7)
+#: The located points re-examined with independent integrators (10× tighter than the hunt's): circles of these
+#: radii (fractions of the window's width), and the point located again from a box of RELOCATE_HALF about it.
+INDEPENDENT = {"contact-dop853": {"preset": "seed", "integrator": "contact-dop853", "tol": 1e-10},
+               "contact-tsit5": {"preset": "seed", "integrator": "contact-tsit5", "tol": 1e-10}}
+REPRO_RADII = (1e-7, 1e-8, 1e-9, 1e-10)
+RELOCATE_HALF = 1e-7
+#: The corner rate's error budget (physical): step caps (s) and tolerances of the numerics, and the fit ranges
+#: (rad): the end of the fit from 1e-4 to 3e-3 rad at the start 1e4 × tilt0, and the start a decade later.
+STEP_CAPS = ((5e-4, 1e-10), (2e-4, 1e-10), (1e-4, 1e-10), (1e-4, 1e-11))
+FIT_ENDS = (1e-4, 3e-4, 1e-3, 3e-3)
 
 
 def _model_text(opts: dict) -> str:
@@ -98,13 +115,16 @@ def rates(ctx: Context) -> dict:
     # bias the rate by 6e-6 of it) to 1e-3 rad; alternatives: another start, a 10× tighter tolerance
     cfg = config(PHYSICAL)
     main = [_fit(cfg, tilt0=1e-10, start=1e4, saturation=1e-3, phi=f) for f in phis]
-    alt_start = _fit(cfg, tilt0=1e-9, start=1e4, saturation=1e-3, phi=phis[0])
-    alt_late = _fit(cfg, tilt0=1e-10, start=1e5, saturation=1e-3, phi=phis[0])
-    alt_tol = _fit(config({**PHYSICAL, "tol": PHYSICAL["tol"] / 10}), tilt0=1e-10, start=1e4, saturation=1e-3,
-                   phi=phis[0])
+    # the numerics: the output step caps the sub-steps, so the step cap and the tolerance are varied together
+    caps = ctx.pick(STEP_CAPS, STEP_CAPS[-1:])
+    numerics = [{"dt_s": dt, "tol": tol, **_fit(config({**PHYSICAL, "tol": tol, "dt_s": dt}), tilt0=1e-10, start=1e4,
+                                                 saturation=1e-3, phi=phis[0])} for dt, tol in caps]
+    # the fit range: its end (the start fixed at 1e4 × tilt0, where the stable directions have decayed) and its start
+    ends = _range_scan_fit(cfg, [(1e-6, e) for e in FIT_ENDS], phis[0], reference=FIT_ENDS.index(1e-3))
+    starts = _range_scan_fit(cfg, [(1e-5, 1e-3), (1e-6, 1e-3)], phis[0], reference=1)
     spin = _fit(cfg, tilt0=1e-7, start=100.0, saturation=1e-3, phi=phis[0], spin_ratio=1.0)
     early = _fit(cfg, tilt0=1e-8, start=100.0, saturation=1e-3, phi=phis[0])  # the stable directions not gone yet
-    out["physical"] = _summary(main, [alt_start, alt_late, alt_tol], out["balance"]["physical"]["rate"],
+    out["physical"] = _summary(main, numerics, ends, starts, out["balance"]["physical"]["rate"],
                                model=_model_text(PHYSICAL), spin=spin, n_directions=len(main),
                                early_start_bias=(early["rate"] - out["balance"]["physical"]["rate"])
                                / out["balance"]["physical"]["rate"])
@@ -137,16 +157,39 @@ def rates(ctx: Context) -> dict:
     return out
 
 
-def _summary(main: list, alts: list, analytic: float, **extra) -> dict:
+def _range_scan_fit(cfg, ranges, phi: float, *, reference: int) -> dict:
+    """The physical corner rate fitted over nested tilt ranges (rad) of one release at 1e-10 rad (its start a
+    multiple of the start tilt): :func:`~dicetrace.analysis.robustness.range_scan` of the fit's range."""
+
+    def fit(lo, hi):
+        r = _fit(cfg, tilt0=1e-10, start=lo / 1e-10, saturation=hi, phi=phi)
+        if r["rate"] is None:
+            raise ValueError(r["error"])
+        return r["rate"]
+
+    return range_scan(fit, ranges, reference=reference).as_dict()
+
+
+def _summary(main: list, numerics: list, ends: dict, starts: dict, analytic: float, **extra) -> dict:
+    """The physical corner rate and its error budget: the mean over directions with the spread over them (stat; a
+    regression's standard error of a clean exponential is rounding, not an error, and is left out), the shift when
+    the step cap and the tolerance change (numerics), and the fit range's one-sided systematic (the end and the
+    start of the fit moved); the difference from the analytic root in σ of the side it lies on."""
     r = np.array([m["rate"] for m in main if m["rate"] is not None], dtype=float)
-    se = np.array([m["stderr"] for m in main if m["rate"] is not None], dtype=float)
     mean = float(r.mean())
-    stat = float(math.hypot(r.std(ddof=1) / math.sqrt(len(r)) if len(r) > 1 else 0.0, float(se.max())))
-    syst = [abs(a["rate"] - main[0]["rate"]) for a in alts if a["rate"] is not None]
-    err = float(math.sqrt(stat**2 + sum(s**2 for s in syst)))
-    return {"runs": main, "alternatives": alts, "rate": mean, "stat": stat, "syst": syst, "error": err,
-            "analytic": analytic, "difference": mean - analytic, "sigmas": (mean - analytic) / err if err else None,
-            "relative": (mean - analytic) / analytic, "max_drift": float(max(m["drift"] for m in main)), **extra}
+    stat = float(r.std(ddof=1) / math.sqrt(len(r))) if len(r) > 1 else math.nan
+    shifts = [m["rate"] - main[0]["rate"] for m in numerics if m["rate"] is not None]
+    num = float(max((abs(v) for v in shifts), default=0.0))
+    lo = float(max(ends["syst_lo"], starts["syst_lo"]))
+    hi = float(max(ends["syst_hi"], starts["syst_hi"]))
+    err_lo, err_hi = math.sqrt(stat**2 + num**2 + lo**2), math.sqrt(stat**2 + num**2 + hi**2)
+    side = err_lo if analytic < mean else err_hi
+    return {"runs": main, "numerics": numerics, "fit_ends": ends, "fit_starts": starts, "rate": mean, "stat": stat,
+            "numerics_syst": num, "range_syst_lo": lo, "range_syst_hi": hi, "error": max(err_lo, err_hi),
+            "error_lo": err_lo, "error_hi": err_hi, "analytic": analytic, "difference": mean - analytic,
+            "sigmas": one_sided_z(mean, stat, math.hypot(num, lo), math.hypot(num, hi), analytic),
+            "relative": (mean - analytic) / analytic, "range_syst_relative": max(lo, hi) / analytic,
+            "error_side": side, "max_drift": float(max(m["drift"] for m in main)), **extra}
 
 
 def _extrapolated(lo: list, hi: dict, sats, analytic: float, **extra) -> dict:
@@ -223,6 +266,7 @@ def triple_points(ctx: Context) -> tuple[dict, dict]:
     cb = corner_balance(config=hunt_cfg)
     throw = _thrower()
     classify = classify_on_slice("seed", config=hunt_cfg)
+    independent = {k: classify_on_slice("seed", config=config(v)) for k, v in INDEPENDENT.items()}
     res = ctx.res(161, 17)
     n_cand = ctx.pick(16, 1)
     tol = ctx.pick(1e-11, 1e-6)
@@ -252,6 +296,7 @@ def triple_points(ctx: Context) -> tuple[dict, dict]:
                                   for r in radii]
                 row["three_on_every_circle"] = all(c["three_sectors"] for c in row["circles"])
                 row["throw"] = throw(row["x"], row["y"])
+                row["reproduced"] = reproduce(ctx, row, width, {"hunt": classify, **independent}, tol)
             row["wall_s"] = time.perf_counter() - t0
             points.append(row)
             ctx.log(f"{w} box {i},{j}: {row['status']} {row.get('labels')} "
@@ -267,9 +312,46 @@ def triple_points(ctx: Context) -> tuple[dict, dict]:
                      "converged": converged_verdict(cert), "hunt_evals": classify.n_evals - n0,
                      "random": rnd, "border": borders})
         plot[w] = s
-    ctx.n_throws += classify.n_evals
+    ctx.n_throws += classify.n_evals + sum(c.n_evals for c in independent.values())
     return {"map_model": _model_text(MAP_MODEL), "hunt_model": _model_text(HUNT_MODEL), "tol": tol,
-            "radii": list(radii), "rate": cb.rate, "maps": maps, "points": points}, plot
+            "radii": list(radii), "rate": cb.rate, "maps": maps, "points": points,
+            "independent": {k: _model_text(v) for k, v in INDEPENDENT.items()},
+            "repro_radii": list(ctx.pick(REPRO_RADII, REPRO_RADII[:2])), "relocate_half": RELOCATE_HALF}, plot
+
+
+def reproduce(ctx: Context, row: dict, width: float, classifiers: dict, tol: float) -> dict:
+    """A located triple point seen by every integrator of ``classifiers`` (``"hunt"``: the one that located it):
+    the faces on circles of the REPRO_RADII (fractions of the window's width) about it, the smallest radius down to
+    which every integrator sees three sectors of the point's three faces
+    (:func:`~dicetrace.analysis.robustness.common_scale`), and the point located again by each independent
+    integrator from a box of half side RELOCATE_HALF × width about it, their spread against the hunt's box
+    (:func:`~dicetrace.analysis.robustness.relocate`)."""
+    radii = ctx.pick(REPRO_RADII, REPRO_RADII[:2])
+    want = sorted(row["labels"])
+    seen, faces = {}, {}
+    n = ctx.pick(24, 8)
+    ang = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
+    for name, cl in classifiers.items():
+        faces[name], seen[name] = [], []
+        for r in radii:  # the faces on the circle, in order (one batch; no bisection: which faces, not where)
+            pts = np.column_stack([row["x"] + r * width * np.cos(ang), row["y"] + r * width * np.sin(ang)])
+            runs = arcs([int(v) for v in np.asarray(cl(pts)).ravel()])
+            f = [int(a[0]) for a in runs]
+            faces[name].append(f)
+            seen[name].append(len(f) == 3 and sorted(f) == want)
+    points = {"hunt": (row["x"], row["y"])}
+    found = {}
+    for name, cl in classifiers.items():
+        if name == "hunt":
+            continue
+        r = refine_triple(cl, (row["x"], row["y"]), RELOCATE_HALF * width, tol=tol)
+        found[name] = {k: r.get(k) for k in ("status", "x", "y", "size", "labels", "evals")}
+        points[name] = (r["x"], r["y"]) if r["status"] == "vertex" and sorted(r["labels"]) == want else None
+    rel = relocate(points, reference="hunt", box=row["size"])
+    scale = common_scale(radii, seen, reference="hunt", require=True)
+    return {"radii": list(radii), "faces": faces, "three_sectors": seen, "reproducible_radius": scale,
+            "relocated": found, "relocation": rel.as_dict(),
+            "spread_over_width": rel.spread / width if math.isfinite(rel.spread) else None}
 
 
 def _border_points(classify, s, ctx: Context, n: int) -> list[tuple[float, float]]:
@@ -318,6 +400,7 @@ def rerender(out, options: Options = Options(), *, remeasure: bool = False):
         R["wall_s"] += R["remeasure_s"]
     fm = {(model, r["tilt"], r["spin_ratio"]): np.asarray(r["labels"])
           for model, v in R["face_maps"]["models"].items() for r in v["rings"]}
+    R["triple"]["reproducibility"] = reproducibility(R["triple"]["points"])
     R["verdict"] = verdict(R)
     output = Output(out)
     render(Computed(R, {"face_maps": fm, "maps": maps}), output)
@@ -326,10 +409,27 @@ def rerender(out, options: Options = Options(), *, remeasure: bool = False):
     return path
 
 
+def reproducibility(points: list) -> dict:
+    """Over the located points re-examined by the independent integrators (:func:`reproduce`): how many every
+    integrator found again with the same faces, the largest and smallest spread of the points (fractions of the
+    window's width), and the coarsest and finest radius down to which every integrator sees the three faces."""
+    rp = [p["reproduced"] for p in points if p.get("reproduced")]
+    spreads = [r["spread_over_width"] for r in rp if r["spread_over_width"] is not None]
+    radii = [r["reproducible_radius"] for r in rp if r["reproducible_radius"] is not None]
+    return {"n_points": len(rp), "n_found_by_all": sum(all(r["relocation"]["found"]) for r in rp),
+            "spread_max": max(spreads, default=None), "spread_min": min(spreads, default=None),
+            "radius_coarsest": max(radii, default=None), "radius_finest": min(radii, default=None),
+            "n_without_common_radius": sum(r["reproducible_radius"] is None for r in rp),
+            "n_with_common_radius": sum(r["reproducible_radius"] is not None for r in rp),
+            "largest_radius": max((max(r["radii"]) for r in rp), default=None),
+            "box_max": max((p["size"] for p in points if p.get("reproduced")), default=None)}
+
+
 def compute(ctx: Context) -> Computed:
     rate = rates(ctx)
     fm, plot_fm = face_maps(ctx)
     tp, plot_tp = triple_points(ctx)
+    tp["reproducibility"] = reproducibility(tp["points"])
     results = {"rates": rate, "face_maps": fm, "triple": tp}
     results["verdict"] = verdict(results)
     return Computed(results, {"face_maps": plot_fm, "maps": plot_tp})

@@ -15,10 +15,16 @@ thrown with ``contact-tsit5`` at a uniform tolerance of 1e-10 (no loosening over
   that bound is below a third of ``f(ε)`` and at least ten pairs changed;
 * the settling hazard against time (settle time and commit time, the last contact off the
   final face), against bounce number and against energy;
+* each hazard's shape across its quantile windows (:func:`~dicetrace.analysis.doubly_transient.hazard_shape`:
+  a steady rise, a dip before a rise, or not monotone) and the late hazard with the tail's start
+  (90–99 % quantile) as its systematic (:func:`~dicetrace.analysis.doubly_transient.tail_scan`);
 * λ₁ on throws that outlive the median settle time (pairs nudged by 1e-10), beside all throws;
-* the edge-release rate of each model, and the two hypotheses with their z-scores: the final
-  saddle is the edge balance (the late commit hazard tends to the edge rate, α at fine
-  scales to 1) against the chaotic-saddle relation α = κ/λ₁.
+* each model's analytic edge saddle (:func:`~dicetrace.analysis.border_rates.edge_saddle`) and,
+  beside it, the edge-release rate; for ``seed`` the release diagnosed (:func:`release_diagnosis`:
+  its fit starts inside a start transient, so it is no bound on the saddle);
+* the two hypotheses with their z-scores: the final saddle is the edge balance, tested on the
+  settle clock (the late settle hazard against α_fine·λ_edge, with the tail-start systematic, and
+  α at fine scales against 1), against the chaotic-saddle relation α = κ/λ₁.
 """
 
 from __future__ import annotations
@@ -31,15 +37,18 @@ from pathlib import Path
 
 import numpy as np
 
+from dicetrace.analysis.border_rates import edge_saddle
 from dicetrace.analysis.doubly_transient import (commit_steps, compare, covariate_hazard, crossover_fit, floor_test,
-                                                 hazard_summary, local_slopes, pair_divergence, pair_outcomes,
-                                                 pair_verdicts, perturbed, throw_floor)
+                                                 hazard_shape, hazard_summary, local_slopes, pair_divergence,
+                                                 pair_outcomes, pair_verdicts, perturbed, tail_scan, throw_floor)
 from dicetrace.analysis.edge import edge_release_rate
 from dicetrace.analysis.lyapunov import finite_time_lyapunov
+from dicetrace.analysis.robustness import one_sided_z
 from dicetrace.analysis.settle import edge_balance_rate
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
+from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
+from dicetrace.studies.text import fmt
 from dicetrace.studies.study_doubly_transient_render import render as _render
 
 NAME = "doubly_transient"
@@ -71,6 +80,11 @@ EPS_QUICK = 10.0 ** np.arange(-8, -1, 2)
 #: A scale counts where the floor's 95 % upper bound (twice the throws' flip fraction) is below this fraction of f(ε)
 #: and at least MIN_CHANGED pairs changed.
 FLOOR_SHARE, MIN_CHANGED = 1.0 / 3.0, 10
+#: ε_c is resolved only where at least this many counted scales lie below it (a smooth range measured, not the
+#: crossover fit's reading of the finest scales).
+EPS_C_MIN_BELOW = 2
+#: The seed edge release, diagnosed: its steps (s), start tilts (rad) and the later starts (s) of the fit.
+RELEASE_DTS, RELEASE_TILTS, RELEASE_STARTS = (1e-4, 5e-5, 2.5e-5), (1e-7, 1e-6, 1e-5), (0.1, 0.15, 0.2)
 
 
 def _config(cond: str, tol: float):
@@ -90,6 +104,52 @@ def _numerics(cfg) -> dict:
     p, n = cfg.preset, cfg.numerics
     return {"preset": p.name, "gamma": p.gamma, "k": p.k, "integrator": n.integrator, "tol": n.tol,
             "tol_growth": n.tol_growth, "dt_s": n.dt_s}
+
+
+def release_diagnosis(cfg) -> dict:
+    """Why the ``seed`` die's edge release does not measure its edge saddle: released at every step of
+    RELEASE_DTS and tilt of RELEASE_TILTS, the rate fitted as section k4 fits it (from ten times the start tilt to
+    0.01 rad), the tilt 0.1 s after the release (the same for every start tilt where the release's first steps,
+    not the tilt, set the motion), and the rate fitted from the later starts RELEASE_STARTS to 0.01 rad."""
+    rows = []
+    for dt in RELEASE_DTS:
+        c = replace(cfg, numerics=replace(cfg.numerics, integrator="contact-substep", dt_s=dt))
+        for tilt0 in RELEASE_TILTS:
+            try:
+                er = edge_release_rate(config=c, tilt0=tilt0)
+            except ValueError as e:
+                rows.append({"dt_s": dt, "tilt0": tilt0, "error": str(e)})
+                continue
+            t, tilt = er.t_s, er.tilt
+            late = []
+            for t0 in RELEASE_STARTS:
+                try:
+                    f = finite_time_lyapunov(t, tilt, saturation=0.01, t_min=max(t0, er.fit_range[0]))
+                    late.append({"from_s": t0, "rate": f.exponent, "stderr": f.stderr})
+                except ValueError:
+                    late.append({"from_s": t0, "rate": math.nan, "stderr": math.nan})
+            rows.append({"dt_s": dt, "tilt0": tilt0, "rate": er.rate, "stderr": er.stderr,
+                         "fit_range": list(er.fit_range), "tilt_at_0_1_s": float(np.interp(0.1, t, tilt)),
+                         "late": late})
+    ok = [r for r in rows if "rate" in r]
+    lates = [x["rate"] for r in ok for x in r["late"] if math.isfinite(x["rate"])]
+    return {"rows": rows, "rate_min": min(r["rate"] for r in ok), "rate_max": max(r["rate"] for r in ok),
+            "late_min": min(lates), "late_max": max(lates),
+            "tilt_0_1_min": min(r["tilt_at_0_1_s"] for r in ok), "tilt_0_1_max": max(r["tilt_at_0_1_s"] for r in ok)}
+
+
+def compare_with_syst(x: float, stat: float, syst_lo: float, syst_hi: float, y: float, y_err: float) -> dict:
+    """:func:`~dicetrace.analysis.doubly_transient.compare` of ``x`` (statistical error ``stat``, one-sided
+    systematic ``syst_lo``/``syst_hi``) with ``y`` ± ``y_err``: the z-score from the statistical errors alone
+    (``z_stat``) and with the systematic of the side ``y`` lies on (``z``, which gives the verdict)."""
+    c = compare(x, stat, y, y_err)
+    ok = all(v is not None and math.isfinite(v) for v in (x, stat, y, y_err))
+    z = one_sided_z(x, stat, syst_lo or 0.0, syst_hi or 0.0, y, y_err) if ok else math.nan
+    verdict = ("undetermined" if not ok or not math.isfinite(z) else
+               "consistent" if abs(z) < 2 else "inconsistent" if abs(z) > 3 else "undetermined")
+    c.update(z_stat=c["z"], z=z if ok else math.nan, syst_lo=syst_lo, syst_hi=syst_hi, verdict=verdict,
+             syst_dominates=bool(max(syst_lo or 0.0, syst_hi or 0.0) > stat) if ok else None)
+    return c
 
 
 def _traced(ctx: Context, cfg, ics, t_settle, rng, n_surv: int, n_rand: int) -> dict:
@@ -170,13 +230,28 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
     except ValueError as e:
         edge = {"rate": math.nan, "stderr": math.nan, "error": str(e)}
     ctx.n_throws += 1
+    saddle = edge_saddle(config=cfg)
+    lam_edge = saddle.rate
+    diagnosis = None
+    if cfg.preset.name == "seed" and not ctx.quick:
+        diagnosis = release_diagnosis(cfg)
+        ctx.n_throws += len(diagnosis["rows"])
     lam1, lam1_se = tr["survivors"]["mean"], tr["survivors"]["stderr"]
     k_mid, k_mid_se = hz["commit"]["kappa_mid"], hz["commit"]["kappa_mid_stderr"]
     ratio = k_mid / lam1 if lam1 else math.nan
     ratio_se = ratio * math.hypot(k_mid_se / k_mid, lam1_se / lam1) if lam1 and k_mid else math.nan
+    shapes = {k: hazard_shape(hz[k]["windows"]["h"], hz[k]["windows"]["stderr"]) for k in ("commit", "settle")}
+    tails = {}
+    for key, life in (("settle", t_settle[base]), ("commit", commit[base] * dt)):
+        tails[key] = tail_scan(life, censored=life >= t_cap)
+    st = tails["settle"]
+    below = int(np.sum(np.asarray(eps)[counted] < cx.eps_c)) if cx.status == "fitted" else 0
     tests = {
-        "edge_late_hazard": compare(hz["commit"]["kappa_late"], hz["commit"]["kappa_late_stderr"], edge["rate"],
-                                    edge["stderr"]),
+        # the settle clock: an edge saddle predicts κ = α·λ_edge with α the uncertainty exponent at the scales the
+        # late throws reach (the finest counted); the commit time can stop on arrival at the final edge
+        "edge_settle": compare_with_syst(st["value"], st["stat"], st["syst_lo"], st["syst_hi"],
+                                         alpha_fine[0] * lam_edge, alpha_fine[1] * lam_edge),
+        "edge_settle_alpha1": compare_with_syst(st["value"], st["stat"], st["syst_lo"], st["syst_hi"], lam_edge, 0.0),
         "edge_alpha_fine": compare(alpha_fine[0], alpha_fine[1], 1.0, 0.0),
         "saddle_beta": compare(cx.beta, cx.beta_stderr, ratio, ratio_se),
         "saddle_alpha_fine": compare(alpha_fine[0], alpha_fine[1], ratio, ratio_se),
@@ -194,14 +269,20 @@ def _measure(ctx: Context, cond: str, index: int) -> dict:
         "alpha_fine": alpha_fine[0], "alpha_fine_stderr": alpha_fine[1],
         "alpha_fine_eps": float(ls.eps_mid[fine]) if fine >= 0 else math.nan,
         "eps_c": cx.eps_c, "log10_eps_c_stderr": cx.log10_eps_c_stderr, "eps_c_status": cx.status,
+        "eps_c_counted_below": below, "eps_c_resolved": bool(cx.status == "fitted" and below >= EPS_C_MIN_BELOW),
         "beta": cx.beta, "beta_stderr": cx.beta_stderr, "crossover_boot": cx.n_boot,
-        "hazard": hz, "lambda": tr, "edge_rate": edge, "edge_rate_analytic": edge_balance_rate(),
+        "hazard": hz, "hazard_shape": shapes, "tail": tails, "lambda": tr, "edge_rate": edge,
+        "edge_rate_analytic": edge_balance_rate(), "edge_saddle": lam_edge, "edge_saddle_pivot": saddle.friction,
+        "release_diagnosis": diagnosis,
         "kappa_over_lambda1": ratio, "kappa_over_lambda1_stderr": ratio_se, "tests": tests,
         "wall_s": time.perf_counter() - t_start,
     }
     ctx.log(f"{cond}: α_fine {alpha_fine[0]:.2f} ± {alpha_fine[1]:.2f} at ε {row['alpha_fine_eps']:.1e}, "
             f"ε_c {cx.eps_c:.2g} ({cx.status}), β {cx.beta:.2f}, κ_mid {k_mid:.2f}, κ_late "
-            f"{hz['commit']['kappa_late']:.2f} /s, λ₁ {lam1:.2f} ± {lam1_se:.2f} /s, edge {edge['rate']:.2f} /s")
+            f"{hz['commit']['kappa_late']:.2f} /s, settle κ_late {fmt(st['value'], '.2f')} ± {fmt(st['stat'], '.2f')} "
+            f"(tail syst +{fmt(st['syst_hi'], '.2f')}/−{fmt(st['syst_lo'], '.2f')}), λ₁ {lam1:.2f} ± {lam1_se:.2f} /s, "
+            f"edge release "
+            f"{edge['rate']:.2f} /s, edge saddle {lam_edge:.2f} /s; commit hazard {shapes['commit']['shape']}")
     return row
 
 
@@ -220,9 +301,16 @@ def render(c: Computed, out: Output) -> None:
 
 def rerender(out) -> dict:
     """Draw the figures and tables again from ``OUT/results/doubly_transient.json`` alone (the render reads nothing
-    else) and write them back into it: no simulation, no number changed."""
+    else) and write them back into it: no simulation, no measured number changed (each hazard's shape, a function
+    of its stored windows, is derived again)."""
     path = Path(out) / "results" / f"{NAME}.json"
     r = json.loads(path.read_text())
+    for row in r["rows"]:  # a pure function of the stored windows: derived again with the code
+        if "hazard_shape" in row:
+            row["hazard_shape"] = jsonable({k: hazard_shape(row["hazard"][k]["windows"]["h"],
+                                                            row["hazard"][k]["windows"]["stderr"])
+                                            for k in ("commit", "settle")})
+    r["by"] = {row["condition"]: row for row in r["rows"]}
     output = Output(Path(out))
     render(Computed(r), output)
     r["figures"], r["tables"] = output.figures, output.tables

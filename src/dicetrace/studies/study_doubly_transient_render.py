@@ -70,13 +70,13 @@ def _hazard_figure(rows, out: Output) -> None:
         h, se, ev = (_arr(eh[x]) for x in ("h", "stderr", "events"))
         ok = ev >= 3
         axes[2].errorbar(e[ok], h[ok], yerr=se[ok], fmt="o-", ms=3, color=col, capsize=2, label=r["condition"])
-    edge = rows[0]["edge_rate"]["rate"]
+    edge = rows[0].get("edge_saddle", rows[0]["edge_rate"]["rate"])
     if edge and math.isfinite(edge):
         axes[0].axhline(edge, color="k", lw=0.8, ls=":")
         axes[2].axhline(edge, color="k", lw=0.8, ls=":")
     axes[0].set_xlabel("t / s")
     axes[0].set_ylabel("hazard h(t) / (1/s)")
-    axes[0].set_title("hazard of committing (solid) and settling (dashed); dotted: edge rate")
+    axes[0].set_title(f"hazard of committing (solid) and settling (dashed); dotted: {rows[0]['condition']}'s edge saddle")
     axes[0].legend(fontsize=6)
     axes[1].set_xlabel("landings before the commit, n")
     axes[1].set_ylabel("P(commit at landing n | reached n)")
@@ -103,13 +103,17 @@ def _tests_figure(rows, out: Output) -> None:
     def col(test, key):
         return _arr([v[test][key] for v in t])
 
-    a0.errorbar(x - 0.1, col("edge_late_hazard", "x"), yerr=col("edge_late_hazard", "x_err"), fmt="o", capsize=3,
-                label="late commit hazard κ_late")
-    a0.errorbar(x + 0.1, col("edge_late_hazard", "y"), yerr=col("edge_late_hazard", "y_err"), fmt="s", capsize=3,
-                label="edge-release rate")
+    lo, hi = col("edge_settle", "syst_lo"), col("edge_settle", "syst_hi")
+    a0.errorbar(x - 0.1, col("edge_settle", "x"), yerr=col("edge_settle", "x_err"), fmt="o", capsize=3,
+                label="late settle hazard κ_late (stat)")
+    a0.errorbar(x - 0.1, col("edge_settle", "x"), yerr=[lo, hi], fmt="none", elinewidth=6, alpha=0.25,
+                label="its tail-start systematic")
+    a0.errorbar(x + 0.1, col("edge_settle", "y"), yerr=col("edge_settle", "y_err"), fmt="s", capsize=3,
+                label="α_fine · λ_edge")
+    a0.plot(x + 0.1, col("edge_settle_alpha1", "y"), "k_", ms=12, label="λ_edge (analytic)")
     a0.set_xticks(x, lab, fontsize=7)
     a0.set_ylabel("rate / (1/s)")
-    a0.set_title("edge hypothesis: κ_late → edge rate")
+    a0.set_title("edge hypothesis, settle clock: κ_late = α·λ_edge")
     a0.legend(fontsize=7)
     def field(key):
         return _arr([r[key] for r in rows])
@@ -125,7 +129,9 @@ def _tests_figure(rows, out: Output) -> None:
     a1.set_title("α → 1 (edge) against α = κ/λ₁ (chaotic saddle)")
     a1.legend(fontsize=7)
     fig.tight_layout()
-    out.save_fig(fig, "n_tests", caption="The two hypotheses per model, 1σ bars.")
+    out.save_fig(fig, "n_tests", caption="The two hypotheses per model, 1σ bars; left: the late settle hazard (past the "
+                 "97 % quantile, with the shift when the tail starts at the 90–99 % quantile instead) against the "
+                 "finest counted α times the analytic edge saddle.")
 
 
 def render(c: Computed, out: Output) -> None:
@@ -157,22 +163,56 @@ def render(c: Computed, out: Output) -> None:
         "l1": pm(r["lambda"]["survivors"]["mean"], r["lambda"]["survivors"]["stderr"], ".2f"),
         "la": pm(r["lambda"]["all"]["mean"], r["lambda"]["all"]["stderr"], ".2f"),
         "kl": pm(r["kappa_over_lambda1"], r["kappa_over_lambda1_stderr"], ".2f"),
+        "shape": r["hazard_shape"]["commit"]["shape"] if "hazard_shape" in r else "–",
+        "sshape": r["hazard_shape"]["settle"]["shape"] if "hazard_shape" in r else "–",
+        "dip": fmt(r["hazard_shape"]["commit"]["min_step_z"], ".1f") if "hazard_shape" in r else "–",
         "edge": pm(r["edge_rate"]["rate"], r["edge_rate"]["stderr"], ".2f"),
+        "saddle": fmt(r.get("edge_saddle"), ".2f"),
     } for r in rows], [("m", "model", ""), ("med", "median commit (s)", ""),
                        ("w", "commit hazard, quantile windows 50-75-90-97-100 % (1/s)", ""),
                        ("ws", "settle hazard, same windows (1/s)", ""), ("z", "rise, last vs first (z)", ""),
+                       ("shape", "commit hazard's shape", ""), ("dip", "largest fall between windows (z)", ""),
+                       ("sshape", "settle hazard's shape", ""),
                        ("km", "κ_mid (1/s)", ""), ("l1", "λ₁ survivors (1/s)", ""), ("la", "λ all throws (1/s)", ""),
-                       ("kl", "κ_mid/λ₁", ""), ("edge", "edge-release rate (1/s)", "")])
+                       ("kl", "κ_mid/λ₁", ""), ("saddle", "edge saddle, analytic (1/s)", ""),
+                       ("edge", "edge-release rate (1/s)", "")])
 
     def verdict(v):
         return f"{v['verdict']} (z = {fmt(v['z'], '.1f')})"
 
+    def settle_test(v):
+        return (f"{pm(v['x'], v['x_err'], '.1f')} (tail +{fmt(v['syst_hi'], '.1f')}/−{fmt(v['syst_lo'], '.1f')}) vs "
+                f"{pm(v['y'], v['y_err'], '.1f')}: {v['verdict']} (z = {fmt(v['z'], '.1f')}; stat alone "
+                f"{fmt(v['z_stat'], '.1f')})")
+
     out.tables["tests"] = md_table([{
         "m": r["condition"],
-        "eh": f"{pm(r['tests']['edge_late_hazard']['x'], r['tests']['edge_late_hazard']['x_err'], '.1f')} vs "
-              f"{pm(r['tests']['edge_late_hazard']['y'], r['tests']['edge_late_hazard']['y_err'], '.2f')}: "
-              + verdict(r["tests"]["edge_late_hazard"]),
+        "es": settle_test(r["tests"]["edge_settle"]),
+        "e1": f"{r['tests']['edge_settle_alpha1']['verdict']} (z = {fmt(r['tests']['edge_settle_alpha1']['z'], '.1f')})",
         "ea": verdict(r["tests"]["edge_alpha_fine"]), "sb": verdict(r["tests"]["saddle_beta"]),
         "sa": verdict(r["tests"]["saddle_alpha_fine"]),
-    } for r in rows], [("m", "model", ""), ("eh", "edge: κ_late vs edge rate", ""), ("ea", "edge: α_fine = 1", ""),
+    } for r in rows], [("m", "model", ""), ("es", "edge: κ_late (settle) vs α_fine·λ_edge (1/s)", ""),
+                       ("e1", "κ_late (settle) vs λ_edge", ""), ("ea", "edge: α_fine = 1", ""),
                        ("sb", "saddle: β = κ_mid/λ₁", ""), ("sa", "saddle: α_fine = κ_mid/λ₁", "")])
+    out.tables["tails"] = md_table([{
+        "m": r["condition"], "clock": key,
+        "v": pm(r["tail"][key]["value"], r["tail"][key]["stat"], ".1f"),
+        "by": " / ".join(fmt(v, ".1f") for v in r["tail"][key]["values"]),
+        "syst": f"+{fmt(r['tail'][key]['syst_hi'], '.1f')} / −{fmt(r['tail'][key]['syst_lo'], '.1f')}",
+        "dom": "yes" if r["tail"][key]["syst_dominates"] else "no",
+    } for r in rows if "tail" in r for key in ("settle", "commit")], [
+        ("m", "model", ""), ("clock", "clock", ""), ("v", "κ_late past the 97 % quantile (1/s)", ""),
+        ("by", "past the 99 / 97 / 95 / 90 % quantile (1/s)", ""), ("syst", "tail-start systematic (+ / −)", ""),
+        ("dom", "systematic exceeds statistical", "")])
+    diag = [r for r in rows if r.get("release_diagnosis")]
+    if diag:
+        d = diag[0]["release_diagnosis"]
+        out.tables["release"] = md_table([{
+            "dt": f"{x['dt_s'] * 1e3:g} ms", "t0": f"{x['tilt0']:g}", "rate": pm(x.get("rate"), x.get("stderr"), ".2f"),
+            "from": fmt(x["fit_range"][0] * 1e3, ".1f") if "fit_range" in x else "–",
+            "tilt": fmt(x.get("tilt_at_0_1_s"), ".2e"),
+            "late": " / ".join(fmt(y["rate"], ".2f") for y in x.get("late", [])),
+        } for x in d["rows"]], [("dt", "step", ""), ("t0", "start tilt (rad)", ""),
+                                ("rate", "rate fitted from 10× the start tilt (1/s)", ""),
+                                ("from", "that fit starts at (ms)", ""), ("tilt", "tilt at 0.1 s (rad)", ""),
+                                ("late", "fitted from 0.1 / 0.15 / 0.2 s (1/s)", "")])

@@ -3,10 +3,13 @@ resolution, the stacks' slices, the period vectors with their errors, the sub-ce
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from dicetrace.analysis.robustness import group_spread
 from dicetrace.studies.context import Computed, Output
-from dicetrace.studies.text import fmt, md_table
+from dicetrace.studies.text import CONVERGED_MIN, fmt, md_table
 
 
 def join_figure(R: dict, out: Output) -> None:
@@ -221,37 +224,34 @@ def verdicts(R: dict) -> dict:
     series = " → ".join(f"{_pm(r['fraction'], r['stderr'])} ({r['res']}³, {r['n_cells']} cells)" for r in lv)
     cert = (f"The stacks' certificate is at least {st['certificate_min']:.4f} at every level: "
             f"**{st['certificate_word']}**.")
-    if st["verdict"] == "converged":
-        per = ", ".join(f"{w['n_joined']}/{w['n_cells']}" for w in lv[-1]["windows"])
-        s = (f"*Verdict.* The join fraction has stopped moving: {series}. At {lv[-1]['res']}³, "
-             f"**{_pm(lv[-1]['fraction'], lv[-1]['stderr'])}** of the 2-D cells share a 3-D cell with another 2-D cell "
-             f"of their slice (per window {per}: the share varies from window to window). A path in a stack is a path "
-             "in IC space, so this is a lower bound: on the converged die, at least that share of the same-face "
-             "regions a slice shows are parts of a larger cell, and the others may still join through the three "
-             "directions not stacked. The writeup's question has its answer for these regions: fewer cells than "
-             "regions, not one cell for all. " + cert)
+    last = lv[-1]
+    per = ", ".join(f"{w['n_joined']}/{w['n_cells']}" for w in last["windows"])
+    g = group_spread([w["n_joined"] / w["n_cells"] if w["n_cells"] else math.nan for w in last["windows"]])
+    moving = ("has stopped moving by k5's rule (the last three levels within 2σ)" if st["verdict"] == "converged"
+              else "still moves by k5's rule")
+    if g["n"] > 1:
+        between = (f" ± {g['spread']:.3f} (between the windows: {per}, from {g['min']:.2f} to {g['max']:.2f}); the "
+                   "spread between windows " + ("exceeds" if g["spread"] > last["stderr"] else "is within")
+                   + " the binomial error")
     else:
-        a, b = lv[-1], lv[-2] if len(lv) > 1 else lv[-1]
-        close = abs(a["fraction"] - b["fraction"]) <= 2 * (a["stderr"] ** 2 + b["stderr"] ** 2) ** 0.5
-        last_two = (f" The last two levels agree ({b['fraction']:.3f} and {a['fraction']:.3f}), but the one before "
-                    "differs from the last by more than two standard errors: a further level would decide."
-                    if close and len(lv) > 2 else "")
-        s = (f"*Verdict.* The join fraction moves with resolution: {series}; it has not stopped moving (the series' "
-             "verdict: undetermined)." + last_two + " Whether the same-face regions of a slice of the converged die are one cell of "
-             "IC space is therefore **undetermined** at these resolutions, as it was for the discrete die (k5); "
-             "what the stacks show is that a third IC direction joins "
-             f"{_pm(lv[-1]['fraction'], lv[-1]['stderr'])} of them at {lv[-1]['res']}³, so 'many regions in the "
-             "slice' does not mean 'many cells'. " + cert)
+        between = f" (one window: {per})"
+    s = (f"*Verdict.* The join fraction of the stacks' grid nodes: {series}. At {last['res']}³ it is "
+         f"{_pm(last['fraction'], last['stderr'])} (binomial, pooled){between}. "
+         f"The series {moving}, but what it counts is not what the writeup asks. A join is a path through grid "
+         "nodes of one face; between two neighbouring nodes the face is not known, and the borders are fractal "
+         "far below the grid's spacing, so a path through the grid is not shown to be a path in IC space. The join "
+         "fraction is therefore **not a lower bound** on the share of a slice's regions that belong to a larger "
+         "cell, and its plateau is a plateau of the grid count, not convergence of that share. The earlier reading, "
+         "\"fewer cells than regions\", is **withdrawn**: it would need every joining path verified (the face "
+         "checked along each segment down to the chaos floor) and counted only between large cells. Whether the "
+         "same-face regions of a slice of the converged die are one cell of IC space is **undetermined** here, as "
+         "for the discrete die (k5). " + cert)
     head = (f"section p; {R['model']}, certificate ≥ {st['certificate_min']:.4f} against tol/10 and `contact-dop853`: "
             f"{st['certificate_word']}")
-    span = (f"the 3-D join fraction of three 3·10⁻³ windows of home is {_pm(lv[0]['fraction'], lv[0]['stderr'])} at "
-            f"{lv[0]['res']}³ and {_pm(lv[-1]['fraction'], lv[-1]['stderr'])} at {lv[-1]['res']}³")
-    if st["verdict"] == "converged":
-        answer = (f"**Fewer cells than regions** ({head}): {span}, stopped moving by k5's rule (the last three levels "
-                  "within 2σ); a path in a stack is one in IC space, so at least that share of a slice's same-face "
-                  "regions belong to a larger cell.")
-    else:
-        answer = f"**Undetermined** ({head}): {span}, still moving by k5's rule (the last three levels within 2σ)."
+    answer = (f"**Undetermined** ({head}): the 3-D join fraction of three 3·10⁻³ windows of home is "
+              f"{_pm(last['fraction'], last['stderr'])} at {last['res']}³ (windows {per}), but it counts paths through "
+              "grid nodes, not verified paths in IC space: it is no lower bound, and \"fewer cells than regions\" is "
+              "withdrawn.")
     word = p["certificate"]["word"]
     stable = [r for r in p["periods"] if r["interior_fraction"] >= STABLE_PEAK]
     if p["periods"] and not stable:
@@ -290,11 +290,20 @@ def verdicts(R: dict) -> dict:
            f"{ms[-1]['n_subcells']} sub-cells, {ms[-1]['frac_nodes_in_singletons']:.3f} of the nodes alone "
            f"(at {first['res']}²: {ms[0]['frac_nodes_in_singletons']:.3f}).")
     falling = raw[-1]["frac_nodes_in_singletons"] < raw[0]["frac_nodes_in_singletons"] - 0.2
+    repro = [e["by_min_set"][0]["same_at_exact_dt"]]
+    if "events" in e:
+        repro.append(e["events"]["by_min_set"][0]["same_events_at_fine_dt"])
+    certified = min(repro) >= CONVERGED_MIN
+    word = "" if certified else (
+        f" The sequence itself reproduces on only {min(repro):.2f}–{max(repro):.2f} of the checked throws when the "
+        f"output step changes, below the {CONVERGED_MIN:g} the report asks of a converged observable: these sub-cell "
+        "counts are **statistics only** by the report's rule, not a certified property of each throw.")
     tail = (" Refining the grid merges nodes into regions of one sequence: the cell has sub-cells." if falling else
             f" Refining the grid {first['res']}² → {last['res']}² merges few of them: almost every throw of the cell "
-            "has a sequence of its own at these resolutions, so throws in one cell are **not** topologically the "
-            "same, on the converged die as on the discrete one (section d); whether sub-cells of one sequence emerge "
-            "at far finer grids is not settled here.")
+            "has a sequence of its own at these resolutions" + (
+                ", so throws in one cell are **not** topologically the same, on the converged die as on the discrete "
+                "one (section d)" if certified else "") + "; whether sub-cells of one sequence emerge at far finer "
+            "grids is not settled here.") + word
     exact = (f"Of the {e['n']} throws checked, {e['by_min_set'][0]['same_at_exact_dt']:.2f} have the same raw "
              f"sequence at a 1 µs step as at 10 µs ({e['by_min_set'][-1]['same_at_exact_dt']:.2f} without the sets "
              f"under 1 ms, whose durations sit near the cut), and {e['same_outcome_exact_dt']:.2f} the same outcome; "
@@ -328,9 +337,16 @@ def verdicts(R: dict) -> dict:
         lv = t["levels"][-1]["events"]["by_min_set"]
         top += (f", {lv[0]['frac_nodes_in_singletons']:.3f} by exact contact events "
                 f"({lv[-1]['frac_nodes_in_singletons']:.3f} without the sets under 1 ms)")
-    topology_answer = (f"**Sub-cells emerge** ({top}; section p): refining the grid merges throws into regions of one "
-                       "sequence." if falling else
-                       f"**No** ({top}; section p): almost every throw of a converged cell has a contact sequence of "
-                       f"its own at {first['res']}²–{last['res']}².")
+    if not certified:
+        topology_answer = (f"**Statistics only** ({top}; section p): almost every throw of a converged cell has a "
+                           f"contact sequence of its own at {first['res']}²–{last['res']}², but the sequence reproduces "
+                           f"on only {min(repro):.2f}–{max(repro):.2f} of the checked throws between output steps, "
+                           f"below the {CONVERGED_MIN:g} of a converged observable.")
+    elif falling:
+        topology_answer = (f"**Sub-cells emerge** ({top}; section p): refining the grid merges throws into regions of "
+                           "one sequence.")
+    else:
+        topology_answer = (f"**No** ({top}; section p): almost every throw of a converged cell has a contact sequence "
+                           f"of its own at {first['res']}²–{last['res']}².")
     return {"stacks": s, "periods": q, "topology": "*Verdict.* " + exact + events + " " + sub + tail,
             "answer": answer, "topology_answer": topology_answer}

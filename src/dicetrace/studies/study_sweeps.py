@@ -36,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from dicetrace.analysis.agreement import agreement
-from dicetrace.analysis.doubly_transient import (commit_steps, compare, crossover_fit, hazard_summary, local_slopes,
+from dicetrace.analysis.doubly_transient import (commit_steps, compare, crossover_fit, hazard_shape, hazard_summary,
+                                                 local_slopes, tail_scan_windows,
                                                  pair_outcomes, pair_verdicts, perturbed, throw_floor)
 from dicetrace.analysis.face_fractions import face_fractions
 from dicetrace.analysis.fractality import basins_fractal_test
@@ -44,7 +45,7 @@ from dicetrace.analysis.simulator import run_on_slice, window_points
 from dicetrace.analysis.wada import wada_merge_test
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
+from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
 from dicetrace.studies.study_doubly_transient import FLOOR_SHARE, MIN_CHANGED, TOL, TOL_FLOOR
 from dicetrace.studies.study_sweeps_render import render as _render
 from dicetrace.studies.text import CONVERGED_MIN
@@ -255,12 +256,46 @@ def face_changes(rows) -> list[dict]:
     return out
 
 
+#: A condition's hazard counts only where its numerics converge: its map's certificate is at least CONVERGED_MIN and
+#: at most this share of its floor throws change face between the tolerance and a tenth of it.
+FLOOR_FLIPS_MAX = 0.01
+
+
+def numerics_converged(r: dict) -> bool:
+    """Whether a row's numerics converge: its map is converged and its throws at the uniform tolerance keep their
+    face at a tenth of it (at most FLOOR_FLIPS_MAX of the floor throws change)."""
+    p = r["pairs"]
+    return bool(r["map"]["converged"]) and p["floor_throw_flips"] <= FLOOR_FLIPS_MAX * p["floor_throws"]
+
+
+def hazard_rows(rows) -> list[dict]:
+    """Per row with a commit hazard: its shape across the quantile windows, the rise (last window against the
+    first), the late hazard with the tail-start systematic (:func:`tail_scan_windows`), and whether the row's
+    numerics converge (:func:`numerics_converged`)."""
+    out = []
+    for r in rows:
+        hz = r["pairs"]["hazard"]
+        if not hz:
+            continue
+        w = hz["commit"]["windows"]
+        out.append({"condition": r["condition"], "window": r["window"], "converged": numerics_converged(r),
+                    "rise_z": hz["commit"]["late_minus_first"]["z"], "shape": hazard_shape(w["h"], w["stderr"]),
+                    "tail": tail_scan_windows(w)})
+    return out
+
+
 def _summary(rows) -> dict:
-    """Counts of the verdicts over every map, the face changes against the preset's, and the range of the tail
-    hazard's rise (its z-score, last quantile window against the first) over the rows that have one."""
+    """Counts of the verdicts over every map, the face changes against the preset's, and the tail hazard's rise (its
+    z-score, last quantile window against the first) and shape, over every row and over the rows whose numerics
+    converge (:func:`numerics_converged`), which alone count."""
     fc = face_changes(rows)
-    rise = [r["pairs"]["hazard"]["commit"]["late_minus_first"]["z"] for r in rows if r["pairs"]["hazard"]]
-    rise = [z for z in rise if z is not None and math.isfinite(z)]
+    hr = hazard_rows(rows)
+    rise = [h["rise_z"] for h in hr if h["rise_z"] is not None and math.isfinite(h["rise_z"])]
+    conv = [h for h in hr if h["converged"]]
+    crise = [h["rise_z"] for h in conv if h["rise_z"] is not None and math.isfinite(h["rise_z"])]
+    shapes = {}
+    for h in conv:
+        shapes.setdefault(h["shape"]["shape"], []).append(f"{h['condition']} / {h['window']}")
     return {"n_maps": len(rows), "n_converged": sum(r["map"]["converged"] for r in rows),
             "converged": [f"{r['condition']} / {r['window']}" for r in rows if r["map"]["converged"]],
             "n_puy_fractal": sum(r["map"]["puy"]["verdict"] == "fractal" for r in rows),
@@ -269,7 +304,17 @@ def _summary(rows) -> dict:
             "face_changes": fc, "n_face_changes": len(fc), "n_face_changed": sum(c["changed"] for c in fc),
             "n_hazard_rise": len(rise), "hazard_rise_z_min": min(rise) if rise else None,
             "hazard_rise_z_max": max(rise) if rise else None, "n_hazard_rise_z2": sum(z > 2 for z in rise),
-            "n_hazard_rise_z3": sum(z > 3 for z in rise)}
+            "n_hazard_rise_z3": sum(z > 3 for z in rise),
+            "hazards": jsonable(hr), "floor_flips_max": FLOOR_FLIPS_MAX, "n_numerics_converged": len(conv),
+            "numerics_converged": [f"{h['condition']} / {h['window']}" for h in conv],
+            "n_converged_rise_z2": sum(z > 2 for z in crise), "n_converged_rise_z3": sum(z > 3 for z in crise),
+            "converged_rise_z_min": min(crise) if crise else None,
+            "converged_rise_z_max": max(crise) if crise else None,
+            "converged_shapes": shapes,
+            "n_converged_monotone_rise": len(shapes.get("rises", [])),
+            "n_converged_weak_rise": len(shapes.get("rises weakly", [])),
+            "n_converged_not_monotone": len(shapes.get("not monotone", [])) + len(shapes.get("dips, then rises", [])),
+            "converged_not_monotone": shapes.get("not monotone", []) + shapes.get("dips, then rises", [])}
 
 
 def render(c: Computed, out: Output) -> None:

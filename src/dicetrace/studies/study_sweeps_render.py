@@ -237,3 +237,20 @@ def render(c: Computed, out: Output) -> None:
                        ("b", "β (above ε_c)", ""),
                        ("hz", "commit hazard, windows 50-75-90-97-100 % (1/s)", ""), ("kl", "κ_late (1/s)", ""),
                        ("z", "rise, last vs first (z)", "")])
+    summary = c.results.get("summary") or {}
+    if "hazards" in summary:
+        out.tables["hazard_shapes"] = md_table([{
+            "c": h["condition"], "w": h["window"], "conv": "yes" if h["converged"] else "no (not counted)",
+            "shape": h["shape"]["shape"], "rise": fmt(h["rise_z"], ".1f"),
+            "fall": fmt(h["shape"]["min_step_z"], ".1f"),
+            "kl": pm(h["tail"]["value"], h["tail"]["stat"], ".1f"),
+            "ts": (f"+{h['tail']['syst_hi']:.1f} / −{h['tail']['syst_lo']:.1f}" if h["tail"]["value"] is not None
+                   else "—"),
+            "dom": ("yes" if h["tail"]["syst_dominates"] else "no") if h["tail"]["value"] is not None else "—",
+        } for h in summary["hazards"]], [("c", "condition", ""), ("w", "window", ""),
+                                         ("conv", "numerics converged", ""), ("shape", "commit hazard's shape", ""),
+                                         ("rise", "rise, last vs first (z)", ""),
+                                         ("fall", "most negative step between windows (z)", ""),
+                                         ("kl", "κ_late past 97 % (1/s)", ""),
+                                         ("ts", "tail start 90 / 75 / 50 %: systematic (+ / −)", ""),
+                                         ("dom", "systematic exceeds statistical", "")])
