@@ -287,8 +287,8 @@ LITERATURE = {
     "not_found": (
         "A measured coefficient of restitution of steel (or of a die) on a wooden table: the sources that "
         "could be read give none (a 2022 study of balls on wood, J. Soc. Mat. Sci. Japan 71(7):603, says "
-        "only in its abstract that the restitution grows with the wood's density and can be elastic or "
-        "inelastic).",
+        "only in its abstract that the restitution depends on the wood's density and that the collisions can "
+        "be elastic or inelastic).",
         "Measured release height, speed and spin of a hand's throw of a die: M. Kapitaniak, J. Strzalko, "
         "J. Grabski and T. Kapitaniak, \"The three-dimensional dynamics of the die throw\", Chaos (2012), "
         "filmed throws with a high-speed camera, but only press summaries could be read (the face lowest at "
