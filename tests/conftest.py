@@ -17,6 +17,15 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 
 
+def pytest_configure(config):
+    """The Python API's one line on the first compile (``compile_clock.say_first_compile``) stays quiet in the
+    test processes, whose standard error some tests read line by line; ``tests/test_compile_clock.py`` checks it
+    in fresh interpreters."""
+    from dicetrace import compile_clock
+
+    compile_clock.quiet_compiles().__enter__()
+
+
 def _reference_dir() -> Path | None:
     for cand in (
         os.environ.get("DICETRACE_REFERENCE"),

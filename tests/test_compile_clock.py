@@ -119,3 +119,63 @@ def test_a_study_logs_its_grids_compile_apart(tmp_path, monkeypatch, capsys):
 def test_time_text_says_compile_apart():
     assert time_text(3.14) == "3.1 s"
     assert time_text(12.4, 10.2, ".0f") == "12 s (10 s compiling the kernels, 2 s running)"
+
+
+# -- the Python API says once that it compiles -----------------------------------------------------------------
+
+_FIRST = """
+import sys
+import numpy as np
+import dicetrace.simulate  # registers the notice
+from dicetrace.core.model import top4_mask
+top4_mask(np.arange(8.0))  # a kernel of dicetrace's, compiled (or loaded) on this call
+top4_mask(np.arange(8.0))
+print("done")
+"""
+
+
+def _first(env_extra):
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, **env_extra}
+    return subprocess.run([sys.executable, "-c", _FIRST], capture_output=True, text=True, timeout=300, env=env)
+
+
+@pytest.mark.slow
+def test_the_first_compile_is_said_once_and_a_cache_load_says_nothing(tmp_path):
+    """A first call from Python that compiles one of dicetrace's kernels says so once on standard error (the
+    command line's spinner aside); the same kernel loaded from the cache in a new interpreter says nothing."""
+    from dicetrace.compile_clock import FIRST_COMPILE
+
+    env = {"DICETRACE_CACHE_DIR": str(tmp_path / "kernels")}
+    cold = _first(env)
+    assert cold.returncode == 0, cold.stderr
+    assert cold.stderr.splitlines().count(FIRST_COMPILE) == 1, cold.stderr
+    warm = _first(env)
+    assert warm.returncode == 0 and FIRST_COMPILE not in warm.stderr, warm.stderr
+
+
+def _fresh_dicetrace_compile() -> None:
+    """A real compile of a new function that the notice takes for one of dicetrace's (its module's name)."""
+    def g(n):
+        return n + 1
+
+    g.__module__ = "dicetrace.test_fresh"
+    numba.njit(cache=False)(g)(1)
+
+
+def test_quiet_compiles_says_nothing(capsys, monkeypatch):
+    """Outside ``quiet_compiles`` the first compile of a dicetrace kernel says so; inside it (the command line,
+    and these tests' processes) it says nothing."""
+    from dicetrace import compile_clock
+
+    compile_clock.say_first_compile()
+    monkeypatch.setitem(compile_clock._NOTICE, "quiet", 0)
+    monkeypatch.setitem(compile_clock._NOTICE, "said", False)
+    with compile_clock.quiet_compiles():
+        _fresh_dicetrace_compile()
+    assert compile_clock.FIRST_COMPILE not in capsys.readouterr().err
+    _fresh_dicetrace_compile()
+    assert capsys.readouterr().err.count(compile_clock.FIRST_COMPILE) == 1

@@ -87,3 +87,60 @@ def rate_text(n: int, unit: str, wall_s: float, compile_s: float = 0.0, rate_uni
     """``"441 throws in 3.1 s, 142/s"``, or with a compile ``"441 throws in 134.1 s (131.0 s compiling the kernels,
     3.1 s running), 142/s"``: the rate is always over the running time."""
     return f"{n:,} {unit} in {time_text(wall_s, compile_s)}, {running_rate(n, wall_s, compile_s):,.0f}{rate_unit}"
+
+
+# ------------------------------------------------------------------ the first compile, said once (the Python API)
+
+#: What the first compile of a process says on standard error (the command line shows a spinner instead).
+FIRST_COMPILE = (
+    "dicetrace: compiling the simulation kernels (the first run on this machine only: about 10-30 s for the seed "
+    "path, 1-2 min for a contact integrator such as physical's, a little more for events or a batch; later runs "
+    "load them from the cache)"
+)
+
+_NOTICE = {"listener": None, "said": False, "quiet": 0}
+_NOTICE_LOCK = threading.Lock()
+
+
+def say_first_compile() -> None:
+    """From now on, say :data:`FIRST_COMPILE` on standard error once, when numba first compiles one of dicetrace's
+    kernels in this process (a cache load says nothing); idempotent.  :func:`quiet_compiles` silences it."""
+    with _NOTICE_LOCK:
+        if _NOTICE["listener"] is not None or _NOTICE["said"]:
+            return
+        from numba.core import event
+
+        class _Listener(event.Listener):
+            def on_start(self, ev):
+                if _NOTICE["said"] or _NOTICE["quiet"]:
+                    return
+                fn = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "") or ""
+                if not fn.startswith("dicetrace."):
+                    return
+                _NOTICE["said"] = True
+                import sys
+
+                try:
+                    sys.stderr.write(FIRST_COMPILE + "\n")
+                    sys.stderr.flush()
+                except (OSError, ValueError, AttributeError):  # no usable standard error: nothing to say
+                    pass
+
+            def on_end(self, ev):
+                pass
+
+        _NOTICE["listener"] = _Listener()
+        event.register("numba:compile", _NOTICE["listener"])
+
+
+class quiet_compiles:
+    """Within the block, :func:`say_first_compile` says nothing (the command line shows its own spinner)."""
+
+    def __enter__(self):
+        with _NOTICE_LOCK:
+            _NOTICE["quiet"] += 1
+        return self
+
+    def __exit__(self, *exc):
+        with _NOTICE_LOCK:
+            _NOTICE["quiet"] -= 1

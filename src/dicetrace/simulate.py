@@ -23,6 +23,7 @@ from dicetrace.batch_chunks import (
     join_parts,
     run_chunk,
 )
+from dicetrace.compile_clock import say_first_compile
 from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.kernels import has_events, new_roll_state, roll_out, run_events, run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
@@ -33,6 +34,8 @@ from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
 from dicetrace.memory import available_memory
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
 from dicetrace.status import Status
+
+say_first_compile()  # a first call from Python compiles for seconds to minutes: say so once, on standard error
 
 ENERGY_NAMES = ("stop_test", "kinetic_translational", "kinetic_rotational", "gravitational", "elastic", "total")
 

@@ -119,6 +119,10 @@ class Crossover:
     n_boot: int
 
 
+#: A fitted small-scale slope β this close to 1 is no crossover (the model's ε_c is then not identified).
+BETA_FLAT = 1e-6
+
+
 def _fit_crossover(leps: np.ndarray, lf: np.ndarray, w: np.ndarray, lo: float, hi: float, f_sat: float | None):
     from scipy.optimize import least_squares  # scipy.optimize is slow to import: only for this fit
 
@@ -172,6 +176,10 @@ def crossover_fit(changed, eps, *, used, valid=None, f_sat: float | None = None,
     bs = np.array(boots) if boots else np.full((1, 3), np.nan)
     lc = p[1]
     status = "fitted" if leps[0] <= lc <= leps[-1] else ("below" if lc < leps[0] else "above")
+    if p[2] >= 1.0 - BETA_FLAT:
+        # slope 1 on both sides of ε_c: no crossover on the scales, whose position the fit cannot then tell
+        # (the model no longer depends on it); smooth on every scale used, so it lies above them
+        status = "above"
     return Crossover(float(math.exp(lc)), float(np.std(bs[:, 1], ddof=1) / math.log(10)) if len(boots) > 1 else math.nan,
                      float(p[2]), float(np.std(bs[:, 2], ddof=1)) if len(boots) > 1 else math.nan, float(math.exp(p[0])),
                      used, status, len(boots))

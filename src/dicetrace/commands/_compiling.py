@@ -16,6 +16,8 @@ import time
 
 from rich.console import Console
 
+from dicetrace.compile_clock import quiet_compiles
+
 
 def _message() -> str:
     from dicetrace.core._jit import CACHE  # lazy: keeps `dicetrace --help` fast (imports numba)
@@ -32,9 +34,16 @@ def compile_notice(stream=None):
         tty = stream.isatty()
     except (AttributeError, ValueError, OSError):
         tty = False
-    if not tty:
-        yield
-        return
+    with quiet_compiles():  # a command says it with its spinner, on a terminal only (the API's line is not its)
+        if not tty:
+            yield
+        else:
+            with _spinner(stream):
+                yield
+
+
+@contextlib.contextmanager
+def _spinner(stream):
     from numba.core import event  # lazy: keeps `dicetrace --help` fast (imports numba)
 
     console = Console(file=stream, stderr=stream is sys.stderr)
