@@ -53,6 +53,8 @@ def _occupy_closed_std_fds() -> None:
         try:
             os.fstat(fd)
         except OSError:
+            if fd == 1:  # closed after Python started (its sys.stdout still names fd 1): closed to us too
+                sys.stdout = None
             try:
                 got = os.open(os.devnull, os.O_RDWR)
             except OSError:

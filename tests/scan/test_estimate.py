@@ -54,7 +54,7 @@ print(json.dumps(results))
 """
 
 README_SCAN = ["scan", "--slice", "seed", "--window", "red-sea", "--res", "400", "--out", "scans/red-sea",
-               "--png", "docs/red-sea.png"]
+               "--png", "out/red-sea.png"]
 
 
 def test_the_readme_still_shows_the_headline_scan():
@@ -79,7 +79,7 @@ def test_on_a_cold_cache_the_readme_scan_runs_without_yes_and_a_1000_square_esti
     headline, big = json.loads(proc.stdout.strip().splitlines()[-1])
     assert headline["rc"] == 0, proc.stderr  # no "confirm with --yes": the cold kernel was not counted
     assert "--yes" not in proc.stderr and "Traceback" not in proc.stderr
-    assert (tmp_path / "scans" / "red-sea" / "_scan.parquet").is_file() and (tmp_path / "docs" / "red-sea.png").is_file()
+    assert (tmp_path / "scans" / "red-sea" / "_scan.parquet").is_file() and (tmp_path / "out" / "red-sea.png").is_file()
     assert headline["estimate_s"] is not None and headline["estimate_s"] < 3600, headline
     assert big["rc"] == 0, proc.stderr
     est, actual = big["estimate_s"], big["actual_s"]
