@@ -19,6 +19,7 @@ import numba
 
 from dicetrace.core.kernels import batch_out, roll_out, run_batch, run_events, run_roll
 from dicetrace.core.loop import BATCH_BLOCK
+from dicetrace.devices import CPU, Device
 from dicetrace.memory import available_memory
 from dicetrace.status import Status
 
@@ -44,7 +45,7 @@ class _Threads:
         numba.set_num_threads(self.old)
 
 
-def _run_batch(kin, cap: int, threads, device: str = "cpu", events: bool = False):
+def _run_batch(kin, cap: int, threads, device: Device = CPU, events: bool = False):
     """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC, on ``device`` ("cpu" or "cuda"):
     (status, steps, outcome, nsets, sets, set_steps, times, starts), throw i's sets from ``starts[i]``.
 
@@ -61,7 +62,7 @@ def _run_batch(kin, cap: int, threads, device: str = "cpu", events: bool = False
     compiles a third as much).
     """
     m = len(kin.ics)
-    if device == "cuda":
+    if device.gpu:
         from dicetrace.core.gpu import run_batch_cuda  # numba-cuda: optional, imported only for a GPU run
 
         return run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, events)
@@ -151,7 +152,7 @@ def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, 
         )
 
 
-def run_chunk(kin, cap: int, threads, device: str = "cpu", events: bool = False):
+def run_chunk(kin, cap: int, threads, device: Device = CPU, events: bool = False):
     """Summaries of the ICs of ``kin``: (status, steps, outcome, nsets, sets, set_steps, times), sets compacted.
 
     Throws that fill their ``cap`` sets are re-run, all together, with
@@ -232,11 +233,11 @@ def _gpu_pool(k: int, streams: int) -> ThreadPoolExecutor:
         return pool
 
 
-def chunk_results(bounds, run, device: str = "cpu"):
+def chunk_results(bounds, run, device: Device = CPU):
     """``run(a, b)`` for each ``(a, b)`` of ``bounds``, yielded in order.
 
     On the CPU the chunks run one after the other here.  On GPUs
-    (``device == "cuda"``) each chunk is cut into pieces (at least
+    (``device.gpu``) each chunk is cut into pieces (at least
     ``GPU_PIECE_MIN`` ICs each, at most ``PIECES_PER_STREAM`` per stream)
     so that every GPU has work, and the pieces go
     round-robin to the GPUs (``core.gpu.device_ids``: every device, or the
@@ -248,7 +249,7 @@ def chunk_results(bounds, run, device: str = "cpu"):
     Every piece runs the same kernels from its own ICs, so the results are
     those of one GPU running the chunks one by one.
     """
-    if device != "cuda":
+    if not device.gpu:
         for a, b in bounds:
             yield run(a, b)
         return

@@ -1,6 +1,10 @@
 """Where batches of throws run: the CPU (numba threads) or a CUDA GPU (numba-cuda), and how to choose.
 
-``device`` is one of :data:`DEVICES`: ``"cpu"`` (the default everywhere;
+A device is asked for by name and resolved once, where a request enters
+(the API's ``simulate_batch``, a scan, a study, the explorer, the command
+line), into one :class:`Device` value that everything below takes: its
+``kind`` (``"cpu"`` or ``"cuda"``) and the ``label`` a result records.
+The name is one of :data:`DEVICES`: ``"cpu"`` (the default everywhere;
 :func:`use_device` changes it for a block, as ``dicetrace analyze --device``
 does for every batch its studies run),
 ``"cuda"`` (a GPU; refused with :class:`DeviceError` where there is none) or
@@ -21,6 +25,7 @@ import contextlib
 import contextvars
 import functools
 import sys
+from dataclasses import dataclass
 
 #: The values of ``device``.
 DEVICES = ("cpu", "cuda", "auto")
@@ -47,18 +52,40 @@ def gpu_unavailable_reason() -> str | None:
     return "numba-cuda found no CUDA GPU (no driver or no device)"
 
 
-_DEFAULT = contextvars.ContextVar("dicetrace_device", default="cpu")
+@dataclass(frozen=True)
+class Device:
+    """A device, resolved (:func:`resolve_device`): where batches run, and what a result records of it.
+
+    ``kind`` is ``"cpu"`` or ``"cuda"``; ``label`` is ``"cpu"`` or ``"cuda: <GPU name>"``.
+    """
+
+    kind: str
+    label: str
+
+    @property
+    def gpu(self) -> bool:
+        """Whether batches run on a CUDA GPU (numba-cuda, or its simulator)."""
+        return self.kind == "cuda"
+
+    def __str__(self) -> str:
+        return self.label
 
 
-def default_device() -> str:
-    """The device a batch runs on when none is given: ``"cpu"``, unless a :func:`use_device` block says otherwise."""
+#: The CPU, resolved (nothing to ask).
+CPU = Device("cpu", "cpu")
+
+_DEFAULT = contextvars.ContextVar("dicetrace_device", default=CPU)
+
+
+def default_device() -> Device:
+    """The device a batch runs on when none is given: the CPU, unless a :func:`use_device` block says otherwise."""
     return _DEFAULT.get()
 
 
 @contextlib.contextmanager
-def use_device(device: str):
-    """Within the block, batches given no device run on ``device`` (checked now: :func:`check_device`)."""
-    token = _DEFAULT.set(check_device(device))
+def use_device(device):
+    """Within the block, batches given no device run on ``device`` (a name or a :class:`Device`, resolved now)."""
+    token = _DEFAULT.set(resolve_device(device))
     try:
         yield
     finally:
@@ -86,29 +113,41 @@ def check_device(device) -> str:
     return device
 
 
-def resolve_device(device: str) -> str:
-    """``"cpu"`` or ``"cuda"``: where ``device`` runs here.
+def resolve_device(device=None) -> Device:
+    """The :class:`Device` that ``device`` names here: a name of :data:`DEVICES`, a :class:`Device` (itself: it is
+    resolved already) or None (:func:`default_device`).
 
     ``"cuda"`` without a usable GPU is a :class:`DeviceError` (one line, the
     reason); ``"auto"`` takes the GPU where there is one (never numba-cuda's
-    simulator) and says which device it chose on
-    standard error, once per process.
+    simulator) and says which device it chose on standard error, once per
+    process.
     """
+    if device is None:
+        return default_device()
+    if isinstance(device, Device):
+        return device
     device = check_device(device)
     if device == "cpu":
-        return "cpu"
+        return CPU
     why = gpu_unavailable_reason()
     if device == "cuda":
         if why is not None:
             raise DeviceError(f"device 'cuda': {why}")
-        return "cuda"
+        return _gpu()
     if why is None and _simulated():
         why = "NUMBA_ENABLE_CUDASIM=1: numba-cuda's simulator is no GPU; device 'cuda' runs on it"
     if why is not None:
         _say_once(f"device auto: running on the CPU ({why})")
-        return "cpu"
-    _say_once(f"device auto: running on the GPU ({device_label('cuda')})")
-    return "cuda"
+        return CPU
+    gpu = _gpu()
+    _say_once(f"device auto: running on the GPU ({gpu.label})")
+    return gpu
+
+
+def _gpu() -> Device:
+    from dicetrace.core import gpu  # numba-cuda: optional and heavy, imported only for a GPU
+
+    return Device("cuda", f"cuda: {gpu.device_name()}")
 
 
 def _simulated() -> bool:
@@ -119,10 +158,7 @@ def _simulated() -> bool:
     return gpu.simulated()
 
 
-def device_label(device: str) -> str:
-    """What a result records as its device: ``"cpu"``, or ``"cuda: <GPU name>"``."""
-    if device != "cuda":
-        return "cpu"
-    from dicetrace.core import gpu  # numba-cuda: optional and heavy, imported only for a GPU
-
-    return f"cuda: {gpu.device_name()}"
+def device_label(device) -> str:
+    """What a result records as its device: ``"cpu"``, or ``"cuda: <GPU name>"`` (``device`` a name or a
+    :class:`Device`; a name is resolved)."""
+    return resolve_device(device).label

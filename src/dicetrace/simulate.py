@@ -28,7 +28,7 @@ from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.kernels import has_events, new_roll_state, roll_out, run_events, run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES
-from dicetrace.devices import check_device, default_device, device_label, resolve_device
+from dicetrace.devices import Device, check_device, resolve_device
 from dicetrace.integrators import INTEGRATORS
 from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
 from dicetrace.memory import available_memory
@@ -480,7 +480,7 @@ def simulate_batch(
     threads: int | None = None,
     cap: int = DEFAULT_CAP,
     chunk: int | None = None,
-    device: str | None = None,
+    device: str | Device | None = None,
     events: bool = False,
     **options,
 ) -> BatchResult:
@@ -526,6 +526,8 @@ def simulate_batch(
         The result records it (``BatchResult.device``).
         None (default): :func:`~dicetrace.devices.default_device`, the CPU
         unless a :func:`~dicetrace.devices.use_device` block says otherwise.
+        A :class:`~dicetrace.devices.Device` (what ``resolve_device``
+        returns) is taken as it is, resolved already.
     events
         Record the exact contact events, as :func:`simulate` does
         (``BatchResult.set_times``); contact integrators only, on either
@@ -541,7 +543,8 @@ def simulate_batch(
     cap = _integer(cap, "cap", 1, MAX_CAP)
     threads = _integer(threads, "threads", 1, none_ok=True)
     chunk = _integer(chunk, "chunk", 1, none_ok=True)
-    device = check_device(default_device() if device is None else device)
+    if device is not None and not isinstance(device, Device):
+        check_device(device)  # the name, now; what it names is resolved once the inputs have passed their checks
     events = check_events(cfg, events)
     conv = cfg.preset.l_convention if l_convention is None else l_convention
     coords = ics.coords if isinstance(ics, SliceICs) else None
@@ -550,9 +553,9 @@ def simulate_batch(
     if coords is not None:
         coords = np.array(coords, dtype=np.float64).reshape(m, 3)
     cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
-    device = resolve_device(device)
+    device = resolve_device(device)  # once: everything below takes this Device
     if chunk is None:
-        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap, events) if device == "cuda" else batch_chunk(cap, events)
+        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap, events) if device.gpu else batch_chunk(cap, events)
     check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention, events=events)
     status, outcome = np.zeros(m, dtype=np.int8), np.zeros(m, dtype=np.int8)
     steps, nsets = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
@@ -592,6 +595,6 @@ def simulate_batch(
         set_steps=flat_steps,
         config=cfg,
         coords=coords,
-        device=device_label(device),
+        device=device.label,
         set_times=flat_times,
     )

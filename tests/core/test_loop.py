@@ -225,9 +225,23 @@ def test_batch_goes_on_with_the_throws_a_slice_stopped(monkeypatch):
         whole = kernels.batch_out(40, 64)
         kernels.run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, 64, whole)
         monkeypatch.setattr(kernels, "SLICE_STEPS", 50)
+        monkeypatch.setattr(kernels, "SUMMARY_SLICES", 1)
         sliced = kernels.batch_out(40, 64)
         kernels.run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, 64, sliced)
         monkeypatch.undo()
         assert whole.steps.min() > 50  # every throw outlived its first slice
         for x, y in zip(whole, sliced):
             np.testing.assert_array_equal(x, y)
+
+
+def test_a_flight_that_never_lands_is_crossed_at_once():
+    """g = 0 and a die thrown up: one free flight to the time cap of 1e7 s (1e10 steps of 1 ms), crossed in one
+    piece; the tolerance weight (tol_growth > 0, ``state.age_tolerance``) stops ageing at its floor instead of
+    multiplying 1e10 times, so the throw ends at once, at the time cap."""
+    cfg = make_config("physical", g=0.0, t_max_s=1e7)
+    assert cfg.numerics.tol_growth > 0
+    kin = cfg.kernel_inputs(np.array([[0.0, 0.0, 50.0, 0.0, -100.0, 0.0]]))
+    cap = 64
+    r = kernels.run_summary(kin.ics[0], kin.off0, kin.params, kin.integrator_id, np.zeros(cap, np.uint8),
+                            np.zeros(cap, np.int32))
+    assert r[0] == Status.TIME_CAP and r[1] == int(kin.params.max_steps)

@@ -76,7 +76,7 @@ def test_a_page_names_the_device_it_is_given():
         View(), can_save=False, device="cuda: NVIDIA <H200>")
 
 
-@pytest.mark.parametrize("bad", ["gpu", None])
+@pytest.mark.parametrize("bad", ["gpu", 3])
 def test_an_unknown_device_is_refused_before_anything_starts(bad):
     from dicetrace.devices import DeviceError
     from dicetrace.explore import Explorer
@@ -88,6 +88,18 @@ def test_an_unknown_device_is_refused_before_anything_starts(bad):
     with pytest.raises(DeviceError):
         Worker(device=bad)
     assert threading.active_count() == before
+
+
+def test_no_device_is_the_default_device():
+    """``device=None`` is the default device (the CPU, unless a ``use_device`` block says otherwise), resolved once."""
+    from dicetrace.devices import CPU
+    from dicetrace.explore.compute import Worker
+
+    w = Worker(device=None)
+    try:
+        assert w.device == "cpu" and w._device is CPU
+    finally:
+        w.shutdown()
 
 
 @pytest.mark.slow

@@ -136,13 +136,15 @@ def test_a_local_cluster_for_a_gpu_scan_starts_one_worker_per_gpu(monkeypatch):
     from dicetrace.devices import DeviceError
 
     monkeypatch.setattr(gpu, "device_count", lambda: 3)
-    monkeypatch.setattr(sd, "resolve_device", lambda d: "cuda")
+    from dicetrace.devices import CPU, Device
+
+    monkeypatch.setattr(sd, "resolve_device", lambda d: Device("cuda", "cuda: stand-in"))
     assert sd.local_worker_count(None, "cuda") == 3
     assert sd.local_worker_count(None, "cuda:0 (NVIDIA H200)") == 3
     assert sd.local_worker_count(None, "auto") == 3
     assert sd.local_worker_count(2, "cuda") == 2
     assert sd.local_worker_count(None, "cpu") == (os.cpu_count() or 1)
-    monkeypatch.setattr(sd, "resolve_device", lambda d: "cpu")  # auto on a machine without a GPU
+    monkeypatch.setattr(sd, "resolve_device", lambda d: CPU)  # auto on a machine without a GPU
     assert sd.local_worker_count(None, "auto") == (os.cpu_count() or 1)
 
     def no_gpu(d):

@@ -167,6 +167,27 @@ def device_or_fail(device: str) -> str:
         return device_label(resolve_device(device))
 
 
+#: A throw that may run longer than this before its time cap (at the slowest step of any integrator) needs ``--yes``.
+LONG_THROW_S = 600.0
+YesOption = Annotated[bool, typer.Option(
+    "--yes", "-y", help=f"Run even when a throw may take over {LONG_THROW_S / 60:g} min before its time cap "
+    "(Ctrl-C stops it within a second).")]
+
+
+def long_throw_or_fail(cfg, yes: bool) -> None:
+    """Refuse, without ``--yes``, a time cap so long that a throw may run for over ``LONG_THROW_S`` before it:
+    its steps (``--t-max`` over ``--dt``) at the slowest step of any integrator (``scan.estimate.SLOWEST_STEP_S``,
+    a pessimistic bound).  One line that says both, exit 2."""
+    from dicetrace.scan.estimate import SLOWEST_STEP_S, human_seconds  # lazy: keeps `dicetrace --help` fast
+
+    steps = cfg.numerics.max_steps
+    worst = steps * SLOWEST_STEP_S
+    if worst > LONG_THROW_S and not yes:
+        fail(f"--t-max {fmt_num(cfg.numerics.t_max_s)} at --dt {fmt_num(cfg.numerics.dt_s)}: a throw may run "
+             f"{steps:,} steps before its time cap, up to {human_seconds(worst)} at {SLOWEST_STEP_S * 1e6:g} µs a step; "
+             "pass --yes to run it anyway (Ctrl-C stops it within a second), or a shorter --t-max")
+
+
 def events_or_fail(cfg, events: bool) -> bool:
     """``--events`` checked against the configuration's integrator: one line naming it, exit 2, where it has none."""
     from dicetrace.simulate import check_events  # lazy: keeps `dicetrace --help` fast (imports numba)

@@ -301,6 +301,7 @@ def register(app: typer.Typer) -> None:
             "instead of stdout."
         ),
         events: opts.SimulateEventsOption = False,
+        yes: opts.YesOption = False,
     ) -> None:
         """Throw the die from one or many ICs; print outcome, steps, t_settle_s, status and contact sequence per IC.
 
@@ -325,6 +326,7 @@ def register(app: typer.Typer) -> None:
             source = desc
         cfg = build_config(model, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth)
         opts.events_or_fail(cfg, events)
+        opts.long_throw_or_fail(cfg, yes)
         batch = run_ics(ic_arr, cfg, events)
         names, rows = result_rows(batch, coords)
         meta = {

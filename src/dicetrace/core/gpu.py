@@ -454,7 +454,7 @@ def _first_pass(ics, off0, kp, integ, cap, events):
     d_sets, d_set_steps = buf.dev("sets", m * cap, np.uint8), buf.dev("set_steps", m * cap, np.int32)
     d_times = buf.dev("times", m * cap, np.float64) if events else buf.dev("ev_times", 0, np.float64)
     if seed_path:
-        args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps, kernels.SLICE_STEPS)
+        args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps, kernels.SLICE_STEPS * kernels.SUMMARY_SLICES)
     else:
         args = (d_ics, d_off0, kp, cap, buf.dev("no_motion", 0, MOTION), buf.dev("no_work", 0, kernels_for(integ).scheme.WORK),
                 *outs, d_sets, d_set_steps, d_times, *_no_trace(buf), False, kernels.SLICE_STEPS, 0)

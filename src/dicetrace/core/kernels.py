@@ -152,6 +152,10 @@ def batch_kernel(integ: int):
 #: (KeyboardInterrupt) stops a run within one slice.  Above the default time cap's 60,000 steps of 1 ms: a
 #: throw at the default settings never stops in the middle.
 SLICE_STEPS = 1 << 16
+#: The specialised summary kernel's slice, in ``SLICE_STEPS``: its steps cost a tenth of the run loop's or less
+#: (``core.fast``), and a throw it has not ended then starts again in the run loop (it keeps nothing), so its
+#: slice is long: only a throw past a time cap of some 4,000 s of 1 ms steps goes on in the run loop.
+SUMMARY_SLICES = 64
 #: The time one call of a batch kernel aims at (its throws are chosen from the last call's rate).
 CALL_SECONDS = 0.25
 #: Most throws in one call of a batch kernel, per numba thread (the state records of a call: a few MiB).
@@ -200,7 +204,7 @@ def run_summary(ic, off0, kp, integ, sets, set_steps):
     """
     k = kernels_for(integ)
     if hasattr(k.scheme, "summary") and k.scheme.summary_applies(kp, off0):
-        r = k.scheme.summary(ic, off0, kp, sets, set_steps, SLICE_STEPS)
+        r = k.scheme.summary(ic, off0, kp, sets, set_steps, SLICE_STEPS * SUMMARY_SLICES)
         if r[0] != Status.RUNNING:
             return r
     return _in_slices(k.roll_summary, ic, off0, kp, new_roll_state(integ), roll_out(sets, set_steps))
@@ -287,7 +291,8 @@ def run_batch(ics, off0, kp, integ, cap, out: BatchOut, *, events: bool = False)
     while a < m:
         b = min(m, a + size)
         t0 = time.perf_counter()
-        kernel(ics[a:b], off0, kp, cap, S[: b - a], Wk[: b - a], _rows(out, a, b, cap), False, SLICE_STEPS)
+        kernel(ics[a:b], off0, kp, cap, S[: b - a], Wk[: b - a], _rows(out, a, b, cap), False, SLICE_STEPS,
+               SLICE_STEPS * SUMMARY_SLICES)
         spent = time.perf_counter() - t0
         going = np.nonzero(out.status[a:b] == Status.RUNNING)[0]
         if going.size:
@@ -304,7 +309,7 @@ def run_batch(ics, off0, kp, integ, cap, out: BatchOut, *, events: bool = False)
                 break
             sub = _taken(part, going, cap)
             Sg, Wg = Sh[going], Wh[going]  # copies: the call moves them on, and they go back after it
-            kernel(ics[idx[going]], off0, kp, cap, Sg, Wg, sub, True, SLICE_STEPS)
+            kernel(ics[idx[going]], off0, kp, cap, Sg, Wg, sub, True, SLICE_STEPS, 0)
             _put(part, going, cap, sub)
             Sh[going], Wh[going] = Sg, Wg
         _put(out, idx, cap, part)

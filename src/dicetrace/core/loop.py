@@ -391,13 +391,14 @@ def make_batch(scheme: ModuleType, loops: ModuleType, *, events: bool = False, n
     per call; never to resume).  ``loops`` is the module that holds the
     scheme's run loops (``core.kernels.kernels_of``): the kernel closes over
     modules only, which numba's disk cache keys on by name (``core._jit``).
-    The kernel, ``batch(ics, off0, kp, cap, S, Wk, out, resume, budget)``:
-    throw i runs in its own motion and work records ``S[i]``, ``Wk[i]`` and
-    writes ``out`` (:class:`BatchOut`), at most ``budget`` steps (a throw
-    not ended then is ``Status.RUNNING``, kept in its records); with
-    ``resume`` every throw goes on from where its last slice stopped.  A
-    throw the specialised kernel stopped at the budget (it keeps nothing)
-    starts again in the run loop, which keeps its state.  Blocks of ``BATCH_BLOCK`` throws go
+    The kernel, ``batch(ics, off0, kp, cap, S, Wk, out, resume, budget,
+    fast_budget)``: throw i runs in its own motion and work records ``S[i]``,
+    ``Wk[i]`` and writes ``out`` (:class:`BatchOut`), at most ``budget``
+    steps (a throw not ended then is ``Status.RUNNING``, kept in its
+    records); with ``resume`` every throw goes on from where its last slice
+    stopped.  The specialised kernel, whose steps cost a fraction of the
+    loop's, takes up to ``fast_budget`` steps; a throw it has not ended then
+    (it keeps nothing) starts again in the run loop, which keeps its state.  Blocks of ``BATCH_BLOCK`` throws go
     to the threads, and every throw runs the very same serial code, so
     results are bit-identical to a loop of the single-throw loop whatever the
     number of threads, the scheduling or the caller's chunking.  ``events``:
@@ -406,7 +407,7 @@ def make_batch(scheme: ModuleType, loops: ModuleType, *, events: bool = False, n
     events = bool(events)
     use_summary = hasattr(scheme, "summary") and not events
 
-    def batch(ics, off0, kp, cap, S, Wk, out, resume, budget):
+    def batch(ics, off0, kp, cap, S, Wk, out, resume, budget, fast_budget):
         m = ics.shape[0]
         nblk = (m + BATCH_BLOCK - 1) // BATCH_BLOCK
         fast = use_summary and not resume and scheme.summary_applies(kp, off0)
@@ -424,7 +425,7 @@ def make_batch(scheme: ModuleType, loops: ModuleType, *, events: bool = False, n
                 hi = lo + cap
                 s = Status.RUNNING
                 if fast:  # what the summary loop would do, without the call through it
-                    s, n, o, ns = scheme.summary(ics[i], off0, kp, sets[lo:hi], set_steps[lo:hi], budget)
+                    s, n, o, ns = scheme.summary(ics[i], off0, kp, sets[lo:hi], set_steps[lo:hi], fast_budget)
                 if s == Status.RUNNING:  # a fresh throw the specialised kernel did not end (it keeps nothing), or any
                     ro = RollOut(sets[lo:hi], set_steps[lo:hi], ev_times[lo:hi], e0, e1, e2)
                     if events:

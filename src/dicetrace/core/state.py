@@ -188,15 +188,21 @@ def age_tolerance(st, kp, h, steps):
     With ``kp.tol_growth`` > 0 an error-controlled step that starts at time t
     weighs its error estimates by exp(−tol_growth·t), never below kp.tol /
     ``TOL_LOOSEST`` (the loosest tolerance); 1 with tol_growth = 0.  The
-    weight is a product of one ``tol_decay`` per step (see ``STATE``).
+    weight is a product of one ``tol_decay`` per step (see ``MOTION``).  Once
+    it is below that floor it only ever gives the floor, and it ages no
+    further: a free flight crossed in one piece of 10¹⁰ steps (a die that
+    never lands) takes a few hundred multiplications, not 10¹⁰.
     """
     grade = 1.0
     if kp.tol_growth > 0.0:
-        grade = max(st.tol_weight, min(1.0, kp.tol / TOL_LOOSEST))
+        floor = min(1.0, kp.tol / TOL_LOOSEST)
+        grade = max(st.tol_weight, floor)
         if h != st.tol_h:
             st.tol_h = h
             st.tol_decay = math.exp(-kp.tol_growth * h)
         for _ in range(steps):
+            if st.tol_weight < floor:
+                break
             st.tol_weight *= st.tol_decay
     return grade
 

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dicetrace.devices import device_label, resolve_device
+from dicetrace.devices import resolve_device
 from dicetrace.explore.outcome_map import Cancelled, MapBuild, OutcomeMap
 from dicetrace.explore.view import View, ViewError
 
@@ -286,8 +286,8 @@ class Worker:
 
     def __init__(self, threads: int | None = None, *, budget_s: float | None = None, cache_bytes: int | None = None,
                  device: str = "cpu"):
-        self._device = resolve_device(device)  # "cpu" or "cuda"
-        self.device = device_label(self._device)
+        self._device = resolve_device(device)  # a Device, resolved once (the server passes one)
+        self.device = self._device.label
         self.threads = threads
         self.budget_s = MAP_BUDGET_S if budget_s is None else float(budget_s)
         if not self.budget_s > 0:
@@ -519,7 +519,7 @@ class Worker:
         """Held around every parallel kernel call (map pieces, saves) unless numba's threading layer takes
         calls from several threads at once: then nothing (see :func:`_concurrent_kernels_ok`); on a GPU always
         (one kernel call on the device at a time)."""
-        if self._device == "cuda":
+        if self._device.gpu:
             return self._serial
         return contextlib.nullcontext() if _concurrent_kernels_ok() else self._serial
 

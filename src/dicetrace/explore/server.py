@@ -294,7 +294,7 @@ class Explorer:
                  height: int = 900, device: str = "cpu"):
         host, port = check_host(host), check_port(port)  # before anything starts (ValueError naming the parameter)
         threads, map_budget_s = check_threads(threads), check_budget(map_budget_s)
-        self.device = resolve_device(device)  # "cpu" or "cuda"
+        self.device = resolve_device(device)  # a Device, resolved once here
         if isinstance(height, bool) or not isinstance(height, (int, np.integer)) or height < 1:
             raise ValueError(f"height must be a whole number of pixels >= 1, got {height!r}")
         self.view = make_view(slice, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)

@@ -153,7 +153,7 @@ def local_worker_count(n_workers: int | None, device: str = "cpu") -> int:
     one per CPU core."""
     if n_workers:
         return n_workers
-    if device != "cpu" and resolve_device(device_kind(device) if device != "auto" else device) == "cuda":
+    if device != "cpu" and resolve_device(device_kind(device) if device != "auto" else device).gpu:
         from dicetrace.core import gpu  # numba-cuda: imported only for a GPU scan
 
         return max(1, gpu.device_count())

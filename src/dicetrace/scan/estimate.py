@@ -212,10 +212,41 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     capped = (steps >= cal.numerics.max_steps) & (cal.numerics.max_steps < max_steps)
     full = np.where(capped, float(max_steps), steps)
     per_ic = cpu / len(ids) * (full.sum() / max(steps.sum(), 1.0))
+    fast_steps = _fast_slice(cal)
+    if capped.any() and fast_steps is not None and max_steps > fast_steps:
+        # the seed path's specialised kernel gives a throw past its long slice to the run loop, whose steps cost
+        # more: the steps beyond that slice are costed at the loop's rate, timed on the capped throws
+        per_step = cpu / max(steps.sum(), 1.0)
+        loop_step = _loop_step_seconds(ics[capped], cal, conv)
+        per_ic += capped.sum() / len(ids) * (max_steps - fast_steps) * max(loop_step - per_step, 0.0)
     seen = [x for x in others if x is not None]
     cores, load = effective_cores(nthreads, sum(seen) / len(seen) if seen else None)
     est = _with_sets(est, defn, res, full / np.maximum(steps, 1.0))
     return replace(est, seconds=ics_todo * per_ic / cores, upper=bool(capped.any()), load=load)
+
+
+def _fast_slice(cfg) -> int | None:
+    """The steps the specialised summary kernel takes before it gives a throw to the run loop, where it applies
+    to ``cfg`` (the seed path), else None."""
+    from dicetrace.core.kernels import SLICE_STEPS, SUMMARY_SLICES, kernels_for  # lazy: imports numba
+
+    kin = cfg.kernel_inputs(np.zeros((0, 6)))
+    scheme = kernels_for(kin.integrator_id).scheme
+    if hasattr(scheme, "summary") and scheme.summary_applies(kin.params, kin.off0):
+        return SLICE_STEPS * SUMMARY_SLICES
+    return None
+
+
+def _loop_step_seconds(ics: np.ndarray, cfg, conv: str) -> float:
+    """Processor seconds a step of the run loop costs on these throws (each run to the probe's step limit)."""
+    from dicetrace.params import convert_l
+    from dicetrace.simulate import simulate
+
+    ics = convert_l(ics[:8], conv, cfg.preset.l_convention)
+    simulate(ics[0], config=cfg)  # loads (or compiles) the loop, untimed
+    t0 = time.process_time()
+    n = sum(simulate(ic, config=cfg).steps for ic in ics)
+    return (time.process_time() - t0) / max(n, 1)
 
 
 def _with_sets(est: ScanEstimate, defn: ScanDefinition, probe, stretch: np.ndarray) -> ScanEstimate:

@@ -48,6 +48,7 @@ The chunk files themselves (names, listing, checksums, the checks of
 """
 from __future__ import annotations
 
+import functools
 import itertools
 import json
 import os
@@ -82,7 +83,7 @@ from dicetrace.scan.chunk_files import (
     verify_unlogged,
 )
 from dicetrace.scan.chunk_files import ForeignFileError, rolls_dir  # noqa: F401 (re-exported: users import them from here)
-from dicetrace.devices import DeviceError
+from dicetrace.devices import DeviceError, resolve_device
 from dicetrace.scan.definition import ScanDefinition, describe_differences, device_kind, as_written_now
 from dicetrace.simulate import simulate_batch
 from dicetrace.sinks._common import OutputError, make_folders, remove_quietly
@@ -158,6 +159,12 @@ def _check_space_finite(defn: ScanDefinition) -> None:
 # -- computing one chunk ----------------------------------------------------------------------
 
 
+@functools.cache
+def _resolved(label: str):
+    """The device a scan's label names, resolved once per process (a worker resolves its own)."""
+    return resolve_device(device_kind(label))
+
+
 def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, cap: int = DEFAULT_CAP) -> pa.Table:
     """The rolls table of chunk ``c`` of a scan (its metadata: the batch's, with the device it ran on).
 
@@ -172,7 +179,7 @@ def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, c
     blk = defn.space.block(start, stop)
     batch = simulate_batch(
         blk.ics, config=defn.config, l_convention=defn.space.slice.l_convention, threads=threads, cap=cap,
-        device=device_kind(defn.device), events=defn.events,
+        device=_resolved(defn.device), events=defn.events,
     )
     if batch.device != defn.device:
         raise DeviceError(f"chunk {c} ran on {batch.device}, the scan runs on {defn.device}: "

@@ -31,7 +31,7 @@ from rich.progress import (
 )
 
 from dicetrace.compile_clock import CompileClock, running_rate
-from dicetrace.devices import check_device, device_label, resolve_device
+from dicetrace.devices import Device, check_device, device_label, resolve_device
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.memory import available_memory
 from dicetrace.params import Config, resolve_config
@@ -141,6 +141,12 @@ class ScanReport:
 _SPACES = (Grid, Sample, Points)
 
 
+def _device_name(device):
+    """A :class:`~dicetrace.devices.Device` as the name of its kind (the scan records the label it resolves to, on
+    Dask the workers', and each process resolves it once: ``folder.compute_chunk``); a name as it is."""
+    return device.kind if isinstance(device, Device) else device
+
+
 def _definition(space, config, chunk, options, device=None, events=None) -> ScanDefinition:
     if device is not None:
         check_device(device)
@@ -192,6 +198,7 @@ def iter_scan(
     cluster, an address, or a ``Client``) as they complete.  ``chunks``
     restricts the run to those chunk indices.  Arguments as :func:`scan`.
     """
+    device = _device_name(device)
     defn = _definition(space, config, chunk, options, device, events)
     _check_int(threads, "threads", 1)
     _check_int(n_workers, "n_workers", 1)
@@ -319,6 +326,7 @@ def scan(
         ``out`` cannot be created or written (the message names it); on a
         full disk the chunks finished so far are kept.
     """
+    device = _device_name(device)
     defn = _definition(space, config, chunk, options, device, events)
     _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask)
     _check_space_finite(defn)

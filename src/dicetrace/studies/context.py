@@ -50,7 +50,8 @@ class Options:
     ``integrator`` and ``tol`` override the integrator and tolerance of the
     converged models (study k, :mod:`dicetrace.studies.study_converged`); the
     other studies ignore them.  ``device``: where every batch of the run goes
-    (``dicetrace.devices``; the runner sets it for the whole run).
+    (a name, or a :class:`~dicetrace.devices.Device` resolved already; the
+    runner resolves it once and sets it for the whole run).
     """
 
     quick: bool = False
@@ -59,7 +60,7 @@ class Options:
     no_cache: bool = False
     integrator: str | None = None
     tol: float | None = None
-    device: str = "cpu"
+    device: object = "cpu"
 
     @property
     def full(self) -> bool:
@@ -116,8 +117,9 @@ class Context:
         win = window_ranges(window)
         res_t = (int(res),) * len(win) if np.isscalar(res) else tuple(int(r) for r in res)
         key = [slice_spec, win, res_t, bool(sequences), sorted(overrides.items()), _resolved(overrides), kernel_digest()]
-        if self.options.device != "cpu":  # a GPU's grid may differ from the CPU's by rounding: cached apart
-            key.append(self.options.device)
+        label = str(self.options.device)  # a Device's label, or the name
+        if label != "cpu":  # a GPU's grid may differ from the CPU's by rounding: cached apart
+            key.append(label)
         key = json.dumps(key, sort_keys=True)
         path = self.cache_dir / f"{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
         if path.exists() and not self.options.no_cache:

@@ -18,7 +18,7 @@ from importlib.metadata import version
 from pathlib import Path
 
 from dicetrace import memory  # memory.available_memory is looked up at each call (tests patch it)
-from dicetrace.devices import device_label, use_device
+from dicetrace.devices import resolve_device, use_device
 from dicetrace.sinks._common import human_bytes
 from dicetrace.studies import WRITEUP_STUDIES, resolve, study_module
 from dicetrace.studies.context import Context, Options, Output, write_json
@@ -58,7 +58,8 @@ def run_study(name: str, options: Options, out: Path) -> dict:
     """Compute and render one writeup study into ``out``; returns what its JSON holds."""
     mod = study_module(name)
     ctx = Context(name, options, Path(out) / "cache")
-    with use_device(options.device):  # every batch of the study, however deep, runs there
+    device = resolve_device(options.device)  # once (the command line passes it resolved already)
+    with use_device(device):  # every batch of the study, however deep, runs there
         computed = mod.compute(ctx)
     output = Output(out)
     mod.render(computed, output)
@@ -66,7 +67,7 @@ def run_study(name: str, options: Options, out: Path) -> dict:
                "tables": output.tables, **computed.results}
     results["wall_s"] = time.perf_counter() - ctx.t0
     results["n_throws_simulated"] = int(ctx.n_throws)
-    results["device"] = device_label(options.device)
+    results["device"] = device.label
     path = write_json(output.res_dir / f"{name}.json", results)
     ctx.log(f"wrote {path} ({results['wall_s']:.1f} s)")
     return results
