@@ -14,6 +14,10 @@ read naturally.
 from __future__ import annotations
 
 from enum import IntEnum
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # numpy is imported where it is used: ``import dicetrace`` loads none
+    import numpy as np
 
 
 class Status(IntEnum):
