@@ -40,11 +40,8 @@ L_CONVENTIONS = ("program", "physical")
 #: The convention the kernels work in (the 2019 program's: −physical L).
 KERNEL_L_CONVENTION = "program"
 
-#: Body-frame node offsets in units of the half side: node = 1 + 4[x>0] + 2[y>0] + [z>0]
-#: (row k is node k + 1; docs/model.md §3).
-NODE_SIGNS = np.array(
-    [[(-1.0, 1.0)[(k >> 2) & 1], (-1.0, 1.0)[(k >> 1) & 1], (-1.0, 1.0)[k & 1]] for k in range(8)]
-)
+#: Body-frame node offsets in units of the half side (``dicetrace.body``, where the die's geometry is written once).
+from dicetrace.body import NODE_SIGNS  # noqa: E402,F401  (re-exported)
 
 
 def convert_l(ics, from_convention: str, to_convention: str) -> np.ndarray:

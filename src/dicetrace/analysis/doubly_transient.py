@@ -35,6 +35,8 @@ import warnings
 
 import numpy as np
 
+from dicetrace import body
+
 from dicetrace.simulate import Record, simulate, simulate_batch
 
 __all__ = ["LocalSlopes", "local_slopes", "Crossover", "crossover_fit", "Hazard", "hazard_curve", "hazard_windows",
@@ -43,7 +45,7 @@ __all__ = ["LocalSlopes", "local_slopes", "Crossover", "crossover_fit", "Hazard"
            "tail_scan", "tail_scan_windows"]
 
 #: Bit mask of the four nodes of each face (face 1..6; bit k-1 is node k; docs/model.md §3).
-FACE_NODE_MASK = {1: 0b00001111, 2: 0b00110011, 3: 0b01010101, 4: 0b10101010, 5: 0b11001100, 6: 0b11110000}
+FACE_NODE_MASK = body.FACE_NODE_MASK  # (re-exported: the bitmask of each face's nodes)
 
 
 def _boot_weights(n: int, n_boot: int, rng) -> np.ndarray:

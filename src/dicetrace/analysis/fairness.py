@@ -44,6 +44,8 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
+
+from dicetrace import body
 from scipy import optimize, special, stats
 
 from .dice_data import GAZETTE_97_16, MeasuredCuboids
@@ -55,7 +57,7 @@ __all__ = [
 ]
 
 #: Face f (1..6) of docs/model.md §3 lies on the side ``sign`` of body axis ``axis``: FACE_AXES[f - 1] = (axis, sign).
-FACE_AXES = ((0, -1), (1, -1), (2, -1), (2, +1), (1, +1), (0, +1))
+FACE_AXES = body.FACE_AXES
 
 
 def _aspect(aspect) -> np.ndarray:

@@ -28,6 +28,8 @@ from functools import lru_cache
 from typing import Literal
 
 import numpy as np
+
+from dicetrace.body import NODE_SIGNS
 import pandas as pd
 from scipy import stats
 
@@ -59,12 +61,8 @@ UNDEFINED_LABEL = 0
 
 
 def _node_coords() -> np.ndarray:
-    """Body coordinates (8, 3) of nodes 1..8 (row n-1), entries +-1."""
-    idx = np.arange(8)
-    return np.stack(
-        [np.where(idx & 4, 1, -1), np.where(idx & 2, 1, -1), np.where(idx & 1, 1, -1)],
-        axis=1,
-    )
+    """Body coordinates (8, 3) of nodes 1..8 (row n-1), entries +-1 (``dicetrace.body.NODE_SIGNS``)."""
+    return NODE_SIGNS.astype(int)
 
 
 def _node_index(coords: np.ndarray) -> np.ndarray:

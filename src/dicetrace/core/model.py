@@ -20,14 +20,11 @@ from __future__ import annotations
 import numpy as np
 
 from dicetrace.core._jit import jit
-from dicetrace.params import NODE_SIGNS
+from dicetrace.body import NODE_SIGNS, face_of_top4
 
-# Face table (docs/model.md §3): FACE_OF_TOP4[mask] for an 8-bit mask of the
+# Face table (docs/model.md §3, ``dicetrace.body``): FACE_OF_TOP4[mask] for an 8-bit mask of the
 # top four nodes (bit k = node k+1); 0 where the four nodes are no face.
-_FACES = {1: (1, 2, 3, 4), 2: (1, 2, 5, 6), 3: (1, 3, 5, 7), 4: (2, 4, 6, 8), 5: (3, 4, 7, 8), 6: (5, 6, 7, 8)}
-FACE_OF_TOP4 = np.zeros(256, dtype=np.int8)
-for _face, _nodes in _FACES.items():
-    FACE_OF_TOP4[sum(1 << (n - 1) for n in _nodes)] = _face
+FACE_OF_TOP4 = face_of_top4()
 
 
 @jit

@@ -57,6 +57,7 @@ import dicetrace
 from dicetrace.ic_arrays import IC_FIELDS
 from dicetrace.tables import node_events
 from dicetrace.sinks._common import Destination, destination, write_bytes
+from dicetrace import body as _body
 from dicetrace.sinks.rerun_channels import arrow_scales, log_channels
 from dicetrace.sinks.rerun_pips import log_pips
 from dicetrace.sinks.rerun_view import default_blueprint
@@ -69,12 +70,10 @@ FACE_COLORS = np.array(
     [[30, 90, 230], [20, 170, 60], [220, 30, 30], [210, 40, 210], [245, 215, 20], [15, 15, 15]],
     dtype=np.uint8,
 )
-#: Outward unit normal of each face in the body frame (face value 1..6 → row 0..5).
-FACE_NORMALS = np.array(
-    [[-1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0], [0, 0, 1.0], [0, 1.0, 0], [1.0, 0, 0]]
-)
-#: Corner nodes (0-based) of each face, rows in face order 1..6 (docs/model.md §3).
-FACE_NODES = np.array([[0, 1, 2, 3], [0, 1, 4, 5], [0, 2, 4, 6], [1, 3, 5, 7], [2, 3, 6, 7], [4, 5, 6, 7]])
+#: Outward unit normal of each face in the body frame (face value 1..6 → row 0..5), and the corner nodes (0-based)
+#: of each face in that order: the die's geometry, written once in ``dicetrace.body``.
+FACE_NORMALS = _body.FACE_NORMALS
+FACE_NODES = _body.FACE_NODE_ROWS
 
 BODY_COLOR = (236, 230, 214)  # ivory
 NODE_CONTACT_COLOR = (230, 20, 20)
