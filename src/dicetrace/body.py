@@ -129,6 +129,26 @@ class Body:
         com = self.com_cm
         return box + load - MASS * (com @ com * np.eye(3) - np.outer(com, com))
 
+    def angular_velocity(self, L: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+        """ω = R·I⁻¹·Rᵀ·L for angular momenta ``L`` (n, 3) and orientations ``rotation`` (n, 3, 3, world from body):
+        the kernels' formula, vectorised (the cube's L / I)."""
+        L = np.asarray(L, dtype=np.float64)
+        if self.is_cube:
+            return L / float(self.inertia[0, 0])
+        body_l = np.einsum("nji,nj->ni", rotation, L)  # Rᵀ·L
+        return np.einsum("nij,nj->ni", rotation, body_l @ np.linalg.inv(self.inertia).T)
+
+    @property
+    def reach_cm(self) -> float:
+        """The nodes' largest distance from the centre of mass, cm (the cube's √3·half side)."""
+        return float(np.linalg.norm(self.node_offsets_cm, axis=1).max())
+
+    @property
+    def inv_mass_node(self) -> float:
+        """A bound on a node's inverse effective mass, 1/node-mass: 1/M + r²/I_min (r = :attr:`reach_cm`, I_min the
+        smallest principal moment), the most a unit impulse at a node can change its velocity (the cube's 11/16)."""
+        return 1.0 / MASS + self.reach_cm ** 2 / float(np.linalg.eigvalsh(self.inertia)[0])
+
     @property
     def face_heights_cm(self) -> np.ndarray:
         """The height of the centre of mass over the ground (6,) when the die rests on face f (row f − 1), cm."""

@@ -22,6 +22,7 @@ import numpy as np
 
 from dicetrace.config_values import ConfigError  # noqa: F401  (re-exported)
 from dicetrace.config_values import is_number as _is_number, plain as _plain, read_number as _read_number, show as _show
+from dicetrace.body import Body
 from dicetrace.integrators import INTEGRATORS, IntegratorSpec, get_integrator, unknown_integrator  # noqa: F401  (re-exported)
 from dicetrace.stepsize import auto_dt
 
@@ -96,6 +97,31 @@ class KernelParams(NamedTuple):
     substeps: float  # sub-steps per step while in contact (contact-substep)
     tol: float = 0.0  # local error tolerance of the sub-steps (the adaptive integrators); 0: fixed sub-steps
     tol_growth: float = 0.0  # 1/s: the tolerance at time t is tol·exp(tol_growth·t), at most TOL_LOOSEST (Numerics)
+    # The body (dicetrace.body; the cube: isotropic, and these give the cube's own numbers):
+    isotropic: bool = True  # a uniform cube: ω = L / inertia, free flight exact; else the fields below
+    reach_cm: float = 1.7320508075688772  # the nodes' largest distance from the centre of mass, cm
+    inv_mass_node: float = 0.6875  # a node's largest inverse effective mass along the ground, 1/node-mass
+    ii_xx: float = 0.1875  # the inverse inertia tensor in the body frame, 1/(node-mass·cm²)
+    ii_yy: float = 0.1875
+    ii_zz: float = 0.1875
+    ii_xy: float = 0.0
+    ii_xz: float = 0.0
+    ii_yz: float = 0.0
+    rh_x: float = 0.125  # 1/(8·half-extent) along each body axis: R's columns from the node offsets
+    rh_y: float = 0.125
+    rh_z: float = 0.125
+    e_rest1: float = 7840.0  # the energy of the die resting on face 1..6 (centre of mass height), node-mass·cm²/s²
+    e_rest2: float = 7840.0
+    e_rest3: float = 7840.0
+    e_rest4: float = 7840.0
+    e_rest5: float = 7840.0
+    e_rest6: float = 7840.0
+    e_stop1: float = 2597.9474632040528  # the stop threshold above it on face 1..6 (80 % of its tip barrier)
+    e_stop2: float = 2597.9474632040528
+    e_stop3: float = 2597.9474632040528
+    e_stop4: float = 2597.9474632040528
+    e_stop5: float = 2597.9474632040528
+    e_stop6: float = 2597.9474632040528
 
 
 #: Smallest ``Numerics.tol``: below it the error estimate is rounding.
@@ -179,6 +205,16 @@ class Preset:
         the default tolerance Tsitouras' 5(4) pair is the cheapest of the
         error-controlled schemes that reaches 0.93 outcome agreement with the
         converged reference (0.98; see analysis/accuracy).
+    half_extents_cm
+        The die's box: its three half-extents along the body axes x, y, z, cm
+        (``dicetrace.body``); None (the default): the cube of ``half_side_cm``.
+        A box that is no cube needs a contact integrator with a continuous
+        method (``contact-tsit5``, ``contact-dop853``) and the ``rigid``
+        energy.
+    load_fraction, load_cm
+        A loaded die: the share of its mass (in [0, 1)) in a point load at
+        ``load_cm`` (cm, body frame, from the box's centre, inside the box).
+        0 (the default): uniform.
     default_tol, default_tol_growth
         The error tolerance and its growth rate (``Numerics.tol``,
         ``Numerics.tol_growth``) that an error-controlled integrator uses on
@@ -205,6 +241,9 @@ class Preset:
     integrator: str = "semi-implicit-euler"
     default_tol: float | None = None
     default_tol_growth: float = 0.0
+    half_extents_cm: tuple[float, float, float] | None = None
+    load_fraction: float = 0.0
+    load_cm: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
@@ -227,7 +266,7 @@ class Preset:
             )
         if self.half_side_cm <= 0:
             raise ConfigError("half_side_cm", f"preset {self.name!r}: half_side_cm must be > 0, got {self.half_side_cm!r}")
-        if self.z0_cm < self.half_side_cm:
+        if self.half_extents_cm is None and self.load_fraction == 0 and self.z0_cm < self.half_side_cm:
             raise ConfigError(
                 "z0_cm", f"preset {self.name!r}: z0_cm (the start height of the centre) must be >= half_side_cm "
                 f"({self.half_side_cm!r}: the die starts on or above the ground), got {self.z0_cm!r}"
@@ -256,6 +295,53 @@ class Preset:
             raise ConfigError("default_tol_growth", f"preset {self.name!r}: default_tol_growth must be a number in [0, {TOL_GROWTH_MAX:g}] "
                              f"(1/s), got {_show(gr)}")
         object.__setattr__(self, "default_tol_growth", _plain(gr))
+        self._check_body()
+
+    def _check_body(self) -> None:
+        """The box and the load, checked (``dicetrace.body.Body``); a cube of half_side_cm stored as None."""
+        h = self.half_extents_cm
+        if h is not None:
+            try:
+                h = tuple(_plain(v) for v in h)
+            except TypeError:
+                raise ConfigError("half_extents_cm", f"preset {self.name!r}: half_extents_cm must be three numbers "
+                                  f"(cm), got {_show(self.half_extents_cm)}") from None
+        try:
+            load = tuple(_plain(v) for v in self.load_cm)
+        except TypeError:
+            raise ConfigError("load_cm", f"preset {self.name!r}: load_cm must be three numbers (cm), got "
+                              f"{_show(self.load_cm)}") from None
+        for name, v in (("half_extents_cm", h), ("load_cm", load)):
+            if v is not None and (len(v) != 3 or not all(_is_number(x) and math.isfinite(x) for x in v)):
+                raise ConfigError(name, f"preset {self.name!r}: {name} must be three finite numbers (cm), got {_show(v)}")
+        w = self.load_fraction
+        if not _is_number(w) or not math.isfinite(w) or not 0 <= w < 1:
+            raise ConfigError("load_fraction", f"preset {self.name!r}: load_fraction must be a number in [0, 1), got "
+                              f"{_show(w)}")
+        try:
+            body = Body(h if h is not None else (self.half_side_cm,) * 3, w, load)
+        except ValueError as e:
+            raise ConfigError("half_extents_cm" if "half_extents" in str(e) else "load_cm",
+                              f"preset {self.name!r}: {e}") from None
+        if self.z0_cm < body.face_heights_cm[2]:
+            raise ConfigError("z0_cm", f"preset {self.name!r}: z0_cm (the start height of the centre of mass) must be "
+                              f">= {body.face_heights_cm[2]:g}, its height resting on face 3 (the die starts on or "
+                              f"above the ground), got {self.z0_cm!r}")
+        object.__setattr__(self, "half_extents_cm", h)
+        object.__setattr__(self, "load_fraction", _plain(w))
+        object.__setattr__(self, "load_cm", load)
+
+    @property
+    def body(self) -> Body:
+        """The die's body (``dicetrace.body``): the box (the cube of ``half_side_cm`` unless ``half_extents_cm``) and
+        its load."""
+        h = self.half_extents_cm if self.half_extents_cm is not None else (self.half_side_cm,) * 3
+        return Body(h, self.load_fraction, self.load_cm)
+
+    @property
+    def is_cube(self) -> bool:
+        """A uniform cube (what every integrator runs; a box or a loaded die needs a continuous contact scheme)."""
+        return self.body.is_cube
 
     @property
     def node_mass(self) -> float:
@@ -263,22 +349,39 @@ class Preset:
 
     @property
     def inertia(self) -> float:
-        """Isotropic moment of inertia (1/6)·M·s² with M = 8, s = side, node-mass·cm²."""
+        """Isotropic moment of inertia (1/6)·M·s² with M = 8, s = side, node-mass·cm²; of a die that is no uniform
+        cube, its smallest principal moment (a scale of the error norms)."""
+        if not self.is_cube:
+            return float(np.linalg.eigvalsh(self.body.inertia)[0])
         side = 2.0 * self.half_side_cm
         return 8.0 * side * side / 6.0
 
     @property
     def e_rest(self) -> float:
-        """Gravitational energy of the die lying on a face, Σ m·|g|·z = 8·|g|·half."""
+        """Gravitational energy of the die lying on a face, Σ m·|g|·z = 8·|g|·half; of a die that is no uniform
+        cube, on its lowest face (the blow-up test's reference)."""
+        if not self.is_cube:
+            return float(8.0 * (-self.g) * self.body.face_heights_cm.min())
         return 8.0 * (-self.g) * self.half_side_cm
 
     @property
     def e_stop(self) -> float:
         """Stop-test threshold: 80 % of the energy to stand the die on an edge.
 
-        The program writes it as 0.8·(8·|g|·(√2 − 1)) for a unit half side.
+        The program writes it as 0.8·(8·|g|·(√2 − 1)) for a unit half side.  A
+        die that is no uniform cube has one per face (:meth:`face_energies`);
+        this is their least.
         """
+        if not self.is_cube:
+            return float(self.face_energies()[1].min())
         return 0.8 * self.e_rest * (math.sqrt(2.0) - 1.0)
+
+    def face_energies(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per face (6,): the energy of the die resting on it, 8·|g|·(its centre's height), and the stop threshold
+        above it, 80 % of the energy to tip it onto its nearest edge (the cube's: ``e_rest``, ``e_stop``)."""
+        b = self.body
+        mg = 8.0 * (-self.g)
+        return mg * b.face_heights_cm, 0.8 * mg * b.tip_barriers_cm
 
     def with_(self, **changes) -> "Preset":
         return replace(self, **changes)
@@ -399,6 +502,42 @@ class Numerics:
         return self.spec.order
 
 
+#: The schemes that integrate a body that is no uniform cube (ω = I⁻¹·L along the flow, precession in flight):
+#: the contact driver on an embedded Runge–Kutta pair with a quaternion (``core.methods.erk``).
+BODY_SCHEMES = ("contact_tsit5", "contact_dop853")
+BODY_INTEGRATORS = tuple(n for n, sp in INTEGRATORS.items() if sp.scheme in BODY_SCHEMES)
+
+
+def _body_scale(body: Body) -> float:
+    """A die's length scale for the error norms and the free-flight bounds: its reach over √3 (the cube: its half
+    side)."""
+    return body.reach_cm / math.sqrt(3.0)
+
+
+def _body_params(p: "Preset") -> dict:
+    """The body's fields of :class:`KernelParams`: the cube's own numbers for a uniform cube (its kernels then use
+    the scalar inertia as before), else the box's (``dicetrace.body``)."""
+    if p.is_cube:
+        h = float(p.half_side_cm)
+        inertia = p.inertia
+        # a node's inverse effective mass along the ground: at most 1/8 + |r|²/I = 1/8 + 3h²/(16h²/3) = 11/16
+        return dict(isotropic=True, reach_cm=math.sqrt(3.0) * h, inv_mass_node=11.0 / 16.0,
+                    ii_xx=1.0 / inertia, ii_yy=1.0 / inertia, ii_zz=1.0 / inertia, ii_xy=0.0, ii_xz=0.0, ii_yz=0.0,
+                    rh_x=1.0 / (8.0 * h), rh_y=1.0 / (8.0 * h), rh_z=1.0 / (8.0 * h),
+                    **{f"e_rest{f}": float(p.e_rest) for f in range(1, 7)},
+                    **{f"e_stop{f}": float(p.e_stop) for f in range(1, 7)})
+    b = p.body
+    ii = np.linalg.inv(b.inertia)
+    rest, stop = p.face_energies()
+    h = b.half_extents_cm
+    return dict(isotropic=False, reach_cm=b.reach_cm, inv_mass_node=b.inv_mass_node,
+                ii_xx=float(ii[0, 0]), ii_yy=float(ii[1, 1]), ii_zz=float(ii[2, 2]), ii_xy=float(ii[0, 1]),
+                ii_xz=float(ii[0, 2]), ii_yz=float(ii[1, 2]),
+                rh_x=1.0 / (8.0 * h[0]), rh_y=1.0 / (8.0 * h[1]), rh_z=1.0 / (8.0 * h[2]),
+                **{f"e_rest{f}": float(rest[f - 1]) for f in range(1, 7)},
+                **{f"e_stop{f}": float(stop[f - 1]) for f in range(1, 7)})
+
+
 # Blow-up test on the energy the dynamics conserve (see core.model.energy_dynamic):
 # a run whose energy above the resting level exceeds (1 + BLOWUP_REL) times its
 # initial value plus BLOWUP_ABS has blown up.
@@ -413,6 +552,17 @@ class Config:
     preset: Preset = field(default_factory=lambda: PRESETS["seed"])
     numerics: Numerics = field(default_factory=Numerics)
 
+    def __post_init__(self) -> None:
+        p, spec = self.preset, self.numerics.spec
+        if not p.is_cube:
+            if spec.scheme not in BODY_SCHEMES:
+                raise ConfigError("integrator", f"preset {p.name!r} is no uniform cube (a box or a loaded die): it needs "
+                                  f"an integrator that follows its precession, {' or '.join(BODY_INTEGRATORS)}, not "
+                                  f"{spec.name!r}")
+            if p.energy != "rigid":
+                raise ConfigError("energy", f"preset {p.name!r} is no uniform cube: its stop test needs the rigid "
+                                  f"energy (energy='rigid'), not {p.energy!r}")
+
     def kernel_params(self) -> KernelParams:
         p, n = self.preset, self.numerics
         return KernelParams(
@@ -420,7 +570,7 @@ class Config:
             gamma=float(p.gamma),
             mu=float(p.mu),
             g=float(p.g),
-            half_side_cm=float(p.half_side_cm),
+            half_side_cm=float(p.half_side_cm) if p.is_cube else _body_scale(p.body),
             inertia=float(p.inertia),
             z0_cm=float(p.z0_cm),
             dt_s=float(n.dt_s),
@@ -436,15 +586,18 @@ class Config:
             substeps=1.0 if n.spec.adaptive else float(n.substeps),
             tol=float(n.tol) if n.spec.adaptive else 0.0,
             tol_growth=float(n.tol_growth) if n.spec.adaptive else 0.0,
+            **_body_params(p),
         )
 
     def initial_offsets(self, orientation=None) -> np.ndarray:
-        """Initial node offsets (8, 3), cm: ±half on each axis, turned by ``orientation``.
+        """Initial node offsets (8, 3), cm: ±half on each axis (a box's or loaded die's corners from its centre of
+        mass, ``body.Body.node_offsets_cm``), turned by ``orientation``.
 
         ``orientation`` is a world-from-body rotation matrix (3, 3), or None
         for the program's start (face 3 down, face 4 up).
         """
-        off = NODE_SIGNS * self.preset.half_side_cm
+        p = self.preset
+        off = NODE_SIGNS * p.half_side_cm if p.is_cube else p.body.node_offsets_cm
         if orientation is None:
             return np.ascontiguousarray(off)
         rot = np.asarray(orientation, dtype=np.float64)

@@ -102,12 +102,10 @@ class Trace:
         """World-from-body rotation matrices (n+1, 3, 3) read off the node offsets."""
         if self.node_offsets is None:
             return None
-        x0 = self.node_offsets[0]
-        half = np.abs(x0).max()
-        if not np.all(np.abs(x0) == half):  # a tilted start: the half side is |x_k| / √3
-            half = float(np.linalg.norm(x0, axis=1).mean() / np.sqrt(3.0))
-        # column j: Σ_k sign_kj · x_k / (8·half) is body axis j in the world frame
-        return np.einsum("kj,nki->nij", NODE_SIGNS, self.node_offsets) / (8.0 * half)
+        # column j: Σ_k sign_kj · x_k = 8·h_j·(body axis j in the world frame), for any box and centre of mass
+        # (each axis's signs sum to zero over the corners): normalised, the body axis
+        cols = np.einsum("kj,nki->nij", NODE_SIGNS, self.node_offsets)
+        return cols / np.linalg.norm(cols, axis=1, keepdims=True)
 
     @property
     def written(self) -> np.ndarray:

@@ -30,15 +30,28 @@ AUTO_DT_DEFAULT_THROW_CM_S = 300.0
 def impact_speed_cm_s(ics, preset) -> float:
     """Bound on any node's speed at the first impact over ICs (m, 6) or one IC, cm/s.
 
-    Free flight conserves energy: a node moves at most at |U| + |ω|·√3·half,
+    Free flight conserves energy: a node moves at most at |U| + |ω|·r (r the reach, the cube's √3·half),
     and the fall to the ground adds √(2·|g|·(z0 − half))·... (bounded by
-    adding the drop speed).  ω = |L| / I (either sign convention).
+    adding the drop speed).  |ω| ≤ |L| / I, I the smallest principal moment (either sign convention).
     """
     a = np.atleast_2d(np.asarray(ics, dtype=float))
     u = np.linalg.norm(a[:, :3], axis=1)
     w = np.linalg.norm(a[:, 3:6], axis=1) / preset.inertia
     drop = math.sqrt(max(0.0, 2.0 * abs(preset.g) * max(preset.z0_cm - preset.half_side_cm, 0.0)))
-    return float(np.max(u + w * math.sqrt(3.0) * preset.half_side_cm)) + drop
+    return float(np.max(u + w * _reach_cm(preset))) + drop
+
+
+def _reach_cm(preset) -> float:
+    """The nodes' largest distance from the centre of mass: the cube's √3·half side, a box's or loaded die's
+    ``body.reach_cm``."""
+    if getattr(preset, "is_cube", True):
+        return math.sqrt(3.0) * preset.half_side_cm
+    return preset.body.reach_cm
+
+
+def _inv_mass_node(preset) -> float:
+    """A node's largest inverse effective mass along the ground (the cube's 11/16, ``body.Body.inv_mass_node``)."""
+    return _INV_MASS_NODE if getattr(preset, "is_cube", True) else preset.body.inv_mass_node
 
 
 def stiff_rates(preset, v_impact_cm_s: float) -> tuple[float, float]:
@@ -54,7 +67,7 @@ def stiff_rates(preset, v_impact_cm_s: float) -> tuple[float, float]:
     spring = w * (1.0 + preset.gamma * v)
     fric = 0.0
     if preset.friction == "per-node":
-        fric = preset.mu * _INV_MASS_NODE * w * v * (1.0 + preset.gamma * v) / preset.v_reg_cm_s
+        fric = preset.mu * _inv_mass_node(preset) * w * v * (1.0 + preset.gamma * v) / preset.v_reg_cm_s
     return spring, fric
 
 

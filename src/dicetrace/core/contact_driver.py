@@ -35,6 +35,7 @@ from types import ModuleType
 from dicetrace.core.contacts import hermite_root, node_vz, note_event, note_substep_events
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
+from dicetrace.core.inertia import omega
 from dicetrace.core.model import node_heights
 from dicetrace.core.free_flight import (
     free_advance,
@@ -59,9 +60,6 @@ from dicetrace.params import FRICTION_SPECTRAL
 #: Largest RK4 sub-step for the friction law, in units of 1/λ_f (λ_f the
 #: friction law's stiffness per unit effective mass; RK4 is stable to 2.78).
 FRICTION_THETA = 1.0
-#: Largest inverse effective mass of a node along the ground, 1/8 + 3·3/16 ...
-#: bounded by 1/8 + |r|²/I with |r|² = 3 half², I = 16/3 half²: 11/16.
-INV_MASS_NODE = 11.0 / 16.0
 #: A sub-step is never cut shorter than this fraction of dt / substeps (a node
 #: that sits on the ground to rounding would otherwise be chased forever): a
 #: crossing closer than that to the sub-step's start is ignored, and the cut
@@ -129,7 +127,8 @@ def dense_end(st, kp):
 def friction_rate(z, uk, P, kp):
     """Stiffness of the friction law near the current state, 1/s.
 
-    Per unit effective mass (at most 11/16 per node mass): μ·P_k / max(|u_xy,k|,
+    Per unit effective mass (at most ``kp.inv_mass_node`` per node mass, the
+    cube's 11/16): μ·P_k / max(|u_xy,k|,
     v_reg) for the per-node law.  0 for the program's law: −μ·P_k·u_k/σ is
     discontinuous where σ → 0 (no smooth stiffness to resolve), and every
     scheme chatters there with an amplitude ~ h·μ·P as the program does.
@@ -141,7 +140,7 @@ def friction_rate(z, uk, P, kp):
         if z[k] < 0.0 and P[k] > 0.0:
             s = math.sqrt(uk[k, 0] * uk[k, 0] + uk[k, 1] * uk[k, 1])
             s = max(s, kp.v_reg_cm_s)
-            r = kp.mu * P[k] * INV_MASS_NODE / s
+            r = kp.mu * P[k] * kp.inv_mass_node / s
             if r > lam:
                 lam = r
     return lam
@@ -167,7 +166,7 @@ def free_piece_events(st, wk, t, tau, h, hmax, kp, sets, set_steps, ev_times):
     # rather than left to a division by zero (infinite in the kernels, an exception in plain Python)
     cmin = MIN_CUT * hmax / tau if tau > 0.0 else math.inf
     note_substep_events(st, wk.ev_roots, t, tau, h, wk.new_X, wk.new_U, wk.new_L, wk.new_off, wk.sub_X, wk.sub_U,
-                        wk.sub_L, wk.sub_off, kp.inertia, cmin, sets, set_steps, ev_times)
+                        wk.sub_L, wk.sub_off, kp, cmin, sets, set_steps, ev_times)
 
 
 # ------------------------------------------------------------------ the controller (its state: st.h_next)
@@ -244,7 +243,7 @@ def control_error(st, h, hs, err, err_exp, limited):
 
 
 @jit(inline="always")
-def first_crossing(Xs, Us, Ls, offs, Xe, Ue, Le, offe, inertia, hs, cmin):
+def first_crossing(Xs, Us, Ls, offs, Xe, Ue, Le, offe, kp, hs, cmin):
     """Where in a sub-step of length hs the first node enters or leaves the ground, as a fraction (2.0: none).
 
     From the sub-step's two ends (``*s``, ``*e``): a node whose height
@@ -264,8 +263,10 @@ def first_crossing(Xs, Us, Ls, offs, Xe, Ue, Le, offe, inertia, hs, cmin):
         ze = Xe[2] + offe[k, 2]
         if (zs < 0.0) != (ze < 0.0) and zs != 0.0:
             # u_z = U_z + (x × ω)_z at both ends
-            vs = node_vz(Us, Ls, offs, k, inertia)
-            ve = node_vz(Ue, Le, offe, k, inertia)
+            ws0, ws1, _ = omega(Ls[0], Ls[1], Ls[2], offs, kp)
+            we0, we1, _ = omega(Le[0], Le[1], Le[2], offe, kp)
+            vs = node_vz(Us, ws0, ws1, offs, k)
+            ve = node_vz(Ue, we0, we1, offe, k)
             th = hermite_root(zs, vs, ze, ve, hs)
             if th < 0.0:
                 th = zs / (zs - ze)
@@ -323,8 +324,7 @@ def resume_front(st, wk, kp, h):
     """
     t = st.ahead
     st.ahead = 0.0
-    for j in range(3):
-        st.W[j] = wk.sub_L[j] / kp.inertia
+    st.W[0], st.W[1], st.W[2] = omega(wk.sub_L[0], wk.sub_L[1], wk.sub_L[2], wk.sub_off, kp)
     w = wk.fr_wrench
     return t, t < h, wk.fr_below, w[0], w[1], w[2], w[3], w[4], w[5]
 
@@ -386,12 +386,11 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
                 st.ahead -= h
                 method.dense_state(st, wk, kp, 1.0 - st.ahead / wk.dn_h)
                 return dense_end(st, kp)
-        elif not contact and free_flight_safe(st.X, st.U, st.W, st.off, kp, h):
+        elif kp.isotropic and not contact and free_flight_safe(st.X, st.U, st.W, st.off, kp, h):
             if events_on:
                 note_event(st, 0.0, h, 0, ev[0], ev[1], ev[2])
             free_flight(st, kp, h)
             return eval_forces(st, kp)
-        I = kp.inertia
         Xw, Uw, Lw, offw, Xn, Un, Ln, offn = wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off, wk.new_X, wk.new_U, wk.new_L, wk.new_off
         hmax = h / max(kp.substeps, 1.0)
         adaptive = kp.tol > 0.0
@@ -420,7 +419,9 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
             else:
                 below, f0, f1, f2, t0, t1, t2 = wrench_at(Xw[2], Uw[0], Uw[1], Uw[2], st.W[0], st.W[1], st.W[2], offw,
                                                           kp, st.F, st.uk, st.z, st.P)
-            if not below and not entering:  # free flight, exact, until the end of the step or the next entry
+            if not below and not entering and kp.isotropic:
+                # free flight, exact, until the end of the step or the next entry (a body that is no uniform cube
+                # precesses in flight: the method integrates it)
                 if events_on:
                     note_event(st, t, h, 0, ev[0], ev[1], ev[2])
                 kind, tau, last = free_piece(st, wk, kp, rest, hmax)
@@ -441,7 +442,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
             hs, cause, limited, last = propose_substep(st, hcap, rest, adaptive, h0, lam, method.FRICTION_THETA, overshoot)
             method.substep(st, wk, kp, hs, f0, f1, f2, t0, t1, t2)
             cmin = MIN_CUT * hmax / hs
-            cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, hs, cmin)
+            cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, kp, hs, cmin)
             if cut < 1.0:  # a node crossed the ground inside: the sub-step again, up to the first crossing
                 hs = cut * hs
                 last = False
@@ -450,8 +451,9 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
                 st.substeps[CAUSE_REDONE] += 1
                 method.substep(st, wk, kp, hs, f0, f1, f2, t0, t1, t2)
             if adaptive:  # the estimate's derivative at the new state is the next sub-step's first stage
-                c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I,
-                                                       offn, kp, st.F, st.uk, st.z, st.P)
+                wn0, wn1, wn2 = omega(Ln[0], Ln[1], Ln[2], offn, kp)
+                c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], wn0, wn1, wn2, offn, kp, st.F, st.uk,
+                                                       st.z, st.P)
                 err = method.error(st, wk, kp, hs, g0, g1, g2, q0, q1, q2) * grade
                 if not control_error(st, h, hs, err, method.ERR_EXP, limited):
                     nsub += 1
@@ -461,7 +463,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
                 method.dense_keep(st, wk, hs)
                 ahead = True
             if events_on:  # the sets inside the sub-step: below at its start, and every crossing inside
-                note_substep_events(st, wk.ev_roots, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, cmin, ev[0], ev[1], ev[2])
+                note_substep_events(st, wk.ev_roots, t, hs, h, Xw, Uw, Lw, offw, Xn, Un, Ln, offn, kp, cmin, ev[0], ev[1], ev[2])
             accept_substep(st, wk, kp)
             st.substeps[cause] += 1
             if ahead:

@@ -24,6 +24,7 @@ import math
 import numpy as np
 
 from dicetrace.core._jit import jit
+from dicetrace.core.inertia import omega
 
 
 @jit(inline="always")
@@ -95,9 +96,10 @@ def hermite_slope(a1, a2, a3, t):
 
 
 @jit(inline="always")
-def node_vz(U, L, off, k, inertia):
-    """The vertical velocity of node k: u_z = U_z + (x × ω)_z, with x its offset and ω = L / inertia."""
-    return U[2] + (off[k, 0] * (L[1] / inertia) - off[k, 1] * (L[0] / inertia))
+def node_vz(U, w0, w1, off, k):
+    """The vertical velocity of node k: u_z = U_z + (x × ω)_z, with x its offset and ω (its first two components
+    ``w0``, ``w1``; the cube's L / I, ``inertia.omega``)."""
+    return U[2] + (off[k, 0] * w1 - off[k, 1] * w0)
 
 
 @jit
@@ -245,7 +247,7 @@ HERMITE_SLOPE_BOUND = 4.0 / 27.0
 
 
 @jit
-def note_substep_events(st, roots, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, inertia, cmin, sets, set_steps, ev_times):
+def note_substep_events(st, roots, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe, kp, cmin, sets, set_steps, ev_times):
     """Record the contact sets of one accepted sub-step of length hs that starts ``t`` s into the step.
 
     From its two ends (X, U, L and the offsets at the start ``*s`` and the
@@ -271,11 +273,13 @@ def note_substep_events(st, roots, t, hs, h, Xs, Us, Ls, offs, Xe, Ue, Le, offe,
         return
     mask = 0
     crossing = False
+    ws0, ws1, _ = omega(Ls[0], Ls[1], Ls[2], offs, kp)
+    we0, we1, _ = omega(Le[0], Le[1], Le[2], offe, kp)
     for k in range(8):
         zs = Xs[2] + offs[k, 2]
         ze = Xe[2] + offe[k, 2]
-        vs = node_vz(Us, Ls, offs, k, inertia)
-        ve = node_vz(Ue, Le, offe, k, inertia)
+        vs = node_vz(Us, ws0, ws1, offs, k)
+        ve = node_vz(Ue, we0, we1, offe, k)
         reach = HERMITE_SLOPE_BOUND * hs * (abs(vs) + abs(ve))
         nk = 0
         if min(zs, ze) > reach:

@@ -363,7 +363,7 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, budget, off, F, uk, z, P)
     W1 = L1 / inertia
     W2 = L2 / inertia
     start_nodes(off0, X2, off, F, uk, z, P)
-    e0 = energy_dynamic(U0, U1, U2, W0, W1, W2, z, kp) - e_rest
+    e0 = energy_dynamic(U0, U1, U2, W0, W1, W2, L0, L1, L2, z, kp) - e_rest
     e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
 
     sets[0] = 0
@@ -426,7 +426,7 @@ def roll_summary_sie_in(ic, off0, kp, sets, set_steps, budget, off, F, uk, z, P)
         if ended:
             break
         if contact:
-            if energy_dynamic(U0, U1, U2, W0, W1, W2, z, kp) - e_rest > e_blow:
+            if energy_dynamic(U0, U1, U2, W0, W1, W2, L0, L1, L2, z, kp) - e_rest > e_blow:
                 status = Status.BLOW_UP
                 break
         else:

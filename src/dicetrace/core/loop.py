@@ -56,7 +56,15 @@ from numba import prange
 from dicetrace.core._jit import jit, jit_parallel
 from dicetrace.core.contacts import note_event
 from dicetrace.core.free_flight import flight_steps, free_advance
-from dicetrace.core.model import energy_dynamic, energy_parts, energy_stop, face_up, node_heights, node_velocities
+from dicetrace.core.model import (
+    energy_dynamic,
+    energy_parts,
+    energy_stop,
+    face_levels,
+    face_up,
+    node_heights,
+    node_velocities,
+)
 from dicetrace.core.state import after_step, age_tolerance, copy_motion, init_state, state_finite
 from dicetrace.params import ENERGY_POINT_MASS
 from dicetrace.status import Status
@@ -96,7 +104,7 @@ def _write_trace(n, st, kp, tr_state, tr_force, tr_energy):
         node_velocities(U[0], U[1], U[2], W[0], W[1], W[2], st.off, st.uk)
         if kp.energy_mode == ENERGY_POINT_MASS:
             tr_energy[n, 0] = energy_stop(st.uk, st.z, st.P, kp)
-        parts = energy_parts(U[0], U[1], U[2], W[0], W[1], W[2], st.z, kp)
+        parts = energy_parts(U[0], U[1], U[2], W[0], W[1], W[2], st.L[0], st.L[1], st.L[2], st.z, kp)
         if kp.energy_mode != ENERGY_POINT_MASS:
             tr_energy[n, 0] = parts[4] - kp.e_rest
         for j in range(5):
@@ -142,7 +150,7 @@ def _clears(e, kp):
 
 @jit(inline="always")
 def stop_energy(st, kp, contact, e_dyn, tracing):
-    """The stop-test energy after a step, and whether it clears the threshold by far: (e, clear).
+    """The stop-test energy after a step, whether it clears the threshold by far, and the threshold: (e, clear, stop).
 
     ``e_dyn``: the dynamic energy the blow-up test computed (in contact).
     In free flight (no contact) the point-mass energy is bounded below
@@ -150,10 +158,13 @@ def stop_energy(st, kp, contact, e_dyn, tracing):
     sum is needed only when that bound is near threshold (or a trace shows
     it).  ``clear``: the stop-test energy of a free state clears the
     threshold by far more than rounding (computed alike whether or not
-    tracing), so that a free flight may be crossed in one piece.
+    tracing), so that a free flight may be crossed in one piece.  A die
+    that is no uniform cube is measured from the face it lies on, against
+    that face's threshold (``model.face_levels``).
     """
     U = st.U
     W = st.W
+    L = st.L
     z = st.z
     e_rest = kp.e_rest
     clear = False
@@ -178,9 +189,12 @@ def stop_energy(st, kp, contact, e_dyn, tracing):
         else:
             e = kp.e_stop + 1.0
     else:
-        e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - e_rest
+        e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], L[0], L[1], L[2], z, kp) - e_rest
         clear = not contact and _clears(e, kp)
-    return e, clear
+        if not kp.isotropic:
+            rest, stop = face_levels(z, kp)
+            return (e + e_rest) - rest, clear, stop
+    return e, clear, kp.e_stop
 
 
 @jit
@@ -282,7 +296,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                 ev_times[0] = 0.0
                 st.ev_n = 1
             # nothing reads the forces or node velocities at a step's end: an interpolating scheme may skip them
-            st.lazy = not tracing and not point_mass
+            st.lazy = not tracing and not point_mass and kp.isotropic
             if tracing:
                 _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
             # whether the stop-test energy of a free state clears the stop threshold by far
@@ -297,7 +311,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                 st.ev_step = n
             m = 0
             if flight:
-                if clear and last_mask == 0 and st.ahead == 0.0:
+                if kp.isotropic and clear and last_mask == 0 and st.ahead == 0.0:
                     # A free flight conserves the stop-test energy: while it lasts the stop test cannot fire
                     # and no contact set changes.  Cross it in one exact piece (to the time cap, not the slice).
                     m = flight_steps(X, U, W, off, kp, h, maxn - n)
@@ -322,19 +336,19 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                 break
             e_dyn = math.nan
             if contact:
-                e_dyn = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], z, kp) - kp.e_rest
+                e_dyn = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], L[0], L[1], L[2], z, kp) - kp.e_rest
                 if e_dyn > e_blow:
                     status = Status.BLOW_UP
                     if tracing:  # the state is finite: keep it for inspection
                         _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
                     break
-            e, clear = stop_energy(st, kp, contact, e_dyn, tracing)
+            e, clear, stop = stop_energy(st, kp, contact, e_dyn, tracing)
             if tracing:
                 _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
             if not math.isfinite(e):
                 status = Status.NON_FINITE
                 break
-            if e <= kp.e_stop:
+            if e <= stop:
                 status = Status.SETTLED
                 break
         if status == Status.TIME_CAP and n < maxn:  # the slice ran out: keep what the next one goes on from
@@ -367,7 +381,7 @@ def start_run(st, kp, sets, set_steps):
     n = nsets - 1  # the start's row (0), likewise an int64, never the literal 0
     U = st.U
     W = st.W
-    e0 = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], st.z, kp) - kp.e_rest
+    e0 = energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], st.L[0], st.L[1], st.L[2], st.z, kp) - kp.e_rest
     e_blow = (1.0 + kp.blowup_rel) * max(e0, 0.0) + kp.blowup_abs
     return nsets, last_mask, contact, n, e0, e_blow
 

@@ -17,9 +17,12 @@ without running ``tests/core/test_reference.py``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from dicetrace.core._jit import jit
+from dicetrace.core.inertia import rotational_energy
 from dicetrace.body import NODE_SIGNS, face_of_top4
 
 # Face table (docs/model.md §3, ``dicetrace.body``): FACE_OF_TOP4[mask] for an 8-bit mask of the
@@ -87,14 +90,15 @@ def energy_stop(uk, z, P, kp):
 
 
 @jit(inline="always")
-def energy_parts(U0, U1, U2, w0, w1, w2, z, kp):
+def energy_parts(U0, U1, U2, w0, w1, w2, l0, l1, l2, z, kp):
     """Energies with the inertia the dynamics use, node-mass·cm²/s².
 
-    (translational kinetic ½·8|U|², rotational kinetic ½·I|ω|²,
-    gravitational Σ|g|·z_k, elastic ½·k·Σd_k², total).
+    (translational kinetic ½·8|U|², rotational kinetic ½·ω·L (the cube's
+    ½·I|ω|², ``inertia.rotational_energy``), gravitational Σ|g|·z_k, elastic
+    ½·k·Σd_k², total).
     """
     et = 0.5 * 8.0 * (U0 * U0 + U1 * U1 + U2 * U2)
-    er = 0.5 * kp.inertia * (w0 * w0 + w1 * w1 + w2 * w2)
+    er = rotational_energy(w0, w1, w2, l0, l1, l2, kp)
     eg = 0.0
     el = 0.0
     for k in range(8):
@@ -106,10 +110,10 @@ def energy_parts(U0, U1, U2, w0, w1, w2, z, kp):
 
 
 @jit(inline="always")
-def energy_dynamic(U0, U1, U2, w0, w1, w2, z, kp):
+def energy_dynamic(U0, U1, U2, w0, w1, w2, l0, l1, l2, z, kp):
     """Total mechanical energy with the dynamics' inertia (the blow-up test, docs/model.md §10)."""
     e = 0.5 * 8.0 * (U0 * U0 + U1 * U1 + U2 * U2)
-    e += 0.5 * kp.inertia * (w0 * w0 + w1 * w1 + w2 * w2)
+    e += rotational_energy(w0, w1, w2, l0, l1, l2, kp)
     el = 0.0
     for k in range(8):
         e += -kp.g * z[k]
@@ -130,6 +134,43 @@ def top4_mask(z):
         if rank < 4:
             mask |= 1 << k
     return mask
+
+
+@jit(inline="always")
+def face_down(z):
+    """Face value (1..6) of the four lowest nodes (stable: ties keep node order), 0 when they are no face."""
+    mask = 0
+    for k in range(8):
+        rank = 0
+        for m in range(8):
+            if z[m] < z[k] or (z[m] == z[k] and m < k):
+                rank += 1
+        if rank < 4:
+            mask |= 1 << k
+    return np.int64(FACE_OF_TOP4[mask])
+
+
+@jit(inline="always")
+def face_levels(z, kp):
+    """The rest energy and the stop threshold of the face the die lies on (its four lowest nodes): a box's or a
+    loaded die's differ from face to face (``Preset.face_energies``); the cube's are ``e_rest``, ``e_stop``.  Off a
+    face (the four lowest nodes are no face) nothing stops: the threshold is −∞."""
+    if kp.isotropic:
+        return kp.e_rest, kp.e_stop
+    f = face_down(z)
+    if f == 1:
+        return kp.e_rest1, kp.e_stop1
+    if f == 2:
+        return kp.e_rest2, kp.e_stop2
+    if f == 3:
+        return kp.e_rest3, kp.e_stop3
+    if f == 4:
+        return kp.e_rest4, kp.e_stop4
+    if f == 5:
+        return kp.e_rest5, kp.e_stop5
+    if f == 6:
+        return kp.e_rest6, kp.e_stop6
+    return kp.e_rest, -math.inf
 
 
 @jit(inline="always")

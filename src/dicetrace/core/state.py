@@ -73,6 +73,7 @@ import numpy as np
 
 from dicetrace.core._jit import jit
 from dicetrace.core.contacts import record_set
+from dicetrace.core.inertia import omega
 from dicetrace.params import TOL_LOOSEST
 from dicetrace.status import Status
 
@@ -229,8 +230,8 @@ def init_state(st, ic, off0, kp):
     for j in range(3):
         st.U[j] = ic[j]
         st.L[j] = ic[3 + j]
-        st.W[j] = st.L[j] / kp.inertia
     start_nodes(off0, st.X[2], st.off, st.F, st.uk, st.z, st.P)
+    st.W[0], st.W[1], st.W[2] = omega(st.L[0], st.L[1], st.L[2], st.off, kp)
     st.rot_h = -1.0
     st.rot_ok = False
     st.h_next = 0.0
@@ -248,13 +249,12 @@ def init_state(st, ic, off0, kp):
 
 @jit(inline="always")
 def set_angular_momentum(st, l0, l1, l2, kp):
-    """L ← (l0, l1, l2) and ω = L / I; the cached rotation (for the old ω) is dropped."""
+    """L ← (l0, l1, l2) and ω = I⁻¹·L at the present offsets (``inertia.omega``; the cube: L / I); the cached
+    rotation (for the old ω) is dropped."""
     st.L[0] = l0
     st.L[1] = l1
     st.L[2] = l2
-    st.W[0] = l0 / kp.inertia
-    st.W[1] = l1 / kp.inertia
-    st.W[2] = l2 / kp.inertia
+    st.W[0], st.W[1], st.W[2] = omega(l0, l1, l2, st.off, kp)
     st.rot_h = -1.0
 
 
@@ -291,8 +291,7 @@ def begin_substeps(st, wk):
 def accept_substep(st, wk, kp):
     """The sub-step's result (``wk.new_*``) becomes the sub-step start; ω follows L."""
     copy_motion(wk.new_X, wk.new_U, wk.new_L, wk.new_off, wk.sub_X, wk.sub_U, wk.sub_L, wk.sub_off)
-    for j in range(3):
-        st.W[j] = wk.sub_L[j] / kp.inertia
+    st.W[0], st.W[1], st.W[2] = omega(wk.sub_L[0], wk.sub_L[1], wk.sub_L[2], wk.sub_off, kp)
 
 
 @jit(inline="always")

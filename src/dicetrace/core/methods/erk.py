@@ -6,7 +6,10 @@ velocity, angular momentum (program convention) and a quaternion q that
 rotates the sub-step's starting node offsets, q = 1 at the start::
 
     X' = U     U' = g·ẑ + Σ_k F_k / 8     L' = τ = Σ_k F_k × x_k
-    q' = ½·(0, ω)·q,  ω = −L / I (physical, world frame)   x_k = R(q/|q|)·x_k(0)
+    q' = ½·(0, ω)·q,  ω = −I⁻¹·L (physical, world frame)   x_k = R(q/|q|)·x_k(0)
+
+with I⁻¹ the cube's 1 / I, or a box's or loaded die's R·I_b⁻¹·Rᵀ at the
+stage's orientation R = R(q)·R_s (R_s the sub-step start's, :func:`stage_omega`).
 
 The quaternion's flow keeps |q| = 1 exactly, so any Runge–Kutta tableau
 integrates it at its full order; the stages read R(q/|q|), and the accepted
@@ -34,6 +37,7 @@ import numpy as np
 
 from dicetrace.core._jit import jit
 from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
+from dicetrace.core.inertia import omega_in, orientation
 from dicetrace.core.model import offset_cross_omega
 from dicetrace.core.methods.common import error_norm, error_speed
 from dicetrace.params import FRICTION_SPECTRAL
@@ -128,8 +132,24 @@ def quat_rotate(q0, q1, q2, q3, off, out):
 
 
 @jit(inline="always")
-def stage_wrench(y, off, kp, offs, F, uk, z, P):
-    """Contact force sum and torque at the stage point y (sums from 0.0 over the nodes with a force).
+def stage_omega(y, off, kp):
+    """ω (program convention) at the stage point y of a sub-step that starts at the offsets ``off``: the cube's L / I;
+    any other body's R·I_b⁻¹·Rᵀ·L with its orientation there R = R(q)·R_s (``inertia``)."""
+    if kp.isotropic:
+        I = kp.inertia
+        return y[6] / I, y[7] / I, y[8] / I
+    a00, a01, a02, a10, a11, a12, a20, a21, a22 = quat_matrix(y[9], y[10], y[11], y[12])
+    s00, s01, s02, s10, s11, s12, s20, s21, s22 = orientation(off, kp)
+    R = (a00 * s00 + a01 * s10 + a02 * s20, a00 * s01 + a01 * s11 + a02 * s21, a00 * s02 + a01 * s12 + a02 * s22,
+         a10 * s00 + a11 * s10 + a12 * s20, a10 * s01 + a11 * s11 + a12 * s21, a10 * s02 + a11 * s12 + a12 * s22,
+         a20 * s00 + a21 * s10 + a22 * s20, a20 * s01 + a21 * s11 + a22 * s21, a20 * s02 + a21 * s12 + a22 * s22)
+    return omega_in(y[6], y[7], y[8], R, kp)
+
+
+@jit(inline="always")
+def stage_wrench(y, off, kp, offs, F, uk, z, P, w0, w1, w2):
+    """Contact force sum and torque at the stage point y (sums from 0.0 over the nodes with a force); ω there
+    (``w*``, :func:`stage_omega`).
 
     What ``quat_rotate`` then ``forces.wrench_at`` give, in the same
     arithmetic, bit for bit, for the per-node friction law: a node's height
@@ -139,21 +159,15 @@ def stage_wrench(y, off, kp, offs, F, uk, z, P):
     (node 1 → 8), never stored.  The program's spectral law couples every
     node's velocity (σ): it goes through ``wrench_at`` with all offsets.
     """
-    I = kp.inertia
     q0 = y[9]
     q1 = y[10]
     q2 = y[11]
     q3 = y[12]
     if kp.friction_mode == FRICTION_SPECTRAL:
         quat_rotate(q0, q1, q2, q3, off, offs)
-        below, f0, f1, f2, t0, t1, t2 = wrench_at(
-            y[2], y[3], y[4], y[5], y[6] / I, y[7] / I, y[8] / I, offs, kp, F, uk, z, P
-        )
+        below, f0, f1, f2, t0, t1, t2 = wrench_at(y[2], y[3], y[4], y[5], w0, w1, w2, offs, kp, F, uk, z, P)
         return f0, f1, f2, t0, t1, t2
     r00, r01, r02, r10, r11, r12, r20, r21, r22 = quat_matrix(q0, q1, q2, q3)
-    w0 = y[6] / I
-    w1 = y[7] / I
-    w2 = y[8] / I
     Xz = y[2]
     f0 = f1 = f2 = t0 = t1 = t2 = 0.0
     for k in range(8):
@@ -185,9 +199,9 @@ def stage_wrench(y, off, kp, offs, F, uk, z, P):
 
 
 @jit(inline="always")
-def derivative_row(K, i, y, f0, f1, f2, t0, t1, t2, kp):
-    """Row i of the stage derivatives K at the point y, with force sum f and torque t there."""
-    I = kp.inertia
+def derivative_row(K, i, y, f0, f1, f2, t0, t1, t2, w0, w1, w2, kp):
+    """Row i of the stage derivatives K at the point y, with force sum f, torque t and ω (program convention,
+    :func:`stage_omega`) there."""
     a0, a1, a2 = acceleration(f0, f1, f2, kp)
     K[i, 0] = y[3]
     K[i, 1] = y[4]
@@ -198,10 +212,10 @@ def derivative_row(K, i, y, f0, f1, f2, t0, t1, t2, kp):
     K[i, 6] = t0
     K[i, 7] = t1
     K[i, 8] = t2
-    # q' = ½·(0, ω)·q with the physical ω = −L/I
-    w0 = -y[6] / I
-    w1 = -y[7] / I
-    w2 = -y[8] / I
+    # q' = ½·(0, ω)·q with the physical ω, minus the program's
+    w0 = -w0
+    w1 = -w1
+    w2 = -w2
     qw = y[9]
     qx = y[10]
     qy = y[11]
@@ -313,11 +327,13 @@ def erk_substep(name: str, ns: int, a: np.ndarray, b: np.ndarray):
         off = wk.sub_off
         offs = wk.stage_off
         substep_start(wk, y0)
-        derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, kp)
+        w0, w1, w2 = stage_omega(y0, off, kp)
+        derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, w0, w1, w2, kp)
         for i in range(1, ns):
             combine(a[i], i, K, y0, h, y)
-            g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)
-            derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, kp)
+            w0, w1, w2 = stage_omega(y, off, kp)
+            g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P, w0, w1, w2)
+            derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, w0, w1, w2, kp)
         combine(b, ns, K, y0, h, y)
         substep_end(wk, y)
 
@@ -334,7 +350,8 @@ def erk_error2(name: str, ns: int, e5: np.ndarray, e3: np.ndarray):
     def error(st, wk, kp, h, g0, g1, g2, q0, q1, q2):
         K = wk.rk_k
         y = wk.rk_y
-        derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, kp)
+        w0, w1, w2 = stage_omega(y, wk.sub_off, kp)  # y: the new state, q from the sub-step start
+        derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, w0, w1, w2, kp)
         err5 = wk.rk_acc
         err3 = wk.rk_y0  # the sub-step start is no longer needed
         combine(e5, ns + 1, K, ZERO, 1.0, err5)
@@ -361,7 +378,8 @@ def erk_error1(name: str, ns: int, e: np.ndarray):
     def error(st, wk, kp, h, g0, g1, g2, q0, q1, q2):
         K = wk.rk_k
         y = wk.rk_y
-        derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, kp)
+        w0, w1, w2 = stage_omega(y, wk.sub_off, kp)  # y: the new state, q from the sub-step start
+        derivative_row(K, ns, y, g0, g1, g2, q0, q1, q2, w0, w1, w2, kp)
         err = wk.rk_acc
         combine(e, ns + 1, K, ZERO, 1.0, err)
         vs = error_speed(wk.new_U, wk.new_L, kp)
@@ -430,7 +448,11 @@ def dense_state(st, wk, kp, theta):
         st.X[j] = y[j]
         st.U[j] = y[3 + j]
         st.L[j] = y[6 + j]
-        st.W[j] = y[6 + j] / kp.inertia
+    if kp.isotropic:
+        for j in range(3):
+            st.W[j] = y[6 + j] / kp.inertia
+    else:  # ω at the interpolated orientation (not lazy: ``loop.make_roll`` reads every offset of such a body)
+        st.W[0], st.W[1], st.W[2] = stage_omega(y, wk.dn_off, kp)
     if st.lazy:
         # only the heights are read at this step end: the offsets' third row (the rest of R unused)
         r = quat_matrix(y[9] / qn, y[10] / qn, y[11] / qn, y[12] / qn)
