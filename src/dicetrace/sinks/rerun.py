@@ -325,7 +325,8 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
 
     tr = roll.trace
     cfg = roll.config
-    half = float(cfg.preset.half_side_cm)
+    body = cfg.preset.body
+    half = max(body.half_extents_cm)  # the die's scale: node and arrow sizes, the ground's extent
     # rows with a finite, written state (a numerical failure may end in NaN or unwritten rows)
     rows = tr.written & np.isfinite(tr.cm_pos).all(axis=1) & np.isfinite(tr.node_offsets).all(axis=(1, 2))
     steps = tr.step[rows].astype(np.int64)
@@ -352,12 +353,13 @@ def log_roll(rec, roll, *, ic_label: str | None = None, trail_every: int | None 
     # -- the die: body box and face plates ---------------------------------------------------------
     rec.log(
         "world/die/body",
-        rr.Boxes3D.from_fields(half_sizes=[[half, half, half]], colors=[BODY_COLOR], fill_mode="solid"),
+        rr.Boxes3D.from_fields(half_sizes=[body.half_extents_cm], colors=[BODY_COLOR], fill_mode="solid"),
         static=True,
     )
-    rec.send_columns("world/die/body", indexes=index, columns=rr.Boxes3D.columns(centers=cm, quaternions=quat))
+    rec.send_columns("world/die/body", indexes=index,
+                     columns=rr.Boxes3D.columns(centers=box_centers(body, cm, tr.rotation[rows]), quaternions=quat))
 
-    log_faces(rec, "world/die/faces", half, index, cm, quat)
+    log_faces(rec, "world/die/faces", body, index, cm, quat)
 
     # -- nodes: red while in contact -------------------------------------------------------------
     rec.log(
@@ -480,20 +482,36 @@ def log_ground(rec, xy: np.ndarray, half: float, anchor: np.ndarray) -> None:
             static=True)
 
 
-def log_faces(rec, entity: str, half: float, index, cm, quat) -> None:
+def box_centers(body, cm, rotation) -> np.ndarray:
+    """The box's centre in the world (n, 3): the centre of mass ``cm`` less the centre of mass's offset in the body
+    frame, turned by ``rotation`` (n, 3, 3); the centre of mass itself for a uniform die."""
+    com = np.asarray(body.com_cm)
+    if not com.any():
+        return cm
+    return cm - np.einsum("nij,j->ni", rotation, com)
+
+
+def log_faces(rec, entity: str, body, index, cm, quat) -> None:
     """The die's six face plates (writeup colours, numbered on hover) and their pips at ``entity``.
 
-    Static in the body frame, carried by the die's pose: one transform per step (centre ``cm``,
+    ``body``: the die's :class:`dicetrace.body.Body` (or, for the cube, its half side in cm).  Static in the body
+    frame, whose origin is the centre of mass, carried by the die's pose: one transform per step (centre ``cm``,
     quaternion ``quat``, xyzw) on the ``index`` timelines.  The pips are the child ``entity/pips``.
     """
     import rerun as rr  # rerun is slow to import: only when used
 
-    plate_t = 0.02 * half
-    plate_half = np.where(FACE_NORMALS != 0, plate_t, 0.62 * half)
+    if not isinstance(body, _body.Body):
+        body = _body.Body.cube(float(body))
+    h = np.asarray(body.half_extents_cm)
+    plate_t = 0.02 * float(h.min())
+    # each plate: thin along its normal, 62 % of the face's extent along the face's two axes
+    plate_half = np.where(FACE_NORMALS != 0, plate_t, 0.62 * h)
+    out = np.abs(FACE_NORMALS) @ h  # the face's distance from the box's centre
+    center = -np.asarray(body.com_cm)
     rec.log(
         entity,
         rr.Boxes3D.from_fields(
-            centers=FACE_NORMALS * (half + plate_t),
+            centers=center + FACE_NORMALS * (out + plate_t)[:, None],
             half_sizes=plate_half,
             colors=FACE_COLORS,
             fill_mode="solid",
@@ -503,7 +521,7 @@ def log_faces(rec, entity: str, half: float, index, cm, quat) -> None:
         static=True,
     )
     rec.send_columns(entity, indexes=index, columns=rr.Transform3D.columns(translation=cm, quaternion=quat))
-    log_pips(rec, f"{entity}/pips", FACE_NORMALS, half, lift=half + 2 * plate_t)
+    log_pips(rec, f"{entity}/pips", FACE_NORMALS, h, lift=out + 2 * plate_t, center=center)
 
 
 def _log_trail(rec, rr, cm, steps, t_s, trail_every, *, entity: str = "world/cm_path", color=CM_COLOR,

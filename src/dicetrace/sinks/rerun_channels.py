@@ -11,7 +11,7 @@ Computed and logged only when asked; the default recording stays lean.
                 max(0, −z), cm, every step
 ``velocities``  ``world/die/velocities``: an arrow per node of its velocity
                 u_k = U + x_k × ω (the kernel's formula, program convention,
-                ω = L_program / inertia), cm/s
+                ω = R·I⁻¹·Rᵀ·L_program, the cube's L_program / inertia), cm/s
 
 Arrows are drawn at a fixed scale per recording, stored in the recording
 property ``dicetrace`` as ``force_arrow_cm_per_unit`` and
@@ -45,18 +45,19 @@ def parse_channels(text: str | None) -> frozenset:
 
 
 def node_velocities(roll) -> np.ndarray:
-    """(n+1, 8, 3) node velocities u_k = U + x_k × ω, ω = L_program / inertia (the kernel's formula), cm/s."""
+    """(n+1, 8, 3) node velocities u_k = U + x_k × ω, ω = R·I⁻¹·Rᵀ·L_program (the kernel's formula; the cube's
+    L_program / inertia), cm/s."""
     tr = roll.trace
     cfg = roll.config
     ic_rows = np.concatenate([tr.cm_vel, tr.L], axis=1)
     l_prog = convert_l(ic_rows, cfg.preset.l_convention, "program")[:, 3:]
-    w = l_prog / float(cfg.preset.inertia)
+    w = cfg.preset.body.angular_velocity(l_prog, tr.rotation)
     return tr.cm_vel[:, None, :] + np.cross(tr.node_offsets, w[:, None, :])
 
 
 def arrow_scales(roll, channels) -> dict:
     """Per-recording arrow scales: the largest arrow is about two die sides long."""
-    half = float(roll.config.preset.half_side_cm)
+    half = max(roll.config.preset.body.half_extents_cm)
     out = {}
     if "forces" in channels and roll.trace.forces is not None:
         fmax = float(np.abs(roll.trace.forces[np.isfinite(roll.trace.forces)]).max(initial=0.0))

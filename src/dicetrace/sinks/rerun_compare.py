@@ -39,7 +39,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from dicetrace.sinks.rerun import _log_trail, encode_rrd, log_faces, log_ground, metadata_values
+from dicetrace.body import NODE_SIGNS, Body
+from dicetrace.sinks.rerun import _log_trail, box_centers, encode_rrd, log_faces, log_ground, metadata_values
 from dicetrace.sinks.rerun_view import framed_points, framing_eye, layout_blueprint, view_axes
 
 # rerun is imported in the functions that log or lay out, not here: heavy at import, and it must not load before a
@@ -100,13 +101,26 @@ def divergence(ref: dict, other: dict, *, side_cm: float, u0: float, l0: float) 
     return {"distance": parts.max(axis=0), "position_cm": dpos, "angle_rad": ang}
 
 
+def scaled_body(body: Body, scale: float) -> Body:
+    """``body`` drawn ``scale`` times its size (each throw's die a little larger than the one before, so coinciding
+    dice do not flicker): its half-extents and its load's place scaled alike."""
+    return Body(tuple(scale * v for v in body.half_extents_cm), body.load_fraction,
+                tuple(scale * v for v in body.load_cm))
+
+
+def rotations(off) -> np.ndarray:
+    """World-from-body rotations (n, 3, 3) read off node offsets (n, 8, 3), as ``Trace.rotation`` does."""
+    cols = np.einsum("kj,nki->nij", NODE_SIGNS, off)
+    return cols / np.linalg.norm(cols, axis=1, keepdims=True)
+
+
 def compare_series(rolls) -> tuple[np.ndarray, np.ndarray, list[dict]]:
     """(step, t_s, [divergence of each later throw from the first: throw 2, 3, ... from throw 1])."""
     n = common_length(rolls)
     dt = rolls[0].dt_s
     states = [_padded(r, n) for r in rolls]
     cfg = rolls[0].config
-    side = 2.0 * float(cfg.preset.half_side_cm)
+    side = 2.0 * max(cfg.preset.body.half_extents_cm)
     u0 = float(np.linalg.norm(rolls[0].ic[:3]))
     l0 = float(np.linalg.norm(rolls[0].ic[3:]))
     divs = [divergence(states[0], s, side_cm=side, u0=u0, l0=l0) for s in states[1:]]
@@ -172,7 +186,8 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
     """
     import rerun as rr  # rerun is slow to import: only when used
 
-    half = float(rolls[0].config.preset.half_side_cm)
+    body = rolls[0].config.preset.body
+    half = max(body.half_extents_cm)
     steps, t_s, divs = compare_series(rolls)
     n = len(steps)
 
@@ -191,11 +206,15 @@ def log_compare(rec, rolls, labels, *, layout: str = "overlay") -> None:
         base = f"throws/{k + 1}"
         index = idx(steps, t_s)
         h = drawn_half(half, k)
+        drawn = scaled_body(body, h / half)
         cm = s["cm"] + shifts[k]
-        rec.log(f"{base}/body", rr.Boxes3D.from_fields(half_sizes=[[h, h, h]], colors=[color], fill_mode="solid",
-                                                       labels=[f"throw {k + 1}"], show_labels=False), static=True)
-        rec.send_columns(f"{base}/body", indexes=index, columns=rr.Boxes3D.columns(centers=cm, quaternions=s["quat"]))
-        log_faces(rec, f"{base}/faces", h, index, cm, s["quat"])
+        rec.log(f"{base}/body", rr.Boxes3D.from_fields(half_sizes=[drawn.half_extents_cm], colors=[color],
+                                                       fill_mode="solid", labels=[f"throw {k + 1}"],
+                                                       show_labels=False), static=True)
+        centers = box_centers(drawn, cm, rotations(s["off"]))
+        rec.send_columns(f"{base}/body", indexes=index,
+                         columns=rr.Boxes3D.columns(centers=centers, quaternions=s["quat"]))
+        log_faces(rec, f"{base}/faces", drawn, index, cm, s["quat"])
         rec.log(f"{base}/nodes", rr.Points3D.from_fields(radii=[0.07 * h], colors=[color],
                                                         labels=[str(j) for j in range(1, 9)], show_labels=False),
                 static=True)
@@ -234,7 +253,7 @@ def compare_blueprint(rolls=None, layout: str = "overlay", aspect: float | None 
 
     eye = None
     if rolls:
-        half = float(rolls[0].config.preset.half_side_cm)
+        half = max(rolls[0].config.preset.body.half_extents_cm)
         n = common_length(rolls)
         states = [_padded(r, n) for r in rolls]
         shifts = layout_offsets(states, half, layout)

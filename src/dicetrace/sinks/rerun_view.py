@@ -152,7 +152,7 @@ def default_blueprint(roll=None, channels=(), aspect: float | None = None):
 
     eye = None
     if roll is not None and roll.trace is not None and roll.trace.cm_pos is not None:
-        eye = _eye_for(roll.trace.cm_pos, float(roll.config.preset.half_side_cm), aspect)
+        eye = _eye_for(roll.trace.cm_pos, max(roll.config.preset.body.half_extents_cm), aspect)
 
     view3d = rrb.Spatial3DView(
         origin="/world",
