@@ -93,6 +93,47 @@ SliceOption = Annotated[Optional[str], typer.Option("--slice", help=SLICE_HELP)]
 IntegratorsAlias = Annotated[Optional[str], typer.Option("--integrators", hidden=True)]
 
 
+DIE_HELP = ("The die's box: its three sides in cm, X,Y,Z along the body axes of faces 1|6, 2|5 and 3|4 (default: the "
+            "preset's cube, 2,2,2). A box other than the cube, or a loaded die, runs on the continuous contact "
+            "integrators (contact-tsit5, the physical preset's, and contact-dop853; docs/model.md, 'Bodies').")
+LOAD_HELP = ("A hidden weight: W@X,Y,Z puts the share W (0 <= W < 1) of the die's mass at the body-frame point "
+             "(X, Y, Z), cm from the box's centre, inside the box (e.g. 0.3@-0.9,0,0: near the middle of face 1).")
+DieOption = Annotated[Optional[str], typer.Option("--die", help=DIE_HELP)]
+LoadOption = Annotated[Optional[str], typer.Option("--load", help=LOAD_HELP)]
+
+
+def _numbers(option: str, text: str, count: int, what: str) -> tuple[float, ...]:
+    parts = [t.strip() for t in text.split(",")]
+    try:
+        values = tuple(float(t) for t in parts)
+    except ValueError:
+        values = ()
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        fail(f"{option} needs {what}, got {text!r}")
+    return values
+
+
+def body_overrides(die: str | None, load: str | None) -> dict:
+    """The preset fields that ``--die X,Y,Z`` (sides, cm) and ``--load W@X,Y,Z`` set, or a one-line failure naming
+    the option; {} when neither is given.  The values themselves are checked with the preset (``Preset.body``)."""
+    out: dict = {}
+    if die is not None:
+        sides = _numbers("--die", die, 3, "three sides in cm, X,Y,Z (the cube: 2,2,2)")
+        if min(sides) <= 0:
+            fail(f"--die needs three sides > 0 cm, got {die!r}")
+        out["half_extents_cm"] = tuple(0.5 * v for v in sides)
+    if load is not None:
+        share, sep, where = load.partition("@")
+        if not sep:
+            fail(f"--load needs W@X,Y,Z (a share of the mass at a body-frame point, cm), got {load!r}")
+        w = _numbers("--load", share, 1, "a share W of the mass in [0, 1) before the @")[0]
+        if not 0.0 <= w < 1.0:
+            fail(f"--load needs a share W of the mass in [0, 1) before the @, got {share.strip()!r}")
+        out["load_fraction"] = w
+        out["load_cm"] = _numbers("--load", where, 3, "the load's place X,Y,Z (cm, body frame) after the @")
+    return out
+
+
 def either(value: str | None, alias: str | None) -> str | None:
     """An option's value, else the value given under its other spelling."""
     return value if value is not None else alias
@@ -119,7 +160,7 @@ FIELD_OPTIONS = {
     "preset": "--preset", "integrator": "--integrator", "dt_s": "--dt", "t_max_s": "--t-max", "tol": "--tol",
     "tol_growth": "--tol-growth", "window": "--window", "z": "--z", "res": "--res", "chunk": "--chunk",
     "n": "--n", "seed": "--seed", "method": "--sample", "points": "--points", "device": "--device",
-    "events": "--events",
+    "events": "--events", "half_extents_cm": "--die", "load_fraction": "--load", "load_cm": "--load",
 }
 #: How an error naming several options shows one the user did not give.
 DEFAULT_TEXT = {"--dt": f"{Numerics.dt_s:g} (the default)", "--t-max": f"{Numerics.t_max_s:g} (the default)"}

@@ -66,7 +66,7 @@ DEFAULT_FOLDER = Path("recordings")
 def default_name(ic, coords, desc: dict, cfg, channels=frozenset(), events: bool = False) -> str:
     """File stem saying what is in the recording: the IC, then whatever is not the default.
 
-    The preset, integrator, time step, time cap, tolerance (and its growth), sub-steps when they
+    The preset, the die's box and load (``--die``, ``--load``), integrator, time step, time cap, tolerance (and its growth), sub-steps when they
     are not the defaults, the optional channels (``_forces-penetration``) and ``_events`` for exact
     contact events (their contact sequence is another one): two recordings with
     different content never get the same default name, so a default-named file is only ever
@@ -81,6 +81,10 @@ def default_name(ic, coords, desc: dict, cfg, channels=frozenset(), events: bool
     default, num = Numerics(), cfg.numerics
     if cfg.preset.name != "seed":
         parts.append(cfg.preset.name)
+    if cfg.preset.half_extents_cm is not None:  # --die: the box's sides
+        parts.append("die" + "x".join(fmt_num(2.0 * h) for h in cfg.preset.half_extents_cm))
+    if cfg.preset.load_fraction:  # --load
+        parts.append(f"load{fmt_num(cfg.preset.load_fraction)}at" + ",".join(fmt_num(v) for v in cfg.preset.load_cm))
     if num.integrator != default.integrator:
         parts.append(num.integrator)
     if num.dt_s != default.dt_s:
@@ -263,6 +267,8 @@ def register(app: typer.Typer) -> None:
         t_max: opts.TMaxOption = None,
         tol: opts.TolOption = None,
         tol_growth: opts.TolGrowthOption = None,
+        die: opts.DieOption = None,
+        load: opts.LoadOption = None,
         out: Optional[Path] = typer.Option(
             None, "--out", "--save", help="Output .rrd file (default, when no other sink is given: "
             "recordings/<name>.rrd, the name encoding the IC and every non-default option); a character device or FIFO is written directly, "
@@ -337,7 +343,7 @@ def register(app: typer.Typer) -> None:
             if ics or slice_name is not None:
                 fail("give either --scan DIR --at X,Y or --ic / --slice, not both")
             conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol,
-                           "--tol-growth": tol_growth}
+                           "--tol-growth": tol_growth, "--die": die, "--load": load}
             the_ic, cfg, coords, desc = ic_from_scan(scan, at, conflicting)
             note = desc.pop("note")
             events = events or desc["events"]  # the scan's rows hold exact events: so does their replay
@@ -356,7 +362,7 @@ def register(app: typer.Typer) -> None:
             labels.append(f"throw 1's IC × (1 + {eps:g})")
         if scan is None:
             cfg = build_config(model, integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
-                               tol_growth=tol_growth)
+                               tol_growth=tol_growth, overrides=opts.body_overrides(die, load))
         events = opts.events_or_fail(cfg, events)
         name = default_name(the_ic, coords, desc, cfg, chans, events)
         if comparing:

@@ -293,6 +293,8 @@ def register(app: typer.Typer) -> None:
         t_max: opts.TMaxOption = None,
         tol: opts.TolOption = None,
         tol_growth: opts.TolGrowthOption = None,
+        die: opts.DieOption = None,
+        load: opts.LoadOption = None,
         fmt: str = typer.Option("table", "--format", help="Output format: table, csv or json. On a terminal a table of more "
                                f"than {TTY_ROWS} rows shows the first {TTY_HEAD} and the outcomes of all; a file "
                                "or pipe gets every row."),
@@ -324,7 +326,8 @@ def register(app: typer.Typer) -> None:
             ic_arr = one[None, :]
             coords = None if c is None else c[None, :]
             source = desc
-        cfg = build_config(model, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth)
+        cfg = build_config(model, integrator, dt, t_max, ics=ic_arr, tol=tol, tol_growth=tol_growth,
+                           overrides=opts.body_overrides(die, load))
         opts.events_or_fail(cfg, events)
         opts.long_throw_or_fail(cfg, yes)
         batch = run_ics(ic_arr, cfg, events)
