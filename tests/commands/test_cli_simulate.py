@@ -223,3 +223,20 @@ def test_bad_input_through_the_console_script(tmp_path):
     assert "'soon'" in res.stderr
     assert "Traceback" not in res.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_die_and_load_throw_the_body_the_python_api_throws(tmp_path, dicetrace_cli):
+    """``--die 2,1.6,1.2 --load 0.2@0.3,-0.6,0.2``: the box of those sides (cm) with that weight, the same throw as
+    the preset's fields through the Python API."""
+    ic = [60.0, 40.0, 0.0, 20.0, -30.0, 10.0]
+    res = dicetrace_cli("simulate", "--ic", ",".join(map(str, ic)), "--preset", "physical", "--die", "2,1.6,1.2",
+                        "--load", "0.2@0.3,-0.6,0.2", "--format", "json", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(res.stdout)
+    assert doc["config"]["preset"]["half_extents_cm"] == [1.0, 0.8, 0.6]  # the file says which die it threw
+    row = doc["rolls"][0]
+    want = simulate_batch(np.array([ic]), preset="physical", half_extents_cm=(1.0, 0.8, 0.6), load_fraction=0.2,
+                          load_cm=(0.3, -0.6, 0.2))
+    assert (row["outcome"], row["steps"], row["status"]) == (int(want.outcome[0]), int(want.steps[0]), "settled")
+    cube = simulate_batch(np.array([ic]), preset="physical")
+    assert int(cube.steps[0]) != row["steps"]  # the body changed the throw

@@ -45,6 +45,14 @@ HOME3 = ["--window", "home", "--res", "3"]
         ("simulate", [*IC, "--t-max", "1e-300"], "--t-max 1e-300 with --dt 0.001 (the default): time step dt"),
         ("simulate", [*IC, "--integrator", "magic"], "--integrator: unknown integrator 'magic'"),
         ("scan", [*HOME3, "--set", "gamma=-1"], "--set: preset 'seed': damping gamma must be >= 0, got -1.0"),
+        # the die's body: --die and --load read in commands.options, their values checked with the preset
+        ("simulate", [*IC, "--preset", "physical", "--die", "2,2"], "--die needs three sides in cm, X,Y,Z"),
+        ("simulate", [*IC, "--preset", "physical", "--die", "2,0,2"], "--die needs three sides > 0 cm"),
+        ("record", [*IC, "--preset", "physical", "--load", "0.3"], "--load needs W@X,Y,Z"),
+        ("simulate", [*IC, "--preset", "physical", "--load", "1.2@0,0,0"], "--load needs a share W of the mass in [0, 1)"),
+        ("simulate", [*IC, "--preset", "physical", "--load", "0.2@0,0,-1.5"],
+         "--load: preset 'physical': load_cm (0.0, 0.0, -1.5) lies outside the box of half-extents (1.0, 1.0, 1.0)"),
+        ("simulate", [*IC, "--die", "2,2,1"], "--integrator: preset 'seed' is no uniform cube"),
         # window: get_window
         ("scan", ["--window", "0,1,1,0", "--res", "3"], "--window: the y range must have y1 > y0 (negative width)"),
         ("scan", ["--sample", "random", "--n", "3", "--box", "atlantis"], "--box: unknown window 'atlantis'"),
