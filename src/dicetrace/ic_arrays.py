@@ -156,3 +156,58 @@ class SliceICs(np.ndarray):
         super().__setstate__(nd_state)
         self.coords = coords
 
+
+
+#: The columns of a throw's starting pose in the tables: its orientation as a unit quaternion (x, y, z, w; world
+#: from body, scipy's and Rerun's order) and the start height of its centre of mass, cm.
+POSE_FIELDS = ("qx", "qy", "qz", "qw", "z0_cm")
+
+
+def validate_orientations(orientations, m: int) -> np.ndarray:
+    """Per-throw orientations as world-from-body rotation matrices (m, 3, 3), or a ValueError naming the problem.
+
+    ``orientations``: (m, 4) unit quaternions in (x, y, z, w) order, or (m, 3, 3) rotation matrices.  A
+    quaternion is normalised if its norm is within 1e-6 of 1 (so a float32 copy reads back), refused
+    otherwise; a matrix must be a rotation to 1e-9 (RᵀR = I, det R = +1).
+    """
+    a = as_real(orientations, "orientations", f"({m}, 4) quaternions x, y, z, w or ({m}, 3, 3) rotation matrices")
+    if a.shape == (m, 4):
+        if not np.isfinite(a).all():
+            raise ValueError("orientations must be finite")
+        norm = np.linalg.norm(a, axis=1)
+        bad = np.flatnonzero(np.abs(norm - 1.0) > 1e-6)
+        if len(bad):
+            raise ValueError(f"orientations: quaternion {int(bad[0])} has norm {norm[bad[0]]:.9g}, not 1 "
+                             f"(x, y, z, w of a rotation)")
+        from scipy.spatial.transform import Rotation  # scipy: only when orientations are given
+
+        return np.ascontiguousarray(Rotation.from_quat(a / norm[:, None]).as_matrix())
+    if a.shape == (m, 3, 3):
+        if not np.isfinite(a).all():
+            raise ValueError("orientations must be finite")
+        err = np.abs(np.einsum("nji,njk->nik", a, a) - np.eye(3)).max(axis=(1, 2))
+        bad = np.flatnonzero((err > 1e-9) | (np.linalg.det(a) < 0))
+        if len(bad):
+            raise ValueError(f"orientations: matrix {int(bad[0])} is not a rotation (RᵀR ≠ I or det < 0)")
+        return np.ascontiguousarray(a, dtype=np.float64)
+    raise ValueError(f"orientations must be ({m}, 4) quaternions x, y, z, w or ({m}, 3, 3) rotation matrices for "
+                     f"{m} ICs, got shape {a.shape}")
+
+
+def quaternions_xyzw(rot: np.ndarray) -> np.ndarray:
+    """Unit quaternions (m, 4), x, y, z, w with w ≥ 0, of rotation matrices (m, 3, 3) (scipy's ``Rotation``)."""
+    from scipy.spatial.transform import Rotation  # scipy: only when orientations are given
+
+    return Rotation.from_matrix(np.asarray(rot, dtype=np.float64)).as_quat(canonical=True)
+
+
+def validate_heights(heights_cm, m: int) -> np.ndarray:
+    """Per-throw start heights of the centre of mass (m,), cm: finite numbers (one for all throws, or one each)."""
+    a = as_real(heights_cm, "heights_cm", f"one number or {m}")
+    if a.ndim == 0:
+        a = np.full(m, float(a))
+    if a.shape != (m,):
+        raise ValueError(f"heights_cm must be one number or {m} numbers, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError("heights_cm must be finite")
+    return np.ascontiguousarray(a, dtype=np.float64)

@@ -28,9 +28,11 @@ from dicetrace.core.contacts import contact_sets_from_heights
 from dicetrace.core.kernels import has_events, new_roll_state, roll_out, run_events, run_roll
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES
+from dicetrace.devices import CPU as CPU_DEVICE
 from dicetrace.devices import Device, check_device, resolve_device
 from dicetrace.integrators import INTEGRATORS
-from dicetrace.ic_arrays import SliceICs, validate_ic, validate_ics
+from dicetrace.ic_arrays import (SliceICs, quaternions_xyzw, validate_heights, validate_ic, validate_ics,
+                                 validate_orientations)
 from dicetrace.memory import available_memory
 from dicetrace.params import NODE_SIGNS, Config, resolve_config
 from dicetrace.status import Status
@@ -438,6 +440,8 @@ class BatchResult:
     coords: np.ndarray | None = None  # (m, 3) float64 slice coordinates, NaN where none
     device: str = "cpu"  # where the throws ran: "cpu" or "cuda: <GPU name>" (also in the tables' metadata)
     set_times: np.ndarray | None = None  # float64 like ``sets``: each set's exact start time (s), with events=True
+    orientations: np.ndarray | None = None  # (m, 4) x, y, z, w: each throw's starting orientation, when given
+    heights_cm: np.ndarray | None = None  # (m,): each throw's start height of the centre of mass, when given
 
     def __len__(self) -> int:
         return len(self.outcome)
@@ -480,6 +484,8 @@ def simulate_batch(
     chunk: int | None = None,
     device: str | Device | None = None,
     events: bool = False,
+    orientations=None,
+    heights_cm=None,
     **options,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads, or a GPU).
@@ -533,6 +539,18 @@ def simulate_batch(
         are those of ``events=False`` bit for bit, and on the CPU the batch
         is bit-identical to :func:`simulate` with events, row by row.
 
+    orientations, heights_cm
+        A full starting state per throw: its orientation, (m, 4) unit
+        quaternions x, y, z, w (world from body) or (m, 3, 3) rotation
+        matrices, and the start height of its centre of mass, cm (one number
+        or m); None: the preset's start (face 3 down, at ``z0_cm``) for every
+        throw.  Each throw is then that of :func:`simulate` with
+        ``orientation=`` its matrix (and ``z0_cm=`` its height), bit for bit;
+        the throws run one per numba thread (CPU only), and the result keeps
+        them (``BatchResult.orientations``, ``heights_cm``; the tables'
+        columns ``qx, qy, qz, qw, z0_cm``).  A throw whose die would start
+        below the ground is refused, naming it.
+
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are
     ICs that are not real numbers (complex, bool, text, other objects).
@@ -551,7 +569,14 @@ def simulate_batch(
     if coords is not None:
         coords = np.array(coords, dtype=np.float64).reshape(m, 3)
     cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
+    posed = orientations is not None or heights_cm is not None
+    if posed:
+        rots, heights = _poses(cfg, orientations, heights_cm, m)
     device = resolve_device(device)  # once: everything below takes this Device
+    if posed and device.gpu:
+        raise ValueError("orientations and heights_cm: throws from their own poses run on the CPU (device='cpu')")
+    if posed:
+        chunk = 1  # one throw a chunk: each has its own starting offsets and height
     if chunk is None:
         chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap, events) if device.gpu else batch_chunk(cap, events)
     check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention, events=events)
@@ -565,8 +590,12 @@ def simulate_batch(
     def one_chunk(a: int, b: int):
         return run_chunk(cfg.kernel_inputs(ics[a:b], l_convention=conv), cap, threads, device, events)
 
+    if posed:
+        results = _posed_results(cfg, ics, conv, rots, heights, cap, threads, events)
+    else:
+        results = chunk_results(bounds, one_chunk, device)
     # chunk by chunk (on several GPUs, a few at a time): one chunk's buffers in memory, its sets compacted
-    for (a, b), (st, sp, oc, ns, sets, set_steps, times) in zip(bounds, chunk_results(bounds, one_chunk, device)):
+    for (a, b), (st, sp, oc, ns, sets, set_steps, times) in zip(bounds, results):
         status[a:b], steps[a:b], outcome[a:b], nsets[a:b] = st, sp, oc, ns
         set_parts.append(sets)
         step_parts.append(set_steps)
@@ -595,4 +624,40 @@ def simulate_batch(
         coords=coords,
         device=device.label,
         set_times=flat_times,
+        orientations=quaternions_xyzw(rots) if posed else None,
+        heights_cm=heights if posed else None,
     )
+
+
+def _poses(cfg: Config, orientations, heights_cm, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """The throws' orientations (m, 3, 3) and start heights (m,), checked: every die starts on or above the ground."""
+    rots = np.broadcast_to(np.eye(3), (m, 3, 3)) if orientations is None else validate_orientations(orientations, m)
+    heights = np.full(m, cfg.preset.z0_cm) if heights_cm is None else validate_heights(heights_cm, m)
+    body_off = cfg.initial_offsets()
+    lowest = heights + np.einsum("kj,nj->nk", body_off, rots[:, 2, :]).min(axis=1)  # each throw's lowest node
+    bad = np.flatnonzero(lowest < 0.0)
+    if len(bad):
+        i = int(bad[0])
+        raise ValueError(f"throw {i} starts below the ground: its lowest node is at {lowest[i]:.6g} cm (height "
+                         f"{heights[i]:.6g} cm); raise its height")
+    return np.ascontiguousarray(rots), heights
+
+
+def _posed_results(cfg: Config, ics, conv, rots, heights, cap: int, threads, events: bool):
+    """Each throw from its own pose, one per numba thread (the kernels release the GIL): its results in order."""
+    import numba
+
+    from dicetrace.params import KernelInputs
+
+    kin = cfg.kernel_inputs(ics, l_convention=conv)
+
+    def one(i: int):
+        k = KernelInputs(kin.ics[i : i + 1], cfg.initial_offsets(rots[i]), kin.params._replace(z0_cm=float(heights[i])),
+                         kin.integrator_id)
+        return run_chunk(k, cap, 1, CPU_DEVICE, events)
+
+    workers = numba.get_num_threads() if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        yield from pool.map(one, range(len(ics)))

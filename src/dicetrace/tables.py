@@ -99,6 +99,11 @@ ROLLS_SCHEMA = pa.schema(
 
 #: The column a ``rolls`` table of exact contact events adds at its end: when each contact set began.
 EVENT_TIMES_FIELD = _f("contact_times_s", pa.list_(pa.float64()), "s")
+#: The columns a ``rolls`` table of throws from their own poses (``simulate_batch(orientations=, heights_cm=)``)
+#: adds at its end: the starting orientation, a unit quaternion x, y, z, w (world from body), and the start
+#: height of the centre of mass.
+POSE_FIELDS = [*(_f(name, pa.float64(), "quaternion, world from body") for name in ("qx", "qy", "qz", "qw")),
+               _f("z0_cm", pa.float64(), "cm")]
 
 #: ``ROLLS_SCHEMA`` with the grid indices after ``ic_id``: the rows of a scan dataset.
 GRID_ROLLS_SCHEMA = pa.schema([ROLLS_SCHEMA.field(0), *GRID_FIELDS, *list(ROLLS_SCHEMA)[1:]])
@@ -250,6 +255,8 @@ class _Summaries:
             times = getattr(source, "set_times", None)
             self.set_times = None if times is None else np.asarray(times, dtype=np.float64)
             self.coords = source.coords
+            self.orientations = getattr(source, "orientations", None)
+            self.heights_cm = getattr(source, "heights_cm", None)
             return
         rolls = [source] if _is_roll(source) else list(source)
         if not rolls:
@@ -274,6 +281,7 @@ class _Summaries:
         if any(with_times) and not all(with_times):
             raise ValueError("rolls with and without exact contact events cannot share one table")
         self.set_times = np.concatenate([r.contact_times for r in rolls]) if all(with_times) else None
+        self.orientations = self.heights_cm = None
         self.coords = None
 
     def __len__(self) -> int:
@@ -409,6 +417,12 @@ def rolls_table(source, *, coords=None, ic_ids=None, index=None, metadata: Mappi
         cols["contact_times_s"] = pa.ListArray.from_arrays(
             pa.array(s.set_offsets.astype(np.int32), type=pa.int32()), pa.array(s.set_times, type=pa.float64()))
         schema = schema.append(EVENT_TIMES_FIELD)
+    if s.orientations is not None:
+        for j, name in enumerate(("qx", "qy", "qz", "qw")):
+            cols[name] = pa.array(np.ascontiguousarray(s.orientations[:, j]), type=pa.float64())
+        cols["z0_cm"] = pa.array(np.asarray(s.heights_cm, dtype=np.float64), type=pa.float64())
+        for f in POSE_FIELDS:
+            schema = schema.append(f)
     table = pa.Table.from_arrays([cols[f.name] for f in schema], schema=schema)
     device = getattr(source, "device", None)  # where a batch ran (BatchResult.device)
     extra = {"device": device, **dict(metadata or {})} if device is not None else metadata
