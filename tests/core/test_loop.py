@@ -245,3 +245,24 @@ def test_a_flight_that_never_lands_is_crossed_at_once():
     r = kernels.run_summary(kin.ics[0], kin.off0, kin.params, kin.integrator_id, np.zeros(cap, np.uint8),
                             np.zeros(cap, np.int32))
     assert r[0] == Status.TIME_CAP and r[1] == int(kin.params.max_steps)
+
+
+@pytest.mark.parametrize("preset, integrator, body", [
+    ("seed", "forward-euler", {}),  # unstable: it never settles, so the cap ends it
+    ("physical", "contact-tsit5", {}),
+    ("physical", "contact-tsit5", dict(half_extents_cm=(1.0, 0.8, 0.6), load_fraction=0.2, load_cm=(0.3, -0.6, 0.2))),
+])
+def test_the_time_cap_ends_a_throw_at_t_max_whatever_its_stop_threshold(preset, integrator, body):
+    """A throw still moving at t_max ends there, after exactly t_max/dt steps, in one call and in a batch: the
+    stop threshold (about 2598 in energy units for the cube) is never taken for the last step of a slice."""
+    from dicetrace.simulate import simulate, simulate_batch
+
+    t_max = 3.0 if preset == "physical" else 2.0
+    cfg = make_config(preset, integrator=integrator, t_max_s=t_max, g=-98.0 if preset == "physical" else -980.0,
+                      **body)
+    ic = np.array([80.0, 20.0, 0.0, 30.0, -40.0, 20.0])
+    r = simulate(ic, config=cfg)
+    b = simulate_batch(ic[None, :], config=cfg)
+    want = round(t_max / cfg.numerics.dt_s)
+    assert (r.status, r.steps) == ("time_cap", want)
+    assert (b.status[0], int(b.steps[0])) == ("time_cap", want)

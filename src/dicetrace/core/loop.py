@@ -150,7 +150,8 @@ def _clears(e, kp):
 
 @jit(inline="always")
 def stop_energy(st, kp, contact, e_dyn, tracing):
-    """The stop-test energy after a step, whether it clears the threshold by far, and the threshold: (e, clear, stop).
+    """The stop-test energy after a step, whether it clears the threshold by far, and the threshold: (e, clear,
+    threshold).
 
     ``e_dyn``: the dynamic energy the blow-up test computed (in contact).
     In free flight (no contact) the point-mass energy is bounded below
@@ -192,8 +193,8 @@ def stop_energy(st, kp, contact, e_dyn, tracing):
         e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], L[0], L[1], L[2], z, kp) - e_rest
         clear = not contact and _clears(e, kp)
         if not kp.isotropic:
-            rest, stop = face_levels(z, kp)
-            return (e + e_rest) - rest, clear, stop
+            rest, threshold = face_levels(z, kp)
+            return (e + e_rest) - rest, clear, threshold
     return e, clear, kp.e_stop
 
 
@@ -342,13 +343,13 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
                     if tracing:  # the state is finite: keep it for inspection
                         _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
                     break
-            e, clear, stop = stop_energy(st, kp, contact, e_dyn, tracing)
+            e, clear, threshold = stop_energy(st, kp, contact, e_dyn, tracing)
             if tracing:
                 _write_trace(n, st, kp, tr_state, tr_force, tr_energy)
             if not math.isfinite(e):
                 status = Status.NON_FINITE
                 break
-            if e <= stop:
+            if e <= threshold:
                 status = Status.SETTLED
                 break
         if status == Status.TIME_CAP and n < maxn:  # the slice ran out: keep what the next one goes on from
