@@ -173,10 +173,15 @@ def test_compare_is_pearsons_chi2_of_the_counts():
     pearson = sum(stats.chisquare([kk, nn - kk], [nn * pp, nn * (1 - pp)]).statistic for kk, nn, pp in zip(k, n, model))
     assert got.chi2 == pytest.approx(pearson, rel=1e-12)
     assert got.p_value == pytest.approx(stats.chi2.sf(pearson, 3), rel=1e-12)
-    # a Monte-Carlo model's own binomial error adds in quadrature
+    # a Monte-Carlo model is a second binomial sample: Pearson's χ² of each 2×2 table of counts (no continuity
+    # correction), finite where the model's share is 0
     mc = f.compare(model, data, model_n=4000)
-    z0 = (k[0] / n[0] - 0.37) / math.sqrt(0.37 * 0.63 / 300 + 0.37 * 0.63 / 4000)
-    assert mc.z[0] == pytest.approx(z0, rel=1e-12)
+    tables = [[[kk, nn - kk], [4000 * pp, 4000 * (1 - pp)]] for kk, nn, pp in zip(k, n, model)]
+    two_by_two = [stats.chi2_contingency(t, correction=False).statistic for t in tables]
+    np.testing.assert_allclose(mc.z ** 2, two_by_two, rtol=1e-12)
+    assert np.sign(mc.z[0]) == np.sign(k[0] / n[0] - 0.37)
+    zero = f.compare(np.array([0.0, 0.31, 0.1]), data, model_n=200)
+    assert np.isfinite(zero.z).all() and zero.z[0] > 5
     only = f.compare(model, data, points=[1.0, 1.5], n_fitted=1)
     assert only.dof == 1 and list(only.aspect) == [1.0, 1.5]
 

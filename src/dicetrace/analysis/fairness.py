@@ -303,8 +303,8 @@ class Comparison:
         The points compared (those of ``points``), their measured shares,
         throws and the model's p.
     sigma : numpy.ndarray
-        Standard error of ``p_obs − p_model``: √(p(1 − p)/n + p(1 − p)/n_model)
-        at the model's p (the second term only for a Monte-Carlo model).
+        Standard error of ``p_obs − p_model``: √(p(1 − p)/n) at the model's p;
+        for a Monte-Carlo model √(p̄(1 − p̄)(1/n + 1/n_model)) at the pooled share p̄.
     z : numpy.ndarray
         (p_obs − p_model)/sigma; ±inf where sigma is 0 and the two differ.
     chi2 : float
@@ -349,8 +349,11 @@ def compare(p_model, data: MeasuredCuboids = GAZETTE_97_16, *, model_n=None, poi
 
     Each measured share is binomial: its standard error is √(p(1 − p)/N),
     taken at the model's p (Pearson's χ² for two categories, finite where a
-    measured share is 0 or 1).  A Monte-Carlo model's own estimate carries
-    √(p(1 − p)/n_model), added in quadrature when ``model_n`` is given.
+    measured share is 0 or 1).  A Monte-Carlo model (``model_n`` given) is a
+    second sample: the two shares are compared as two binomial samples, at
+    their pooled share p̄ = (N·p_obs + n·p_model)/(N + n), σ² = p̄(1 − p̄)·(1/N +
+    1/n) (Pearson's χ² of the 2×2 table of counts, finite unless both shares
+    are 0 or both 1).
 
     Parameters
     ----------
@@ -375,7 +378,8 @@ def compare(p_model, data: MeasuredCuboids = GAZETTE_97_16, *, model_n=None, poi
         mn = np.broadcast_to(np.asarray(model_n, dtype=float), data.p.shape)[idx]
         if np.any(~(mn > 0)):
             raise ValueError("model_n must be > 0")
-        var = var + pm * (1.0 - pm) / mn
+        pooled = (data.n[idx] * data.p[idx] + mn * pm) / (data.n[idx] + mn)
+        var = pooled * (1.0 - pooled) * (1.0 / data.n[idx] + 1.0 / mn)
     sigma = np.sqrt(var)
     diff = data.p[idx] - pm
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -163,6 +163,21 @@ def run_friction(*, quick: bool = False, out: Optional[Path] = None, quiet: bool
         print(f"wrote {path}")
 
 
+def run_cuboids(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
+                quiet: bool = False, command: str = "dicetrace analyze cuboids") -> None:
+    """The cuboid-dice study: the physical die against the measured face probabilities of square cuboids."""
+    from dicetrace.studies import study_cuboids as cu  # lazy: matplotlib and the study only when run
+
+    if threads is not None and threads < 1:
+        fail(f"--threads must be >= 1, got {threads}")
+    folder = _out_dir(out, "cuboids", {"--quick": quick})
+    t0 = time.perf_counter()
+    data = cu.study(**(cu.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
+    summary = cu.summarise(data)
+    paths = cu.render(data, summary, folder, command, time.perf_counter() - t0)
+    _report(paths, ("csv", "json", "figure"), quiet)
+
+
 def register(app: typer.Typer) -> None:
     """``dicetrace accuracy`` and ``dicetrace stability``: aliases of ``dicetrace analyze accuracy|stability``."""
     @app.command("accuracy")

@@ -8,11 +8,12 @@ Examples::
     dicetrace analyze --report-only --out analysis   # re-assemble analysis/REPORT.md only
     dicetrace analyze accuracy --quick            # an integrator study, into ./dicetrace-results/accuracy
     dicetrace analyze friction --out analysis/accuracy   # regenerate the committed v_reg.csv, v_reg.md
+    dicetrace analyze cuboids --out analysis/cuboids     # physical against real cuboid dice (committed)
 
 Writeup studies: the names and letters of :data:`dicetrace.studies.WRITEUP_STUDIES` and
 :data:`~dicetrace.studies.LETTERS` (``dicetrace analyze --help`` lists them, from cells (a) to the
 latest), or ``all``; several at once share one output folder.  Integrator
-studies: accuracy, stability, friction, each run alone with options of its own
+studies: accuracy, stability, friction, cuboids, each run alone with options of its own
 (:mod:`dicetrace.commands.accuracy`; ``dicetrace accuracy`` and ``dicetrace
 stability`` are aliases kept from before).  An option the named study does not
 take (:data:`TAKES`) is refused by name.
@@ -46,7 +47,7 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail
-from dicetrace.commands.accuracy import command_line, run_accuracy, run_friction, run_stability
+from dicetrace.commands.accuracy import command_line, run_accuracy, run_cuboids, run_friction, run_stability
 from dicetrace.commands.options import IntegratorsAlias, config_errors, either
 from dicetrace.devices import resolve_device
 from dicetrace.extras import require
@@ -70,6 +71,7 @@ TAKES = {
     "accuracy": ("--quick", "--out", "--window", "--n", "--seed", "--presets", "--integrator", "--threads", "--quiet"),
     "stability": ("--quick", "--out", "--presets", "--integrator", "--k", "--quiet"),
     "friction": ("--quick", "--out", "--quiet"),
+    "cuboids": ("--quick", "--out", "--threads", "--quiet"),
 }
 
 
@@ -99,7 +101,8 @@ The options each study takes (any other is refused):
 
 The committed results in analysis/ are regenerated only by full runs from the
 repository root: `dicetrace analyze all --out analysis`, and `dicetrace analyze
-accuracy|stability|friction --out analysis/accuracy`; a --quick or otherwise
+accuracy|stability|friction --out analysis/accuracy` and `dicetrace analyze cuboids
+--out analysis/cuboids`; a --quick or otherwise
 reduced run into analysis/ is refused. REPORT.md is the whole report once every
 writeup study has results in OUT/results, else the sections of those that have
 (one study alone: its own section). --report-only re-assembles OUT/REPORT.md
@@ -214,6 +217,8 @@ def _integrator_study(name: str, *, window, n, seed, quick, presets, integrators
     elif name == "stability":
         run_stability(quick=quick, presets=presets, integrators=integrators, k_values=k_values, out=out, quiet=quiet,
                       command=command)
+    elif name == "cuboids":
+        run_cuboids(quick=quick, threads=threads, out=out, quiet=quiet, command=command)
     else:
         run_friction(quick=quick, out=out, quiet=quiet, command=command)
 

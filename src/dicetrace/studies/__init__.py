@@ -66,12 +66,13 @@ TITLES = {
 TITLES["onecell_converged"] = "one cell or many, repetition and topology on the converged die (writeup 5.1, 5.5, 5.7)"
 TITLES["sweeps"] = "damping γ and ground stiffness k on three windows of the converged die, with certificates"
 #: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
-INTEGRATOR_STUDIES = ("accuracy", "stability", "friction")
+INTEGRATOR_STUDIES = ("accuracy", "stability", "friction", "cuboids")
 #: What each integrator study is about (the first line of its module's docstring).
 INTEGRATOR_TITLES = {
     "accuracy": "the work-precision study of the integrators",
     "stability": "the map of the integrators' stable steps",
     "friction": "how near to Coulomb the physical die's friction can go: the regularisation study",
+    "cuboids": "the physical die held to the measured face probabilities of real square cuboidal dice",
 }
 #: Every study's name.
 STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES

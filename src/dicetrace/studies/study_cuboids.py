@@ -1,0 +1,244 @@
+"""Study cuboids: the physical die held to the measured face probabilities of real square cuboidal dice.
+
+The data: *The Mathematical Gazette* 97, note 97.16 (2013), Table 1
+(:data:`dicetrace.analysis.dice_data.GAZETTE_97_16`): 15 steel dice cut from a
+square bar, each with two y×y square faces and four x×y faces, x/y from 0.47 to
+2.65, thrown by hand N = 275–1011 times each; p is the share that ended with a
+square face up.
+
+Everything below was fixed before any simulated p was compared with the data:
+
+- the model: the ``physical`` preset as it is (its ground law, friction and
+  tolerance schedule; ``contact-tsit5``), no parameter tuned;
+- the dice: boxes of square side y = 2 cm (the cube's side) and length x = (x/y)·2
+  cm along the body's x axis, so faces 1 and 6 are the square ones; uniform,
+  mass 8 node masses (the die's unit, docs/model.md §2);
+- the throw: :data:`dicetrace.throws.CASUAL` (uniformly random orientation, released
+  8–20 cm up, 0.3–1.2 m/s across, 5–30 rad/s of spin), ``N_MAIN`` throws per die;
+  the same throws' ICs are drawn afresh for each die from one seed;
+- the systematic of the throw: :data:`~dicetrace.throws.GENTLE` and
+  :data:`~dicetrace.throws.VIGOROUS`, ``N_SYST`` throws per die each;
+- the systematic of the integrator: the first ``N_INTEG`` casual throws of each
+  die again with ``contact-dop853`` at tol 1e-10 (an independent scheme, tighter):
+  the share of throws whose face agrees, and the shift of p.
+
+A throw counts when it settles on a face (outcome 1–6); throws that end on an
+edge (outcome 0) or at the time cap are counted and reported, not dropped silently.
+p is the share of counted throws with face 1 or 6 up, with its 95 % Wilson
+interval.  The comparison (:func:`dicetrace.analysis.fairness.compare`) is
+Pearson's χ² over the 15 dice with the binomial errors of the data and of the
+simulation; the baselines are the solid-angle model, the Gazette note's edge
+model and the Gibbs model with its temperature fitted on all 15 dice (one
+parameter), for scale.  The verdict is "supported" only if the casual throws
+pass (χ² p-value ≥ 0.05) and so do both other throw models; "not supported" if
+all three fail; otherwise "undetermined" (the answer then depends on a throw no
+one measured).
+
+Run it with ``dicetrace analyze cuboids --out analysis/cuboids`` (it writes
+``cuboids.csv``, ``results.json``, ``cuboids.md`` and ``cuboids.png``; ``--quick``
+for a small check, into ``./dicetrace-results/cuboids`` by default).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from dicetrace.analysis.dice_data import GAZETTE_97_16
+from dicetrace.analysis.fairness import compare, edge_tip_p, fit_one_parameter, gibbs_p, solid_angle_p
+from dicetrace.analysis.grouping import wilson_interval
+from dicetrace.compile_clock import CompileClock, time_text
+from dicetrace.params import make_config
+from dicetrace.simulate import simulate_batch
+from dicetrace.studies.outputs import write_text, written
+from dicetrace.throws import CASUAL, GENTLE, VIGOROUS
+
+#: The square side of every die, cm (the cube's side): the box is (x/y)·SIDE_CM long.
+SIDE_CM = 2.0
+N_MAIN = 1000
+N_SYST = 400
+N_INTEG = 200
+#: The independent, tighter run of the integrator systematic.
+INTEG_CHECK = dict(integrator="contact-dop853", tol=1e-10, tol_growth=0.0)
+SEED = 20131
+QUICK = dict(n_main=24, n_syst=12, n_integ=8, aspects=(0.63, 1.16, 1.87))
+#: The χ² p-value at and above which a throw model's p passes.
+PASS_P = 0.05
+
+
+def _config(aspect: float, **numerics):
+    return make_config("physical", half_extents_cm=(0.5 * aspect * SIDE_CM, 0.5 * SIDE_CM, 0.5 * SIDE_CM),
+                       **numerics)
+
+
+def _throw(aspect: float, throw, n: int, seed: int, threads, **numerics):
+    """n throws of the die of ``aspect`` drawn from ``throw`` (reproducibly from ``seed``): their BatchResult."""
+    cfg = _config(aspect, **numerics)
+    t = throw.sample(n, cfg, seed)
+    r = simulate_batch(t.ics, config=cfg, orientations=t.orientations, heights_cm=t.heights_cm, threads=threads)
+    return r
+
+
+def _share(outcome: np.ndarray) -> dict:
+    """p (square face up) over the throws that ended on a face, its Wilson interval, and what did not count."""
+    on_face = (outcome >= 1) & (outcome <= 6)
+    k = int(np.sum(on_face & ((outcome == 1) | (outcome == 6))))
+    n = int(np.sum(on_face))
+    lo, hi = wilson_interval(k, n) if n else (float("nan"), float("nan"))
+    return {"k": k, "n": n, "p": k / n if n else float("nan"), "ci_low": float(lo), "ci_high": float(hi),
+            "edge": int(np.sum(outcome == 0)), "unsettled": int(np.sum(outcome < 0))}
+
+
+def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG, aspects=None, threads=None,
+          say=print) -> dict:
+    """Every run of the study (see the module docstring) as plain data."""
+    aspects = tuple(float(a) for a in (GAZETTE_97_16.aspect if aspects is None else aspects))
+    rows = []
+    agreement = []
+    for j, a in enumerate(aspects):
+        for throw, n in ((CASUAL, n_main), (GENTLE, n_syst), (VIGOROUS, n_syst)):
+            t0 = time.perf_counter()
+            with CompileClock() as clock:
+                r = _throw(a, throw, n, SEED + 1000 * j, threads)
+            rows.append({"aspect": a, "throw": throw.name, "integrator": r.config.numerics.integrator,
+                         "throws": n, **_share(r.outcome),
+                         "mean_settle_time_s": float(np.mean(r.t_settle_s[r.status_code == 0]))})
+            say(f"x/y {a:g}: {throw.name} × {n}: p = {rows[-1]['p']:.3f} "
+                f"({time_text(time.perf_counter() - t0, clock.seconds, '.0f')})")
+            if throw is CASUAL:
+                main = r
+        # the integrator systematic: the first n_integ casual throws again, independently and tighter
+        t = CASUAL.sample(n_main, _config(a), SEED + 1000 * j)
+        cfg = _config(a, **INTEG_CHECK)
+        check = simulate_batch(t.ics[:n_integ], config=cfg, orientations=t.orientations[:n_integ],
+                               heights_cm=t.heights_cm[:n_integ], threads=threads)
+        same = main.outcome[:n_integ] == check.outcome
+        lo, hi = wilson_interval(int(same.sum()), n_integ)
+        agreement.append({"aspect": a, "throws": n_integ, "agree": int(same.sum()), "agreement": float(same.mean()),
+                          "ci_low": float(lo), "ci_high": float(hi),
+                          "p_main_subset": _share(main.outcome[:n_integ])["p"], "p_check": _share(check.outcome)["p"]})
+        say(f"x/y {a:g}: {INTEG_CHECK['integrator']} tol {INTEG_CHECK['tol']:g} agrees on "
+            f"{agreement[-1]['agreement']:.3f} of {n_integ}")
+    return {"rows": rows, "integrator_check": agreement, "aspects": list(aspects)}
+
+
+def summarise(data: dict) -> dict:
+    """χ² of each throw model and of the baselines against the data, the systematics and the verdict."""
+    rows = pd.DataFrame(data["rows"])
+    full = len(data["aspects"]) == len(GAZETTE_97_16.aspect)
+    points = None if full else data["aspects"]
+    idx = [int(np.flatnonzero(np.abs(GAZETTE_97_16.aspect - a) < 1e-9)[0]) for a in data["aspects"]]
+    out = {"models": {}, "baselines": {}}
+
+    def on_table(values) -> np.ndarray:  # values at the measured points, the rest filled (compare takes them all)
+        p = np.full(len(GAZETTE_97_16.aspect), 0.5)
+        p[idx] = values
+        return p
+
+    for name, g in rows.groupby("throw", sort=False):
+        g = g.set_index("aspect").loc[data["aspects"]]
+        c = compare(on_table(g["p"].to_numpy()), model_n=on_table(g["n"].to_numpy()), points=points)
+        out["models"][name] = {"chi2": c.chi2, "dof": c.dof, "p_value": c.p_value, "z": c.z.tolist(),
+                               "passes": bool(c.p_value >= PASS_P)}
+    asp = GAZETTE_97_16.aspect
+    for name, p in (("solid angle", solid_angle_p(asp)), ("edge (Gazette note)", edge_tip_p(asp))):
+        c = compare(p, points=points)
+        out["baselines"][name] = {"chi2": c.chi2, "dof": c.dof, "p_value": c.p_value}
+    fit = fit_one_parameter(gibbs_p, (0.01, 100.0), fit_points=data["aspects"], log_scale=True)
+    out["baselines"]["Gibbs (temperature fitted)"] = {"chi2": fit.on_fit.chi2, "dof": fit.on_fit.dof,
+                                                     "p_value": fit.on_fit.p_value, "temperature": fit.value}
+    wide = rows.pivot(index="aspect", columns="throw", values="p").loc[data["aspects"]]
+    out["throw_spread"] = (wide.max(axis=1) - wide.min(axis=1)).tolist()
+    chk = pd.DataFrame(data["integrator_check"])
+    out["integrator_shift"] = (chk["p_check"] - chk["p_main_subset"]).tolist()
+    out["integrator_agreement_min"] = float(chk["agreement"].min())
+    passes = [m["passes"] for m in out["models"].values()]
+    out["verdict"] = "supported" if all(passes) else ("not supported" if not any(passes) else "undetermined")
+    return out
+
+
+def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) -> dict[str, Path]:
+    """``cuboids.csv``, ``results.json``, ``cuboids.md`` and ``cuboids.png`` in ``out``; their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    rows = pd.DataFrame(data["rows"])
+    with written(out / "cuboids.csv", "table") as tmp:
+        rows.to_csv(tmp, index=False)
+    with written(out / "results.json", "results") as tmp:
+        Path(tmp).write_text(json.dumps({"command": command, "wall_s": wall_s, "side_cm": SIDE_CM, "seed": SEED,
+                                         "integrator_check": INTEG_CHECK, **data, "summary": summary}, indent=1))
+    asp = np.array(data["aspects"])
+    idx = [int(np.flatnonzero(np.abs(GAZETTE_97_16.aspect - a) < 1e-9)[0]) for a in asp]
+    fig, ax = plt.subplots(figsize=(7.5, 4.8))
+    n_obs = GAZETTE_97_16.n[idx]
+    p_obs = GAZETTE_97_16.p[idx]
+    lo, hi = wilson_interval(np.round(p_obs * n_obs).astype(int), n_obs)
+    ax.errorbar(asp, p_obs, yerr=[p_obs - lo, hi - p_obs], fmt="ko", capsize=3, label="measured (Gazette 97.16)")
+    for (name, g), colour, shift in zip(rows.groupby("throw", sort=False), ("C0", "C2", "C3"), (-0.012, 0.0, 0.012)):
+        g = g.set_index("aspect").loc[asp]
+        ax.errorbar(asp + shift, g["p"], yerr=[g["p"] - g["ci_low"], g["ci_high"] - g["p"]], fmt="s", ms=4,
+                    color=colour, capsize=2, label=f"physical, {name} throws")
+    fine = np.geomspace(asp.min() * 0.95, asp.max() * 1.05, 200)
+    ax.plot(fine, solid_angle_p(fine), "k:", lw=1, label="solid angle")
+    ax.plot(fine, gibbs_p(fine, summary["baselines"]["Gibbs (temperature fitted)"]["temperature"]), "k--", lw=1,
+            label="Gibbs, fitted")
+    ax.set_xscale("log")
+    ax.set_xlabel("x / y (length over the square side)")
+    ax.set_ylabel("p (a square face up)")
+    ax.set_title("Square cuboidal dice: simulation against hand throws (95 % Wilson intervals)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with written(out / "cuboids.png", "figure") as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
+    plt.close(fig)
+    write_text(out / "cuboids.md", _markdown(data, summary, command, wall_s), "summary")
+    return {"csv": out / "cuboids.csv", "json": out / "results.json", "summary": out / "cuboids.md",
+            "figure": out / "cuboids.png"}
+
+
+def _markdown(data: dict, summary: dict, command: str, wall_s: float) -> str:
+    rows = pd.DataFrame(data["rows"])
+    chk = pd.DataFrame(data["integrator_check"]).set_index("aspect")
+    asp = data["aspects"]
+    idx = [int(np.flatnonzero(np.abs(GAZETTE_97_16.aspect - a) < 1e-9)[0]) for a in asp]
+    lines = [
+        "# Square cuboidal dice: the physical die against hand throws",
+        "",
+        f"Command: `{command}` ({wall_s:.0f} s wall on this machine). Model: the `physical` preset as it is "
+        f"(contact-tsit5, its tolerance schedule), dice of square side {SIDE_CM:g} cm, uniform; throws: "
+        "dicetrace.throws (casual; gentle and vigorous for the throw's systematic). Data: The Mathematical "
+        "Gazette 97, note 97.16, Table 1. p: share of throws that settled on a face with a square face up "
+        "(95 % Wilson interval); edge: throws that stopped on an edge; unsettled: at the time cap.",
+        "",
+        "| x/y | measured p (N) | casual | gentle | vigorous | throw spread | DOP853 1e-10 agreement | DOP853 shift of p | edge / unsettled (casual) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    wide = {name: g.set_index("aspect") for name, g in rows.groupby("throw", sort=False)}
+    for j, a in enumerate(asp):
+        i = idx[j]
+        cells = []
+        for name in ("casual", "gentle", "vigorous"):
+            r = wide[name].loc[a]
+            cells.append(f"{r['p']:.3f} ({r['ci_low']:.3f}–{r['ci_high']:.3f}, n {int(r['n'])})")
+        c = chk.loc[a]
+        cas = wide["casual"].loc[a]
+        lines.append(f"| {a:g} | {GAZETTE_97_16.p[i]:.3f} ({GAZETTE_97_16.n[i]}) | {' | '.join(cells)} | "
+                     f"{summary['throw_spread'][j]:.3f} | {c['agreement']:.3f} ({c['ci_low']:.3f}–{c['ci_high']:.3f}) | "
+                     f"{summary['integrator_shift'][j]:+.3f} | {int(cas['edge'])} / {int(cas['unsettled'])} |")
+    lines += ["", "| model | χ² | dof | p-value |", "|---|---|---|---|"]
+    for name, m in summary["models"].items():
+        lines.append(f"| physical, {name} throws | {m['chi2']:.1f} | {m['dof']} | {m['p_value']:.2g} |")
+    for name, m in summary["baselines"].items():
+        extra = f" (T = {m['temperature']:.3g})" if "temperature" in m else ""
+        lines.append(f"| {name}{extra} | {m['chi2']:.1f} | {m['dof']} | {m['p_value']:.2g} |")
+    lines += ["", f"Verdict on `physical` held to these dice: **{summary['verdict']}** (a throw model passes at a "
+              f"χ² p-value ≥ {PASS_P:g}; supported only if all three pass, not supported if none does).", ""]
+    return "\n".join(lines)
