@@ -110,6 +110,9 @@ class KernelParams(NamedTuple):
     rh_x: float = 0.125  # 1/(8·half-extent) along each body axis: R's columns from the node offsets
     rh_y: float = 0.125
     rh_z: float = 0.125
+    com_x: float = 0.0  # the centre of mass in the body frame, from the box's centre, cm
+    com_y: float = 0.0
+    com_z: float = 0.0
     e_rest1: float = 7840.0  # the energy of the die resting on face 1..6 (centre of mass height), node-mass·cm²/s²
     e_rest2: float = 7840.0
     e_rest3: float = 7840.0
@@ -534,6 +537,7 @@ def _body_params(p: "Preset") -> dict:
                 ii_xx=float(ii[0, 0]), ii_yy=float(ii[1, 1]), ii_zz=float(ii[2, 2]), ii_xy=float(ii[0, 1]),
                 ii_xz=float(ii[0, 2]), ii_yz=float(ii[1, 2]),
                 rh_x=1.0 / (8.0 * h[0]), rh_y=1.0 / (8.0 * h[1]), rh_z=1.0 / (8.0 * h[2]),
+                com_x=float(b.com_cm[0]), com_y=float(b.com_cm[1]), com_z=float(b.com_cm[2]),
                 **{f"e_rest{f}": float(rest[f - 1]) for f in range(1, 7)},
                 **{f"e_stop{f}": float(stop[f - 1]) for f in range(1, 7)})
 

@@ -17,7 +17,7 @@ from scipy.special import ellipj, ellipk
 
 from dicetrace.body import FACE_AXES
 from dicetrace.core.inertia import omega, orientation
-from dicetrace.core.model import face_levels
+from dicetrace.core.model import face_below, face_levels
 from dicetrace.params import ConfigError, make_config
 from dicetrace.simulate import Record, simulate, simulate_batch
 
@@ -105,15 +105,17 @@ def test_a_box_in_free_flight_turns_as_jacobis_solution_and_flips_on_time():
 @pytest.mark.parametrize("body", [BOX, LOADED], ids=["box", "loaded"])
 def test_a_body_at_rest_on_each_face_stays_there(body):
     """Set down (0.05 cm up, at rest) on face f, a box or a loaded die settles at once with face 7 − f up, on the
-    threshold of the face it lies on (``face_levels``: its rest energy and 80 % of its own tip barrier)."""
+    threshold of the face it stands over (``face_below``, ``face_levels``: its rest energy and 80 % of its own tip
+    barrier)."""
     base = make_config("physical", **body)
     heights = base.preset.body.face_heights_cm
     rest, stop = base.preset.face_energies()
     kp = base.kernel_params()
     for f in range(1, 7):
         R = _face_down(f)
-        z = heights[f - 1] + (base.preset.body.node_offsets_cm @ R.T)[:, 2]
-        assert face_levels(z, kp) == (rest[f - 1], stop[f - 1])
+        off = np.ascontiguousarray(base.preset.body.node_offsets_cm @ R.T)
+        assert face_below(off, kp) == f
+        assert face_levels(off, kp) == (rest[f - 1], stop[f - 1])
         cfg = make_config("physical", z0_cm=max(heights[f - 1], heights[2]) + 0.05, **body)
         r = simulate(np.zeros(6), config=cfg, orientation=R)
         assert (r.status, r.outcome) == ("settled", 7 - f)
@@ -150,3 +152,20 @@ def test_bodies_need_a_continuous_contact_integrator_and_the_rigid_energy():
     with pytest.raises(ConfigError, match="z0_cm"):
         make_config("physical", z0_cm=0.4, **BOX)
     assert math.isclose(make_config("physical", **BOX).preset.body.face_heights_cm[2], 0.5)
+
+
+@pytest.mark.parametrize("tilt_deg, up", [(15.0, 6), (35.0, 4), (60.0, 4)])
+def test_a_bar_tipped_past_its_balance_falls_over_and_one_short_of_it_stands(tilt_deg, up):
+    """A long bar (5.3 × 2 × 2 cm) set down at rest on an edge of its end face, tilted by ``tilt_deg`` from upright:
+    short of its balance angle (atan(1/2.65) = 20.7°) it rocks back onto its end (face 6 up); past it, it falls onto
+    a long side (face 4 up), although its end face's four nodes stay the lowest up to a tilt of 69°: a stop test
+    measured from the face of the four lowest nodes took the falling bar for one standing on its end."""
+    cfg0 = make_config("physical", half_extents_cm=(2.65, 1.0, 1.0))
+    # upright on face 1 (x down), then tipped about the body's y axis so that the edge x = −a, z = −c touches
+    R = Rotation.from_euler("y", -(90.0 - tilt_deg), degrees=True).as_matrix()
+    lowest = (cfg0.preset.body.node_offsets_cm @ R.T)[:, 2].min()
+    face = face_below(np.ascontiguousarray(cfg0.preset.body.node_offsets_cm @ R.T), cfg0.kernel_params())
+    assert face == (1 if tilt_deg < 20.7 else 3)
+    cfg = make_config("physical", half_extents_cm=(2.65, 1.0, 1.0), z0_cm=-lowest + 1e-4)
+    r = simulate(np.zeros(6), config=cfg, orientation=R)
+    assert (r.status, r.outcome) == ("settled", up)

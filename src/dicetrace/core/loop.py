@@ -61,9 +61,9 @@ from dicetrace.core.model import (
     energy_parts,
     energy_stop,
     face_levels,
-    face_up,
     node_heights,
     node_velocities,
+    outcome_face,
 )
 from dicetrace.core.state import after_step, age_tolerance, copy_motion, init_state, state_finite
 from dicetrace.params import ENERGY_POINT_MASS
@@ -161,7 +161,7 @@ def stop_energy(st, kp, contact, e_dyn, tracing):
     threshold by far more than rounding (computed alike whether or not
     tracing), so that a free flight may be crossed in one piece.  A die
     that is no uniform cube is measured from the face it lies on, against
-    that face's threshold (``model.face_levels``).
+    that face's threshold (``model.face_levels``): the face its centre of mass stands over.
     """
     U = st.U
     W = st.W
@@ -193,7 +193,7 @@ def stop_energy(st, kp, contact, e_dyn, tracing):
         e = e_dyn if contact else energy_dynamic(U[0], U[1], U[2], W[0], W[1], W[2], L[0], L[1], L[2], z, kp) - e_rest
         clear = not contact and _clears(e, kp)
         if not kp.isotropic:
-            rest, threshold = face_levels(z, kp)
+            rest, threshold = face_levels(st.off, kp)
             return (e + e_rest) - rest, clear, threshold
     return e, clear, kp.e_stop
 
@@ -355,7 +355,7 @@ def make_roll(scheme: ModuleType, *, trace: bool, exact_flight: bool | None = No
         if status == Status.TIME_CAP and n < maxn:  # the slice ran out: keep what the next one goes on from
             keep_run(st, n, nsets, last_mask, contact, clear, e_blow)
             return Status.RUNNING, n, -1, nsets
-        outcome = face_up(z) if status == Status.SETTLED else -1
+        outcome = outcome_face(z, st.off, kp) if status == Status.SETTLED else -1
         if events:
             nsets = events_kept(st, n, status, set_steps)
         return status, n, outcome, nsets

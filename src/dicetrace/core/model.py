@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from dicetrace.core._jit import jit
-from dicetrace.core.inertia import rotational_energy
+from dicetrace.core.inertia import orientation, rotational_energy
 from dicetrace.body import NODE_SIGNS, face_of_top4
 
 # Face table (docs/model.md §3, ``dicetrace.body``): FACE_OF_TOP4[mask] for an 8-bit mask of the
@@ -137,27 +137,42 @@ def top4_mask(z):
 
 
 @jit(inline="always")
-def face_down(z):
-    """Face value (1..6) of the four lowest nodes (stable: ties keep node order), 0 when they are no face."""
-    mask = 0
-    for k in range(8):
-        rank = 0
-        for m in range(8):
-            if z[m] < z[k] or (z[m] == z[k] and m < k):
-                rank += 1
-        if rank < 4:
-            mask |= 1 << k
-    return np.int64(FACE_OF_TOP4[mask])
+def face_below(off, kp):
+    """The face (1..6) the die stands over: the one its centre of mass's downward vertical leaves the box through.
+
+    That face's basin: set down gently, a die rolls onto the face its centre's
+    vertical pierces, and to leave it for another face its centre must pass
+    over one of that face's edges, at least the edge's distance from the
+    centre above the ground (docs/model.md §14).  ``off``: the node offsets
+    (the orientation R, ``inertia.orientation``); the box's half-extents are
+    1/(8·``kp.rh_*``) and its centre of mass ``kp.com_*`` (body frame).
+    """
+    R = orientation(off, kp)
+    d0, d1, d2 = -R[6], -R[7], -R[8]  # the world's downward direction in the body frame: −(third row of R)
+    best = math.inf
+    face = 0
+    if d0 != 0.0:
+        t = ((0.125 / kp.rh_x if d0 > 0.0 else -0.125 / kp.rh_x) - kp.com_x) / d0
+        if t < best:
+            best, face = t, 6 if d0 > 0.0 else 1
+    if d1 != 0.0:
+        t = ((0.125 / kp.rh_y if d1 > 0.0 else -0.125 / kp.rh_y) - kp.com_y) / d1
+        if t < best:
+            best, face = t, 5 if d1 > 0.0 else 2
+    if d2 != 0.0:
+        t = ((0.125 / kp.rh_z if d2 > 0.0 else -0.125 / kp.rh_z) - kp.com_z) / d2
+        if t < best:
+            best, face = t, 4 if d2 > 0.0 else 3
+    return np.int64(face)
 
 
 @jit(inline="always")
-def face_levels(z, kp):
-    """The rest energy and the stop threshold of the face the die lies on (its four lowest nodes): a box's or a
-    loaded die's differ from face to face (``Preset.face_energies``); the cube's are ``e_rest``, ``e_stop``.  Off a
-    face (the four lowest nodes are no face) nothing stops: the threshold is −∞."""
+def face_levels(off, kp):
+    """The rest energy and the stop threshold of the face the die stands over (:func:`face_below`): a box's or a
+    loaded die's differ from face to face (``Preset.face_energies``); the cube's are ``e_rest``, ``e_stop``."""
     if kp.isotropic:
         return kp.e_rest, kp.e_stop
-    f = face_down(z)
+    f = face_below(off, kp)
     if f == 1:
         return kp.e_rest1, kp.e_stop1
     if f == 2:
@@ -168,9 +183,16 @@ def face_levels(z, kp):
         return kp.e_rest4, kp.e_stop4
     if f == 5:
         return kp.e_rest5, kp.e_stop5
-    if f == 6:
-        return kp.e_rest6, kp.e_stop6
-    return kp.e_rest, -math.inf
+    return kp.e_rest6, kp.e_stop6
+
+
+@jit(inline="always")
+def outcome_face(z, off, kp):
+    """The face that comes up: the cube's four highest nodes (0 when they are no face, docs/model.md §3), any
+    other body's face opposite the one it stands over (:func:`face_below`)."""
+    if kp.isotropic:
+        return face_up(z)
+    return np.int64(7) - face_below(off, kp)
 
 
 @jit(inline="always")
