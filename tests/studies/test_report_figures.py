@@ -4,7 +4,8 @@ results file.
 A *figure* is a number in the prose or tables of the two documents (code blocks, inline code, link targets
 and image paths are not prose). A results file is one a study or a benchmark wrote: ``analysis/results/*``
 (JSON and CSV), the integrator studies' ``analysis/accuracy/*.csv``, ``*.json`` and their written summaries
-(``summary.md``, ``stability.md``, ``v_reg.md``), and ``benchmarks/results/**`` where one is committed.
+(``summary.md``, ``stability.md``, ``v_reg.md``), the cuboid study's ``analysis/cuboids/`` (``results.json``,
+``cuboids.csv``, ``cuboids.md``), and ``benchmarks/results/**`` where one is committed.
 Hand-written pages (``analysis/README.md``, ``analysis/accuracy/README.md``, ``TUNING.md``) are not sources.
 
 A figure is held when some number in those files, rounded to the figure's printed precision, is the figure
@@ -110,6 +111,8 @@ def result_files() -> list[Path]:
     files = [*sorted((REPO / "analysis" / "results").glob("*.json")), *sorted((REPO / "analysis" / "results").glob("*.csv")),
              *sorted(acc.glob("*.csv")), *sorted(acc.glob("*.json")),
              *(acc / n for n in ("summary.md", "stability.md", "v_reg.md") if (acc / n).exists()),
+             *(REPO / "analysis" / "cuboids" / n for n in ("results.json", "cuboids.csv", "cuboids.md")
+               if (REPO / "analysis" / "cuboids" / n).exists()),
              *sorted(p for p in (REPO / "benchmarks" / "results").rglob("*") if p.is_file())]
     return files
 

@@ -1,0 +1,79 @@
+"""Study cuboids: physical against the measured square cuboids, its committed results and its quick run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from dicetrace.analysis.dice_data import GAZETTE_97_16
+from dicetrace.analysis.fairness import compare
+from dicetrace.studies import study_cuboids as cu
+
+REPO = Path(__file__).resolve().parents[2]
+COMMITTED = REPO / "analysis" / "cuboids"
+
+
+@pytest.fixture(scope="module")
+def committed():
+    path = COMMITTED / "results.json"
+    if not path.exists():
+        pytest.skip("the committed cuboid results are not in this checkout")
+    return json.loads(path.read_text())
+
+
+def test_the_committed_run_is_the_full_study(committed):
+    rows = pd.DataFrame(committed["rows"])
+    assert committed["aspects"] == GAZETTE_97_16.aspect.tolist()
+    assert sorted(rows["variant"].unique()) == sorted(["casual", "gentle", "vigorous", f"casual, μ {cu.MU_LITERATURE:g}"])
+    assert (rows.loc[rows["variant"] == "casual", "throws"] == cu.N_MAIN).all()
+    assert (rows.loc[rows["variant"].isin(["gentle", "vigorous"]), "throws"] == cu.N_SYST).all()
+    # every throw counted: settled on a face, on an edge or at the time cap
+    assert ((rows["n"] + rows["edge"] + rows["unsettled"]) == rows["throws"]).all()
+    assert len(committed["integrator_check"]) == 15
+
+
+def test_the_committed_summary_follows_from_its_rows(committed):
+    """χ², the verdict and the systematics recomputed from the committed rows (no simulation) are the committed ones."""
+    again = cu.summarise({k: committed[k] for k in ("rows", "integrator_check", "aspects")})
+    for name, m in committed["summary"]["models"].items():
+        assert again["models"][name]["chi2"] == pytest.approx(m["chi2"], rel=1e-12)
+    assert again["verdict"] == committed["summary"]["verdict"]
+    np.testing.assert_allclose(again["throw_spread"], committed["summary"]["throw_spread"])
+    rows = pd.DataFrame(committed["rows"])
+    casual = rows[rows["variant"] == "casual"].set_index("aspect").loc[GAZETTE_97_16.aspect]
+    c = compare(casual["p"].to_numpy(), model_n=casual["n"].to_numpy())
+    assert c.chi2 == pytest.approx(committed["summary"]["models"]["casual"]["chi2"], rel=1e-12)
+    # the long bars: a square end face up about as rarely as measured, the flat plates far more often than the bars
+    assert casual.loc[2.65, "p"] < 0.03 and casual.loc[0.47, "p"] > 0.6
+
+
+def test_the_summary_file_states_the_verdict_and_the_numbers_of_the_results(committed):
+    text = (COMMITTED / "cuboids.md").read_text()
+    assert f"**{committed['summary']['verdict']}**" in text
+    for name, m in committed["summary"]["models"].items():
+        assert f"| physical, {name} | {m['chi2']:.1f} | {m['dof']} |" in text
+
+
+@pytest.mark.slow
+def test_the_quick_run_writes_every_file_and_no_verdict(tmp_path, dicetrace_cli):
+    res = dicetrace_cli("analyze", "cuboids", "--quick", "--out", str(tmp_path / "q"), "--quiet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    for name in ("cuboids.csv", "results.json", "cuboids.md", "cuboids.png"):
+        assert (tmp_path / "q" / name).stat().st_size > 0
+    data = json.loads((tmp_path / "q" / "results.json").read_text())
+    assert data["summary"]["verdict"].startswith("none")
+    rows = pd.DataFrame(data["rows"])
+    assert set(rows["aspect"]) == set(cu.QUICK["aspects"])
+    assert ((rows["p"] >= 0) & (rows["p"] <= 1)).all()
+
+
+def test_bad_input_is_one_line(tmp_path, dicetrace_cli):
+    res = dicetrace_cli("analyze", "cuboids", "--threads", "0", "--out", str(tmp_path / "x"), cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.strip().count("\n") == 0 and "--threads" in res.stderr
+    assert not (tmp_path / "x").exists()
+    res = dicetrace_cli("analyze", "cuboids", "--res", "5", cwd=tmp_path)
+    assert res.returncode == 2 and "--res" in res.stderr
