@@ -74,6 +74,8 @@ def default_name(ic, coords, desc: dict, cfg, channels=frozenset(), events: bool
     """
     if desc.get("kind") == "scan":
         parts = [Path(desc["scan"]).resolve().name or "scan"] + [f"{a}{fmt_num(v)}" for a, v in zip("xyz", coords)]
+    elif desc.get("kind") == "rolls":
+        parts = [Path(desc["rolls"]).stem, f"id{desc['ic_id']}", desc["digest"]]
     elif desc.get("kind") == "slice":
         parts = [desc["slice"]] + [f"{a}{fmt_num(v)}" for a, v in zip("xyz", coords)]
     else:
@@ -121,6 +123,8 @@ def ic_label(ic, coords, desc: dict) -> str:
         return f"scan {desc['scan']} (slice {desc['slice']}) at {where}, ic_id {desc['ic_id']}"
     if desc.get("kind") == "slice":
         return f"{desc['slice']} slice at " + ", ".join(f"{a} = {fmt_num(v)}" for a, v in zip("xyz", coords))
+    if desc.get("kind") == "rolls":
+        return f"table {desc['rolls']}, ic_id {desc['ic_id']}: " + ", ".join(fmt_num(v) for v in ic)
     return "given directly: " + ", ".join(fmt_num(v) for v in ic)
 
 
@@ -184,6 +188,60 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
         desc["note"] = (f"dicetrace: --scan: recording the scanned point nearest to --at {at}: {point} "
                         f"(ic_id {int(row['ic_id'])})")
     return np.asarray(the_ic, dtype=np.float64), cfg, exact, desc
+
+
+def ic_from_rolls(path: Path, ic_id: int | None, conflicting: dict):
+    """The IC, configuration and starting pose of row ``ic_id`` of a rolls table, to record that throw again.
+
+    Returns (ic, config, orientation or None, description dict: ``kind`` "rolls", the file, the ic_id and the
+    row's outcome and steps, which the replay is checked against).  The configuration is the table's metadata's
+    (``tables.metadata_json``); the start height ``z0_cm`` of a row with a pose becomes the preset's.
+    """
+    if ic_id is None:
+        fail("--rolls needs --ic-id N (the row to record)")
+    given = [opt for opt, v in conflicting.items() if v is not None]
+    if given:
+        fail(f"--rolls takes the IC and the configuration from the table: drop {', '.join(given)}")
+    import pyarrow.parquet as pq  # lazy: keeps `dicetrace --help` fast
+
+    from dicetrace.scan.definition import config_from_dict
+    from dicetrace.tables import read_metadata
+
+    path = Path(path)
+    if not path.is_file():
+        fail(f"--rolls {str(path)!r} is not a file")
+    try:
+        meta = read_metadata(path)
+        cfg = config_from_dict(meta["config"])
+        names = pq.read_schema(path).names
+        want = ["ic_id", "vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps"]
+        posed = all(c in names for c in ("qx", "qy", "qz", "qw", "z0_cm"))
+        table = pq.read_table(path, columns=want + (["qx", "qy", "qz", "qw", "z0_cm"] if posed else []),
+                              filters=[("ic_id", "=", int(ic_id))])
+    except (ValueError, KeyError, TypeError, OSError) as e:  # no metadata, not Parquet, a config that fails its checks
+        fail(f"--rolls {str(path)!r}: {' '.join(str(e).split())}")
+    if table.num_rows != 1:
+        fail(f"--ic-id {ic_id}: the table {str(path)!r} has {'no' if table.num_rows == 0 else table.num_rows} rows "
+             f"with that ic_id")
+    row = {c: table.column(c)[0].as_py() for c in table.column_names}
+    ic = np.array([row[c] for c in ("vx", "vy", "vz", "Lx", "Ly", "Lz")], dtype=np.float64)
+    pose = None
+    if posed:
+        from dicetrace.ic_arrays import validate_orientations
+
+        try:
+            pose = validate_orientations(np.array([[row["qx"], row["qy"], row["qz"], row["qw"]]]), 1)[0]
+            cfg = type(cfg)(preset=cfg.preset.with_(z0_cm=float(row["z0_cm"])), numerics=cfg.numerics)
+        except ValueError as e:
+            fail(f"--rolls {str(path)!r} --ic-id {ic_id}: {e}")
+    import hashlib
+
+    # the throw itself (IC, pose, height) in the default file name: two tables' rows never share one
+    digest = hashlib.sha256(np.concatenate([ic, [] if pose is None else pose.ravel(),
+                                            [cfg.preset.z0_cm]]).tobytes()).hexdigest()[:10]
+    desc = {"kind": "rolls", "rolls": str(path), "ic_id": int(ic_id), "outcome": int(row["outcome"]),
+            "steps": int(row["steps"]), "digest": digest}
+    return ic, cfg, pose, desc
 
 
 def parse_nudge(text: str | None) -> float | None:
@@ -257,6 +315,12 @@ def register(app: typer.Typer) -> None:
         scan: Optional[Path] = typer.Option(
             None, "--scan", help="A scan folder (dicetrace scan): record its point nearest to --at, with its configuration."
         ),
+        rolls_file: Optional[Path] = typer.Option(
+            None, "--rolls", help="A rolls.parquet table (simulate_batch(...).to_arrow(), record --parquet, a scan's "
+            "row file): record its throw --ic-id N again, with the table's configuration and the throw's own "
+            "starting pose (qx, qy, qz, qw, z0_cm) where the table has one."
+        ),
+        ic_id: Optional[int] = typer.Option(None, "--ic-id", help="With --rolls: the ic_id of the row to record."),
         nudge: Optional[str] = typer.Option(
             None, "--nudge", help="Compare with a second throw whose IC is the first one's times (1 + NUDGE), e.g. 1e-6: "
             "both dice side by side and their divergence on a log scale."
@@ -339,7 +403,20 @@ def register(app: typer.Typer) -> None:
             fail(f"--layout must be one of {', '.join(LAYOUTS)}, got {layout!r}")
         if layout is not None and not comparing:
             fail("--layout places compared throws: give several --ic or --nudge")
-        if scan is not None:
+        pose = None
+        if ic_id is not None and rolls_file is None:
+            fail("--ic-id needs --rolls FILE (the table whose row to record)")
+        if rolls_file is not None:
+            if ics or slice_name is not None or at is not None or scan is not None:
+                fail("give either --rolls FILE --ic-id N or --ic / --slice / --scan, not both")
+            conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol,
+                           "--tol-growth": tol_growth, "--die": die, "--load": load}
+            the_ic, cfg, pose, desc = ic_from_rolls(rolls_file, ic_id, conflicting)
+            note = None
+            all_ics = [the_ic]
+            coords = None
+            labels = [ic_label(the_ic, None, desc)]
+        elif scan is not None:
             if ics or slice_name is not None:
                 fail("give either --scan DIR --at X,Y or --ic / --slice, not both")
             conflicting = {"--preset": preset, "--integrator": integrator, "--dt": dt, "--t-max": t_max, "--tol": tol,
@@ -360,7 +437,7 @@ def register(app: typer.Typer) -> None:
         if eps is not None:
             all_ics.append(all_ics[0] * (1.0 + eps))
             labels.append(f"throw 1's IC × (1 + {eps:g})")
-        if scan is None:
+        if scan is None and rolls_file is None:
             cfg = build_config(model, integrator, dt, t_max, ics=np.stack(all_ics), tol=tol,
                                tol_growth=tol_growth, overrides=opts.body_overrides(die, load))
         events = opts.events_or_fail(cfg, events)
@@ -392,7 +469,11 @@ def register(app: typer.Typer) -> None:
         from dicetrace.simulate import Record, simulate  # lazy: keeps `dicetrace --help` fast (imports numba)
 
         rec_what = Record(states=True, energy=True, forces="forces" in chans)
-        rolls = [simulate(v, config=cfg, record=rec_what, events=events) for v in all_ics]
+        rolls = [simulate(v, config=cfg, record=rec_what, events=events, orientation=pose) for v in all_ics]
+        if rolls_file is not None and (rolls[0].outcome, rolls[0].steps) != (desc["outcome"], desc["steps"]):
+            say(f"dicetrace: --rolls: the throw replayed ends otherwise than its row says (outcome {rolls[0].outcome}, "
+                f"{rolls[0].steps} steps against {desc['outcome']}, {desc['steps']}): the table was written by "
+                "another version or machine")
         roll = rolls[0]
         label = labels[0]
 
