@@ -94,7 +94,7 @@ def main() -> None:
             if a.integrator:
                 q["integrator"] = a.integrator
             urllib.request.urlopen(f"{base}/api/map.png?{urlencode(q)}", timeout=3600).read()
-        record["device"] = ex.device
+        record["device"] = str(ex.device)  # its label: "cpu" or "cuda: <GPU name>"
         record["warm_s"] = time.perf_counter() - t0
         print(f"preset {a.preset}, {os.cpu_count()} CPUs, device {record['device']}; kernel compile or cache load "
               f"{record['warm_s']:.2f} s")

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Install dicetrace with its test extras into .venv and run the whole test suite.
+# Install dicetrace with its test extras into .venv and run the test suite (its CI tier; --all: every test).
 # As root on Debian it also installs Xvfb and Mesa's software Vulkan, so the
 # test that renders a recording with the real Rerun viewer runs (it is skipped
 # where xvfb-run is missing; it counts the faces' pips on the screenshot).
@@ -22,4 +22,11 @@ python3 -m venv .venv
 # Compile the numba kernels into numba's cache once, on every CPU, before pytest's workers would
 # each compile the ones they meet first (a few seconds when the cache is warm).
 .venv/bin/python tests/compile_kernels.py
-.venv/bin/python -m pytest -n 2 "$@"
+# The CI tier leaves out the tests marked `long` (end-to-end checks of 5 s to minutes each, ~12 min more on
+# 2 cores); `scripts/test.sh --all` runs them too. Other arguments go to pytest.
+if [ "${1:-}" = "--all" ]; then
+    shift
+    .venv/bin/python -m pytest -n 2 "$@"
+else
+    .venv/bin/python -m pytest -n 2 -m "not long" "$@"
+fi

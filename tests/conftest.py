@@ -26,6 +26,13 @@ def pytest_configure(config):
     compile_clock.quiet_compiles().__enter__()
 
 
+def pytest_collection_modifyitems(config, items):
+    """A ``long`` test is also ``slow``: ``pytest -m "not slow"``, the inner loop, leaves it out as well."""
+    for item in items:
+        if item.get_closest_marker("long") is not None and item.get_closest_marker("slow") is None:
+            item.add_marker(pytest.mark.slow)
+
+
 def _reference_dir() -> Path | None:
     for cand in (
         os.environ.get("DICETRACE_REFERENCE"),

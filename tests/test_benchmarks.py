@@ -86,6 +86,7 @@ AGREEMENT_LINES = ("outcomes equal", "steps equal", "contact sequences equal", "
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_gpu_bench_runs_on_the_simulator_and_prints_the_agreement(tmp_path):
     written = tmp_path / "gpu.json"
     res = _bench_gpu("--quick", "--skip-scan", "--write", str(written),

@@ -86,6 +86,7 @@ def _one_line_naming(res, extra: str) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_without_the_extras_record_runs_and_the_explorer_refuses_in_one_line(tmp_path):
     env = _env(tmp_path)
     hooked = _run(["-c", "import starlette"], tmp_path, env)

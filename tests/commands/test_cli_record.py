@@ -472,6 +472,7 @@ def listening_in_table(text: str, port: int) -> set[str]:
 @pytest.mark.skipif(shutil.which("xvfb-run") is None, reason="xvfb-run not on PATH (a display for the viewer)")
 @pytest.mark.skipif(not RERUN_CLI.exists(), reason="rerun CLI not installed")
 @pytest.mark.skipif(not Path("/proc/net/tcp").exists(), reason="reads the listening sockets from /proc/net/tcp")
+@pytest.mark.long
 def test_spawn_starts_a_viewer_listening_on_127_0_0_1_only(tmp_path):
     """Under a virtual display: the viewer --spawn starts listens on 127.0.0.1 only (looked at while the display,
     and so the detached viewer, still live; both end with it)."""

@@ -57,6 +57,7 @@ def test_no_compile_no_notice_and_off_a_terminal_nothing():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_cold_record_says_it_is_compiling_within_seconds(tmp_path):
     """DICETRACE_CACHE=0 (nothing cached): in a terminal, the notice comes before the compile is done
     (measured 1.2 s after the start of a compile of several seconds), and the record finishes."""

@@ -482,6 +482,7 @@ def test_spawn_onto_a_port_held_by_something_else_is_one_line_exit_2(tmp_path, p
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_connect_to_a_peer_that_takes_no_data_gives_up_within_the_flush_timeout(tmp_path, peer):
     """A peer that passes the handshake and then reads nothing: the SDK's disconnect (and its shutdown hook at
     exit) would wait forever; the command gives up at its flush timeout (3 s here instead of 60) in one line."""

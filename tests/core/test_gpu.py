@@ -136,6 +136,7 @@ def test_events_kernel_on_the_simulator_is_the_cpu_bit_for_bit():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("preset,events", [("seed", False), ("physical", False), ("physical", True)])
+@pytest.mark.long
 def test_throws_that_outlive_a_slice_go_on_in_the_held_kernel(preset, events):
     """With slices of 60 steps every throw outlives its first launch (the seed kernel's and the local-record
     kernels' records are lost then): the throws start again in the held kernel, their records in device memory,
@@ -198,6 +199,7 @@ def _nvvm_missing() -> str | None:
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_kernels_compile_for_the_device():
     """The seed, general and events kernels (and the one that packs the contact sets, steps and events' times)
     compile to PTX for an H200 (sm_90) with NVIDIA's compiler, without contraction: their only fused multiply-adds are libdevice's own (sin, cos, exp), so far fewer

@@ -59,6 +59,7 @@ main()
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_no_writable_cache_folder_runs_without_the_disk_cache_and_says_so_in_one_line():
     """numba refuses ``cache=True`` with 'no locator available' when no folder can hold its cache: the
     command still runs (compiled, not cached), with one line on standard error, never an internal error."""
@@ -115,6 +116,7 @@ def _run(src, cache):
     return float(value), int(compiles), digest
 
 
+@pytest.mark.long
 def test_two_checkouts_of_the_same_kernel_sources_share_their_compiled_kernels(tmp_path):
     """The kernel cache is keyed by the digest of the kernel sources, not by their paths or file times: a
     second clone of the same code loads what the first compiled; a changed kernel source compiles anew."""

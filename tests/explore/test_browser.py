@@ -283,6 +283,7 @@ def test_info_panel_shows_long_lines_whole(browser, explorer):
 
 @pytest.mark.parametrize("stored", [None, "(app_options:(show_metrics:false,check_for_updates_on_startup:true))"],
                          ids=["fresh", "viewer-settings-stored"])
+@pytest.mark.long
 def test_the_page_and_its_viewer_request_nothing_beyond_the_local_server(browser, explorer, stored):
     """Issue 35 item 11: every request of the page, Rerun's web viewer included, goes to 127.0.0.1 (Rerun's viewer
     asks api.github.com for its latest release unless told not to), and the page's connect-src policy blocked none;
@@ -312,6 +313,7 @@ def test_the_page_and_its_viewer_request_nothing_beyond_the_local_server(browser
     assert state.count("check_for_updates_on_startup:false") == 1 and "check_for_updates_on_startup:true" not in state
 
 
+@pytest.mark.long
 def test_shift_click_gives_the_viewer_both_throws_in_one_recording(browser, explorer, tmp_path):
     """Issue 35 item 9: after a shift-click the viewer is given one compare recording holding both throws (each
     die, and their divergence), as `dicetrace record --ic A --ic B` makes it, in place of the first throw's."""
@@ -451,6 +453,7 @@ def test_the_download_link_waits_for_a_pick_and_the_empty_viewer_says_what_to_do
     assert "click a point" not in page.inner_text("#viewerbox")  # the viewer took the box
 
 
+@pytest.mark.long
 def test_at_1280_by_720_the_picks_details_show_without_scrolling(browser, explorer):
     """Issue 46 item 9: at 1280×720 the info panel started at y = 636, the throw's details below the fold.  The
     picked throw's details are beside the map, above the viewer: every line of them inside the window, unscrolled,
@@ -516,6 +519,7 @@ def _viewer_dice(page, colours: dict, what: str, timeout_s: int = 180):
 
 
 @pytest.mark.parametrize("viewport", [(1920, 1080), (1100, 900), (760, 1200)], ids=["wide", "narrow", "portrait"])
+@pytest.mark.long
 def test_every_resting_die_is_inside_the_viewers_3d_view_at_any_window_shape(browser, explorer, viewport):
     """Issue 46 item 6: the die was cut at the right edge of the explorer's 3-D view (one throw, and the second die
     of a comparison half outside at 1400×900 and 1920×1080): the camera framed a square, and the 3-D view is

@@ -40,6 +40,7 @@ def test_cuda_without_a_gpu_is_one_line_and_serves_nothing(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_auto_without_a_gpu_serves_maps_on_the_cpu_and_says_so(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--device", "auto",
                              "--window", WINDOW, "--res", str(RES)], cwd=tmp_path, stdout=subprocess.PIPE,
@@ -103,6 +104,7 @@ def test_no_device_is_the_default_device():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_map_on_the_simulated_gpu_is_the_cpu_map():
     """The explorer's worker on --device cuda (numba-cuda's simulator): its map of a 4×4 view is the CPU's."""
     code = textwrap.dedent(

@@ -335,6 +335,7 @@ def _get_bg(url: str, into: dict, key: str, timeout: float = 600.0) -> threading
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_slow_map_blocks_no_other_tab_a_newer_view_supersedes_it_and_ctrl_c_stops_the_server(tmp_path):
     """A real ``dicetrace explore`` on 127.0.0.1: while tab A's hours-long map computes, tab B's small map
     answers; A's newer view ends A's old request at once; SIGINT ends the process while a map computes."""
@@ -619,6 +620,7 @@ def test_under_a_1024_fd_limit_1030_slow_connections_leave_it_answering_and_ctrl
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_ctrl_c_during_a_save_stops_at_once_without_a_traceback(tmp_path):
     """Issue 47 B3: Ctrl-C while "save view as scan" computes printed a CancelledError traceback.  Now the save's
     request is answered as the server stops, the process ends at once, and standard error holds no traceback."""

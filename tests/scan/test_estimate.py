@@ -65,6 +65,7 @@ def test_the_readme_still_shows_the_headline_scan():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_on_a_cold_cache_the_readme_scan_runs_without_yes_and_a_1000_square_estimate_is_within_3x(tmp_path):
     """With nothing cached the first scan compiles the kernels; its estimate still counts warm throughput only.
 

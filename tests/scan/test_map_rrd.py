@@ -120,6 +120,7 @@ def test_ticks_are_round_numbers_in_slice_coordinates(decoded):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_400_square_map_is_well_under_2_mb(tmp_path):
     out = tmp_path / "s"
     scan(Grid("seed", "red-sea", 400), out)

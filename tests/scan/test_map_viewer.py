@@ -21,6 +21,7 @@ def _runs(mask: np.ndarray, axis: int, frac: float) -> np.ndarray:
 
 @pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
 @pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+@pytest.mark.long
 def test_the_viewer_shows_the_map_upright_framed_and_with_its_legend(tmp_path):
     from PIL import Image
 

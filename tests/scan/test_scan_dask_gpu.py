@@ -68,6 +68,7 @@ _RUN = textwrap.dedent(
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_dask_gpu_scan_uses_a_gpu_per_worker_and_gives_one_gpus_rows():
     """A 3×3 `seed` scan in chunks of one IC on three Dask workers and three stand-in GPUs: every worker ran its
     chunks on its own device (numbered as gpu_places numbers the workers), and the rows are those of the same

@@ -53,12 +53,14 @@ def one_error_line(res: subprocess.CompletedProcess) -> str:
 
 
 @pytest.mark.parametrize("extra", [[], ["--dask"]])
+@pytest.mark.long
 def test_cuda_without_a_gpu_is_one_line_and_writes_nothing(tmp_path, extra):
     res = cli("scan", *HOME, "--res", "3", "--out", "new/scan", "--device", "cuda", *extra, cwd=tmp_path, env=NO_GPU)
     assert one_error_line(res).startswith("dicetrace: error: --device: device 'cuda': ")
     assert list(tmp_path.iterdir()) == []  # no folder made
 
 
+@pytest.mark.long
 def test_auto_without_a_gpu_runs_on_the_cpu_says_so_once_and_records_cpu(tmp_path):
     res = cli("scan", *HOME, "--res", "3", "--chunk", "4", "--out", "s", "--device", "auto", "-q", cwd=tmp_path,
               env=NO_GPU)
@@ -74,6 +76,7 @@ def test_auto_without_a_gpu_runs_on_the_cpu_says_so_once_and_records_cpu(tmp_pat
     assert got[ROW_COLUMNS].equals(want[ROW_COLUMNS])
 
 
+@pytest.mark.long
 def test_auto_never_takes_numba_cudas_simulator_for_a_gpu(tmp_path):
     """``NUMBA_ENABLE_CUDASIM=1`` (without NUMBA_DISABLE_JIT, whose device kernels fail): ``--device auto`` runs on
     the CPU, says why in one line, and records the CPU (once "running on the GPU (cuda: numba-cuda simulator)",
@@ -123,6 +126,7 @@ def test_a_run_that_fails_before_its_first_chunk_leaves_no_manifest(tmp_path, mo
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_cuda_scan_on_the_simulator_is_the_cpu_scan_and_resumes_only_on_its_device(tmp_path, dicetrace_cli):
     """A 4×4 `seed` scan with --device cuda on numba-cuda's simulator: the CPU scan's rows (outcome, steps,
     status, contact sequences and sets), its device in the definition and every chunk's metadata; resumed on
@@ -153,6 +157,7 @@ def test_cuda_scan_on_the_simulator_is_the_cpu_scan_and_resumes_only_on_its_devi
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_an_events_scan_on_the_simulator_is_the_cpu_events_scan(tmp_path, dicetrace_cli):
     """``scan --events --device cuda`` (the events kernel) on numba-cuda's simulator, 2×2 ICs of `physical`: the
     CPU events scan's rows, their event sets and times bit for bit."""
@@ -236,6 +241,7 @@ def test_a_gpu_scan_is_not_timed_on_the_cpu():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_on_dask_a_worker_resolves_the_device(tmp_path, dicetrace_cli):
     """The chunk tasks run on the device as a worker resolves it: recorded in the definition and every chunk;
     --device cuda on a --scheduler cluster whose workers have no GPU is one line naming --device, nothing written."""
@@ -264,6 +270,7 @@ def test_on_dask_a_worker_resolves_the_device(tmp_path, dicetrace_cli):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_new_gpu_scan_takes_chunks_that_fill_a_gpu_and_a_cpu_scan_the_cpus(tmp_path):
     """Without --chunk, a new scan on a GPU runs 2¹⁸ ICs a chunk (one launch each), a CPU scan 8192."""
     from dicetrace.scan import DEFAULT_CHUNK, GPU_DEFAULT_CHUNK

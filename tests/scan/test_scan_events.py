@@ -115,6 +115,7 @@ def test_an_events_definition_may_name_a_gpu_and_an_events_scan_records_its_devi
     assert t.schema.names[-1] == "contact_times_s"
 
 
+@pytest.mark.long
 def test_the_disk_estimate_bounds_an_events_scan(tmp_path):
     """The estimate (before any work) is an upper bound of what the rows take on disk, with their times."""
     space = Grid("seed", "zoom-out", 48)
@@ -191,6 +192,7 @@ def test_cli_scan_events_and_record_reproduce_the_row(tmp_path, dicetrace_cli):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_dask_runs_an_events_scan_as_a_local_run(events_scan):
     pytest.importorskip("dask.distributed")
     t = scan(GRID, config=PHYSICAL, chunk=4, events=True, dask=True, n_workers=2, device="cpu")

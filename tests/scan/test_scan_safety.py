@@ -154,6 +154,7 @@ def _cli_scan(out: Path, res: str):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_two_concurrent_scans_end_cleanly_with_the_single_run_dataset(tmp_path):
     """Same definition twice at once: one computes, the other waits and finds it done; both exit 0.
     Another definition meanwhile: refused in one line (exit 2).  The dataset is bit-identical to a single run."""
@@ -220,6 +221,7 @@ def _answer(p, timeout: float = 120.0) -> dict:
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_two_scans_of_different_definitions_racing_for_a_new_folder_one_wins_the_other_refuses(tmp_path):
     """20 races of two real scan processes (3x3 and 4x4 grids) released together on a new folder each time: exactly
     one completes a valid folder (its lock still in place), the other exits 2 in one line (busy, or a different scan)

@@ -26,6 +26,7 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.long
 def test_served_web_viewer_reads_the_recording_and_asks_nothing_beyond_this_machine(tmp_path, browser):
     grpc, web = _free_port(), _free_port()
     proc = subprocess.Popen(

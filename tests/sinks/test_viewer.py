@@ -188,6 +188,7 @@ def test_viewer_screenshot_shows_the_die_on_the_ground(tmp_path):
 
 @pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
 @pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+@pytest.mark.long
 def test_viewer_screenshot_numbers_the_faces_of_the_die_in_flight(tmp_path):
     """The throw cut at 0.33 s (330 steps), mid-throw: faces 4 and 5 (magenta, yellow) face the camera (6, black,
     is seen edge-on)."""
@@ -205,6 +206,7 @@ def test_viewer_screenshot_numbers_the_faces_of_the_die_in_flight(tmp_path):
 
 @pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
 @pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+@pytest.mark.long
 def test_viewer_screenshot_shows_the_compare_view(tmp_path):
     """``record --nudge``: both dice in their colours in the 3-D view with their faces and pips, the log10
     divergence curve in the plot."""
@@ -244,6 +246,7 @@ def test_viewer_screenshot_shows_the_compare_view(tmp_path):
 
 @pytest.mark.skipif(XVFB is None, reason="xvfb-run not on PATH")
 @pytest.mark.skipif(RERUN is None, reason="rerun CLI not installed")
+@pytest.mark.long
 def test_in_a_1100_by_900_viewer_every_resting_die_is_inside_the_3d_view(tmp_path):
     """Issue 46 item 6, the real viewer's part: at 1100×900 the 3-D view (the layout's left 3/5) is narrower than it
     is tall, and the die was cut at its right edge (the camera framed a square).  On the screenshot, one throw's die

@@ -75,6 +75,7 @@ def test_two_studies_write_their_two_sections(tmp_path, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_analyze_settle_quick_writes_its_own_section(tmp_path):
     """The issue's reproducer: ``dicetrace analyze settle --quick`` into a new folder."""
     out = tmp_path / "out"

@@ -28,6 +28,7 @@ def _dicetrace(*args, cwd, timeout=300):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_every_study_wrote_results_and_figures(quick_run):
     out, results = quick_run
     for name in WRITEUP_STUDIES:
@@ -130,6 +131,7 @@ def test_cli_rejects_an_unknown_study(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.skipif(not (REPO / "analysis" / ".committed-results").exists(), reason="no committed results here")
+@pytest.mark.long
 def test_quick_run_never_touches_the_committed_results():
     """``--quick`` (or --res, --seed, --integrator, --tol) into analysis/ is refused before anything is written."""
     before = {p: p.stat().st_mtime_ns for p in (REPO / "analysis").rglob("*") if p.is_file()}

@@ -16,6 +16,7 @@ from dicetrace.studies.study_accuracy_grids import GRIDS, color, grid
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_quick_study_cli_runs(tmp_path):
     """No --out: the results go to ./dicetrace-results/accuracy of the current folder (a bounded wait, no time
     assert: speed belongs in benchmarks/); the summary names the command as typed."""
@@ -68,6 +69,7 @@ def test_quick_study_cli_runs(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_bad_input_is_one_line_exit_2(tmp_path):
     for args in (["--window", "nowhere"], ["--n", "1"], ["--integrator", "euler"], ["--presets", "seed,x"]):
         res = subprocess.run(
@@ -145,6 +147,7 @@ def test_study_runs_come_from_the_integrator_table():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_quick_run_may_not_overwrite_committed_results(tmp_path):
     """A folder holding the committed-results marker takes full runs only; the refusal writes nothing."""
     from dicetrace.studies.outputs import COMMITTED_MARKER

@@ -47,6 +47,7 @@ def test_quick_run_uses_uniform_tight_numerics_and_finds_the_edge_saddles(quick_
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_reanalysis_from_the_raw_profiles_gives_the_same_numbers(quick_run, tmp_path):
     from dicetrace.studies.study_border_rates import rerender
 

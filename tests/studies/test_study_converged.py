@@ -107,6 +107,7 @@ def test_quick_run_measures_every_window_and_model(study_l):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_rerender_reproduces_the_tables_without_simulating(study_l, tmp_path):
     run_out, opts, R = study_l
     out = tmp_path / "analysis"  # a copy: rerender rewrites the run's JSON and figures, which other tests read

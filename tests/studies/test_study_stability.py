@@ -135,6 +135,7 @@ def test_stability_map_small():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_stability_cli_rejects_bad_input(tmp_path):
     import subprocess
     import sys
