@@ -158,14 +158,14 @@ def variants() -> dict:
         wk.dn_w[6] += terr(st, wk, kp, h, g0, g1, g2, q0, q1, q2)
         return terr(st, wk, kp, h, g0, g1, g2, q0, q1, q2)
 
-    stage = "            g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P)\n"
+    stage = "            g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P, w0, w1, w2)\n"
     stages_factory = _edited(erk.erk_substep, "erk_substep_stages_twice", stage, _twice(stage, "g0 + q1"),
                              "return _named(", "return _named_uncached(", env={"_named_uncached": _named_uncached})
     stages_twice = stages_factory("tsit5_stages_twice", erk.TSIT5_STAGES, erk.TSIT5_A, erk.TSIT5_B)
 
-    end_forces = (DRIVE + "            c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], Ln[0] / I, Ln[1] / I, Ln[2] / I,\n"
-                  + DRIVE + "                                                   offn, kp, st.F, st.uk, st.z, st.P)\n")
-    cut = DRIVE + "        cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, I, hs, cmin)\n"
+    end_forces = (DRIVE + "            c5, g0, g1, g2, q0, q1, q2 = wrench_at(Xn[2], Un[0], Un[1], Un[2], wn0, wn1, wn2, offn, kp, st.F, st.uk,\n"
+                  + DRIVE + "                                                   st.z, st.P)\n")
+    cut = DRIVE + "        cut = first_crossing(Xw, Uw, Lw, offw, Xn, Un, Ln, offn, kp, hs, cmin)\n"
     interp = DRIVE + "            method.dense_state(st, wk, kp, 1.0 - st.ahead / wk.dn_h)\n"
     interp_forces = interp + DRIVE + "            return dense_end(st, kp)\n"
     # the parts outside the driver's closure (``free_piece``): an edited copy, put in the edited driver's globals

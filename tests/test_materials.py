@@ -218,3 +218,38 @@ def test_the_docs_restitution_table_is_what_the_functions_give():
     assert round(flat_drop.max_depth * 10, 1) == 2.7 and round(flat_drop.contact_time * 1e3, 1) == 6.5
     assert round(m.restitution(float(m.drop_speed(14.0)), PHYS.gamma), 4) == 0.6398
     assert round(m.friction_relaxation_time(PHYS.mu, PHYS.v_reg_cm_s, PHYS.g) * 1e3, 1) == 8.5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("e", [0.3, 0.8])
+def test_a_presets_restitution_is_the_flat_drops_at_its_reference_speed(e):
+    """``restitution=e`` sets γ; the simulator's flat drop at the reference speed (100 cm/s) then bounces with e,
+    measured on its trajectory (as above) to 1e-6."""
+    from dicetrace.params import RESTITUTION_SPEED_CM_S, make_config
+    from dicetrace.simulate import Record, simulate
+
+    v = RESTITUTION_SPEED_CM_S
+    cfg = make_config("physical", restitution=e, z0_cm=PHYS.half_side_cm + v * v / (2 * -PHYS.g))
+    assert cfg.preset.gamma == pytest.approx(m.gamma_for_restitution(e, v, PHYS.k, g=PHYS.g, n_contact=4, mass=8.0))
+    roll = simulate(np.zeros(6), config=cfg, record=Record(states=True, energy=False))
+    z = roll.trace.cm_pos[:, 2] - PHYS.half_side_cm
+    vz = roll.trace.cm_vel[:, 2]
+    touching = z <= 0
+    first = int(np.argmax(touching))
+    after = first + int(np.argmax(~touching[first:]))
+    v_in = math.sqrt(vz[first - 1] ** 2 + 2 * -PHYS.g * z[first - 1])
+    v_out = math.sqrt(vz[after] ** 2 + 2 * -PHYS.g * z[after])
+    assert v_in == pytest.approx(v, rel=1e-9)
+    assert v_out / v_in == pytest.approx(e, rel=1e-6)
+
+
+@pytest.mark.parametrize("changes, field", [
+    (dict(restitution=0.0), "restitution"), (dict(restitution=1.5), "restitution"),
+    (dict(restitution="x"), "restitution"), (dict(restitution=0.5, restitution_speed_cm_s=-1.0), "restitution_speed_cm_s"),
+])
+def test_a_bad_restitution_is_refused_naming_it(changes, field):
+    from dicetrace.params import ConfigError, make_config
+
+    with pytest.raises(ConfigError) as err:
+        make_config("physical", **changes)
+    assert err.value.fields == (field,) and "\n" not in str(err.value)

@@ -26,6 +26,7 @@ OPTIONS = ("--out", "--save", "--parquet", "--png", "--rrd")
 REGENERATES = {
     "analysis": "dicetrace analyze all --out analysis: the committed report and its figures",
     "analysis/accuracy": "dicetrace analyze accuracy|stability|friction --out analysis/accuracy: the committed studies",
+    "analysis/cuboids": "dicetrace analyze cuboids --out analysis/cuboids: the committed comparison with real dice",
 }
 #: Placeholders in the README's paths, and a name that stands for each.
 PLACEHOLDERS = {"<name>": "x", "<study>": "x", "<digest>": "x", "NAME": "x", "STUDY": "x"}

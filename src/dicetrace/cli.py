@@ -207,7 +207,7 @@ def _root(
 ) -> None:
     pass
 
-_COMMANDS = ("record", "simulate", "scan", "accuracy", "analyze", "explore")
+_COMMANDS = ("record", "simulate", "throw", "scan", "accuracy", "analyze", "explore")
 
 
 def _register() -> None:

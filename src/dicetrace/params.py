@@ -13,6 +13,7 @@ ICs into everything a kernel needs).
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -25,6 +26,17 @@ from dicetrace.config_values import is_number as _is_number, plain as _plain, re
 from dicetrace.body import Body
 from dicetrace.integrators import INTEGRATORS, IntegratorSpec, get_integrator, unknown_integrator  # noqa: F401  (re-exported)
 from dicetrace.stepsize import auto_dt
+
+#: The impact speed at which a preset's ``restitution`` is the coefficient of restitution of the die's flat drop, cm/s.
+RESTITUTION_SPEED_CM_S = 100.0
+
+
+@functools.lru_cache(maxsize=256)
+def _gamma_for_flat_drop(e: float, v: float, k: float, g: float) -> float:
+    """γ for restitution ``e`` of the die's flat drop (4 nodes, mass 8) at impact speed ``v`` (``dicetrace.materials``)."""
+    from dicetrace.materials import gamma_for_restitution
+
+    return gamma_for_restitution(e, v, k, g=g, n_contact=4, mass=8.0)
 
 
 #: Default friction regularisation speed of the per-node law, cm/s (see Preset).
@@ -218,6 +230,12 @@ class Preset:
         A loaded die: the share of its mass (in [0, 1)) in a point load at
         ``load_cm`` (cm, body frame, from the box's centre, inside the box).
         0 (the default): uniform.
+    restitution, restitution_speed_cm_s
+        The coefficient of restitution e of the die's flat drop at the impact
+        speed ``restitution_speed_cm_s`` (default 100 cm/s): when given, it
+        sets ``gamma`` (the one γ of the ground law that gives it, with this
+        k and g; ``dicetrace.materials.gamma_for_restitution``, docs/model.md
+        §13).  None (the default): ``gamma`` as given.
     default_tol, default_tol_growth
         The error tolerance and its growth rate (``Numerics.tol``,
         ``Numerics.tol_growth``) that an error-controlled integrator uses on
@@ -247,6 +265,8 @@ class Preset:
     half_extents_cm: tuple[float, float, float] | None = None
     load_fraction: float = 0.0
     load_cm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    restitution: float | None = None
+    restitution_speed_cm_s: float = RESTITUTION_SPEED_CM_S
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
@@ -267,6 +287,8 @@ class Preset:
                 "g", f"preset {self.name!r}: gravity g must be <= 0 (cm/s² along z; negative points down, the default is "
                 f"-980; positive would lift the die away from the ground), got {self.g!r}"
             )
+        if self.restitution is not None:  # the damping that gives it (k and g checked above)
+            object.__setattr__(self, "gamma", self._gamma_of_restitution())
         if self.half_side_cm <= 0:
             raise ConfigError("half_side_cm", f"preset {self.name!r}: half_side_cm must be > 0, got {self.half_side_cm!r}")
         if self.half_extents_cm is None and self.load_fraction == 0 and self.z0_cm < self.half_side_cm:
@@ -333,6 +355,19 @@ class Preset:
         object.__setattr__(self, "half_extents_cm", h)
         object.__setattr__(self, "load_fraction", _plain(w))
         object.__setattr__(self, "load_cm", load)
+
+    def _gamma_of_restitution(self) -> float:
+        """γ that gives the die's flat drop the coefficient of restitution ``restitution`` at ``restitution_speed_cm_s``."""
+        e, v = self.restitution, self.restitution_speed_cm_s
+        if not _is_number(e) or not 0.0 < e <= 1.0:
+            raise ConfigError("restitution", f"preset {self.name!r}: restitution must be None or a number in (0, 1], "
+                              f"got {_show(e)}")
+        if not _is_number(v) or not (math.isfinite(v) and v > 0):
+            raise ConfigError("restitution_speed_cm_s", f"preset {self.name!r}: restitution_speed_cm_s must be a finite "
+                              f"number > 0, got {_show(v)}")
+        object.__setattr__(self, "restitution", _plain(e))
+        object.__setattr__(self, "restitution_speed_cm_s", _plain(v))
+        return _gamma_for_flat_drop(self.restitution, self.restitution_speed_cm_s, self.k, self.g)
 
     @property
     def body(self) -> Body:

@@ -105,9 +105,10 @@ class Trace:
         if self.node_offsets is None:
             return None
         # column j: Σ_k sign_kj · x_k = 8·h_j·(body axis j in the world frame), for any box and centre of mass
-        # (each axis's signs sum to zero over the corners): normalised, the body axis
+        # (each axis's signs sum to zero over the corners); 8·h_j is its length at the start (a rigid body's
+        # offsets keep their lengths): the cube's 8·half exactly when it starts unturned
         cols = np.einsum("kj,nki->nij", NODE_SIGNS, self.node_offsets)
-        return cols / np.linalg.norm(cols, axis=1, keepdims=True)
+        return cols / np.linalg.norm(cols[0], axis=0)
 
     @property
     def written(self) -> np.ndarray:

@@ -11,7 +11,7 @@ import dicetrace
 from dicetrace.cli import NOISE_TYPES, app
 from dicetrace.studies import INTEGRATOR_TITLES, LETTERS, TITLES, module_name
 
-COMMANDS = ("record", "simulate", "scan", "accuracy", "stability", "analyze", "explore")
+COMMANDS = ("record", "simulate", "throw", "scan", "accuracy", "stability", "analyze", "explore")
 
 
 def test_version(dicetrace_cli, tmp_path):

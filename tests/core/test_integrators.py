@@ -571,7 +571,7 @@ def set_down_on_a_face(integ, kp, h, t_end=10.0):
     for i in range(n):  # one step per call
         assert drive(kp, h, 1, S, zmin, zmax)
         st = S[0]
-        E[i] = energy_dynamic(*st["U"], *st["W"], st["z"], kp)
+        E[i] = energy_dynamic(*st["U"], *st["W"], *st["L"], st["z"], kp)
         Xs[i] = st["X"]
     return S, E, Xs, zmax
 
@@ -824,11 +824,11 @@ def test_stage_wrench_is_rotation_then_wrench_at(friction):
     for _ in range(400):
         q = rng.normal(size=4) * rng.uniform(0.5, 2.0)  # any norm: both sides read q/|q|
         y = np.concatenate([[0.1, -0.2], [rng.uniform(0.9, 1.8)], rng.normal(0, 80, 3), rng.normal(0, 200, 3), q])
-        got = stage_wrench(y, off, kp, *scratch)
+        I = kp.inertia
+        got = stage_wrench(y, off, kp, *scratch, y[6] / I, y[7] / I, y[8] / I)
         offs = np.zeros((8, 3))
         quat_rotate(q[0], q[1], q[2], q[3], off, offs)
         below_counts.add(int(np.sum(y[2] + offs[:, 2] < 0)))
-        I = kp.inertia
         F, uk, z, P = np.zeros((8, 3)), np.zeros((8, 3)), np.zeros(8), np.zeros(8)
         _, *want = wrench_at(y[2], y[3], y[4], y[5], y[6] / I, y[7] / I, y[8] / I, offs, kp, F, uk, z, P)
         assert got == tuple(want)

@@ -316,9 +316,9 @@ def register(app: typer.Typer) -> None:
             None, "--scan", help="A scan folder (dicetrace scan): record its point nearest to --at, with its configuration."
         ),
         rolls_file: Optional[Path] = typer.Option(
-            None, "--rolls", help="A rolls.parquet table (simulate_batch(...).to_arrow(), record --parquet, a scan's "
-            "row file): record its throw --ic-id N again, with the table's configuration and the throw's own "
-            "starting pose (qx, qy, qz, qw, z0_cm) where the table has one."
+            None, "--rolls", help="A rolls table (a Parquet file of dicetrace's: dicetrace throw, record --parquet, "
+            "a batch's to_arrow): record its throw --ic-id N again, with the table's configuration and the throw's "
+            "own starting pose (qx, qy, qz, qw, z0_cm) where the table has one."
         ),
         ic_id: Optional[int] = typer.Option(None, "--ic-id", help="With --rolls: the ic_id of the row to record."),
         nudge: Optional[str] = typer.Option(

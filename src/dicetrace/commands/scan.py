@@ -200,6 +200,12 @@ def parse_overrides(preset, items: List[str]) -> dict:
                 changes[key] = float(text)
             except ValueError:
                 fail(f"--set {key} needs a number, got {text!r}")
+        elif current is None or isinstance(current, tuple):  # an optional number, or a triple (half_extents_cm, ...)
+            try:
+                values = tuple(float(t) for t in text.split(",")) if text.lower() != "none" else None
+            except ValueError:
+                fail(f"--set {key} needs a number or numbers X,Y,Z (or none), got {text!r}")
+            changes[key] = values if values is None or len(values) > 1 else values[0]
         else:
             changes[key] = text
     return changes
