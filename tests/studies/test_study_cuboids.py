@@ -36,9 +36,17 @@ def test_the_committed_run_is_the_full_study(committed):
     assert len(committed["integrator_check"]) == 15
 
 
+def test_the_uniform_cube_shows_its_six_faces_alike(committed):
+    """10⁵ casual throws of the cube: 1/6 inside (nearly) every face's interval, no face preferred (χ²)."""
+    cube = committed["cube"]
+    assert cube["throws"] == cu.N_CUBE and sum(cube["faces"]) + cube["edge"] + cube["unsettled"] == cu.N_CUBE
+    inside = sum(lo <= 1 / 6 <= hi for lo, hi in zip(cube["ci_low"], cube["ci_high"]))
+    assert inside >= 5 and cube["chi2_p"] > 0.001
+
+
 def test_the_committed_summary_follows_from_its_rows(committed):
     """χ², the verdict and the systematics recomputed from the committed rows (no simulation) are the committed ones."""
-    again = cu.summarise({k: committed[k] for k in ("rows", "integrator_check", "aspects")})
+    again = cu.summarise({k: committed[k] for k in ("rows", "integrator_check", "aspects", "cube")})
     for name, m in committed["summary"]["models"].items():
         assert again["models"][name]["chi2"] == pytest.approx(m["chi2"], rel=1e-12)
     assert again["verdict"] == committed["summary"]["verdict"]

@@ -23,6 +23,8 @@ Everything below was fixed before any simulated p was compared with the data:
   values in ``dicetrace.materials.LITERATURE`` (0.2–0.6 static, 0.3 kinetic, metal on
   wood), to see how much of the answer is the table's friction (the restitution of steel on
   wood could not be found, so it is not varied);
+- the uniform cube, ``N_CUBE`` casual throws: its six faces should come up alike (a test
+  of the throw model and of the code's symmetry);
 - the systematic of the integrator: the first ``N_INTEG`` casual throws of each
   die again with ``contact-dop853`` at tol 1e-10 (an independent scheme, tighter):
   the share of throws whose face agrees, and the shift of p.
@@ -67,12 +69,15 @@ SIDE_CM = 2.0
 N_MAIN = 1000
 N_SYST = 400
 N_INTEG = 200
+#: Casual throws of the uniform cube: its six faces should come up alike (a test of the throws and of the code's
+#: symmetry).
+N_CUBE = 100_000
 #: The friction coefficient of the material variant: steel (metal) on wood, the middle of the literature's values.
 MU_LITERATURE = 0.4
 #: The independent, tighter run of the integrator systematic.
 INTEG_CHECK = dict(integrator="contact-dop853", tol=1e-10, tol_growth=0.0)
 SEED = 20131
-QUICK = dict(n_main=24, n_syst=12, n_integ=8, aspects=(0.63, 1.16, 1.87))
+QUICK = dict(n_main=24, n_syst=12, n_integ=8, n_cube=300, aspects=(0.63, 1.16, 1.87))
 #: The χ² p-value at and above which a throw model's p passes.
 PASS_P = 0.05
 
@@ -100,12 +105,25 @@ def _share(outcome: np.ndarray) -> dict:
             "edge": int(np.sum(outcome == 0)), "unsettled": int(np.sum(outcome < 0))}
 
 
-def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG, aspects=None, threads=None,
-          say=print) -> dict:
+def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG, n_cube: int = N_CUBE, aspects=None,
+          threads=None, say=print) -> dict:
     """Every run of the study (see the module docstring) as plain data."""
+    from scipy import stats
+
     aspects = tuple(float(a) for a in (GAZETTE_97_16.aspect if aspects is None else aspects))
     rows = []
     agreement = []
+    t0 = time.perf_counter()
+    cube_cfg = make_config("physical")
+    t = CASUAL.sample(n_cube, cube_cfg, SEED - 1)
+    r = simulate_batch(t.ics, config=cube_cfg, orientations=t.orientations, heights_cm=t.heights_cm, threads=threads)
+    faces = np.array([int(np.sum(r.outcome == f)) for f in range(1, 7)])
+    lo, hi = wilson_interval(faces, int(faces.sum()))
+    cube = {"throws": n_cube, "faces": faces.tolist(), "ci_low": np.asarray(lo).tolist(),
+            "ci_high": np.asarray(hi).tolist(), "edge": int(np.sum(r.outcome == 0)),
+            "unsettled": int(np.sum(r.outcome < 0)), "chi2_p": float(stats.chisquare(faces).pvalue),
+            "throws_per_s": n_cube / (time.perf_counter() - t0)}
+    say(f"the cube: {n_cube} casual throws, faces {faces.tolist()}, χ² p = {cube['chi2_p']:.3g}")
     for j, a in enumerate(aspects):
         for variant, throw, n, preset in ((CASUAL.name, CASUAL, n_main, {}), (GENTLE.name, GENTLE, n_syst, {}),
                                           (VIGOROUS.name, VIGOROUS, n_syst, {}),
@@ -132,7 +150,7 @@ def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG,
                           "p_main_subset": _share(main.outcome[:n_integ])["p"], "p_check": _share(check.outcome)["p"]})
         say(f"x/y {a:g}: {INTEG_CHECK['integrator']} tol {INTEG_CHECK['tol']:g} agrees on "
             f"{agreement[-1]['agreement']:.3f} of {n_integ}")
-    return {"rows": rows, "integrator_check": agreement, "aspects": list(aspects)}
+    return {"rows": rows, "integrator_check": agreement, "aspects": list(aspects), "cube": cube}
 
 
 def summarise(data: dict) -> dict:
@@ -249,6 +267,17 @@ def _markdown(data: dict, summary: dict, command: str, wall_s: float) -> str:
                      f"{summary['throw_spread'][j]:.3f} | {cells[3]} | "
                      f"{c['agreement']:.3f} ({c['ci_low']:.3f}–{c['ci_high']:.3f}) | "
                      f"{summary['integrator_shift'][j]:+.3f} | {int(cas['edge'])} / {int(cas['unsettled'])} |")
+    cube = data["cube"]
+    lines += ["", f"The uniform cube, {cube['throws']} casual throws (a test of the throws and of the code's symmetry): "
+              f"{cube['throws_per_s']:.0f} throws/s on all cores of this machine.", "",
+              "| face | throws | share | 95 % Wilson interval |", "|---|---|---|---|"]
+    n_cube = sum(cube["faces"])
+    for f in range(6):
+        lines.append(f"| {f + 1} | {cube['faces'][f]} | {cube['faces'][f] / n_cube:.4f} | "
+                     f"{cube['ci_low'][f]:.4f}–{cube['ci_high'][f]:.4f} |")
+    lines += ["", f"On an edge {cube['edge']}, at the time cap {cube['unsettled']}; χ² test of equal shares: "
+              f"p = {cube['chi2_p']:.3g}; 1/6 = 0.1667 is inside {sum(lo <= 1 / 6 <= hi for lo, hi in zip(cube['ci_low'], cube['ci_high']))} "
+              "of the six intervals."]
     lines += ["", "| model | χ² | dof | p-value |", "|---|---|---|---|"]
     for name, m in summary["models"].items():
         lines.append(f"| physical, {name} | {m['chi2']:.1f} | {m['dof']} | {m['p_value']:.2g} |")
