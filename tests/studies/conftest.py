@@ -1,6 +1,6 @@
 """The one ``dicetrace analyze all --quick`` run that the studies' tests share.
 
-It is the CI run of the writeup studies (~2 min on two cores): ``test_studies.py`` checks its
+It is the quick run of the writeup studies (~2 min on two cores; the ``long`` tier): ``test_studies.py`` checks its
 outputs, ``test_referee.py`` its study k and ``test_converged.py`` its study l.  With ``pytest -n``
 every worker that reaches one of those tests asks for it: the first runs it into the run's common
 temporary folder under a file lock, the others wait for it there and read the same outputs
@@ -20,12 +20,14 @@ import pytest
 from filelock import FileLock
 
 
-@pytest.hookimpl(tryfirst=True)  # before ``-m "not slow"`` deselects
+@pytest.hookimpl(tryfirst=True)  # before ``-m "not slow"`` and ``-m "not long"`` deselect
 def pytest_collection_modifyitems(items):
-    """Every test that reads the shared quick run (a minute of studies) is ``slow``, whether or not it says so."""
+    """Every test that reads the shared quick run (two minutes of studies on two cores) is ``long`` and ``slow``,
+    whether or not it says so: CI's tier leaves it to ``scripts/test.sh --all``."""
     for item in items:
         if "quick_run" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.slow)
+            item.add_marker(pytest.mark.long)
 
 
 @pytest.fixture(scope="session")
