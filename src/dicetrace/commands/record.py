@@ -156,6 +156,13 @@ def check_record_size(cfg, n_throws: int = 1, forces: bool = False) -> None:
              f"{human_bytes(avail)} available: use a larger --dt or a shorter --t-max")
 
 
+def refuse_given(conflicting: dict, why: str) -> None:
+    """Fail in one line, ``why: drop OPTIONS``, when any option of ``conflicting`` (option -> value) was given."""
+    given = [opt for opt, v in conflicting.items() if v is not None]
+    if given:
+        fail(f"{why}: drop {', '.join(given)}")
+
+
 def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
     """The IC of a scanned point (nearest grid point to ``--at``) and the scan's configuration.
 
@@ -165,9 +172,7 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
     """
     if at is None:
         fail("--scan needs --at X,Y (the slice coordinates of a scanned point)")
-    given = [opt for opt, v in conflicting.items() if v is not None]
-    if given:
-        fail(f"--scan takes the IC and the configuration from the scan: drop {', '.join(given)}")
+    refuse_given(conflicting, "--scan takes the IC and the configuration from the scan")
     folder = Path(folder)
     if not folder.is_dir():
         fail(f"--scan {str(folder)!r} is not a folder")
@@ -199,9 +204,7 @@ def ic_from_rolls(path: Path, ic_id: int | None, conflicting: dict):
     """
     if ic_id is None:
         fail("--rolls needs --ic-id N (the row to record)")
-    given = [opt for opt, v in conflicting.items() if v is not None]
-    if given:
-        fail(f"--rolls takes the IC and the configuration from the table: drop {', '.join(given)}")
+    refuse_given(conflicting, "--rolls takes the IC and the configuration from the table")
     import pyarrow.parquet as pq  # lazy: keeps `dicetrace --help` fast
 
     from dicetrace.scan.definition import config_from_dict
