@@ -117,7 +117,9 @@ def main() -> int:
               f"{fig.get('spill_loads', '?')} B spill loads, {fig.get('stack_bytes', '?')} B stack frame"
               + (f" (records {fig['local_records_bytes']} B)" if fig["local_records_bytes"] else ""), flush=True)
     if args.write:
-        args.write.write_text(json.dumps(dict(cc=args.cc, kernels=results), indent=1) + "\n")
+        head = subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True,
+                              cwd=Path(__file__).resolve().parent).stdout.strip()
+        args.write.write_text(json.dumps(dict(cc=args.cc, commit=head or None, kernels=results), indent=1) + "\n")
     return 0
 
 
