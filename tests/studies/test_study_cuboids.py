@@ -44,9 +44,30 @@ def test_the_uniform_cube_shows_its_six_faces_alike(committed):
     assert inside >= 5 and cube["chi2_p"] > 0.001
 
 
+def test_the_flawed_and_loaded_dice_lean_the_way_their_flaws_say(committed):
+    """10⁵ throws each: the longer side makes its two faces (1, 6) rarer, the shifted centre of mass brings face 6
+    (opposite the shift) up more; the detection counts follow from the committed shares."""
+    flaws = committed["flaws"]
+    assert list(flaws) == list(cu.FLAWS)
+    for name, d in flaws.items():
+        assert d["throws"] == cu.N_FLAW and sum(d["faces"]) + d["edge"] + d["unsettled"] == cu.N_FLAW
+        assert {k: d[k] for k in cu.detection(d["faces"])} == cu.detection(d["faces"])
+        assert d["resolved"] == (d["cohens_w"] ** 2 > 4 * 5 / sum(d["faces"]))
+    share = {name: np.array(d["faces"]) / sum(d["faces"]) for name, d in flaws.items()}
+    long3 = share["x side 3 % longer"]
+    assert long3[0] + long3[5] < 1 / 3 and flaws["x side 3 % longer"]["ci_high"][0] < 1 / 6
+    shift5 = share["centre 5 % towards face 1"]
+    assert shift5[5] > shift5[0] and flaws["centre 5 % towards face 1"]["ci_low"][5] > 1 / 6
+    # the larger flaws are resolved, and each is seen sooner than its smaller twin where that one is resolved too
+    assert flaws["x side 3 % longer"]["resolved"] and flaws["centre 5 % towards face 1"]["resolved"]
+    for big, small in (("x side 3 % longer", "x side 1 % longer"), ("centre 5 % towards face 1", "centre 2 % towards face 1")):
+        if flaws[small]["resolved"]:
+            assert flaws[big]["chi2_throws"] < flaws[small]["chi2_throws"]
+
+
 def test_the_committed_summary_follows_from_its_rows(committed):
     """χ², the verdict and the systematics recomputed from the committed rows (no simulation) are the committed ones."""
-    again = cu.summarise({k: committed[k] for k in ("rows", "integrator_check", "aspects", "cube")})
+    again = cu.summarise({k: committed[k] for k in ("rows", "integrator_check", "aspects", "cube", "flaws")})
     for name, m in committed["summary"]["models"].items():
         assert again["models"][name]["chi2"] == pytest.approx(m["chi2"], rel=1e-12)
     assert again["verdict"] == committed["summary"]["verdict"]
@@ -66,7 +87,7 @@ def test_the_summary_file_states_the_verdict_and_the_numbers_of_the_results(comm
         assert f"| physical, {name} | {m['chi2']:.1f} | {m['dof']} |" in text
 
 
-@pytest.mark.slow
+@pytest.mark.long
 def test_the_quick_run_writes_every_file_and_no_verdict(tmp_path, dicetrace_cli):
     res = dicetrace_cli("analyze", "cuboids", "--quick", "--out", str(tmp_path / "q"), "--quiet", cwd=tmp_path)
     assert res.returncode == 0, res.stderr

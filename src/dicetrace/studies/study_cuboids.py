@@ -25,6 +25,9 @@ Everything below was fixed before any simulated p was compared with the data:
   wood could not be found, so it is not varied);
 - the uniform cube, ``N_CUBE`` casual throws: its six faces should come up alike (a test
   of the throw model and of the code's symmetry);
+- flaws and loads (:data:`FLAWS`): a d6 with one side 1 % or 3 % longer, or its centre of
+  mass 2 % or 5 % of the side towards a face, ``N_FLAW`` casual throws each: the bias of
+  each face and the throws a player needs to detect it (:func:`detection`);
 - the systematic of the integrator: the first ``N_INTEG`` casual throws of each
   die again with ``contact-dop853`` at tol 1e-10 (an independent scheme, tighter):
   the share of throws whose face agrees, and the shift of p.
@@ -69,6 +72,16 @@ SIDE_CM = 2.0
 N_MAIN = 1000
 N_SYST = 400
 N_INTEG = 200
+#: Flawed and loaded d6 (side 2 cm), thrown casually ``N_FLAW`` times each: a side 1 % or 3 % longer (the x axis,
+#: faces 1 and 6), and the centre of mass shifted by 2 % or 5 % of the side towards face 1 (a tenth of the mass at
+#: x = −0.4 or −1.0 cm).
+FLAWS = {
+    "x side 1 % longer": dict(half_extents_cm=(1.01, 1.0, 1.0)),
+    "x side 3 % longer": dict(half_extents_cm=(1.03, 1.0, 1.0)),
+    "centre 2 % towards face 1": dict(load_fraction=0.1, load_cm=(-0.4, 0.0, 0.0)),
+    "centre 5 % towards face 1": dict(load_fraction=0.1, load_cm=(-1.0, 0.0, 0.0)),
+}
+N_FLAW = 100_000
 #: Casual throws of the uniform cube: its six faces should come up alike (a test of the throws and of the code's
 #: symmetry).
 N_CUBE = 100_000
@@ -77,7 +90,7 @@ MU_LITERATURE = 0.4
 #: The independent, tighter run of the integrator systematic.
 INTEG_CHECK = dict(integrator="contact-dop853", tol=1e-10, tol_growth=0.0)
 SEED = 20131
-QUICK = dict(n_main=24, n_syst=12, n_integ=8, n_cube=300, aspects=(0.63, 1.16, 1.87))
+QUICK = dict(n_main=24, n_syst=12, n_integ=8, n_cube=300, n_flaw=300, aspects=(0.63, 1.16, 1.87))
 #: The χ² p-value at and above which a throw model's p passes.
 PASS_P = 0.05
 
@@ -105,8 +118,43 @@ def _share(outcome: np.ndarray) -> dict:
             "edge": int(np.sum(outcome == 0)), "unsettled": int(np.sum(outcome < 0))}
 
 
-def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG, n_cube: int = N_CUBE, aspects=None,
-          threads=None, say=print) -> dict:
+def _faces(outcome) -> dict:
+    """Face counts of ``outcome``, their 95 % Wilson intervals, and the throws that ended on no face."""
+    faces = np.array([int(np.sum(outcome == f)) for f in range(1, 7)])
+    lo, hi = wilson_interval(faces, int(faces.sum()))
+    return {"faces": faces.tolist(), "ci_low": np.asarray(lo).tolist(), "ci_high": np.asarray(hi).tolist(),
+            "edge": int(np.sum(outcome == 0)), "unsettled": int(np.sum(outcome < 0))}
+
+
+def detection(faces) -> dict:
+    """How many throws detect the die's bias at 95 % power, level 0.05: χ² over six faces, and the one-sided binomial
+    test of its most biased face (:func:`dicetrace.analysis.fairness.throws_to_detect`), at its measured shares."""
+    from dicetrace.analysis.fairness import throws_to_detect
+
+    p = np.asarray(faces, dtype=float) / np.sum(faces)
+    chi2 = throws_to_detect(p, test="chi2")
+    binom = throws_to_detect(p, test="binomial")
+    return {"chi2_throws": int(chi2.n), "cohens_w": float(chi2.effect), "binomial_throws": int(binom.n),
+            "binomial_face": int(binom.face), "binomial_bias": float(binom.effect)}
+
+
+def flaws(n: int = N_FLAW, threads=None, say=print) -> dict:
+    """The flawed and loaded dice of :data:`FLAWS`, ``n`` casual throws each: faces, intervals and detection."""
+    out = {}
+    for j, (name, body) in enumerate(FLAWS.items()):
+        cfg = make_config("physical", **body)
+        t = CASUAL.sample(n, cfg, SEED - 2 - j)
+        r = simulate_batch(t.ics, config=cfg, orientations=t.orientations, heights_cm=t.heights_cm, threads=threads)
+        out[name] = {"throws": n, **body, **_faces(r.outcome)}
+        out[name].update(detection(out[name]["faces"]))
+        # a fair die's measured shares give w² ≈ (6 − 1)/N by chance alone: a flaw is resolved well above that floor
+        out[name]["resolved"] = bool(out[name]["cohens_w"] ** 2 > 4 * 5 / sum(out[name]["faces"]))
+        say(f"{name}: faces {out[name]['faces']}, χ² detects it in {out[name]['chi2_throws']} throws")
+    return out
+
+
+def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG, n_cube: int = N_CUBE,
+          n_flaw: int = N_FLAW, aspects=None, threads=None, say=print) -> dict:
     """Every run of the study (see the module docstring) as plain data."""
     from scipy import stats
 
@@ -150,7 +198,8 @@ def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG,
                           "p_main_subset": _share(main.outcome[:n_integ])["p"], "p_check": _share(check.outcome)["p"]})
         say(f"x/y {a:g}: {INTEG_CHECK['integrator']} tol {INTEG_CHECK['tol']:g} agrees on "
             f"{agreement[-1]['agreement']:.3f} of {n_integ}")
-    return {"rows": rows, "integrator_check": agreement, "aspects": list(aspects), "cube": cube}
+    return {"rows": rows, "integrator_check": agreement, "aspects": list(aspects), "cube": cube,
+            "flaws": flaws(n_flaw, threads, say)}
 
 
 def summarise(data: dict) -> dict:
@@ -278,6 +327,21 @@ def _markdown(data: dict, summary: dict, command: str, wall_s: float) -> str:
     lines += ["", f"On an edge {cube['edge']}, at the time cap {cube['unsettled']}; χ² test of equal shares: "
               f"p = {cube['chi2_p']:.3g}; 1/6 = 0.1667 is inside {sum(lo <= 1 / 6 <= hi for lo, hi in zip(cube['ci_low'], cube['ci_high']))} "
               "of the six intervals."]
+    lines += ["", "Flawed and loaded d6, casual throws: the share of each face (95 % Wilson interval) and the throws "
+              "that detect the flaw at 95 % power (level 0.05): Pearson's χ² over the six faces, and the one-sided "
+              "binomial test of the most biased face, at the measured shares.", "",
+              "| die | throws | face 1 | face 6 | faces 2–5 (mean) | χ² test: throws | binomial: face, bias, throws |",
+              "|---|---|---|---|---|---|---|"]
+    for name, d in data["flaws"].items():
+        n_d = sum(d["faces"])
+        share = [c / n_d for c in d["faces"]]
+        if d["resolved"]:
+            detect = f"{d['chi2_throws']} | {d['binomial_face']}, {d['binomial_bias']:+.4f}, {d['binomial_throws']}"
+        else:
+            detect = "not resolved (w² within 4× the chance floor 5/N) | —"
+        lines.append(f"| {name} | {d['throws']} | {share[0]:.4f} ({d['ci_low'][0]:.4f}–{d['ci_high'][0]:.4f}) | "
+                     f"{share[5]:.4f} ({d['ci_low'][5]:.4f}–{d['ci_high'][5]:.4f}) | {np.mean(share[1:5]):.4f} | "
+                     f"{detect} |")
     lines += ["", "| model | χ² | dof | p-value |", "|---|---|---|---|"]
     for name, m in summary["models"].items():
         lines.append(f"| physical, {name} | {m['chi2']:.1f} | {m['dof']} | {m['p_value']:.2g} |")
