@@ -49,6 +49,18 @@ FACE_NORMALS.setflags(write=False)
 MASS = 8.0
 
 
+def rotations(node_offsets) -> np.ndarray:
+    """World-from-body rotations (n, 3, 3) of a rigid body read off its node offsets (n, 8, 3), any box and centre
+    of mass.
+
+    Column j of R is Σ_k sign_kj · x_k = 8·h_j·(body axis j in the world frame): each axis's signs sum to zero
+    over the corners, so the centre of mass's shift drops out.  8·h_j is the column's length at the start (a rigid
+    body's offsets keep their lengths): the cube's 8·half exactly when it starts unturned.
+    """
+    cols = np.einsum("kj,nki->nij", NODE_SIGNS, np.asarray(node_offsets, dtype=np.float64))
+    return cols / np.linalg.norm(cols[0], axis=0)
+
+
 def face_of_top4() -> np.ndarray:
     """The face (1..6) whose four nodes an 8-bit mask names (bit k = node k + 1), 0 where they are no face: what
     the kernels read the outcome from (the four highest nodes)."""

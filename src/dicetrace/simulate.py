@@ -34,7 +34,8 @@ from dicetrace.integrators import INTEGRATORS
 from dicetrace.ic_arrays import (SliceICs, quaternions_xyzw, validate_heights, validate_ic, validate_ics,
                                  validate_orientations)
 from dicetrace.memory import available_memory
-from dicetrace.params import NODE_SIGNS, Config, resolve_config
+from dicetrace.body import rotations
+from dicetrace.params import Config, resolve_config
 from dicetrace.status import Status
 
 say_first_compile()  # a first call from Python compiles for seconds to minutes: say so once, on standard error
@@ -104,11 +105,7 @@ class Trace:
         """World-from-body rotation matrices (n+1, 3, 3) read off the node offsets."""
         if self.node_offsets is None:
             return None
-        # column j: Σ_k sign_kj · x_k = 8·h_j·(body axis j in the world frame), for any box and centre of mass
-        # (each axis's signs sum to zero over the corners); 8·h_j is its length at the start (a rigid body's
-        # offsets keep their lengths): the cube's 8·half exactly when it starts unturned
-        cols = np.einsum("kj,nki->nij", NODE_SIGNS, self.node_offsets)
-        return cols / np.linalg.norm(cols[0], axis=0)
+        return rotations(self.node_offsets)
 
     @property
     def written(self) -> np.ndarray:

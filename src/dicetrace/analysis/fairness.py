@@ -52,6 +52,7 @@ from .dice_data import GAZETTE_97_16, MeasuredCuboids
 
 __all__ = [
     "FACE_AXES", "Comparison", "DetectionPlan", "OneParameterFit", "compare", "edge_tip_p", "edge_tip_square_share",
+    "face_counts",
     "fit_one_parameter", "gibbs_faces", "gibbs_p", "pender_uhrin_p", "pender_uhrin_ratio", "solid_angle_faces",
     "solid_angle_p", "throws_to_detect",
 ]
@@ -463,6 +464,21 @@ def fit_one_parameter(model: Callable[[np.ndarray, float], np.ndarray], bounds: 
         predicted=compare(p_best, data, model_n=model_n, points=rest) if rest else None,
         overall=compare(p_best, data, model_n=model_n, n_fitted=1),
     )
+
+
+def face_counts(outcome) -> dict:
+    """The faces of throws' ``outcome`` codes (1..6 a face, 0 an edge, < 0 no end): each face's count and the 95 %
+    Wilson interval of its share among the throws that ended on a face (NaN when none did), and the throws that
+    ended on an edge or not at all."""
+    from .grouping import wilson_interval
+
+    outcome = np.asarray(outcome)
+    faces = np.array([int(np.sum(outcome == f)) for f in range(1, 7)])
+    n = int(faces.sum())
+    lo, hi = wilson_interval(faces, n) if n else (np.full(6, np.nan), np.full(6, np.nan))
+    return {"faces": faces.tolist(), "ci_low": np.asarray(lo, dtype=float).tolist(),
+            "ci_high": np.asarray(hi, dtype=float).tolist(), "edge": int(np.sum(outcome == 0)),
+            "unsettled": int(np.sum(outcome < 0))}
 
 
 # -- how many throws to see a bias ----------------------------------------------------------------------

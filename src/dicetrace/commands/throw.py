@@ -37,22 +37,20 @@ MAX_N = 10**8
 
 def face_table(outcome, cube: bool) -> tuple[str, dict]:
     """The face table of ``outcome`` (one line per face, then what did not end on a face) and its numbers."""
-    import numpy as np
     from scipy import stats
 
-    from dicetrace.analysis.grouping import wilson_interval
+    from dicetrace.analysis.fairness import face_counts
 
-    outcome = np.asarray(outcome)
-    faces = np.array([int(np.sum(outcome == f)) for f in range(1, 7)])
-    n = int(faces.sum())
+    counts = face_counts(outcome)
+    faces, lo, hi = counts["faces"], counts["ci_low"], counts["ci_high"]
+    n = sum(faces)
     lines = ["face  throws      share   95 % interval"]
-    lo, hi = wilson_interval(faces, n) if n else (np.full(6, np.nan), np.full(6, np.nan))
     for f in range(6):
         share = faces[f] / n if n else float("nan")
         lines.append(f"{f + 1:>4}  {faces[f]:>6}  {share:9.4f}   {lo[f]:.4f}-{hi[f]:.4f}")
-    edge, unsettled = int(np.sum(outcome == 0)), int(np.sum(outcome < 0))
+    edge, unsettled = counts["edge"], counts["unsettled"]
     lines.append(f"on a face {n}, on an edge {edge}, at the time cap {unsettled}")
-    out = {"faces": faces.tolist(), "on_face": n, "edge": edge, "unsettled": unsettled}
+    out = {"faces": faces, "on_face": n, "edge": edge, "unsettled": unsettled}
     if cube and n:
         p = float(stats.chisquare(faces).pvalue)
         out["fair_chi2_p"] = p

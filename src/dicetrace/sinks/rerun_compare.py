@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dicetrace.body import NODE_SIGNS, Body
+from dicetrace.body import Body, rotations
 from dicetrace.sinks.rerun import _log_trail, box_centers, encode_rrd, log_faces, log_ground, metadata_values
 from dicetrace.sinks.rerun_view import framed_points, framing_eye, layout_blueprint, view_axes
 
@@ -106,12 +106,6 @@ def scaled_body(body: Body, scale: float) -> Body:
     dice do not flicker): its half-extents and its load's place scaled alike."""
     return Body(tuple(scale * v for v in body.half_extents_cm), body.load_fraction,
                 tuple(scale * v for v in body.load_cm))
-
-
-def rotations(off) -> np.ndarray:
-    """World-from-body rotations (n, 3, 3) read off node offsets (n, 8, 3), as ``Trace.rotation`` does."""
-    cols = np.einsum("kj,nki->nij", NODE_SIGNS, off)
-    return cols / np.linalg.norm(cols, axis=1, keepdims=True)
 
 
 def compare_series(rolls) -> tuple[np.ndarray, np.ndarray, list[dict]]:

@@ -59,7 +59,7 @@ import numpy as np
 import pandas as pd
 
 from dicetrace.analysis.dice_data import GAZETTE_97_16
-from dicetrace.analysis.fairness import compare, edge_tip_p, fit_one_parameter, gibbs_p, solid_angle_p
+from dicetrace.analysis.fairness import compare, edge_tip_p, face_counts, fit_one_parameter, gibbs_p, solid_angle_p
 from dicetrace.analysis.grouping import wilson_interval
 from dicetrace.compile_clock import CompileClock, time_text
 from dicetrace.params import make_config
@@ -101,11 +101,11 @@ def _config(aspect: float, **numerics):
 
 
 def _throw(aspect: float, throw, n: int, seed: int, threads, **numerics):
-    """n throws of the die of ``aspect`` drawn from ``throw`` (reproducibly from ``seed``): their BatchResult."""
+    """n throws of the die of ``aspect`` drawn from ``throw`` (reproducibly from ``seed``): (the throws, their
+    BatchResult)."""
     cfg = _config(aspect, **numerics)
     t = throw.sample(n, cfg, seed)
-    r = simulate_batch(t.ics, config=cfg, orientations=t.orientations, heights_cm=t.heights_cm, threads=threads)
-    return r
+    return t, simulate_batch(t.ics, config=cfg, orientations=t.orientations, heights_cm=t.heights_cm, threads=threads)
 
 
 def _share(outcome: np.ndarray) -> dict:
@@ -115,14 +115,6 @@ def _share(outcome: np.ndarray) -> dict:
     n = int(np.sum(on_face))
     lo, hi = wilson_interval(k, n) if n else (float("nan"), float("nan"))
     return {"k": k, "n": n, "p": k / n if n else float("nan"), "ci_low": float(lo), "ci_high": float(hi),
-            "edge": int(np.sum(outcome == 0)), "unsettled": int(np.sum(outcome < 0))}
-
-
-def _faces(outcome) -> dict:
-    """Face counts of ``outcome``, their 95 % Wilson intervals, and the throws that ended on no face."""
-    faces = np.array([int(np.sum(outcome == f)) for f in range(1, 7)])
-    lo, hi = wilson_interval(faces, int(faces.sum()))
-    return {"faces": faces.tolist(), "ci_low": np.asarray(lo).tolist(), "ci_high": np.asarray(hi).tolist(),
             "edge": int(np.sum(outcome == 0)), "unsettled": int(np.sum(outcome < 0))}
 
 
@@ -145,7 +137,7 @@ def flaws(n: int = N_FLAW, threads=None, say=print) -> dict:
         cfg = make_config("physical", **body)
         t = CASUAL.sample(n, cfg, SEED - 2 - j)
         r = simulate_batch(t.ics, config=cfg, orientations=t.orientations, heights_cm=t.heights_cm, threads=threads)
-        out[name] = {"throws": n, **body, **_faces(r.outcome)}
+        out[name] = {"throws": n, **body, **face_counts(r.outcome)}
         out[name].update(detection(out[name]["faces"]))
         # a fair die's measured shares give w² ≈ (6 − 1)/N by chance alone: a flaw is resolved well above that floor
         out[name]["resolved"] = bool(out[name]["cohens_w"] ** 2 > 4 * 5 / sum(out[name]["faces"]))
@@ -165,32 +157,28 @@ def study(*, n_main: int = N_MAIN, n_syst: int = N_SYST, n_integ: int = N_INTEG,
     cube_cfg = make_config("physical")
     t = CASUAL.sample(n_cube, cube_cfg, SEED - 1)
     r = simulate_batch(t.ics, config=cube_cfg, orientations=t.orientations, heights_cm=t.heights_cm, threads=threads)
-    faces = np.array([int(np.sum(r.outcome == f)) for f in range(1, 7)])
-    lo, hi = wilson_interval(faces, int(faces.sum()))
-    cube = {"throws": n_cube, "faces": faces.tolist(), "ci_low": np.asarray(lo).tolist(),
-            "ci_high": np.asarray(hi).tolist(), "edge": int(np.sum(r.outcome == 0)),
-            "unsettled": int(np.sum(r.outcome < 0)), "chi2_p": float(stats.chisquare(faces).pvalue),
-            "throws_per_s": n_cube / (time.perf_counter() - t0)}
-    say(f"the cube: {n_cube} casual throws, faces {faces.tolist()}, χ² p = {cube['chi2_p']:.3g}")
+    cube = {"throws": n_cube, **face_counts(r.outcome)}
+    cube["chi2_p"] = float(stats.chisquare(cube["faces"]).pvalue)
+    cube["throws_per_s"] = n_cube / (time.perf_counter() - t0)
+    say(f"the cube: {n_cube} casual throws, faces {cube['faces']}, χ² p = {cube['chi2_p']:.3g}")
     for j, a in enumerate(aspects):
         for variant, throw, n, preset in ((CASUAL.name, CASUAL, n_main, {}), (GENTLE.name, GENTLE, n_syst, {}),
                                           (VIGOROUS.name, VIGOROUS, n_syst, {}),
                                           (f"casual, μ {MU_LITERATURE:g}", CASUAL, n_main, {"mu": MU_LITERATURE})):
             t0 = time.perf_counter()
             with CompileClock() as clock:
-                r = _throw(a, throw, n, SEED + 1000 * j, threads, **preset)
+                t, r = _throw(a, throw, n, SEED + 1000 * j, threads, **preset)
             rows.append({"aspect": a, "variant": variant, "throw": throw.name, "mu": r.config.preset.mu,
                          "integrator": r.config.numerics.integrator, "throws": n, **_share(r.outcome),
                          "mean_settle_time_s": float(np.mean(r.t_settle_s[r.status_code == 0]))})
             say(f"x/y {a:g}: {variant} × {n}: p = {rows[-1]['p']:.3f} "
                 f"({time_text(time.perf_counter() - t0, clock.seconds, '.0f')})")
             if variant == CASUAL.name:
-                main = r
+                main, thrown = r, t
         # the integrator systematic: the first n_integ casual throws again, independently and tighter
-        t = CASUAL.sample(n_main, _config(a), SEED + 1000 * j)
         cfg = _config(a, **INTEG_CHECK)
-        check = simulate_batch(t.ics[:n_integ], config=cfg, orientations=t.orientations[:n_integ],
-                               heights_cm=t.heights_cm[:n_integ], threads=threads)
+        check = simulate_batch(thrown.ics[:n_integ], config=cfg, orientations=thrown.orientations[:n_integ],
+                               heights_cm=thrown.heights_cm[:n_integ], threads=threads)
         same = main.outcome[:n_integ] == check.outcome
         lo, hi = wilson_interval(int(same.sum()), n_integ)
         agreement.append({"aspect": a, "throws": n_integ, "agree": int(same.sum()), "agreement": float(same.mean()),
