@@ -569,7 +569,7 @@ def simulate_batch(
     cfg.to_preset_convention(ics[:0], conv)  # a bad l_convention is refused before anything runs
     posed = orientations is not None or heights_cm is not None
     if posed:
-        rots, heights = _poses(cfg, orientations, heights_cm, m)
+        rots, heights, offsets = _poses(cfg, orientations, heights_cm, m)
     device = resolve_device(device)  # once: everything below takes this Device
     if posed and device.gpu:
         raise ValueError("orientations and heights_cm: throws from their own poses run on the CPU (device='cpu')")
@@ -589,7 +589,7 @@ def simulate_batch(
         return run_chunk(cfg.kernel_inputs(ics[a:b], l_convention=conv), cap, threads, device, events)
 
     if posed:
-        results = _posed_results(cfg, ics, conv, rots, heights, cap, threads, events)
+        results = _posed_results(cfg, ics, conv, offsets, heights, cap, threads, events)
     else:
         results = chunk_results(bounds, one_chunk, device)
     # chunk by chunk (on several GPUs, a few at a time): one chunk's buffers in memory, its sets compacted
@@ -627,22 +627,26 @@ def simulate_batch(
     )
 
 
-def _poses(cfg: Config, orientations, heights_cm, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """The throws' orientations (m, 3, 3) and start heights (m,), checked: every die starts on or above the ground."""
+def _poses(cfg: Config, orientations, heights_cm, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The throws' orientations (m, 3, 3), start heights (m,) and starting node offsets (m, 8, 3), checked: every
+    die starts on or above the ground.  Each throw's offsets are ``cfg.initial_offsets(R)``'s arithmetic, the
+    body's offsets turned by R, without checking R again (``validate_orientations`` did)."""
     rots = np.broadcast_to(np.eye(3), (m, 3, 3)) if orientations is None else validate_orientations(orientations, m)
     heights = np.full(m, cfg.preset.z0_cm) if heights_cm is None else validate_heights(heights_cm, m)
     body_off = cfg.initial_offsets()
-    lowest = heights + np.einsum("kj,nj->nk", body_off, rots[:, 2, :]).min(axis=1)  # each throw's lowest node
+    offsets = np.stack([body_off @ r.T for r in rots]) if m else np.zeros((0, 8, 3))
+    lowest = heights + offsets[:, :, 2].min(axis=1)  # each throw's lowest node
     bad = np.flatnonzero(lowest < 0.0)
     if len(bad):
         i = int(bad[0])
         raise ValueError(f"throw {i} starts below the ground: its lowest node is at {lowest[i]:.6g} cm (height "
                          f"{heights[i]:.6g} cm); raise its height")
-    return np.ascontiguousarray(rots), heights
+    return np.ascontiguousarray(rots), heights, offsets
 
 
-def _posed_results(cfg: Config, ics, conv, rots, heights, cap: int, threads, events: bool):
-    """Each throw from its own pose, one per numba thread (the kernels release the GIL): its results in order."""
+def _posed_results(cfg: Config, ics, conv, offsets, heights, cap: int, threads, events: bool):
+    """Each throw from its own starting offsets and height (:func:`_poses`), one per numba thread (the kernels release
+    the GIL): its results in order."""
     import numba
 
     from dicetrace.params import KernelInputs
@@ -650,8 +654,7 @@ def _posed_results(cfg: Config, ics, conv, rots, heights, cap: int, threads, eve
     kin = cfg.kernel_inputs(ics, l_convention=conv)
 
     def one(i: int):
-        k = KernelInputs(kin.ics[i : i + 1], cfg.initial_offsets(rots[i]), kin.params._replace(z0_cm=float(heights[i])),
-                         kin.integrator_id)
+        k = KernelInputs(kin.ics[i : i + 1], offsets[i], kin.params._replace(z0_cm=float(heights[i])), kin.integrator_id)
         return run_chunk(k, cap, 1, CPU_DEVICE, events)
 
     workers = numba.get_num_threads() if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
