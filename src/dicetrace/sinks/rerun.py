@@ -494,14 +494,12 @@ def box_centers(body, cm, rotation) -> np.ndarray:
 def log_faces(rec, entity: str, body, index, cm, quat) -> None:
     """The die's six face plates (writeup colours, numbered on hover) and their pips at ``entity``.
 
-    ``body``: the die's :class:`dicetrace.body.Body` (or, for the cube, its half side in cm).  Static in the body
-    frame, whose origin is the centre of mass, carried by the die's pose: one transform per step (centre ``cm``,
-    quaternion ``quat``, xyzw) on the ``index`` timelines.  The pips are the child ``entity/pips``.
+    ``body``: the die's :class:`dicetrace.body.Body`.  Static in the body frame, whose origin is the centre of
+    mass, carried by the die's pose: one transform per step (centre ``cm``, quaternion ``quat``, xyzw) on the
+    ``index`` timelines.  The pips are the child ``entity/pips``.
     """
     import rerun as rr  # rerun is slow to import: only when used
 
-    if not isinstance(body, _body.Body):
-        body = _body.Body.cube(float(body))
     h = np.asarray(body.half_extents_cm)
     plate_t = 0.02 * float(h.min())
     # each plate: thin along its normal, 62 % of the face's extent along the face's two axes
