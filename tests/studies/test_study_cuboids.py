@@ -71,6 +71,14 @@ def test_the_committed_summary_follows_from_its_rows(committed):
     for name, m in committed["summary"]["models"].items():
         assert again["models"][name]["chi2"] == pytest.approx(m["chi2"], rel=1e-12)
     assert again["verdict"] == committed["summary"]["verdict"]
+    assert again["throw_homogeneity"] == pytest.approx(committed["summary"]["throw_homogeneity"], rel=1e-12)
+    # the homogeneity χ² is scipy's 2×3 contingency test per die, summed
+    from scipy import stats
+
+    rows3 = pd.DataFrame(committed["rows"]).query("variant in ['casual', 'gentle', 'vigorous']")
+    total = sum(stats.chi2_contingency(np.array([g["k"], g["n"] - g["k"]]), correction=False).statistic
+                for _, g in rows3.groupby("aspect"))
+    assert committed["summary"]["throw_homogeneity"]["chi2"] == pytest.approx(total, rel=1e-12)
     np.testing.assert_allclose(again["throw_spread"], committed["summary"]["throw_spread"])
     rows = pd.DataFrame(committed["rows"])
     casual = rows[rows["variant"] == "casual"].set_index("aspect").loc[GAZETTE_97_16.aspect]
@@ -82,7 +90,7 @@ def test_the_committed_summary_follows_from_its_rows(committed):
 
 def test_the_summary_file_states_the_verdict_and_the_numbers_of_the_results(committed):
     text = (COMMITTED / "cuboids.md").read_text()
-    assert f"**{committed['summary']['verdict']}**" in text
+    assert f"at the data's binomial errors: **{committed['summary']['verdict']}**" in text
     for name, m in committed["summary"]["models"].items():
         assert f"| physical, {name} | {m['chi2']:.1f} | {m['dof']} |" in text
 
