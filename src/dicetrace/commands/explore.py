@@ -7,14 +7,18 @@ Examples::
     dicetrace explore --slice seed3 --window home --z 0.02 --out scans/  # "save this view as a scan" writes under scans/
     dicetrace explore --no-browser --port 8765          # print the URL only
     dicetrace explore --device cuda                     # the maps on a CUDA GPU (numba-cuda)
+    dicetrace explore --preset physical --die 2,2,3 --window home   # the maps of a box (any box, loaded or not)
 
-The view (window, resolution, preset, integrator, γ, dt, z) is in the page's
+The view (window, resolution, preset, integrator, γ, dt, z, die, load) is in the page's
 URL, so a view can be shared and reopened.  Runs until interrupted (Ctrl-C
 stops it at once, even while a map computes).  Maps are shared fairly between
 browser tabs, a tab's newer view cancels its older one, and a map that would
 take more than --map-budget seconds of computing is refused with a message.
 The maps (and saved scans) run on ``--device``, which the page and
 ``/api/view`` name; a hover's and the viewer's single throws run on the CPU.
+The die (``--die X,Y,Z``, ``--load W@X,Y,Z``, as ``simulate`` takes them) is
+part of the view: the maps, a hover's and the viewer's throws and a saved scan
+are of that die, and the page's header says which die it shows.
 Exit code 2 on bad input (a bad option, a port in use, ``--device cuda``
 without a GPU), nothing served.
 """
@@ -30,7 +34,7 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail, output_dir
-from dicetrace.commands.options import DEVICE_HELP, INTEGRATOR_HELP, PRESET_HELP, device_or_fail
+from dicetrace.commands.options import DEVICE_HELP, INTEGRATOR_HELP, PRESET_HELP, DieOption, LoadOption, device_or_fail
 from dicetrace.explore.server import check_budget, check_host, check_port, check_threads, make_view, serve_forever
 from dicetrace.explore.view import ViewError
 from dicetrace.extras import require
@@ -49,6 +53,8 @@ def register(app: typer.Typer) -> None:
         integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
         gamma: Optional[float] = typer.Option(None, "--gamma", help="Damping γ, s/cm (default: the preset's)."),
         dt: Optional[float] = typer.Option(None, "--dt", help="Time step, s (default 0.001)."),
+        die: DieOption = None,
+        load: LoadOption = None,
         host: str = typer.Option("127.0.0.1", "--host", "--bind",
                                  help="Address to listen on (default 127.0.0.1: this machine only)."),
         port: int = typer.Option(0, "--port", help="Port (default: a free one)."),
@@ -69,9 +75,10 @@ def register(app: typer.Typer) -> None:
         """
         require("explore", "dicetrace explore")  # before anything else: one line naming the extra
         try:
-            view = make_view(slice_name, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
+            view = make_view(slice_name, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z,
+                             die=die, load=load)
         except ViewError as e:
-            fail(f"--{e.param}: {e.message}")
+            fail(f"--{e.param} {e.message}" if e.message.startswith("needs ") else f"--{e.param}: {e.message}")
         for check, value, name in ((check_port, port, "--port"), (check_host, host, "--host"),
                                    (check_threads, threads, "--threads"), (check_budget, map_budget, "--map-budget")):
             try:

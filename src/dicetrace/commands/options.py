@@ -102,6 +102,14 @@ DieOption = Annotated[Optional[str], typer.Option("--die", help=DIE_HELP)]
 LoadOption = Annotated[Optional[str], typer.Option("--load", help=LOAD_HELP)]
 
 
+class BodyTextError(ValueError):
+    """A ``--die`` or ``--load`` text that is no box or load; ``option`` names it (``"--die"``, ``"--load"``)."""
+
+    def __init__(self, option: str, message: str):
+        super().__init__(f"{option} {message}")
+        self.option, self.message = option, message
+
+
 def _numbers(option: str, text: str, count: int, what: str) -> tuple[float, ...]:
     parts = [t.strip() for t in text.split(",")]
     try:
@@ -109,29 +117,72 @@ def _numbers(option: str, text: str, count: int, what: str) -> tuple[float, ...]
     except ValueError:
         values = ()
     if len(values) != count or not all(math.isfinite(v) for v in values):
-        fail(f"{option} needs {what}, got {text!r}")
+        raise BodyTextError(option, f"needs {what}, got {text!r}")
     return values
 
 
-def body_overrides(die: str | None, load: str | None) -> dict:
-    """The preset fields that ``--die X,Y,Z`` (sides, cm) and ``--load W@X,Y,Z`` set, or a one-line failure naming
-    the option; {} when neither is given.  The values themselves are checked with the preset (``Preset.body``)."""
+def parse_body(die: str | None, load: str | None) -> dict:
+    """The preset fields that ``--die X,Y,Z`` (sides, cm) and ``--load W@X,Y,Z`` set ({} when neither is given), or
+    a :class:`BodyTextError` naming the option.  The values themselves are checked with the preset (``Preset.body``).
+    The one reader of both texts: the commands' options and the explorer's ``die`` and ``load`` parameters."""
     out: dict = {}
     if die is not None:
         sides = _numbers("--die", die, 3, "three sides in cm, X,Y,Z (the cube: 2,2,2)")
         if min(sides) <= 0:
-            fail(f"--die needs three sides > 0 cm, got {die!r}")
+            raise BodyTextError("--die", f"needs three sides > 0 cm, got {die!r}")
         out["half_extents_cm"] = tuple(0.5 * v for v in sides)
     if load is not None:
         share, sep, where = load.partition("@")
         if not sep:
-            fail(f"--load needs W@X,Y,Z (a share of the mass at a body-frame point, cm), got {load!r}")
+            raise BodyTextError("--load", f"needs W@X,Y,Z (a share of the mass at a body-frame point, cm), got {load!r}")
         w = _numbers("--load", share, 1, "a share W of the mass in [0, 1) before the @")[0]
         if not 0.0 <= w < 1.0:
-            fail(f"--load needs a share W of the mass in [0, 1) before the @, got {share.strip()!r}")
+            raise BodyTextError("--load", f"needs a share W of the mass in [0, 1) before the @, got {share.strip()!r}")
         out["load_fraction"] = w
         out["load_cm"] = _numbers("--load", where, 3, "the load's place X,Y,Z (cm, body frame) after the @")
     return out
+
+
+def body_overrides(die: str | None, load: str | None) -> dict:
+    """The preset fields that ``--die X,Y,Z`` (sides, cm) and ``--load W@X,Y,Z`` set, or a one-line failure naming
+    the option; {} when neither is given (:func:`parse_body`)."""
+    try:
+        return parse_body(die, load)
+    except BodyTextError as e:
+        fail(str(e))
+
+
+def plain_body(preset):
+    """``preset`` with its body written one way: a cube of its ``half_side_cm`` as ``half_extents_cm=None``, a load of
+    share 0 at the centre.  ``--die 2,2,2`` and no ``--die`` are then one scan (one definition to resume)."""
+    h = preset.half_extents_cm
+    changes = {}
+    if h is not None and all(v == preset.half_side_cm for v in h):
+        changes["half_extents_cm"] = None
+    if preset.load_fraction == 0 and any(v != 0 for v in preset.load_cm):
+        changes["load_cm"] = (0.0, 0.0, 0.0)
+    return preset.with_(**changes) if changes else preset
+
+
+def die_text(preset) -> str:
+    """The die of ``preset`` in words, as its options give it: ``cube 2 × 2 × 2 cm`` or ``box 2 × 2 × 3 cm``, and
+    ``, load 0.3 of its mass at (-0.9, 0, 0) cm`` for a loaded die (what a scan's refusal and the explorer show)."""
+    body = preset.body
+    sides = " × ".join(fmt_num(2 * v) for v in body.half_extents_cm)
+    text = f"{'cube' if len(set(body.half_extents_cm)) == 1 else 'box'} {sides} cm"
+    if body.load_fraction:
+        text += (f", load {fmt_num(body.load_fraction)} of its mass at "
+                 f"({', '.join(fmt_num(v) for v in body.load_cm)}) cm")
+    return text
+
+
+def die_options(preset) -> str:
+    """The options that give ``preset``'s die: ``--die X,Y,Z`` and, for a loaded die, ``--load W@X,Y,Z``."""
+    body = preset.body
+    text = "--die " + ",".join(fmt_num(2 * v) for v in body.half_extents_cm)
+    if body.load_fraction:
+        text += f" --load {fmt_num(body.load_fraction)}@" + ",".join(fmt_num(v) for v in body.load_cm)
+    return text
 
 
 def either(value: str | None, alias: str | None) -> str | None:
@@ -247,7 +298,7 @@ def preset_or_fail(name: str):
 
 def build_config(
     preset, integrator: str | None, dt: str | None, t_max: str | None, ics=None, tol: str | None = None,
-    overrides: dict | None = None, tol_growth: str | None = None,
+    overrides: dict | None = None, tol_growth: str | None = None, renamed: dict | None = None,
 ):
     """The Config of a command, built once from its options' text, or a one-line failure naming the option.
 
@@ -255,14 +306,15 @@ def build_config(
     or its name; ``overrides``: its fields from ``--set``.  Every value is
     read and checked by :func:`dicetrace.params.make_config`, strictly: ``--tol``
     or ``--tol-growth`` with a fixed-step integrator is refused (it would
-    have no effect).  ``--dt auto`` picks the step from the final model and
+    have no effect).  ``renamed``: field → option where the command took a field under another option than
+    ``FIELD_OPTIONS`` names (``half_extents_cm="--set"`` when ``--set half_extents_cm=...`` gave it).  ``--dt auto`` picks the step from the final model and
     the fastest first impact of ``ics`` (see ``dicetrace.stepsize.auto_dt``),
     or refuses.
     """
     given = {"--preset": getattr(preset, "name", preset), "--integrator": integrator, "--dt": dt, "--t-max": t_max,
              "--tol": tol, "--tol-growth": tol_growth}
     model = preset_or_fail(preset) if isinstance(preset, str) else preset
-    with config_errors(given, fallback="--set" if overrides else "--preset"):
+    with config_errors(given, fallback="--set" if overrides else "--preset", **(renamed or {})):
         model = model.with_(**overrides) if overrides else model
         v_impact = None
         if dt is not None and dt.strip().lower() == "auto" and ics is not None:

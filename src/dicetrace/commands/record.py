@@ -2,7 +2,9 @@
 
 The IC comes from ``--ic VX,VY,VZ,LX,LY,LZ``, ``--slice seed --at X,Y[,Z]``,
 or ``--scan DIR --at X,Y`` (the scanned point nearest to X,Y, with the
-scan's configuration: it reproduces that row exactly).
+scan's configuration: it reproduces that row exactly), or ``--rolls FILE
+--ic-id N`` (row N of a rolls table or of a scan folder, from its own pose
+where it has one, with the table's configuration: the row again, exactly).
 The recording goes to ``--out PATH.rrd``, by default
 ``recordings/<name>.rrd`` where the name says what is in it: the IC
 (``seed_x1.65_y3.9.rrd``, ``ic_1_2_3_4_5_6.rrd``), plus the preset,
@@ -196,7 +198,8 @@ def ic_from_scan(folder: Path, at: str | None, conflicting: dict):
 
 
 def ic_from_rolls(path: Path, ic_id: int | None, conflicting: dict):
-    """The IC, configuration and starting pose of row ``ic_id`` of a rolls table, to record that throw again.
+    """The IC, configuration and starting pose of row ``ic_id`` of a rolls table (a Parquet file of dicetrace's, or a
+    scan folder: ``dicetrace scan``'s rows), to record that throw again.
 
     Returns (ic, config, orientation or None, description dict: ``kind`` "rolls", the file, the ic_id and the
     row's outcome and steps, which the replay is checked against).  The configuration is the table's metadata's
@@ -211,22 +214,33 @@ def ic_from_rolls(path: Path, ic_id: int | None, conflicting: dict):
     from dicetrace.tables import read_metadata
 
     path = Path(path)
-    if not path.is_file():
-        fail(f"--rolls {str(path)!r} is not a file")
-    try:
-        meta = read_metadata(path)
-        cfg = config_from_dict(meta["config"])
-        names = pq.read_schema(path).names
-        want = ["ic_id", "vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps"]
-        posed = all(c in names for c in ("qx", "qy", "qz", "qw", "z0_cm"))
-        table = pq.read_table(path, columns=want + (["qx", "qy", "qz", "qw", "z0_cm"] if posed else []),
-                              filters=[("ic_id", "=", int(ic_id))])
-    except (ValueError, KeyError, TypeError, OSError) as e:  # no metadata, not Parquet, a config that fails its checks
-        fail(f"--rolls {str(path)!r}: {' '.join(str(e).split())}")
-    if table.num_rows != 1:
-        fail(f"--ic-id {ic_id}: the table {str(path)!r} has {'no' if table.num_rows == 0 else table.num_rows} rows "
-             f"with that ic_id")
-    row = {c: table.column(c)[0].as_py() for c in table.column_names}
+    if path.is_dir():  # a scan folder: its rows, its definition's configuration
+        from dicetrace.scan.read import scan_row
+
+        try:
+            cfg, row = scan_row(path, int(ic_id))
+        except (ValueError, KeyError, TypeError, OSError) as e:
+            fail(f"--rolls {str(path)!r}: {' '.join(str(e).split())}")
+        if row is None:
+            fail(f"--ic-id {ic_id}: the scan {str(path)!r} has no row with that ic_id (yet)")
+        posed = "qx" in row
+    elif not path.is_file():
+        fail(f"--rolls {str(path)!r} is neither a file nor a scan folder")
+    else:
+        try:
+            meta = read_metadata(path)
+            cfg = config_from_dict(meta["config"])
+            names = pq.read_schema(path).names
+            want = ["ic_id", "vx", "vy", "vz", "Lx", "Ly", "Lz", "outcome", "steps"]
+            posed = all(c in names for c in ("qx", "qy", "qz", "qw", "z0_cm"))
+            table = pq.read_table(path, columns=want + (["qx", "qy", "qz", "qw", "z0_cm"] if posed else []),
+                                  filters=[("ic_id", "=", int(ic_id))])
+        except (ValueError, KeyError, TypeError, OSError) as e:  # no metadata, not Parquet, a config that fails its checks
+            fail(f"--rolls {str(path)!r}: {' '.join(str(e).split())}")
+        if table.num_rows != 1:
+            fail(f"--ic-id {ic_id}: the table {str(path)!r} has {'no' if table.num_rows == 0 else table.num_rows} rows "
+                 f"with that ic_id")
+        row = {c: table.column(c)[0].as_py() for c in table.column_names}
     ic = np.array([row[c] for c in ("vx", "vy", "vz", "Lx", "Ly", "Lz")], dtype=np.float64)
     pose = None
     if posed:
@@ -320,8 +334,8 @@ def register(app: typer.Typer) -> None:
         ),
         rolls_file: Optional[Path] = typer.Option(
             None, "--rolls", help="A rolls table (a Parquet file of dicetrace's: dicetrace throw, record --parquet, "
-            "a batch's to_arrow): record its throw --ic-id N again, with the table's configuration and the throw's "
-            "own starting pose (qx, qy, qz, qw, z0_cm) where the table has one."
+            "a batch's to_arrow) or a scan folder (dicetrace scan): record its throw --ic-id N again, with the "
+            "table's configuration and the throw's own starting pose (qx, qy, qz, qw, z0_cm) where the table has one."
         ),
         ic_id: Optional[int] = typer.Option(None, "--ic-id", help="With --rolls: the ic_id of the row to record."),
         nudge: Optional[str] = typer.Option(

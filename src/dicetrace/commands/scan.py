@@ -11,6 +11,21 @@ Examples::
     dicetrace scan ... --scheduler tcp://host:8786 # an existing one
     dicetrace scan ... --device cuda               # on a CUDA GPU (numba-cuda)
     dicetrace scan --preset physical ... --events  # exact contact events (a contact_times_s column)
+    dicetrace scan --preset physical --die 2,2,3 --window home --res 64 --out scans/box  # any box
+    dicetrace scan --throw casual --n 100000 --seed 1 --die 2,2,3 --out scans/hand  # hand throws, each its own pose
+    dicetrace scan --throws out/throws/rolls.parquet --out scans/table               # the throws of a table
+
+The die is any box, loaded or not (``--die X,Y,Z``, ``--load W@X,Y,Z``, as
+``simulate`` takes them; the same as ``--set half_extents_cm=...`` with half
+the sides); it is part of the scan's definition, and every chunk's metadata and
+the manifest say it (``"die"``: sides, half-extents, load, centre of mass).
+``--throw MODEL --n N --seed S`` (a hand-throw model of :mod:`dicetrace.throws`)
+and ``--throws FILE`` (a throw table: ``dicetrace throw``'s Parquet, or a CSV
+with the columns vx, vy, vz, Lx, Ly, Lz, qx, qy, qz, qw, z0_cm) scan full
+starting states instead of a slice: each throw from its own orientation and
+height (:mod:`dicetrace.scan.poses`), on the CPU; the rows add
+``qx, qy, qz, qw, z0_cm``, and ``dicetrace record --rolls OUT --ic-id N``
+replays any row exactly.
 
 The output folder holds the rolls table ``rolls/part-*.parquet``, written
 chunk by chunk, and the manifest ``_scan.parquet`` (no rows; the scan's
@@ -66,6 +81,12 @@ from dicetrace.commands._common import (
 )
 from dicetrace.commands.options import (
     DEVICE_HELP,
+    DieOption,
+    LoadOption,
+    body_overrides,
+    die_options,
+    die_text,
+    plain_body,
     INTEGRATOR_HELP,
     PRESET_HELP,
     TOL_GROWTH_HELP,
@@ -87,7 +108,13 @@ from dicetrace.sinks._common import Staging, human_bytes
 from dicetrace.status import Status
 from dicetrace.windows import get_res, get_window
 
-SLICE_HELP = "Slice of IC space: seed (the writeup's 2-D), seed3 (3-D), seed-ortho, seed3-ortho (Gram–Schmidt)."
+SLICE_HELP = ("Slice of IC space: seed (the writeup's 2-D; the default), seed3 (3-D), seed-ortho, seed3-ortho "
+              "(Gram–Schmidt).")
+THROW_HELP = ("Scan hand throws instead of a slice: N (--n) throws drawn from the model casual, gentle or vigorous "
+              "(dicetrace.throws; seeded by --seed), each from its own orientation and height; CPU only.")
+THROWS_HELP = ("Scan the throws of a table instead of a slice: a Parquet file (dicetrace throw's rolls.parquet) or a "
+               "CSV with the columns vx,vy,vz,Lx,Ly,Lz,qx,qy,qz,qw,z0_cm (L in the preset's convention), each throw "
+               "from its own orientation and height; CPU only.")
 WINDOW_HELP = (
     "Window: a name (home, zoom-out, more-out, most-out, red-sea, red-sea-2, party, green-island) "
     "or x0,x1,y0,y1[,z0,z1] with x1 > x0, y1 > y0, z1 > z0 (an axis of one grid point may be a single value)."
@@ -136,20 +163,33 @@ def build_slice(slice_name: str, origin: Optional[str], dirs: Optional[List[str]
     return SLICES[slice_name]
 
 
-def build_space(sl, window, z, res, sample, n, box, seed, points):
-    """The IC space from the options (grid, sample or points), or a one-line failure naming the option.
+def build_space(sl, window, z, res, sample, n, box, seed, points, throw=None):
+    """The IC space from the options (grid, sample, points or hand throws), or a one-line failure naming the option.
 
     Windows, boxes, z ranges and resolutions are read and checked by the one
     parser of each (:func:`dicetrace.windows.get_window`, ``get_res``); the
     spaces check the rest; what they refuse names its option (``config_errors``).
+    ``throw``: the name of a hand-throw model (``--throw``): ``--n`` throws of it,
+    seeded by ``--seed``, on no slice.
     """
-    given = [name for name, v in (("--window/--res", window or res), ("--sample", sample), ("--points", points)) if v]
+    given = [name for name, v in (("--window/--res", window or res), ("--sample", sample), ("--points", points),
+                                  ("--throw", throw)) if v]
     if len(given) > 1:
         fail(f"give one IC space: {' or '.join(given)}, not several")
-    if sample is None:  # an option that would be ignored is refused: it says the user meant something else
+    if sample is None and throw is None:  # an option that would be ignored is refused: it says the user meant something else
         for name, v in (("--n", n), ("--box", box), ("--seed", seed)):
             if v is not None:
-                fail(f"{name} goes with --sample (random or sobol), which is not given")
+                fail(f"{name} goes with --sample (random or sobol) or --throw (a hand-throw model), neither is given")
+    if throw is not None:
+        from dicetrace.scan.poses import HandThrows  # lazy: keeps `dicetrace --help` fast
+
+        for name, v in (("--box", box), ("--z", z)):
+            if v is not None:
+                fail(f"{name} goes with a slice, not with --throw (hand throws lie on no slice)")
+        if n is None:
+            fail("--throw needs --n N (how many throws)")
+        with config_errors(throw="--throw"):
+            return HandThrows(throw, n, 0 if seed is None else seed)
     if points is not None and z is not None:
         fail("--z goes with a named --window or --box on a 3-D slice, not with --points")
     if z is not None and sl.ndim != 3:
@@ -167,12 +207,38 @@ def build_space(sl, window, z, res, sample, n, box, seed, points):
         with config_errors(window="--box"):
             return Sample(sl, get_window(box, sl.ndim, z), n, sample, 0 if seed is None else seed)
     if window is None:
-        fail("give --window NAME or x0,x1,y0,y1[,z0,z1] (with --res), or --sample, or --points")
+        fail("give --window NAME or x0,x1,y0,y1[,z0,z1] (with --res), or --sample, --points, --throw or --throws")
     if res is None:
         fail("--window needs --res N (points per axis), e.g. --res 400 or --res 200,200,50")
     with config_errors():
         shape = get_res(res, sl.ndim)
         return Grid(sl, get_window(window, sl.ndim, z, points=shape), shape)
+
+
+def throws_space(path: Path, l_convention: str, given: dict):
+    """The throws of the table ``--throws FILE`` (:func:`dicetrace.scan.poses.read_throw_table`), or a one-line
+    failure: a file that is no throw table, or another IC space given beside it (``given``: option → value)."""
+    from dicetrace.scan.poses import read_throw_table  # lazy: keeps `dicetrace --help` fast
+
+    others = [name for name, v in given.items() if v is not None]
+    if others:
+        fail(f"--throws gives the throws: drop {', '.join(others)}")
+    try:
+        return read_throw_table(path, l_convention)
+    except ValueError as e:
+        fail(f"--throws {str(path)!r}: {e}")
+
+
+def die_overrides(preset, die: str | None, load: str | None, sets: dict) -> tuple[dict, dict]:
+    """The preset fields of ``--set`` and of ``--die``/``--load`` together, and the option each body field came from
+    (for a refusal's line); one line, exit 2, when both give the same field."""
+    body = body_overrides(die, load)
+    for field, option in (("half_extents_cm", "--die"), ("load_fraction", "--load"), ("load_cm", "--load")):
+        if field in body and field in sets:
+            fail(f"{option} and --set {field} both give the die: give it once ({option}; --set {field}= is the same "
+                 "field, half the sides for half_extents_cm)")
+    renamed = {field: "--set" for field in ("half_extents_cm", "load_fraction", "load_cm") if field in sets}
+    return {**sets, **body}, renamed
 
 
 def parse_overrides(preset, items: List[str]) -> dict:
@@ -310,9 +376,27 @@ def _check_run_size(defn, out: Path, threads, max_chunks, yes: bool, quiet: bool
         say(f"dicetrace: scan: {est.describe()}")
 
 
+def _other_die(out: Path, defn) -> str | None:
+    """The line that refuses resuming the scan in ``out`` with another die than its own (None: the same die, or no
+    scan there that can be read)."""
+    from dicetrace.scan import read_manifest  # lazy: keeps `dicetrace --help` fast (imports numba)
+    from dicetrace.scan.definition import config_from_dict
+
+    try:
+        have = plain_body(config_from_dict(read_manifest(out)["definition"]["config"]).preset)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    want = defn.config.preset
+    if have.body == want.body:
+        return None
+    option = "--die" if have.body.half_extents_cm != want.body.half_extents_cm else "--load"
+    return (f"{option}: {str(out)!r} holds a scan of another die ({die_text(have)}; this run: {die_text(want)}): "
+            f"resume it with {die_options(have)}, or use another --out folder")
+
+
 def _check_out(out: Path, defn) -> None:
-    """Refuse (one line) a folder the scan ``defn`` cannot go into: another scan's, the same run on another
-    device (``--device``), or files that are not a scan."""
+    """Refuse (one line) a folder the scan ``defn`` cannot go into: another scan's (another die's named by its
+    option, ``--die`` or ``--load``), the same run on another device (``--device``), or files that are not a scan."""
     # lazy: keeps `dicetrace --help` fast (imports numba)
     from dicetrace.scan import DeviceMismatchError, ScanMismatchError
     from dicetrace.scan.folder import ScanBusyError, check_folder
@@ -321,7 +405,9 @@ def _check_out(out: Path, defn) -> None:
         check_folder(out, defn)
     except DeviceMismatchError as e:
         fail(f"--device: {e}")
-    except (ScanMismatchError, FileExistsError, ScanBusyError) as e:
+    except ScanMismatchError as e:
+        fail(_other_die(out, defn) or f"--out: {e}")
+    except (FileExistsError, ScanBusyError) as e:
         fail(f"--out: {e}")
 
 
@@ -329,25 +415,30 @@ def register(app: typer.Typer) -> None:
     @app.command("scan")
     def scan_cmd(
         out: Path = typer.Option(..., "--out", help="Output folder: a Parquet dataset, one row per IC, that any reader reads as it is (re-run to resume)."),
-        slice_name: str = typer.Option("seed", "--slice", help=SLICE_HELP),
+        slice_name: Optional[str] = typer.Option(None, "--slice", help=SLICE_HELP),
         window: Optional[str] = typer.Option(None, "--window", help=WINDOW_HELP),
         z: Optional[str] = typer.Option(None, "--z", help="Z0,Z1: the z range with a named window on a 3-D slice (z1 > z0, or z1 = z0 with one z point)."),
         res: Optional[str] = typer.Option(None, "--res", help=RES_HELP),
         sample: Optional[str] = typer.Option(None, "--sample", help="random or sobol: N points in --box instead of a grid."),
-        n: Optional[int] = typer.Option(None, "--n", help="Number of sample points (with --sample only)."),
+        n: Optional[int] = typer.Option(None, "--n", help="Number of sample points (with --sample) or of throws (with --throw)."),
         box: Optional[str] = typer.Option(None, "--box", help="Sample box (with --sample only): a window name or x0,x1,y0,y1[,z0,z1]."),
-        seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the random or scrambled Sobol sample (with --sample only; default 0)."),
+        seed: Optional[int] = typer.Option(None, "--seed", help="Seed of the random or scrambled Sobol sample (with --sample) or of the hand throws (with --throw); default 0."),
         points: Optional[Path] = typer.Option(None, "--points", help="CSV of slice coordinates (columns x,y[,z])."),
+        throw: Optional[str] = typer.Option(None, "--throw", help=THROW_HELP),
+        throws: Optional[Path] = typer.Option(None, "--throws", help=THROWS_HELP),
         origin: Optional[str] = typer.Option(None, "--origin", help="Custom slice origin VX,VY,VZ,LX,LY,LZ."),
         dirs: Optional[List[str]] = typer.Option(None, "--dir", help="Custom slice direction (6 numbers; 1 to 3 times)."),
         preset: str = typer.Option("seed", "--preset", help=PRESET_HELP),
+        die: DieOption = None,
+        load: LoadOption = None,
         integrator: Optional[str] = typer.Option(None, "--integrator", help=INTEGRATOR_HELP),
         dt: Optional[str] = typer.Option(None, "--dt", help="Time step, s (default 0.001), or 'auto' (chosen from the stiffness k for a 300 cm/s impact; 0.001 for the error-controlled schemes; refused when no step fits)."),
         t_max: Optional[str] = typer.Option(None, "--t-max", help="Time cap, s (default 60)."),
         tol: Optional[str] = typer.Option(None, "--tol", help=TOL_HELP),
         tol_growth: Optional[str] = typer.Option(None, "--tol-growth", help=TOL_GROWTH_HELP),
         sets: Optional[List[str]] = typer.Option(
-            None, "--set", help="Override a preset parameter, NAME=VALUE (e.g. gamma=0.01, mu=0.6, k=1e6); repeatable."
+            None, "--set", help="Override a preset parameter, NAME=VALUE (e.g. gamma=0.01, mu=0.6, k=1e6; the die: "
+            "half_extents_cm=X,Y,Z, half the sides that --die takes); repeatable."
         ),
         chunk: Optional[int] = typer.Option(None, "--chunk", help="ICs per chunk file / Dask task (default 8192; "
                                             "262144 on a GPU, whose launches want that many throws)."),
@@ -367,18 +458,30 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar or summary."),
         events: ScanEventsOption = False,
     ) -> None:
-        """Scan a slice (grid), a sample or a list of points of IC space; one row per IC."""
+        """Scan a slice (grid), a sample or a list of points of IC space, or hand throws; one row per IC."""
         # lazy: keeps `dicetrace --help` fast (imports numba)
         from dicetrace.scan import DEFAULT_CHUNK, GPU_DEFAULT_CHUNK, DeviceMismatchError, ScanDefinition, ScanMismatchError, scan
         from dicetrace.scan.dask import SchedulerError, _open_dask, check_scheduler_address, local_worker_count, worker_device
         from dicetrace.scan.folder import ScanBusyError
         from dicetrace.scan.folder import _check_space_finite
 
-        sl = build_slice(slice_name, origin, dirs)
-        space = build_space(sl, window, z, res, sample, n, box, seed, points)
         model = preset_or_fail(preset)  # looked up once: the --set fields, then the config
-        cfg = build_config(model, integrator, dt, t_max, tol=tol, tol_growth=tol_growth,
-                           overrides=parse_overrides(model, sets or []))
+        changes, renamed = die_overrides(model, die, load, parse_overrides(model, sets or []))
+        cfg = build_config(model, integrator, dt, t_max, tol=tol, tol_growth=tol_growth, overrides=changes,
+                           renamed=renamed)
+        cfg = replace(cfg, preset=plain_body(cfg.preset))  # --die 2,2,2 is the cube: one scan, one definition
+        if throws is not None:
+            space = throws_space(throws, cfg.preset.l_convention, {
+                "--slice": slice_name, "--origin": origin, "--dir": dirs or None, "--window": window, "--z": z,
+                "--res": res, "--sample": sample, "--n": n, "--box": box, "--seed": seed, "--points": points,
+                "--throw": throw})
+        else:
+            if throw is not None:
+                for name, v in (("--slice", slice_name), ("--origin", origin), ("--dir", dirs or None)):
+                    if v is not None:
+                        fail(f"{name} gives a slice: --throw scans hand throws, which lie on no slice")
+            sl = build_slice(slice_name or "seed", origin, dirs)
+            space = build_space(sl, window, z, res, sample, n, box, seed, points, throw)
         if chunk is not None and chunk < 1:
             fail(f"--chunk must be >= 1, got {chunk}")
         if threads is not None and threads < 1:
@@ -403,6 +506,9 @@ def register(app: typer.Typer) -> None:
         events = events_or_fail(cfg, events)
         if png is not None and (space.kind != "grid" or space.ndim < 2):
             fail("--png draws 2-D and 3-D grid scans only (use --rrd for samples, points and 1-D slices)")
+        if rrd is not None and space.kind in ("throws", "throw-table"):
+            fail("--rrd draws the scan map of a slice: throws from their own poses lie on no slice (record a row "
+                 "with dicetrace record --rolls OUT --ic-id N)")
         if scheduler is None:  # here (and a local --dask cluster's workers): resolved now, before any work
             label = device_or_fail(device)
         else:  # the cluster's workers resolve it, once connected (below)
@@ -422,7 +528,8 @@ def register(app: typer.Typer) -> None:
         try:
             _check_space_finite(defn)
         except ValueError as e:
-            where = {"grid": "--window", "sample": "--box"}.get(space.kind, "--points")
+            where = {"grid": "--window", "sample": "--box", "throw-table": f"--throws {str(throws)!r}"}.get(
+                space.kind, "--points")
             fail(f"{where}: {e}")
         if label is not None:
             _check_out(out_dir, defn)

@@ -8,7 +8,7 @@ threads, so the event loop keeps answering while they compute.
 Endpoints::
 
     GET  /                      the page (its view in the URL query)
-    GET  /api/view              the normalised view: its query, axes, limits, the device the maps run on
+    GET  /api/view              the normalised view: its query, axes, limits, the device the maps run on, the die
     GET  /api/map.png           the outcome map, one pixel per grid point, y up (pass=preview/coarse: about 1/16, 1/4 resolution)
     GET  /api/map.json          the same map's outcome labels, [i][j] with i along x
     GET  /api/map.strips        the refined map as it is computed: NDJSON, a line per strip of image rows, then "done"
@@ -46,6 +46,7 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
+from dicetrace.commands.options import die_text
 from dicetrace.explore.compare import compare_endpoint
 from dicetrace.explore.compute import (Busy, OverBudget, Worker, check_recording, scan_folder_for, throw_aspect,
                                        throw_info, throw_rrd)
@@ -242,7 +243,8 @@ def create_app(default: View | None = None, *, out: Path | None = None, threads:
     async def view_info(request: Request) -> Response:
         v = _view(request, default)
         return JSONResponse({"query": v.to_query(), "window": v.window, "res": v.res, "ndim": v.ndim,
-                             "limits": {"res": [MIN_RES, MAX_RES]}, "device": worker.device})
+                             "limits": {"res": [MIN_RES, MAX_RES]}, "device": worker.device,
+                             "die": die_text(v.config().preset)})
 
     async def _map(request: Request):
         v = _view(request, default)

@@ -3,7 +3,7 @@
 ``GET /api/compare.rrd?t=THROW&t=THROW...`` (2 to :data:`MAX_THROWS` ``t``): each ``THROW`` is the
 query string of one throw as ``/api/throw.rrd`` takes it (its view's parameters and its grid point
 ``i``, ``j``), URL-encoded, so throws picked in different views (after a zoom or a pan) can be compared.
-The throws must share their configuration (preset, integrator, γ, dt): the comparison steps them together.
+The throws must share their configuration (preset, integrator, γ, dt, die): the comparison steps them together.
 The recording is :func:`dicetrace.sinks.rerun_compare.compare_logger`'s, throw 1 (the first picked)
 the reference, with :func:`~dicetrace.sinks.rerun_compare.compare_blueprint` made active for Rerun's
 web viewer, its camera framing for the viewer's ``aspect`` (``download=1``: default only and the default
@@ -51,7 +51,7 @@ def parse_throws(values, default: View) -> list[tuple[View, int, int]]:
         if not (0 <= i < nx and 0 <= j < ny):
             raise ViewError("t", f"throw {k + 1}: pixel ({i}, {j}) outside its {nx}×{ny} map")
         if k and v.config() != out[0][0].config():
-            raise ViewError("t", f"throw {k + 1} has another configuration (preset, integrator, γ, dt) than throw 1: "
+            raise ViewError("t", f"throw {k + 1} has another configuration (preset, integrator, γ, dt, die) than throw 1: "
                                  "throws are compared step by step under one configuration")
         out.append((v, i, j))
     return out

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dicetrace.commands.options import die_text, fmt_num
 from dicetrace.devices import resolve_device
 from dicetrace.explore.outcome_map import Cancelled, MapBuild, OutcomeMap
 from dicetrace.explore.view import View, ViewError
@@ -93,6 +94,7 @@ def throw_info(view: View, i: int, j: int) -> dict:
         "preset": cfg.preset.name,
         "integrator": cfg.numerics.integrator,
         "dt_s": cfg.numerics.dt_s,
+        "die": die_text(cfg.preset),
     }
 
 
@@ -101,6 +103,10 @@ def throw_name(view: View, coords) -> str:
     parts = [view.slice] + [f"{a}{c!r}" for a, c in zip("xyz", coords)]
     if view.preset != "seed":
         parts.append(view.preset)
+    if view.die is not None:
+        parts.append("die" + "x".join(fmt_num(v) for v in view.die))
+    if view.load is not None:
+        parts.append("load" + fmt_num(view.load[0]) + "at" + ",".join(fmt_num(v) for v in view.load[1:]))
     return "_".join(parts)
 
 

@@ -87,6 +87,8 @@ _TEMPLATE = r"""<!doctype html>
  <label>integrator <select id="integrator">%INTEGRATORS%</select></label>
  <label>γ <input id="gamma" class="num" placeholder="preset's"></label>
  <label>dt <input id="dt" class="num" placeholder="default"></label>
+ <label>die <input id="die" class="num" placeholder="cube" title="the box's sides X,Y,Z in cm (e.g. 2,2,3); a box or loaded die needs the physical preset"></label>
+ <label>load <input id="load" class="num" placeholder="none" title="W@X,Y,Z: a share W of the mass at the body-frame point X,Y,Z (cm)"></label>
  <label>res <input id="res" class="num"></label>
  <button id="apply">apply</button>
  <button id="back">back</button><button id="reset">reset</button>
@@ -97,7 +99,7 @@ _TEMPLATE = r"""<!doctype html>
  <span id="status"></span>
 </div>
 <div id="error" role="alert"></div>
-<div>%LEGEND% <span class="ax" id="device">maps on %DEVICE%;</span> <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to compare more throws with it</span></div>
+<div>%LEGEND% <span class="ax" id="dieshown" aria-label="the die shown"></span> <span class="ax" id="device">maps on %DEVICE%;</span> <span class="ax">drag a box to zoom, wheel to zoom, click a point to see its throw, shift-click to compare more throws with it</span></div>
 <div id="main">
  <div>
   <div id="plot"><div id="yaxis" class="ax" aria-label="y axis"></div>
@@ -148,6 +150,7 @@ async function load(q, push) {
   if (my !== seq) return;                        // a newer view took over while this one was checked
   if (!r.ok) { showError("Bad view parameter " + (j.param || "") + ": " + j.error); setStatus("", false); document.body.dataset.state = "error"; return; }
   view = j.query; window4 = [j.window[0][0], j.window[0][1], j.window[1][0], j.window[1][1]]; res = j.res;
+  $("dieshown").textContent = "die: " + j.die + ";";
   if (push) history.pushState(view, "", "?" + qs(view));
   else history.replaceState(view, "", "?" + qs(view));
   fillControls();
@@ -210,7 +213,7 @@ async function refine(my, c, t0) {
 
 function fillControls() {
   for (const k of ["slice", "preset", "integrator"]) $(k).value = view[k] || "";
-  for (const k of ["gamma", "dt", "z"]) $(k).value = view[k] || "";
+  for (const k of ["gamma", "dt", "z", "die", "load"]) $(k).value = view[k] || "";
   $("res").value = view.res;
   drawAxes();
   $("savebox").style.display = CFG.canSave ? "" : "none";
@@ -350,9 +353,9 @@ function viewerEvent(text) {
 // A click shows that throw in the viewer (record's recording); a shift-click adds it to the picked ones, and the
 // viewer is given one compare recording of them all (record --ic A --ic B's: every die, their divergence from
 // throw 1), in place of what it showed.  Throws are compared under one configuration: a shift-click after the
-// preset, integrator, γ or dt changed starts again from that throw.
+// preset, integrator, γ, dt or die changed starts again from that throw.
 const MAX_COMPARE = CFG.maxCompare;
-const CONFIG_KEYS = ["preset", "integrator", "gamma", "dt"];
+const CONFIG_KEYS = ["preset", "integrator", "gamma", "dt", "die", "load"];
 let opened = [];          // the URLs open in the viewer
 function sameConfig(a, b) { return CONFIG_KEYS.every((k) => (a[k] || "") === (b[k] || "")); }
 function absolute(path) { return new URL(path, location.href).href; }
@@ -424,7 +427,7 @@ fitViewer();
 
 $("apply").onclick = () => {
   const q = {...view};
-  for (const k of ["slice", "preset", "integrator", "gamma", "dt", "z", "res"]) { const v = $(k).value.trim(); if (v) q[k] = v; else delete q[k]; }
+  for (const k of ["slice", "preset", "integrator", "gamma", "dt", "z", "res", "die", "load"]) { const v = $(k).value.trim(); if (v) q[k] = v; else delete q[k]; }
   load(q, true);
 };
 $("back").onclick = () => history.back();

@@ -266,11 +266,13 @@ def make_server(app, sock: socket.socket, *, max_connections: int | None = None,
 
 
 def make_view(slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
-              gamma=None, dt=None, z=None) -> View:
-    """A :class:`View` from keyword options as the command line gives them (ViewError naming a bad one)."""
+              gamma=None, dt=None, z=None, die=None, load=None) -> View:
+    """A :class:`View` from keyword options as the command line gives them (ViewError naming a bad one); ``die``
+    and ``load`` as ``--die X,Y,Z`` and ``--load W@X,Y,Z`` give them."""
     q = {"slice": slice, "preset": preset}
     q["window"] = window if isinstance(window, str) else ",".join(repr(float(v)) for pair in window for v in pair)
-    for name, v in (("res", res), ("integrator", integrator), ("gamma", gamma), ("dt", dt), ("z", z)):
+    for name, v in (("res", res), ("integrator", integrator), ("gamma", gamma), ("dt", dt), ("z", z), ("die", die),
+                    ("load", load)):
         if v is not None:
             q[name] = v if isinstance(v, str) else (",".join(map(str, v)) if isinstance(v, tuple) else str(v))
     return view_from_query(q)
@@ -289,7 +291,7 @@ class Explorer:
     """
 
     def __init__(self, slice: str = "seed", window="red-sea", *, res=None, preset: str = "seed", integrator=None,
-                 gamma=None, dt=None, z=None, out=None, host: str = DEFAULT_HOST, port: int = 0,
+                 gamma=None, dt=None, z=None, die=None, load=None, out=None, host: str = DEFAULT_HOST, port: int = 0,
                  threads: int | None = None, map_budget_s: float | None = None, start: bool = True,
                  height: int = 900, device: str = "cpu"):
         host, port = check_host(host), check_port(port)  # before anything starts (ValueError naming the parameter)
@@ -297,7 +299,8 @@ class Explorer:
         self.device = resolve_device(device)  # a Device, resolved once here
         if isinstance(height, bool) or not isinstance(height, (int, np.integer)) or height < 1:
             raise ValueError(f"height must be a whole number of pixels >= 1, got {height!r}")
-        self.view = make_view(slice, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z)
+        self.view = make_view(slice, window, res=res, preset=preset, integrator=integrator, gamma=gamma, dt=dt, z=z,
+                              die=die, load=load)
         self.out = None if out is None else Path(out)
         self.host, self.port, self.threads, self.height = host, port, threads, int(height)
         self.map_budget_s = map_budget_s

@@ -2,8 +2,9 @@
 
 A :class:`View` is a slice, a 2-D window of it (``x0,x1,y0,y1``; the third
 coordinate ``z`` of a 3-D slice is fixed per view), a resolution and a
-configuration (preset, integrator, damping γ, time step), built once with
-the view (:meth:`View.config`).  It round-trips through a URL query
+configuration (preset, integrator, damping γ, time step, and the die: ``die``
+its sides X,Y,Z in cm and ``load`` W@X,Y,Z, as ``--die`` and ``--load`` give
+them), built once with the view (:meth:`View.config`).  It round-trips through a URL query
 (:meth:`View.to_query` / :func:`view_from_query`), so a view can be shared
 and reopened.  The window and resolution are read by the one parser of
 each (:func:`dicetrace.windows.get_window`, ``get_res``), the configuration
@@ -26,6 +27,7 @@ from urllib.parse import urlencode
 
 from dicetrace.ics import SLICES, Grid, get_slice
 from dicetrace import params
+from dicetrace.commands.options import BodyTextError, fmt_num, parse_body, plain_body
 from dicetrace.params import ConfigError
 from dicetrace.windows import WINDOWS, get_res, get_window
 
@@ -62,7 +64,11 @@ class View:
     ``dicetrace scan`` grid), ``z`` the third coordinate of a 3-D slice.
     ``window`` may also be a name or ``"x0,x1,y0,y1"``, ``res`` ``"N"`` or
     ``"NX,NY"``: they are read into those forms.  ``gamma`` and ``dt`` None
-    mean the preset's and the default.
+    mean the preset's and the default.  ``die``: the sides (X, Y, Z) of the
+    box, cm, or their text ``"X,Y,Z"`` (None: the preset's cube); ``load``:
+    (W, X, Y, Z), a share W of the mass at the body-frame point (X, Y, Z),
+    or its text ``"W@X,Y,Z"`` (None: none).  A box or loaded die runs on the
+    continuous contact integrators (the ``physical`` preset's).
     """
 
     slice: str = "seed"
@@ -73,11 +79,15 @@ class View:
     gamma: float | None = None
     dt: float | None = None
     z: float | None = None
+    die: tuple[float, float, float] | None = None
+    load: tuple[float, float, float, float] | None = None
     _config: object = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "window", _read("window", get_window, self.window, 2))
         object.__setattr__(self, "res", _read("res", get_res, self.res, 2))
+        object.__setattr__(self, "die", _body_value("die", self.die, 3))
+        object.__setattr__(self, "load", _body_value("load", self.load, 4))
         _validate(self)
         object.__setattr__(self, "_config", _make_config(self))
 
@@ -108,7 +118,8 @@ class View:
 
     def key(self) -> tuple:
         """Hashable identity (what a cached map is keyed by)."""
-        return (self.slice, self.window, self.res, self.preset, self.integrator, self.gamma, self.dt, self.z)
+        return (self.slice, self.window, self.res, self.preset, self.integrator, self.gamma, self.dt, self.z,
+                self.die, self.load)
 
     def to_query(self) -> dict[str, str]:
         """URL query parameters that :func:`view_from_query` turns back into this view."""
@@ -123,6 +134,8 @@ class View:
             v = getattr(self, name)
             if v is not None:
                 q[name] = v if isinstance(v, str) else repr(float(v))
+        text = body_texts(self)
+        q.update({name: t for name, t in text.items() if t is not None})
         return q
 
     def query_string(self) -> str:
@@ -151,6 +164,36 @@ def pass_res(n: int, factor: int) -> int:
     if near:
         return min(near, key=lambda c: abs(math.log(c / target)))
     return max(MIN_RES, -(-n // factor))
+
+
+def body_texts(v: View) -> dict:
+    """The view's die and load as ``--die`` and ``--load`` write them (``"2,2,3"``, ``"0.3@-0.9,0,0"``; None where
+    not given)."""
+    die = None if v.die is None else ",".join(fmt_num(x) for x in v.die)
+    load = None if v.load is None else f"{fmt_num(v.load[0])}@" + ",".join(fmt_num(x) for x in v.load[1:])
+    return {"die": die, "load": load}
+
+
+def _body_value(param: str, value, count: int):
+    """``die`` (sides X, Y, Z) or ``load`` (W, X, Y, Z) as numbers, from their text (read by ``--die`` and
+    ``--load``'s one reader, :func:`dicetrace.commands.options.parse_body`) or numbers; ViewError naming it."""
+    if value is None or value == "":
+        return None
+    if not isinstance(value, str):
+        try:
+            nums = tuple(float(x) for x in value)
+        except (TypeError, ValueError):
+            raise ViewError(param, f"must be {count} numbers, got {value!r}") from None
+        value = ",".join(repr(x) for x in nums) if param == "die" or len(nums) != 4 else \
+            f"{nums[0]!r}@{nums[1]!r},{nums[2]!r},{nums[3]!r}"
+    value = str(value)[:200]
+    try:
+        fields = parse_body(value, None) if param == "die" else parse_body(None, value)
+    except BodyTextError as e:
+        raise ViewError(param, e.message) from None
+    if param == "die":
+        return tuple(2.0 * h for h in fields["half_extents_cm"])
+    return (fields["load_fraction"], *fields["load_cm"])
 
 
 def _num(param: str, text) -> float:
@@ -203,21 +246,26 @@ def _validate(v: View) -> None:
 
 
 #: The query parameter that sets each field a ConfigError names (any other: the preset's).
-CONFIG_PARAMS = {"preset": "preset", "integrator": "integrator", "dt_s": "dt", "gamma": "gamma"}
+CONFIG_PARAMS = {"preset": "preset", "integrator": "integrator", "dt_s": "dt", "gamma": "gamma",
+                 "half_extents_cm": "die", "load_fraction": "load", "load_cm": "load"}
 
 
 def _make_config(v: View):
     """The view's Config, by :func:`dicetrace.params.make_config` (the one validator); its ConfigError as a ViewError
-    naming the query parameter."""
+    naming the query parameter.  Its die is written one way (``plain_body``: the sides of the preset's cube are the
+    cube), as a scan writes it."""
     overrides = {} if v.gamma is None else {"gamma": v.gamma}
+    text = body_texts(v)
+    overrides.update(parse_body(text["die"], text["load"]))
     try:
-        return params.make_config(v.preset, integrator=v.integrator, dt_s=v.dt, **overrides)
+        cfg = params.make_config(v.preset, integrator=v.integrator, dt_s=v.dt, **overrides)
     except ConfigError as e:
         raise ViewError(CONFIG_PARAMS.get(e.field, "preset"), e.message) from None
+    return replace(cfg, preset=plain_body(cfg.preset))
 
 
 #: The query parameters a view reads.
-VIEW_PARAMS = ("slice", "window", "res", "preset", "integrator", "gamma", "dt", "z")
+VIEW_PARAMS = ("slice", "window", "res", "preset", "integrator", "gamma", "dt", "z", "die", "load")
 
 
 def view_from_query(q, default: View | None = None) -> View:
@@ -234,7 +282,7 @@ def view_from_query(q, default: View | None = None) -> View:
             kw[name] = str(q[name])
     if "preset" in q:
         kw["preset"] = str(q["preset"])
-    for name in ("integrator",):
+    for name in ("integrator", "die", "load"):
         if name in q:
             kw[name] = str(q[name]) or None
     for name in ("gamma", "dt", "z"):

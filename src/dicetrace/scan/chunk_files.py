@@ -282,7 +282,7 @@ def verify_unlogged(path: Path, defn: ScanDefinition, c: int) -> str | None:
     why = _columns_why(table.schema, defn)
     if why is not None:
         return why
-    blk = defn.space.block(start, stop)
+    blk = defn.block(start, stop)
 
     def column(name):
         return table.column(name).to_numpy(zero_copy_only=False)
@@ -294,4 +294,8 @@ def verify_unlogged(path: Path, defn: ScanDefinition, c: int) -> str | None:
     coords = np.stack([column(n).astype(np.float64) for n in "xyz"], axis=1)
     if not np.array_equal(coords, blk.coords, equal_nan=True):
         return f"its slice coordinates are not chunk {c}'s"
+    if defn.posed:
+        pose = np.stack([column(n) for n in ("qx", "qy", "qz", "qw", "z0_cm")], axis=1)
+        if not np.array_equal(pose, np.c_[blk.orientations, blk.heights_cm]):
+            return f"its poses (qx, qy, qz, qw, z0_cm) are not chunk {c}'s"
     return chunk_identity(path, defn, c, schema=table.schema)

@@ -19,6 +19,7 @@ import numpy as np
 
 from dicetrace.ics import MAX_AXIS_POINTS, MAX_ICS, Grid, IcSpace, Points, Sample, space_from_dict
 from dicetrace.params import Config, ConfigError, Numerics, Preset, _show
+from dicetrace.scan.poses import POSED_KINDS, HandThrows, ThrowTable, posed_from_dict, space_l_convention
 
 FORMAT = "dicetrace-scan/1"
 #: ICs per chunk (one Parquet file, one Dask task): ~0.3 s of work on one core.
@@ -58,6 +59,11 @@ class ScanDefinition:
     ``events``: the rows hold the exact contact events (``simulate_batch(...,
     events=True)``: the contact sets inside the sub-steps and a column
     ``contact_times_s``); the contact integrators only.
+    ``space`` may also be a space of full starting states
+    (:mod:`dicetrace.scan.poses`: hand throws drawn from a model, or a throw
+    table's rows), whose rows add the pose columns ``qx, qy, qz, qw, z0_cm``;
+    such throws run on the CPU.  The die is the configuration's
+    (``config.preset.body``: any box, loaded or not); :attr:`die` says it.
     """
 
     space: IcSpace
@@ -67,8 +73,9 @@ class ScanDefinition:
     events: bool = DEFAULT_EVENTS
 
     def __post_init__(self) -> None:
-        if not isinstance(self.space, (Grid, Sample, Points)):
-            raise TypeError(f"space must be a Grid, Sample or Points (dicetrace.ics), not {type(self.space).__name__}")
+        if not isinstance(self.space, (Grid, Sample, Points, HandThrows, ThrowTable)):
+            raise TypeError(f"space must be a Grid, Sample or Points (dicetrace.ics), or HandThrows or ThrowTable "
+                            f"(dicetrace.scan.poses), not {type(self.space).__name__}")
         if not isinstance(self.config, Config):
             raise TypeError(f"config must be a dicetrace.params.Config, not {type(self.config).__name__}")
         c = self.chunk
@@ -91,8 +98,11 @@ class ScanDefinition:
                 check_events(self.config, True)
             except ValueError as e:
                 raise ConfigError("events", str(e)) from None
+        if self.posed and self.device != "cpu":
+            raise ConfigError("device", f"throws from their own poses ({self.space.kind}) run on the CPU, not on "
+                              f"{self.device}")
         size = self.space.size
-        what = {"grid": "res", "sample": "n"}.get(self.space.kind, "points")  # what sets the size
+        what = {"grid": "res", "sample": "n", "throws": "n"}.get(self.space.kind, "points")  # what sets the size
         if size > MAX_ICS:
             raise ConfigError(
                 what, f"the space has {size:,} ICs ({size:.3g}): more than a scan can number (ic_id is int64, at most {MAX_ICS:.3g})"
@@ -106,6 +116,27 @@ class ScanDefinition:
     @property
     def size(self) -> int:
         return self.space.size
+
+    @property
+    def posed(self) -> bool:
+        """Whether each throw starts from its own pose (a space of :mod:`dicetrace.scan.poses`)."""
+        return isinstance(self.space, (HandThrows, ThrowTable))
+
+    @property
+    def l_convention(self) -> str:
+        """The L convention of the ICs the space gives (converted to the preset's before the throws)."""
+        return space_l_convention(self.space, self.config) if self.posed else self.space.slice.l_convention
+
+    def block(self, start: int, stop: int):
+        """The ICs ``start..stop-1`` (an :class:`~dicetrace.ics.IcBlock`, or a
+        :class:`~dicetrace.scan.poses.PosedBlock` with each throw's orientation and height)."""
+        return self.space.block(start, stop, self.config) if self.posed else self.space.block(start, stop)
+
+    @property
+    def die(self) -> dict:
+        """The die the throws are of, as the tables' metadata says it: its sides and half-extents (cm), the share
+        of its mass in a load and where (cm, body frame, from the box's centre), its centre of mass."""
+        return die_dict(self.config.preset)
 
     @property
     def n_chunks(self) -> int:
@@ -127,16 +158,21 @@ class ScanDefinition:
         one stored before scans could hold events holds none)."""
         if d.get("format") != FORMAT:
             raise ValueError(f"not a {FORMAT} scan definition (format {d.get('format')!r})")
-        return cls(space_from_dict(d["space"]), config_from_dict(d["config"]), d["chunk"],
-                   d.get("device", DEFAULT_DEVICE), d.get("events", DEFAULT_EVENTS))
+        space = d["space"]
+        space = posed_from_dict(space) if space.get("kind") in POSED_KINDS else space_from_dict(space)
+        return cls(space, config_from_dict(d["config"]), d["chunk"], d.get("device", DEFAULT_DEVICE),
+                   d.get("events", DEFAULT_EVENTS))
 
     @property
     def schema(self):
         """The Arrow schema of the scan's rows: ``GRID_ROLLS_SCHEMA``, with ``contact_times_s`` where it holds
-        exact contact events."""
-        from dicetrace.tables import GRID_ROLLS_EVENTS_SCHEMA, GRID_ROLLS_SCHEMA  # lazy: pyarrow
+        exact contact events, then ``qx, qy, qz, qw, z0_cm`` where its throws start from their own poses."""
+        from dicetrace.tables import GRID_ROLLS_EVENTS_SCHEMA, GRID_ROLLS_SCHEMA, POSE_FIELDS  # lazy: pyarrow
 
-        return GRID_ROLLS_EVENTS_SCHEMA if self.events else GRID_ROLLS_SCHEMA
+        schema = GRID_ROLLS_EVENTS_SCHEMA if self.events else GRID_ROLLS_SCHEMA
+        for f in POSE_FIELDS if self.posed else ():
+            schema = schema.append(f)
+        return schema
 
     def canonical(self) -> str:
         """Canonical JSON: :meth:`to_dict` with sorted keys (made once per definition: a scan of points holds
@@ -152,6 +188,14 @@ class ScanDefinition:
         if text is None:
             text = self.__dict__["_digest"] = hashlib.sha256(self.canonical().encode()).hexdigest()
         return text
+
+
+def die_dict(preset: Preset) -> dict:
+    """The die of ``preset`` for a table's metadata (see :attr:`ScanDefinition.die`)."""
+    body = preset.body
+    return {"sides_cm": [2.0 * v for v in body.half_extents_cm], "half_extents_cm": list(body.half_extents_cm),
+            "load_fraction": body.load_fraction, "load_cm": list(body.load_cm),
+            "com_cm": [float(v) for v in body.com_cm], "cube": body.is_cube}
 
 
 def as_written_now(d):

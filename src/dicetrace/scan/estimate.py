@@ -185,14 +185,19 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
         return est
     n = min(CALIBRATION_ICS, defn.size)
     ids = sorted({int(round(v)) for v in np.linspace(0, defn.size - 1, n)})
-    ics = np.concatenate([defn.space.block(i, i + 1).ics for i in ids]).reshape(-1, 6)
+    blocks = [defn.block(i, i + 1) for i in ids]
+    ics = np.concatenate([b.ics for b in blocks]).reshape(-1, 6)
+    poses = {}
+    if defn.posed:  # each throw from its own pose, as the scan throws it
+        poses = {"orientations": np.concatenate([b.orientations for b in blocks]),
+                 "heights_cm": np.concatenate([b.heights_cm for b in blocks])}
     num = defn.config.numerics
     cal_steps = min(max_steps, CALIBRATION_STEPS)
     cal = replace(defn.config, numerics=replace(num, t_max_s=min(num.t_max_s, cal_steps * num.dt_s)))
-    conv = defn.space.slice.l_convention
+    conv = defn.l_convention
 
     def probe():
-        return simulate_batch(ics, config=cal, l_convention=conv, threads=1, events=defn.events)
+        return simulate_batch(ics, config=cal, l_convention=conv, threads=1, events=defn.events, **poses)
 
     # Warm throughput only: the first run compiles (or loads from the cache) every kernel these throws reach --
     # numba compiles some only when a throw first needs them -- and is not timed.  Then the probe is timed over
@@ -213,7 +218,7 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     full = np.where(capped, float(max_steps), steps)
     per_ic = cpu / len(ids) * (full.sum() / max(steps.sum(), 1.0))
     fast_steps = _fast_slice(cal)
-    if capped.any() and fast_steps is not None and max_steps > fast_steps:
+    if capped.any() and fast_steps is not None and max_steps > fast_steps and not defn.posed:
         # the seed path's specialised kernel gives a throw past its long slice to the run loop, whose steps cost
         # more: the steps beyond that slice are costed at the loop's rate, timed on the capped throws
         per_step = cpu / max(steps.sum(), 1.0)

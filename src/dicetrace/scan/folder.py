@@ -139,8 +139,12 @@ def _check_int(value, name: str, lo: int, *, none: bool = True) -> int | None:
 
 
 def _check_space_finite(defn: ScanDefinition) -> None:
-    """Refuse a space whose ICs overflow: the corners of a window or box (an IC is affine in its coordinates), or every point."""
+    """Refuse a space whose ICs overflow: the corners of a window or box (an IC is affine in its coordinates), or every
+    point; a space of throws from their own poses, a throw that would start below the table (``space.check``)."""
     space = defn.space
+    if defn.posed:
+        space.check(defn.config)
+        return
     if isinstance(space, (Grid, Sample)):
         box = space.window if isinstance(space, Grid) else space.box
         coords = np.array(list(itertools.product(*box)), dtype=np.float64)
@@ -176,14 +180,17 @@ def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, c
     for a GPU scan, or where its GPU is another than the scan's.
     """
     start, stop = defn.chunk_range(c)
-    blk = defn.space.block(start, stop)
+    blk = defn.block(start, stop)
+    poses = {"orientations": blk.orientations, "heights_cm": blk.heights_cm} if defn.posed else {}
     batch = simulate_batch(
-        blk.ics, config=defn.config, l_convention=defn.space.slice.l_convention, threads=threads, cap=cap,
-        device=_resolved(defn.device), events=defn.events,
+        blk.ics, config=defn.config, l_convention=defn.l_convention, threads=threads, cap=cap,
+        device=_resolved(defn.device), events=defn.events, **poses,
     )
     if batch.device != defn.device:
         raise DeviceError(f"chunk {c} ran on {batch.device}, the scan runs on {defn.device}: "
                           "one scan runs on one device (its throws may differ by rounding from one to another)")
+    if defn.posed:  # each pose as given, not read back off its matrix: a replay makes the same matrix of it
+        batch.orientations = blk.orientations
     return rolls_table(batch, coords=blk.coords, ic_ids=blk.ic_id, index=blk.index)
 
 
@@ -200,6 +207,7 @@ def chunk_metadata(defn: ScanDefinition, c: int) -> dict:
         "config": defn.config.as_dict(),
         "l_convention": defn.config.preset.l_convention,
         "device": defn.device,
+        "die": defn.die,
         "chunk_index": c,
         "ic_range": [start, stop],
     }
@@ -546,6 +554,7 @@ def prepare_folder(folder, defn: ScanDefinition) -> set[int]:
             "format": defn.to_dict()["format"],
             "dicetrace_version": _version(),
             "definition": defn.to_dict(),
+            "die": defn.die,
             "n_ics": defn.size,
             "n_chunks": defn.n_chunks,
             "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

@@ -134,8 +134,29 @@ def read_scan_table(folder, columns=None, filter=None) -> pa.Table:
             table = table.select(cols)
     else:
         table = _dataset_table(files, cols, filter).sort_by("ic_id")
-    meta = {"scan": manifest["definition"], "dicetrace_version": manifest.get("dicetrace_version")}
+    meta = {"scan": manifest["definition"], "dicetrace_version": manifest.get("dicetrace_version"),
+            "die": ScanDefinition.from_dict(manifest["definition"]).die}
     return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, sort_keys=True).encode()})
+
+
+def scan_row(folder, ic_id: int):
+    """Row ``ic_id`` of a scan folder and the configuration that throws it again: ``(config, row)``, ``row`` a dict
+    of its columns (None where the finished chunks hold no such row).
+
+    ``simulate(ic, config=config, orientation=R)`` reproduces the row's
+    outcome, steps and contact sequence, with ``ic`` its ``vx .. Lz`` (the
+    preset's L convention) and, for a scan of throws from their own poses
+    (the row has ``qx, qy, qz, qw, z0_cm``), ``R`` the rotation of its
+    quaternion (``validate_orientations``) and ``config``'s ``z0_cm`` the
+    row's own.
+    """
+    if isinstance(ic_id, bool) or not isinstance(ic_id, (int, np.integer)):
+        raise TypeError(f"ic_id must be an integer, not {type(ic_id).__name__}")
+    defn = scan_definition(folder)
+    t = read_scan_table(folder, filter=pads.field("ic_id") == int(ic_id))
+    if t.num_rows == 0:
+        return defn.config, None
+    return defn.config, {name: t.column(name)[0].as_py() for name in t.column_names}
 
 
 def _column_counts(folder, column: str) -> dict:
@@ -244,6 +265,9 @@ def ic_at(folder, coords, *, tol: float | None = None):
     if not np.all(np.isfinite(c)):
         raise ValueError("coords must be finite numbers")
     nd = defn.space.ndim
+    if defn.posed:
+        raise ValueError(f"the scan's throws ({defn.space.kind}) start from their own poses and lie on no slice: "
+                         "pick a row by its ic_id (dicetrace record --rolls FOLDER --ic-id N)")
     if c.size != nd:
         raise ValueError(f"the scan's slice is {nd}-D: give {nd} coordinates, got {c.size}")
     cols = ["x", "y", "z"][:nd]

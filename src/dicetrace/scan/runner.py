@@ -36,6 +36,7 @@ from dicetrace.ics import Grid, Points, Sample
 from dicetrace.memory import available_memory
 from dicetrace.params import Config, resolve_config
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, device_kind
+from dicetrace.scan.poses import HandThrows, ThrowTable
 from dicetrace.sinks._common import human_bytes, output_folder
 from dicetrace.scan.estimate import TABLE_MEMORY_PER_IC, TABLE_MEMORY_PER_IC_EVENTS
 from dicetrace.scan.dask import _check_dask, _iter_dask, _open_dask, worker_device
@@ -138,7 +139,7 @@ class ScanReport:
     compile_s: float = 0.0
 
 
-_SPACES = (Grid, Sample, Points)
+_SPACES = (Grid, Sample, Points, HandThrows, ThrowTable)
 
 
 def _device_name(device):
@@ -158,7 +159,8 @@ def _definition(space, config, chunk, options, device=None, events=None) -> Scan
         return space
     if not isinstance(space, _SPACES):
         raise TypeError(
-            f"space must be a Grid, Sample or Points (dicetrace.ics) or a ScanDefinition, not {type(space).__name__}"
+            f"space must be a Grid, Sample or Points (dicetrace.ics), HandThrows or ThrowTable (dicetrace.scan.poses) "
+            f"or a ScanDefinition, not {type(space).__name__}"
         )
     events = False if events is None else events
     return ScanDefinition(space, resolve_config(config, **options), chunk, events=events)
@@ -258,7 +260,12 @@ def scan(
     space
         A :class:`~dicetrace.ics.Grid`, :class:`~dicetrace.ics.Sample` or
         :class:`~dicetrace.ics.Points` (ICs in the slice's L convention; they
-        are converted to the preset's), or a full :class:`ScanDefinition`.
+        are converted to the preset's), a space of throws from their own poses
+        (:class:`~dicetrace.scan.poses.HandThrows`: drawn from a hand-throw
+        model; :class:`~dicetrace.scan.poses.ThrowTable`: a throw table's
+        rows; on the CPU; their rows add ``qx, qy, qz, qw, z0_cm``), or a full
+        :class:`ScanDefinition`.  The die is the configuration's (any box,
+        loaded or not: ``half_extents_cm=``, ``load_fraction=``, ``load_cm=``).
     out
         A folder: the scan is written there as a Parquet dataset, chunk by
         chunk, resuming whatever a previous run of the same scan finished
@@ -350,7 +357,7 @@ def scan(
             if dask:
                 table = table.sort_by("ic_id")
             return _with_metadata(table, {"dicetrace_version": _version(), "scan": defn.to_dict(),
-                                          "config": defn.config.as_dict(), "device": defn.device,
+                                          "config": defn.config.as_dict(), "device": defn.device, "die": defn.die,
                                           "l_convention": defn.config.preset.l_convention})
         with _FolderLock(folder, float(wait)):  # made and locked at once: nothing touches it before
             return _run_into(folder, defn, t0, threads=threads, progress=progress, client=client,
