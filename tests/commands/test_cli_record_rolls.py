@@ -65,3 +65,34 @@ def test_ic_id_without_a_table_and_a_file_that_is_no_table_are_refused(tmp_path,
     (tmp_path / "x.parquet").write_text("no table")
     res = dicetrace_cli("record", "--rolls", str(tmp_path / "x.parquet"), "--ic-id", "1", cwd=tmp_path)
     assert res.returncode == 2 and res.stderr.startswith("dicetrace: error: --rolls") and res.stderr.count("\n") == 1
+
+
+@pytest.fixture(scope="module")
+def hand_scan(tmp_path_factory):
+    """Eight hand throws of a flat box scanned into a folder (two chunks), each from its own pose."""
+    from dicetrace.scan import scan
+    from dicetrace.scan.poses import HandThrows
+
+    folder = tmp_path_factory.mktemp("scan") / "hand"
+    scan(HandThrows("vigorous", 8, 4), folder, config=make_config("physical", half_extents_cm=(1.0, 1.0, 0.6)),
+         chunk=4)
+    return folder
+
+
+@pytest.mark.parametrize("where", ["folder", "chunk file"])
+def test_a_scan_row_replays_from_the_scan_folder_or_its_chunk_file(hand_scan, tmp_path, dicetrace_cli, where):
+    from dicetrace.scan import read_scan_table
+
+    rows = {r["ic_id"]: r for r in read_scan_table(hand_scan).to_pylist()}
+    i = 6
+    path = hand_scan if where == "folder" else hand_scan / "rolls" / "part-000001.parquet"
+    res = dicetrace_cli("record", "--rolls", str(path), "--ic-id", str(i), "--out", str(tmp_path / "r.rrd"),
+                        cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "ends otherwise" not in res.stderr
+    r = rows[i]
+    assert f"outcome {r['outcome']}  status {r['status']}  steps {r['steps']}  t_settle_s {r['t_settle_s']:g} " \
+        in res.stdout, res.stdout
+    res = dicetrace_cli("record", "--rolls", str(hand_scan), "--ic-id", "8", cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.count("\n") == 1 and "--ic-id 8: the scan" in res.stderr
+    assert not (tmp_path / "recordings").exists()

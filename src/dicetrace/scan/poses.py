@@ -315,10 +315,18 @@ def _checked(cols: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(cols)
 
 
-@functools.lru_cache(maxsize=2)
 def _table_columns(path: str, sha256: str) -> np.ndarray:
-    """The checked throw columns of the file ``path``, read once per process; ValueError if its content is not the
-    one of SHA-256 ``sha256`` any more."""
+    """The checked throw columns of the file ``path``, read once per process while the file stays as it was (its
+    size and modification time); ValueError if its content is not the one of SHA-256 ``sha256`` any more."""
+    try:
+        st = Path(path).stat()
+    except OSError as e:
+        raise ValueError(f"cannot read the throw table {path!r}: {e.strerror or e}") from None
+    return _columns_of(path, sha256, st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=2)
+def _columns_of(path: str, sha256: str, size: int, mtime_ns: int) -> np.ndarray:
     p = Path(path)
     try:
         digest = _sha256(p)
