@@ -427,7 +427,8 @@ fitViewer();
 
 $("apply").onclick = () => {
   const q = {...view};
-  for (const k of ["slice", "preset", "integrator", "gamma", "dt", "z", "res", "die", "load"]) { const v = $(k).value.trim(); if (v) q[k] = v; else delete q[k]; }
+  for (const k of ["slice", "preset", "integrator", "gamma", "dt", "z", "res"]) { const v = $(k).value.trim(); if (v) q[k] = v; else delete q[k]; }
+  for (const k of ["die", "load"]) q[k] = $(k).value.trim();   // empty: none (the cube, no load), not the start view's
   load(q, true);
 };
 $("back").onclick = () => history.back();
