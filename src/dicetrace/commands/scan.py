@@ -113,7 +113,7 @@ SLICE_HELP = ("Slice of IC space: seed (the writeup's 2-D; the default), seed3 (
 THROW_HELP = ("Scan hand throws instead of a slice: N (--n) throws drawn from the model casual, gentle or vigorous "
               "(dicetrace.throws; seeded by --seed), each from its own orientation and height; CPU only.")
 THROWS_HELP = ("Scan the throws of a table instead of a slice: a Parquet file (dicetrace throw's rolls.parquet) or a "
-               "CSV with the columns vx,vy,vz,Lx,Ly,Lz,qx,qy,qz,qw,z0_cm (L in the preset's convention), each throw "
+               "CSV with the columns vx, vy, vz, Lx, Ly, Lz, qx, qy, qz, qw, z0_cm (L in the preset's convention), each throw "
                "from its own orientation and height; CPU only.")
 WINDOW_HELP = (
     "Window: a name (home, zoom-out, more-out, most-out, red-sea, red-sea-2, party, green-island) "

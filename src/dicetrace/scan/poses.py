@@ -21,7 +21,9 @@ resumable, on Dask like any scan); their rows carry the pose columns
     Lx, Ly, Lz, qx, qy, qz, qw, z0_cm`` (what ``dicetrace throw`` writes, or any
     rolls table with a pose) or a CSV file with the same header.  The
     definition holds the file's path and SHA-256: a resume reads the same
-    throws, and a file changed since is refused.  L is in the convention the
+    throws, and a file changed since is refused (Dask workers read the file
+    at that path: on a cluster of several machines it must lie on a shared
+    file system).  L is in the convention the
     Parquet file's dicetrace metadata names, a CSV's in the scan preset's.
 
 ``ic_id`` numbers the throws 0..n-1 (a table's rows in their order).  A
