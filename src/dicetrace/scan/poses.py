@@ -37,14 +37,15 @@ from __future__ import annotations
 import csv
 import functools
 import hashlib
-import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from dicetrace.ics import IcBlock, _check_range as _range
 from dicetrace.params import L_CONVENTIONS, ConfigError, _show
 from dicetrace.throws import THROWS, HandThrow
+from dicetrace.windows import _is_count as _count
 
 #: Throws drawn per block of a :class:`HandThrows` space (each block from its own seed ``[seed, block]``).
 POSE_BLOCK = 4096
@@ -56,20 +57,13 @@ POSED_KINDS = ("throws", "throw-table")
 
 
 @dataclass
-class PosedBlock:
-    """A contiguous range of a posed space's throws: ``ic_id`` (m,), ``index`` (m, 3) all -1 and ``coords`` (m, 3)
-    all NaN (no grid, no slice), ``ics`` (m, 6), ``orientations`` (m, 4) quaternions x, y, z, w and
+class PosedBlock(IcBlock):
+    """A contiguous range of a posed space's throws: an :class:`~dicetrace.ics.IcBlock` (``index`` all -1 and
+    ``coords`` all NaN: no grid, no slice) with each throw's ``orientations`` (m, 4), quaternions x, y, z, w, and
     ``heights_cm`` (m,)."""
 
-    ic_id: np.ndarray
-    index: np.ndarray
-    coords: np.ndarray
-    ics: np.ndarray
-    orientations: np.ndarray
-    heights_cm: np.ndarray
-
-    def __len__(self) -> int:
-        return len(self.ic_id)
+    orientations: np.ndarray = None
+    heights_cm: np.ndarray = None
 
 
 def _block(start: int, ics, orientations, heights) -> PosedBlock:
@@ -78,18 +72,6 @@ def _block(start: int, ics, orientations, heights) -> PosedBlock:
                       np.full((m, 3), np.nan), np.ascontiguousarray(ics, dtype=np.float64),
                       np.ascontiguousarray(orientations, dtype=np.float64),
                       np.ascontiguousarray(heights, dtype=np.float64))
-
-
-def _range(start: int, stop: int, size: int) -> tuple[int, int]:
-    start, stop = int(start), int(stop)
-    if not 0 <= start <= stop <= size:
-        raise ValueError(f"throw range [{start}, {stop}) outside [0, {size})")
-    return start, stop
-
-
-def _count(v) -> bool:
-    return not isinstance(v, (bool, np.bool_)) and isinstance(v, (int, np.integer, float, np.floating)) \
-        and math.isfinite(v) and int(v) == v
 
 
 @dataclass(frozen=True)
