@@ -7,7 +7,8 @@
 
 See :func:`scan` (run or resume; in memory, locally or on Dask),
 :func:`iter_scan` (stream chunk tables), :func:`read_scan`,
-:func:`label_grid`, :func:`grid_axes` and :func:`ic_at`.  Without dicetrace,
+:func:`label_grid`, :func:`grid_axes` and :func:`ic_at`; :class:`HandThrows` and
+:class:`ThrowTable` (:mod:`dicetrace.scan.poses`) are spaces of hand throws, each from its own pose.  Without dicetrace,
 point any Parquet reader at the folder as it is:
 ``polars.scan_parquet("scans/red-sea/")`` (its manifest ``_scan.parquet`` is
 a Parquet file of the same columns and no rows).
@@ -38,6 +39,7 @@ from dicetrace.scan.folder import (
     read_manifest,
     write_chunk,
 )
+from dicetrace.scan.poses import HandThrows, ThrowTable, read_throw_table
 from dicetrace.scan.runner import ScanReport, iter_scan, scan
 from dicetrace.tables import GRID_ROLLS_SCHEMA as ROLLS_SCHEMA
 
@@ -45,6 +47,9 @@ __all__ = [
     "CorruptChunkError",
     "DeviceMismatchError",
     "ForeignFileError",
+    "HandThrows",
+    "ThrowTable",
+    "read_throw_table",
     "ScanBusyError",
     "ScanEstimate",
     "ScanWarning",
