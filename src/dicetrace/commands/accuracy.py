@@ -178,6 +178,44 @@ def run_cuboids(*, quick: bool = False, threads: Optional[int] = None, out: Opti
     _report(paths, ("csv", "json", "figure"), quiet)
 
 
+def run_bars(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
+             quiet: bool = False, command: str = "dicetrace analyze bars") -> None:
+    """The long-bar study: the two-dimensional limit against Pender & Uhrin's formula."""
+    from dicetrace.studies import study_bars as sb  # lazy: matplotlib and the study only when run
+
+    if threads is not None and threads < 1:
+        fail(f"--threads must be >= 1, got {threads}")
+    folder = _out_dir(out, "bars", {"--quick": quick})
+    t0 = time.perf_counter()
+    data = sb.study(**(sb.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
+    summary = sb.summarise(data)
+    paths = sb.render(data, summary, folder, command, time.perf_counter() - t0)
+    _report(paths, ("csv", "json", "figure"), quiet)
+
+
+def run_aspect(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
+               quiet: bool = False, command: str = "dicetrace analyze aspect") -> None:
+    """The aspect study: the home window's border fraction and α against the die's aspect ratio."""
+    import numba  # lazy: keeps `dicetrace --help` fast (imports numba)
+
+    from dicetrace.studies import study_aspect as sa  # lazy: matplotlib and the study only when run
+
+    if threads is not None and threads < 1:
+        fail(f"--threads must be >= 1, got {threads}")
+    folder = _out_dir(out, "aspect", {"--quick": quick})
+    before = numba.get_num_threads()
+    if threads is not None:
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    t0 = time.perf_counter()
+    try:
+        data = sa.study(**(sa.QUICK if quick else {}), say=_say(quiet) or (lambda msg: None))
+    finally:
+        numba.set_num_threads(before)
+    summary = sa.summarise(data)
+    paths = sa.render(data, summary, folder, command, time.perf_counter() - t0)
+    _report(paths, ("csv", "json", "figure", "maps"), quiet)
+
+
 def register(app: typer.Typer) -> None:
     """``dicetrace accuracy`` and ``dicetrace stability``: aliases of ``dicetrace analyze accuracy|stability``."""
     @app.command("accuracy")
