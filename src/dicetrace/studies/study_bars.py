@@ -226,6 +226,17 @@ def summarise(data: dict) -> dict:
     ratio_pu = out["models"][CASUAL.name]["R_over_pu"] if tested else []
     out["casual_R_over_pu_min"] = float(min(ratio_pu)) if ratio_pu else math.nan
     out["casual_R_over_pu_max"] = float(max(ratio_pu)) if ratio_pu else math.nan
+    zc = out["models"][CASUAL.name]["z"] if tested else []
+    below = sum(1 for z in zc if z < -1.96)
+    above = sum(1 for z in zc if z > 1.96)
+    out["casual_below"], out["casual_above"] = below, above
+    if tested and below == len(zc):
+        out["direction"] = "below the formula's at every side ratio above 1 (nearer to 1)"
+    elif tested and above == len(zc):
+        out["direction"] = "above the formula's at every side ratio above 1 (further from 1)"
+    else:
+        out["direction"] = (f"below the formula's at {below} and above it at {above} of the {len(zc)} side ratios "
+                            "above 1 (|z| > 1.96), within its binomial error at the others")
     passes = [out["models"][name]["passes"] for name in (CASUAL.name, GENTLE.name, VIGOROUS.name)
               if name in out["models"]]
     if passes and all(passes):
@@ -333,7 +344,7 @@ def _markdown(data: dict, summary: dict, tables: dict, command: str, wall_s: flo
         f"{'consistent with one another' if h['p_value'] >= PASS_P else 'not consistent with one another'} "
         f"(Pearson's χ² of homogeneity {h['chi2']:.1f} on {h['dof']} dof, p = {h['p_value']:.2g}).", "",
         f"The casual R is {summary['casual_R_over_pu_min']:.2f}–{summary['casual_R_over_pu_max']:.2f} times the "
-        "formula's over the bars with l/k > 1.", "",
+        f"formula's over the bars with l/k > 1: {summary['direction']}.", "",
         f"Verdict on Pender & Uhrin's formula as a prediction of `physical`'s long bars: **{summary['verdict']}** "
         f"(supported if every throw model passes at χ² p ≥ {PASS_P:g} at the binomial errors; refuted if the "
         "casual throws fail even with the throw's and the length's systematic added; undetermined otherwise). "
