@@ -368,3 +368,37 @@ def _markdown(data: dict, summary: dict, tables: dict, command: str, wall_s: flo
         + "): their spacing is far above the cells' scale.", "",
     ]
     return "\n".join(lines)
+
+
+def rerender(out: Path) -> dict[str, Path]:
+    """Summarise and render again from ``out``'s ``results.json`` and ``maps.npz`` (no simulation): the committed
+    numbers of the maps and points, the summary, tables and figure recomputed from them."""
+    out = Path(out)
+    res = json.loads((out / "results.json").read_text())
+    with np.load(out / "maps.npz") as z:
+        maps = {k: z[f"c_{k}"] for k in res["by"]}
+    keep = ("window", "ranges", "aspects", "n_points", "eps_rel", "map_res", "seed", "min_changes", "by")
+    data = {k: res[k] for k in keep} | {"maps": maps}
+    return render(data, summarise(data), out, res["command"], res["wall_s"])
+
+
+def _answer(res: dict) -> str:
+    """The report's sentence on the aspect: what the numbers of ``res`` (the study's results) say, and only that."""
+    s = res["summary"]
+    bf, sq, a = s["border_fraction"], s["square_faces"], s["alpha"]
+    keys = list(res["by"])
+    same = {True: "the same for every aspect", False: "not the same for every aspect", None: "not compared"}
+    text = (f"The border fraction at ε = {s['eps_ref_rel']:.0e} of the window's width runs from {bf['min']:.3f} to "
+            f"{bf['max']:.3f} over the aspects and is {same[bf['same_for_every_aspect']]} within its binomial errors "
+            f"(χ² {bf['chi2']:.1f} on {bf['dof']} dof, p = {bf['p_value']:.2g})")
+    if "chi2" in a:
+        text += (f"; α, from {a['min']:.2f} to {a['max']:.2f}, is {same[a['same_for_every_aspect']]} at its "
+                 f"errors (χ² {a['chi2']:.1f} on {a['dof']} dof, p = {a['p_value']:.2g})")
+    lo, hi = keys[0], keys[-1]
+    text += (f". The square faces' share of the window goes from {res['by'][lo]['square_faces']['share']:.3f} "
+             f"(c = {lo}) to {res['by'][hi]['square_faces']['share']:.3f} (c = {hi}).")
+    return text
+
+
+#: Sentences of the report written from the numbers (``{{s:aspect.NAME}}``).
+SENTENCES = {"answer": _answer}

@@ -291,7 +291,7 @@ def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) ->
     caption = (f"R = P(wide side)/P(narrow side) of long bars (section k × l, k = {K_CM:g} cm, "
                f"{2 * HALF_LENGTH_CM:g} cm long), 95 % intervals, against Pender & Uhrin's formula (line)")
     results = {"command": command, "wall_s": wall_s, "seed": SEED, "k_cm": K_CM, "half_length_cm": HALF_LENGTH_CM,
-               "long_half_length_cm": LONG_HALF_LENGTH_CM, "n_main": int(rows["throws"].max()), **data,
+               "long_half_length_cm": LONG_HALF_LENGTH_CM, "n_main": int(rows["throws"].max()), "pass_p": PASS_P, **data,
                "summary": summary, "tables": tables,
                "figures": {"bars": {"path": f"{out.name}/bars.png", "caption": caption}}}
     with written(out / "results.json", "results") as tmp:
@@ -351,3 +351,11 @@ def _markdown(data: dict, summary: dict, tables: dict, command: str, wall_s: flo
         "Pender & Uhrin's own measured rolls could not be read, so only their formula is compared.", "",
     ]
     return "\n".join(lines)
+
+
+def rerender(out: Path) -> dict[str, Path]:
+    """Summarise and render again from ``out``'s ``results.json`` (no simulation)."""
+    out = Path(out)
+    res = json.loads((out / "results.json").read_text())
+    data = {k: res[k] for k in ("rows", "ratios", "long_ratio", "throws_per_s")}
+    return render(data, summarise(data), out, res["command"], res["wall_s"])
