@@ -76,8 +76,12 @@ MIN_CHANGES = 10
 SAT_FRACTION = 0.5
 #: The outcome map's nodes per axis (its face shares and the figure).
 MAP_RES = 101
+#: The integrator check: the first ``N_CHECK`` points again with an independent scheme at a tighter tolerance.
+N_CHECK = 200
+INTEG_CHECK = dict(integrator="contact-dop853", tol=1e-10, tol_growth=0.0)
 SEED = 20191001
-QUICK = dict(n_points=100, eps_rel=(1e-6, 1e-5, 1e-4, 1e-3, 1e-2), map_res=21, aspects=(0.8, 1.0, 1.25), min_changes=2)
+QUICK = dict(n_points=100, eps_rel=(1e-6, 1e-5, 1e-4, 1e-3, 1e-2), map_res=21, aspects=(0.8, 1.0, 1.25), min_changes=2,
+             n_check=10)
 #: The χ² p-value at and above which a quantity counts as the same for every aspect.
 PASS_P = 0.05
 
@@ -85,10 +89,11 @@ __all__ = ["ASPECTS", "WINDOW", "N_POINTS", "EPS_REL", "EPS_REF_REL", "MAP_RES",
            "study", "summarise", "render"]
 
 
-def config(aspect: float):
-    """The ``physical`` preset with the square prism of aspect ``aspect``: half-extents (1, 1, aspect)·half side."""
+def config(aspect: float, **numerics):
+    """The ``physical`` preset with the square prism of aspect ``aspect``: half-extents (1, 1, aspect)·half side
+    (``numerics``: another integrator or tolerance)."""
     h = make_config("physical").preset.half_side_cm
-    return make_config("physical", half_extents_cm=(h, h, h * float(aspect)))
+    return make_config("physical", half_extents_cm=(h, h, h * float(aspect)), **numerics)
 
 
 def exponent(eps, f, n: int, f_sat: float, min_changes: int = MIN_CHANGES) -> dict:
@@ -114,7 +119,7 @@ def exponent(eps, f, n: int, f_sat: float, min_changes: int = MIN_CHANGES) -> di
             "range": d}
 
 
-def _one(c: float, n_points: int, eps_rel, map_res: int, seed: int, min_changes: int) -> tuple[dict, np.ndarray]:
+def _one(c: float, n_points: int, eps_rel, map_res: int, seed: int, min_changes: int, n_check: int) -> tuple[dict, np.ndarray]:
     from dicetrace.analysis.simulator import classify_on_slice, sample_window
     from dicetrace.analysis.uncertainty import uncertainty_exponent_perturbation
 
@@ -133,11 +138,17 @@ def _one(c: float, n_points: int, eps_rel, map_res: int, seed: int, min_changes:
     f_sat = saturation_level(base)
     sl = local_slopes(eps, f, n_points)
     grid = sample_window(WINDOW, map_res, config=cfg).labels
+    m = min(int(n_check), n_points)
+    check = classify_on_slice("seed", config=config(c, **INTEG_CHECK))(pts[:m])
+    agree = int(np.sum(check == base[:m]))
+    alo, ahi = wilson_interval(agree, m) if m else (math.nan, math.nan)
     row = {"n_points": int(n_points), "eps_rel": [float(e) for e in eps_rel], "eps": eps.tolist(), "f": f.tolist(),
            "changed": k.tolist(), "f_low": np.asarray(lo, float).tolist(), "f_high": np.asarray(hi, float).tolist(),
            "f_sat": f_sat, "local_slope": [None if not math.isfinite(v) else float(v) for v in sl.slope],
            "local_slope_stderr": [None if not math.isfinite(v) else float(v) for v in sl.stderr],
            "local_eps_rel": (sl.eps_mid / width).tolist(),
+           "integrator_check": {"points": m, "agree": agree, "agreement": agree / m if m else math.nan,
+                                "ci_low": float(alo), "ci_high": float(ahi)},
            "points": face_counts(base), "map": {"res": int(map_res), **face_fractions(grid),
                                                 "border_fraction_at_grid": float(boundary_fraction(grid))}}
     row.update(exponent(eps, f, n_points, f_sat, min_changes))
@@ -151,17 +162,18 @@ def _one(c: float, n_points: int, eps_rel, map_res: int, seed: int, min_changes:
 
 
 def study(*, n_points: int = N_POINTS, eps_rel=EPS_REL, map_res: int = MAP_RES, aspects=ASPECTS,
-          min_changes: int = MIN_CHANGES, say=print) -> dict:
+          min_changes: int = MIN_CHANGES, n_check: int = N_CHECK, say=print) -> dict:
     """The uncertainty method and the outcome map of the home window for every aspect (the maps under ``maps``)."""
     out = {"window": WINDOW, "ranges": [list(w) for w in get_window(WINDOW, 2)], "aspects": [float(a) for a in aspects],
            "n_points": int(n_points), "eps_rel": [float(e) for e in eps_rel], "map_res": int(map_res),
-           "seed": SEED, "min_changes": int(min_changes), "by": {}, "maps": {}}
+           "seed": SEED, "min_changes": int(min_changes), "n_check": int(n_check),
+           "integrator_check": INTEG_CHECK, "by": {}, "maps": {}}
     for j, c in enumerate(aspects):
         t0 = time.perf_counter()
         with CompileClock() as clock:
-            row, grid = _one(float(c), n_points, eps_rel, map_res, SEED + j, min_changes)
+            row, grid = _one(float(c), n_points, eps_rel, map_res, SEED + j, min_changes, n_check)
         wall = time.perf_counter() - t0
-        throws = n_points * (len(eps_rel) + 1) + map_res * map_res
+        throws = n_points * (len(eps_rel) + 1) + map_res * map_res + min(n_check, n_points)
         row.update(wall_s=wall, compile_s=clock.seconds, throws=throws, throws_per_s=throws / wall)
         out["by"][f"{c:g}"] = row
         out["maps"][f"{c:g}"] = grid
@@ -242,13 +254,14 @@ def _md_tables(data: dict, summary: dict) -> dict[str, str]:
     bf, sq = summary["border_fraction"], summary["square_faces"]
     al = ["| c | α (shortest range) | regression error | range systematic (−/+) | α over every range | scales "
           f"(ε / width) | f at {summary['eps_ref_rel']:.0e}: z against the cube | square faces (3, 4) | z against the "
-          "cube | throws/s |", "|---|---|---|---|---|---|---|---|---|---|"]
+          "cube | DOP853 1e-10 agrees | throws/s |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     width = data["ranges"][0][1] - data["ranges"][0][0]
     for k in keys:
         m = by[k]
         zb = bf.get("z_vs_cube", {}).get(k)
         zs = sq.get("z_vs_cube", {}).get(k)
         s = m["square_faces"]
+        ic = m["integrator_check"]
         if m["alpha"] is None:
             acells = f"— | — | — | — | {m['error']}"
         else:
@@ -258,7 +271,7 @@ def _md_tables(data: dict, summary: dict) -> dict[str, str]:
                       f"{every} | {m['scales'][0] / width:.0e}–{m['scales'][-1] / width:.0e}")
         al.append(f"| {k} | {acells} | {'—' if zb is None else f'{zb:+.1f}'} | "
                   f"{_pm_ci(s['share'], s['ci_low'], s['ci_high'])} | {'—' if zs is None else f'{zs:+.1f}'} | "
-                  f"{m['throws_per_s']:.0f} |")
+                  f"{ic['agree']} of {ic['points']} ({ic['ci_low']:.3f}–{ic['ci_high']:.3f}) | {m['throws_per_s']:.0f} |")
     fs = ["| c | " + " | ".join(f"face {f}" for f in range(1, 7)) + " | edge / unsettled |", "|" + "---|" * 8]
     for k in keys:
         p = by[k]["points"]
@@ -377,7 +390,8 @@ def rerender(out: Path) -> dict[str, Path]:
     res = json.loads((out / "results.json").read_text())
     with np.load(out / "maps.npz") as z:
         maps = {k: z[f"c_{k}"] for k in res["by"]}
-    keep = ("window", "ranges", "aspects", "n_points", "eps_rel", "map_res", "seed", "min_changes", "by")
+    keep = ("window", "ranges", "aspects", "n_points", "eps_rel", "map_res", "seed", "min_changes", "n_check",
+            "integrator_check", "by")
     data = {k: res[k] for k in keep} | {"maps": maps}
     return render(data, summarise(data), out, res["command"], res["wall_s"])
 
