@@ -32,14 +32,23 @@ the window's width, half a decade apart):
 - the face shares of the window: of the unperturbed points (Wilson intervals,
   :func:`dicetrace.analysis.fairness.face_counts`), and of the outcome map of the
   window, ``MAP_RES``² nodes (moving-block bootstrap,
-  :func:`dicetrace.analysis.face_fractions.face_fractions`), drawn in the figure.
+  :func:`dicetrace.analysis.face_fractions.face_fractions`), drawn in the figure;
+- the integrator check: the first ``N_CHECK`` points again with ``contact-dop853`` at a
+  uniform tolerance 1e-10 (``INTEG_CHECK``), the share whose face agrees: where it
+  misses by as much as f at the smallest scales, those scales hold the integrator's
+  noise.
+
+The control: a prism of aspect ``CONTROL`` = 1 + 10⁻⁹, thrown from the cube's own
+points in the same directions.  It runs the prisms' code path (a full inertia tensor,
+not the cube's isotropic one) with the cube's body to 10⁻⁹, so its agreement with the
+cube's faces and its f(ε) beside the cube's say what that path alone does.
 
 Run it with ``dicetrace analyze aspect --out analysis/aspect`` (it writes
 ``aspect.csv``, ``results.json``, ``aspect.md``, ``aspect.png`` and the maps,
 ``maps.npz``; ``--quick`` for a small check, into ``./dicetrace-results/aspect`` by
-default).  The full run throws ``len(ASPECTS)·(N_POINTS·(len(EPS_REL) + 1) +
-MAP_RES²)`` = 190 000 dice, about 10 minutes on one core (the prisms run at about
-500 throws a second a core, the cube twice as fast).
+default).  The full run throws (``len(ASPECTS)`` + 1)·(``N_POINTS``·(``len(EPS_REL)`` + 1) +
+``MAP_RES``² + ``N_CHECK``) = 230 000 dice, about 10 minutes on one core (the prisms run at
+a few hundred throws a second a core, the cube several times faster).
 """
 
 from __future__ import annotations
@@ -79,6 +88,9 @@ MAP_RES = 101
 #: The integrator check: the first ``N_CHECK`` points again with an independent scheme at a tighter tolerance.
 N_CHECK = 200
 INTEG_CHECK = dict(integrator="contact-dop853", tol=1e-10, tol_growth=0.0)
+#: The control: a prism within 10⁻⁹ of the cube, thrown from the cube's own points in the same directions: the prisms'
+#: code path (a full inertia tensor) with the cube's body to 10⁻⁹, so what that path alone does to the outcomes and f.
+CONTROL = 1.0 + 1e-9
 SEED = 20191001
 QUICK = dict(n_points=100, eps_rel=(1e-6, 1e-5, 1e-4, 1e-3, 1e-2), map_res=21, aspects=(0.8, 1.0, 1.25), min_changes=2,
              n_check=10)
@@ -119,7 +131,8 @@ def exponent(eps, f, n: int, f_sat: float, min_changes: int = MIN_CHANGES) -> di
             "range": d}
 
 
-def _one(c: float, n_points: int, eps_rel, map_res: int, seed: int, min_changes: int, n_check: int) -> tuple[dict, np.ndarray]:
+def _one(c: float, n_points: int, eps_rel, map_res: int, seed: int, min_changes: int,
+         n_check: int) -> tuple[dict, np.ndarray, np.ndarray]:
     from dicetrace.analysis.simulator import classify_on_slice, sample_window
     from dicetrace.analysis.uncertainty import uncertainty_exponent_perturbation
 
@@ -158,27 +171,42 @@ def _one(c: float, n_points: int, eps_rel, map_res: int, seed: int, min_changes:
     slo, shi = wilson_interval(sq, n_face) if n_face else (math.nan, math.nan)
     row["square_faces"] = {"share": sq / n_face if n_face else math.nan, "ci_low": float(slo), "ci_high": float(shi),
                            "count": int(sq), "n": int(n_face)}
-    return row, grid.astype(np.int8)
+    return row, grid.astype(np.int8), base
 
 
 def study(*, n_points: int = N_POINTS, eps_rel=EPS_REL, map_res: int = MAP_RES, aspects=ASPECTS,
-          min_changes: int = MIN_CHANGES, n_check: int = N_CHECK, say=print) -> dict:
-    """The uncertainty method and the outcome map of the home window for every aspect (the maps under ``maps``)."""
+          min_changes: int = MIN_CHANGES, n_check: int = N_CHECK, control: float | None = CONTROL,
+          say=print) -> dict:
+    """The uncertainty method and the outcome map of the home window for every aspect (the maps under ``maps``),
+    and the control prism ``control`` on the cube's points (under ``control``, with its agreement with the cube)."""
     out = {"window": WINDOW, "ranges": [list(w) for w in get_window(WINDOW, 2)], "aspects": [float(a) for a in aspects],
            "n_points": int(n_points), "eps_rel": [float(e) for e in eps_rel], "map_res": int(map_res),
            "seed": SEED, "min_changes": int(min_changes), "n_check": int(n_check),
            "integrator_check": INTEG_CHECK, "by": {}, "maps": {}}
-    for j, c in enumerate(aspects):
+    runs = [(float(c), SEED + j) for j, c in enumerate(aspects)]
+    if control is not None and 1.0 in [c for c, _ in runs]:
+        runs.append((float(control), dict(runs)[1.0]))  # the cube's points
+    bases = {}
+    for c, seed in runs:
         t0 = time.perf_counter()
         with CompileClock() as clock:
-            row, grid = _one(float(c), n_points, eps_rel, map_res, SEED + j, min_changes, n_check)
+            row, grid, bases[c] = _one(c, n_points, eps_rel, map_res, seed, min_changes, n_check)
         wall = time.perf_counter() - t0
         throws = n_points * (len(eps_rel) + 1) + map_res * map_res + min(n_check, n_points)
-        row.update(wall_s=wall, compile_s=clock.seconds, throws=throws, throws_per_s=throws / wall)
-        out["by"][f"{c:g}"] = row
-        out["maps"][f"{c:g}"] = grid
+        row.update(wall_s=wall, compile_s=clock.seconds, throws=throws, throws_per_s=throws / wall, seed=seed)
+        if c == control and c not in aspects:
+            agree = int(np.sum(bases[c] == bases[1.0]))
+            lo, hi = wilson_interval(agree, n_points)
+            row["agrees_with_cube"] = {"points": int(n_points), "agree": agree, "agreement": agree / n_points,
+                                       "ci_low": float(lo), "ci_high": float(hi),
+                                       "map_agreement": float(np.mean(grid == out["maps"]["1"]))}
+            out["control"] = {"aspect": c, **row}
+            out["maps"]["control"] = grid
+        else:
+            out["by"][f"{c:g}"] = row
+            out["maps"][f"{c:g}"] = grid
         a = row["alpha"]
-        say(f"c {c:g}: f = {', '.join(f'{v:.3f}' for v in row['f'])}; α {'—' if a is None else f'{a:.3f}'} "
+        say(f"c {c!r}: f = {', '.join(f'{v:.3f}' for v in row['f'])}; α {'—' if a is None else f'{a:.3f}'} "
             f"({time_text(wall, clock.seconds, '.0f')})")
     return out
 
@@ -236,6 +264,14 @@ def summarise(data: dict) -> dict:
                                                            / math.hypot(by[k]["alpha_error"], c["alpha_error"]))
                               for k in have}
     out["alpha"] = a
+    if "control" in data and "1" in by:
+        c, cube = data["control"], by["1"]
+        n1, n2 = cube["n_points"], c["n_points"]
+        k1, k2 = cube["changed"][ref], c["changed"][ref]
+        pool = (k1 + k2) / (n1 + n2)
+        se = math.sqrt(pool * (1 - pool) * (1 / n1 + 1 / n2))
+        out["control"] = {"aspect": c["aspect"], "f_ref": k2 / n2, "cube_f_ref": k1 / n1,
+                          "z": (k2 / n2 - k1 / n1) / se if se > 0 else None, **c["agrees_with_cube"]}
     return out
 
 
@@ -251,6 +287,13 @@ def _md_tables(data: dict, summary: dict) -> dict[str, str]:
         fe.append(f"| {e:.1e} | " + " | ".join(_pm_ci(by[k]["f"][i], by[k]["f_low"][i], by[k]["f_high"][i])
                                                for k in keys) + " |")
     fe.append("| saturation 1 − Σp² | " + " | ".join(f"{by[k]['f_sat']:.3f}" for k in keys) + " |")
+    ctl = data.get("control")
+    if ctl is not None:
+        fe[0] = fe[0][:-1] + f"| c = 1 + {ctl['aspect'] - 1:.0e} (control) |"
+        fe[1] += "---|"
+        for i in range(len(data["eps_rel"])):
+            fe[2 + i] = fe[2 + i][:-1] + f"| {_pm_ci(ctl['f'][i], ctl['f_low'][i], ctl['f_high'][i])} |"
+        fe[-1] = fe[-1][:-1] + f"| {ctl['f_sat']:.3f} |"
     bf, sq = summary["border_fraction"], summary["square_faces"]
     al = ["| c | α (shortest range) | regression error | range systematic (−/+) | α over every range | scales "
           f"(ε / width) | f at {summary['eps_ref_rel']:.0e}: z against the cube | square faces (3, 4) | z against the "
@@ -323,7 +366,7 @@ def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) ->
     cmap = ListedColormap(["#000000", "#888888", "#e41a1c", "#377eb8", "#4daf4a", "#984ea3", "#ff7f00", "#ffff33"])
     (x0, x1), (y0, y1) = data["ranges"]
     span = 0.6 / n
-    for i, (k, grid) in enumerate(data["maps"].items()):
+    for i, (k, grid) in enumerate((k, g) for k, g in data["maps"].items() if k in by):
         ax = fig.add_axes([0.01 + i * span, 0.12, span * 0.94, 0.72])
         ax.imshow(np.asarray(grid).T + 1, origin="lower", cmap=cmap, vmin=0, vmax=7, extent=(x0, x1, y0, y1),
                   interpolation="nearest")
@@ -346,6 +389,10 @@ def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) ->
             w = m["n_points"] * fw / np.maximum(1 - fw, 1e-300)
             fit = fit_power_law(np.array(m["eps"])[sel], fw, weights=w)
             ax.plot(e[sel], np.exp(fit.intercept) * (e[sel] * width) ** fit.slope, "-", color=f"C{j}", lw=1)
+    ctl = data.get("control")
+    if ctl is not None:
+        e, f = np.array(ctl["eps_rel"]), np.array(ctl["f"])
+        ax.plot(e[f > 0], f[f > 0], "k+--", lw=0.8, ms=5, label=f"c = 1 + {ctl['aspect'] - 1:.0e} (control)")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("ε / window width", fontsize=8)
@@ -358,6 +405,15 @@ def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) ->
     write_text(out / "aspect.md", _markdown(data, summary, tables, command, wall_s), "summary")
     return {"csv": out / "aspect.csv", "json": out / "results.json", "summary": out / "aspect.md",
             "figure": out / "aspect.png", "maps": out / "maps.npz"}
+
+
+def _control_text(c: dict) -> str:
+    z = "" if c["z"] is None else f", z = {c['z']:+.1f}"
+    return (f"The control, c = 1 + {c['aspect'] - 1:.0e} (the prisms' code path with the cube's body to that "
+            "precision), thrown from the "
+            f"cube's own points and moved in the same directions: it ends on the cube's face at {c['agree']} of "
+            f"{c['points']} points ({c['ci_low']:.3f}–{c['ci_high']:.3f}), and its f at the reference scale is "
+            f"{c['f_ref']:.3f} against the cube's {c['cube_f_ref']:.3f}{z}.")
 
 
 def _markdown(data: dict, summary: dict, tables: dict, command: str, wall_s: float) -> str:
@@ -374,6 +430,7 @@ def _markdown(data: dict, summary: dict, tables: dict, command: str, wall_s: flo
         "saturation), from the smallest scale up; its range systematic is how far the wider ranges move it.", "",
         "Face shares of the window (the unperturbed points, 95 % Wilson intervals):", "", tables["faces"], "",
         "Across the aspects:", "", tables["across"], "",
+        *([_control_text(summary["control"]), ""] if "control" in summary else []),
         f"The border fraction at ε = {summary['eps_ref_rel']:.0e} of the width runs from {bf['min']:.3f} to "
         f"{bf['max']:.3f} over the aspects. The outcome maps ({data['map_res']}² nodes) are border at almost every "
         "node (the share of nodes with a neighbour of another face: "
@@ -389,10 +446,10 @@ def rerender(out: Path) -> dict[str, Path]:
     out = Path(out)
     res = json.loads((out / "results.json").read_text())
     with np.load(out / "maps.npz") as z:
-        maps = {k: z[f"c_{k}"] for k in res["by"]}
+        maps = {k[2:]: z[k] for k in z.files}
     keep = ("window", "ranges", "aspects", "n_points", "eps_rel", "map_res", "seed", "min_changes", "n_check",
-            "integrator_check", "by")
-    data = {k: res[k] for k in keep} | {"maps": maps}
+            "integrator_check", "by", "control")
+    data = {k: res[k] for k in keep if k in res} | {"maps": maps}
     return render(data, summarise(data), out, res["command"], res["wall_s"])
 
 
@@ -411,6 +468,8 @@ def _answer(res: dict) -> str:
     lo, hi = keys[0], keys[-1]
     text += (f". The square faces' share of the window goes from {res['by'][lo]['square_faces']['share']:.3f} "
              f"(c = {lo}) to {res['by'][hi]['square_faces']['share']:.3f} (c = {hi}).")
+    if "control" in s:
+        text += " " + _control_text(s["control"])
     return text
 
 
