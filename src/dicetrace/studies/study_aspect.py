@@ -200,7 +200,7 @@ def study(*, n_points: int = N_POINTS, eps_rel=EPS_REL, map_res: int = MAP_RES, 
             row["agrees_with_cube"] = {"points": int(n_points), "agree": agree, "agreement": agree / n_points,
                                        "ci_low": float(lo), "ci_high": float(hi),
                                        "map_agreement": float(np.mean(grid == out["maps"]["1"]))}
-            out["control"] = {"aspect": c, **row}
+            out["control"] = {"aspect": c, "offset": c - 1.0, **row}
             out["maps"]["control"] = grid
         else:
             out["by"][f"{c:g}"] = row
