@@ -69,7 +69,7 @@ def test_the_committed_run_is_the_full_study(committed):
 def test_the_committed_summary_and_map_shares_follow_from_the_committed_data(committed):
     """Summary recomputed from the committed per-aspect numbers, and the maps' face shares from maps.npz."""
     data = {k: committed[k] for k in ("window", "ranges", "aspects", "n_points", "eps_rel", "map_res", "seed",
-                                      "min_changes", "by")}
+                                      "min_changes", "by", "control")}
     again = sa.summarise(data)
     assert again["border_fraction"] == pytest.approx(committed["summary"]["border_fraction"], rel=1e-12)
     assert again["alpha"]["values"] == committed["summary"]["alpha"]["values"]
@@ -82,6 +82,16 @@ def test_the_committed_summary_and_map_shares_follow_from_the_committed_data(com
                 assert share[str(f)]["fraction"] == pytest.approx(m["map"]["faces"][str(f)]["fraction"], abs=1e-15)
     text = (COMMITTED / "aspect.md").read_text()
     assert f"runs from {committed['summary']['border_fraction']['min']:.3f}" in text
+
+
+def test_the_prisms_code_path_gives_the_cubes_faces_on_the_cube(committed):
+    """The control prism (1 + 1e-9) runs the general inertia path from the cube's points: nearly every face is the
+    cube's (the rest within what f at the smallest scale allows), and so is its map."""
+    c = committed["control"]
+    assert c["offset"] == pytest.approx(sa.CONTROL - 1) and c["seed"] == committed["by"]["1"]["seed"]
+    assert c["agrees_with_cube"]["agreement"] >= 0.95 and c["agrees_with_cube"]["map_agreement"] >= 0.95
+    with np.load(COMMITTED / "maps.npz") as z:
+        assert np.mean(z["c_control"] == z["c_1"]) == pytest.approx(c["agrees_with_cube"]["map_agreement"])
 
 
 def test_the_square_faces_come_up_more_on_the_flat_prism_than_on_the_tall_one(committed):
@@ -129,6 +139,7 @@ def test_the_quick_run_writes_every_file_the_report_reads(tmp_path, dicetrace_cl
                             / m["n_points"], 1.0)
     text, missing = report.render(section("Real dice II"), {"aspect": data})
     assert not missing, missing
+    assert data["control"]["agrees_with_cube"]["agreement"] >= 0.9  # the general path on the cube: the cube's faces
     sa.rerender(out)
     assert json.loads((out / "results.json").read_text())["summary"] == data["summary"]
 
