@@ -28,14 +28,6 @@ def committed():
     return json.loads(path.read_text())
 
 
-def section(title: str) -> str:
-    """The template's level-2 section whose heading starts with ``title``."""
-    text = report.template_text()
-    start = text.index(f"## {title}")
-    end = text.index("\n## ", start + 3)
-    return text[start:end]
-
-
 def test_the_wide_faces_are_those_the_bar_rests_lowest_on():
     """The faces counted as wide (2, 5) are those on which the bar's centre rests at k/2, the narrow ones (3, 4) at
     l/2, the ends (1, 6) at half its length: the body's own geometry, not the study's labels."""
@@ -122,7 +114,7 @@ def test_the_committed_summary_follows_from_its_rows(committed):
 
 def _report_fields_resolve(res: dict, study: str, title: str) -> None:
     """Every placeholder of the report's section of ``study`` finds its value in ``res``."""
-    text, missing = report.render(section(title), {study: res})
+    text, missing = report.render(report.titled_section(title), {study: res})
     assert not missing, missing
     assert "{{" not in text and "n/a" not in text
 

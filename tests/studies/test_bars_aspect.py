@@ -29,12 +29,6 @@ def committed():
     return json.loads(path.read_text())
 
 
-def section(title: str) -> str:
-    text = report.template_text()
-    start = text.index(f"## {title}")
-    return text[start:text.index("\n## ", start + 3)]
-
-
 def test_the_aspect_one_prism_is_the_cube_bit_for_bit():
     """The prism of aspect 1 is the physical cube: the same map of the home window, outcomes and settle times alike
     to the last bit; the other aspects are other dice (their maps differ)."""
@@ -102,7 +96,7 @@ def test_the_square_faces_come_up_more_on_the_flat_prism_than_on_the_tall_one(co
 
 
 def test_the_committed_results_fill_the_report_section(committed):
-    text, missing = report.render(section("Real dice II"), {"aspect": committed})
+    text, missing = report.render(report.titled_section("Real dice II"), {"aspect": committed})
     assert not missing and "n/a" not in text
     assert sa.SENTENCES["answer"](committed) in (REPO / "analysis" / "REPORT.md").read_text()
 
@@ -137,7 +131,7 @@ def test_the_quick_run_writes_every_file_the_report_reads(tmp_path, dicetrace_cl
         assert len(m["f"]) == len(sa.QUICK["eps_rel"]) and all(0 <= f <= 1 for f in m["f"])
         assert math.isclose(sum(m["points"]["faces"]) / m["n_points"] + (m["points"]["edge"] + m["points"]["unsettled"])
                             / m["n_points"], 1.0)
-    text, missing = report.render(section("Real dice II"), {"aspect": data})
+    text, missing = report.render(report.titled_section("Real dice II"), {"aspect": data})
     assert not missing, missing
     assert data["control"]["agrees_with_cube"]["agreement"] >= 0.9  # the general path on the cube: the cube's faces
     sa.rerender(out)

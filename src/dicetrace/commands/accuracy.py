@@ -163,19 +163,26 @@ def run_friction(*, quick: bool = False, out: Optional[Path] = None, quiet: bool
         print(f"wrote {path}")
 
 
+def _run_throw_study(mod, name: str, *, quick: bool, threads: Optional[int], out: Optional[Path], quiet: bool,
+                     command: str) -> None:
+    """A study of thrown dice (``mod``: study_cuboids, study_bars): ``--threads`` checked, then run, summarised and
+    written into its folder."""
+    if threads is not None and threads < 1:
+        fail(f"--threads must be >= 1, got {threads}")
+    folder = _out_dir(out, name, {"--quick": quick})
+    t0 = time.perf_counter()
+    data = mod.study(**(mod.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
+    summary = mod.summarise(data)
+    paths = mod.render(data, summary, folder, command, time.perf_counter() - t0)
+    _report(paths, ("csv", "json", "figure"), quiet)
+
+
 def run_cuboids(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
                 quiet: bool = False, command: str = "dicetrace analyze cuboids") -> None:
     """The cuboid-dice study: the physical die against the measured face probabilities of square cuboids."""
     from dicetrace.studies import study_cuboids as cu  # lazy: matplotlib and the study only when run
 
-    if threads is not None and threads < 1:
-        fail(f"--threads must be >= 1, got {threads}")
-    folder = _out_dir(out, "cuboids", {"--quick": quick})
-    t0 = time.perf_counter()
-    data = cu.study(**(cu.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
-    summary = cu.summarise(data)
-    paths = cu.render(data, summary, folder, command, time.perf_counter() - t0)
-    _report(paths, ("csv", "json", "figure"), quiet)
+    _run_throw_study(cu, "cuboids", quick=quick, threads=threads, out=out, quiet=quiet, command=command)
 
 
 def run_bars(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
@@ -183,14 +190,7 @@ def run_bars(*, quick: bool = False, threads: Optional[int] = None, out: Optiona
     """The long-bar study: the two-dimensional limit against Pender & Uhrin's formula."""
     from dicetrace.studies import study_bars as sb  # lazy: matplotlib and the study only when run
 
-    if threads is not None and threads < 1:
-        fail(f"--threads must be >= 1, got {threads}")
-    folder = _out_dir(out, "bars", {"--quick": quick})
-    t0 = time.perf_counter()
-    data = sb.study(**(sb.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
-    summary = sb.summarise(data)
-    paths = sb.render(data, summary, folder, command, time.perf_counter() - t0)
-    _report(paths, ("csv", "json", "figure"), quiet)
+    _run_throw_study(sb, "bars", quick=quick, threads=threads, out=out, quiet=quiet, command=command)
 
 
 def run_aspect(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,

@@ -157,6 +157,17 @@ def sections(template: str) -> dict[str, str]:
     return out
 
 
+def titled_section(heading: str, template: str | None = None) -> str:
+    """The template's level-2 section whose heading starts with ``heading`` (``"Real dice I"``), up to the next one
+    (ValueError when there is none)."""
+    text = template_text() if template is None else template
+    start = text.find(f"\n## {heading}")
+    if start < 0:
+        raise ValueError(f"no section headed {heading!r} in the report template")
+    end = text.find("\n## ", start + 4)
+    return text[start + 1:end if end >= 0 else len(text)]
+
+
 def _studies_quoted(text: str) -> set[str]:
     return {m.group(2).strip().partition(".")[0] for m in _PH.finditer(text)}
 
