@@ -65,8 +65,12 @@ def test_the_committed_summary_and_map_shares_follow_from_the_committed_data(com
     data = {k: committed[k] for k in ("window", "ranges", "aspects", "n_points", "eps_rel", "map_res", "seed",
                                       "min_changes", "by", "control")}
     again = sa.summarise(data)
-    assert again["border_fraction"] == pytest.approx(committed["summary"]["border_fraction"], rel=1e-12)
+    for name in ("border_fraction", "square_faces"):
+        for key in ("values", "chi2", "p_value", "same_for_every_aspect"):
+            assert again[name][key] == pytest.approx(committed["summary"][name][key], rel=1e-12)
     assert again["alpha"]["values"] == committed["summary"]["alpha"]["values"]
+    assert again["integrator_noise"]["aspects_fitted_below_noise"] == \
+        committed["summary"]["integrator_noise"]["aspects_fitted_below_noise"]
     with np.load(COMMITTED / "maps.npz") as z:
         for k, m in committed["by"].items():
             grid = z[f"c_{k}"]
