@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from dicetrace.studies import LETTERS, WRITEUP_STUDIES
-from dicetrace.studies.report import build, sections, template_text
+from dicetrace.studies.report import FOLDER_STUDIES, build, sections, template_text
 
 REPO = Path(__file__).resolve().parents[2]
 COMMITTED = REPO / "analysis"
@@ -45,6 +45,10 @@ def test_every_study_has_its_section():
 def test_with_every_result_the_report_is_the_whole_template(tmp_path, capsys):
     """The full run's report is unchanged: built from the committed results it is the committed REPORT.md."""
     shutil.copytree(COMMITTED / "results", tmp_path / "results")
+    for name in FOLDER_STUDIES:  # the studies run alone whose sections the report carries, beside results/
+        if (COMMITTED / name / "results.json").exists():
+            (tmp_path / name).mkdir()
+            shutil.copy2(COMMITTED / name / "results.json", tmp_path / name)
     text = build(tmp_path).read_text()
     assert text == (COMMITTED / "REPORT.md").read_text()
     assert "placeholder" not in capsys.readouterr().err

@@ -5,7 +5,8 @@ A *figure* is a number in the prose or tables of the two documents (code blocks,
 and image paths are not prose). A results file is one a study or a benchmark wrote: ``analysis/results/*``
 (JSON and CSV), the integrator studies' ``analysis/accuracy/*.csv``, ``*.json`` and their written summaries
 (``summary.md``, ``stability.md``, ``v_reg.md``), the cuboid study's ``analysis/cuboids/`` (``results.json``,
-``cuboids.csv``, ``cuboids.md``), and ``benchmarks/results/**`` where one is committed.
+``cuboids.csv``, ``cuboids.md``), the bar and aspect studies' ``analysis/bars/`` and ``analysis/aspect/`` (their
+``results.json``, CSV and summary), and ``benchmarks/results/**`` where one is committed.
 Hand-written pages (``analysis/README.md``, ``analysis/accuracy/README.md``, ``TUNING.md``) are not sources.
 
 A figure is held when some number in those files, rounded to the figure's printed precision, is the figure
@@ -113,6 +114,9 @@ def result_files() -> list[Path]:
              *(acc / n for n in ("summary.md", "stability.md", "v_reg.md") if (acc / n).exists()),
              *(REPO / "analysis" / "cuboids" / n for n in ("results.json", "cuboids.csv", "cuboids.md")
                if (REPO / "analysis" / "cuboids" / n).exists()),
+             *(REPO / "analysis" / d / n for d, names in (("bars", ("results.json", "bars.csv", "bars.md")),
+                                                          ("aspect", ("results.json", "aspect.csv", "aspect.md")))
+               for n in names if (REPO / "analysis" / d / n).exists()),
              *sorted(p for p in (REPO / "benchmarks" / "results").rglob("*") if p.is_file())]
     return files
 

@@ -114,9 +114,11 @@ NOT_TRANSCRIBED = {
         "probabilities); no number of theirs is transcribed here."
     ),
     "pender_uhrin": (
-        "Their rolls of long bars of several side ratios: only the abstract of arXiv:1407.6307 could be read "
-        "(it gives the closed formula implemented in dicetrace.analysis.fairness.pender_uhrin_ratio and says "
-        "their measured ratios are somewhat closer to 1 than the formula); no measured number is transcribed."
+        "Their rolls of long bars of several side ratios: only the abstract and the start of the introduction of "
+        "arXiv:1407.6307 could be read (the formula implemented in dicetrace.analysis.fairness.pender_uhrin_ratio; "
+        "their measured ratios somewhat closer to 1 than the formula), and UCL's news item on the paper (23 June "
+        "2014: planks of several side ratios, rolled until \"the ten thousandth test roll\"); neither gives a measured "
+        "number, so none is transcribed (dicetrace.studies.study_bars compares the formula alone)."
     ),
     "gazette_surface": (
         "The surface the Gazette note's dice were rolled on and how they were thrown: not in the part of the "

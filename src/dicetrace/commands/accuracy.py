@@ -163,19 +163,57 @@ def run_friction(*, quick: bool = False, out: Optional[Path] = None, quiet: bool
         print(f"wrote {path}")
 
 
+def _run_throw_study(mod, name: str, *, quick: bool, threads: Optional[int], out: Optional[Path], quiet: bool,
+                     command: str) -> None:
+    """A study of thrown dice (``mod``: study_cuboids, study_bars): ``--threads`` checked, then run, summarised and
+    written into its folder."""
+    if threads is not None and threads < 1:
+        fail(f"--threads must be >= 1, got {threads}")
+    folder = _out_dir(out, name, {"--quick": quick})
+    t0 = time.perf_counter()
+    data = mod.study(**(mod.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
+    summary = mod.summarise(data)
+    paths = mod.render(data, summary, folder, command, time.perf_counter() - t0)
+    _report(paths, ("csv", "json", "figure"), quiet)
+
+
 def run_cuboids(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
                 quiet: bool = False, command: str = "dicetrace analyze cuboids") -> None:
     """The cuboid-dice study: the physical die against the measured face probabilities of square cuboids."""
     from dicetrace.studies import study_cuboids as cu  # lazy: matplotlib and the study only when run
 
+    _run_throw_study(cu, "cuboids", quick=quick, threads=threads, out=out, quiet=quiet, command=command)
+
+
+def run_bars(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
+             quiet: bool = False, command: str = "dicetrace analyze bars") -> None:
+    """The long-bar study: the two-dimensional limit against Pender & Uhrin's formula."""
+    from dicetrace.studies import study_bars as sb  # lazy: matplotlib and the study only when run
+
+    _run_throw_study(sb, "bars", quick=quick, threads=threads, out=out, quiet=quiet, command=command)
+
+
+def run_aspect(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
+               quiet: bool = False, command: str = "dicetrace analyze aspect") -> None:
+    """The aspect study: the home window's border fraction and α against the die's aspect ratio."""
+    import numba  # lazy: keeps `dicetrace --help` fast (imports numba)
+
+    from dicetrace.studies import study_aspect as sa  # lazy: matplotlib and the study only when run
+
     if threads is not None and threads < 1:
         fail(f"--threads must be >= 1, got {threads}")
-    folder = _out_dir(out, "cuboids", {"--quick": quick})
+    folder = _out_dir(out, "aspect", {"--quick": quick})
+    before = numba.get_num_threads()
+    if threads is not None:
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
     t0 = time.perf_counter()
-    data = cu.study(**(cu.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
-    summary = cu.summarise(data)
-    paths = cu.render(data, summary, folder, command, time.perf_counter() - t0)
-    _report(paths, ("csv", "json", "figure"), quiet)
+    try:
+        data = sa.study(**(sa.QUICK if quick else {}), say=_say(quiet) or (lambda msg: None))
+    finally:
+        numba.set_num_threads(before)
+    summary = sa.summarise(data)
+    paths = sa.render(data, summary, folder, command, time.perf_counter() - t0)
+    _report(paths, ("csv", "json", "figure", "maps"), quiet)
 
 
 def register(app: typer.Typer) -> None:

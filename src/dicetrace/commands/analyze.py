@@ -9,11 +9,13 @@ Examples::
     dicetrace analyze accuracy --quick            # an integrator study, into ./dicetrace-results/accuracy
     dicetrace analyze friction --out analysis/accuracy   # regenerate the committed v_reg.csv, v_reg.md
     dicetrace analyze cuboids --out analysis/cuboids     # physical against real cuboid dice (committed)
+    dicetrace analyze bars --out analysis/bars           # long bars against Pender & Uhrin (committed)
+    dicetrace analyze aspect --out analysis/aspect       # the home window against the aspect (committed)
 
 Writeup studies: the names and letters of :data:`dicetrace.studies.WRITEUP_STUDIES` and
 :data:`~dicetrace.studies.LETTERS` (``dicetrace analyze --help`` lists them, from cells (a) to the
 latest), or ``all``; several at once share one output folder.  Integrator
-studies: accuracy, stability, friction, cuboids, each run alone with options of its own
+studies: accuracy, stability, friction, cuboids, bars, aspect, each run alone with options of its own
 (:mod:`dicetrace.commands.accuracy`; ``dicetrace accuracy`` and ``dicetrace
 stability`` are aliases kept from before).  An option the named study does not
 take (:data:`TAKES`) is refused by name.
@@ -47,7 +49,8 @@ from typing import Optional
 import typer
 
 from dicetrace.commands._common import fail
-from dicetrace.commands.accuracy import command_line, run_accuracy, run_cuboids, run_friction, run_stability
+from dicetrace.commands.accuracy import (command_line, run_accuracy, run_aspect, run_bars, run_cuboids, run_friction,
+                                         run_stability)
 from dicetrace.commands.options import IntegratorsAlias, config_errors, either
 from dicetrace.devices import resolve_device
 from dicetrace.extras import require
@@ -72,6 +75,8 @@ TAKES = {
     "stability": ("--quick", "--out", "--presets", "--integrator", "--k", "--quiet"),
     "friction": ("--quick", "--out", "--quiet"),
     "cuboids": ("--quick", "--out", "--threads", "--quiet"),
+    "bars": ("--quick", "--out", "--threads", "--quiet"),
+    "aspect": ("--quick", "--out", "--threads", "--quiet"),
 }
 
 
@@ -101,8 +106,8 @@ The options each study takes (any other is refused):
 
 The committed results in analysis/ are regenerated only by full runs from the
 repository root: `dicetrace analyze all --out analysis`, and `dicetrace analyze
-accuracy|stability|friction --out analysis/accuracy` and `dicetrace analyze cuboids
---out analysis/cuboids`; a --quick or otherwise
+accuracy|stability|friction --out analysis/accuracy` and `dicetrace analyze
+cuboids|bars|aspect --out analysis/NAME`; a --quick or otherwise
 reduced run into analysis/ is refused. REPORT.md is the whole report once every
 writeup study has results in OUT/results, else the sections of those that have
 (one study alone: its own section). --report-only re-assembles OUT/REPORT.md
@@ -219,6 +224,10 @@ def _integrator_study(name: str, *, window, n, seed, quick, presets, integrators
                       command=command)
     elif name == "cuboids":
         run_cuboids(quick=quick, threads=threads, out=out, quiet=quiet, command=command)
+    elif name == "bars":
+        run_bars(quick=quick, threads=threads, out=out, quiet=quiet, command=command)
+    elif name == "aspect":
+        run_aspect(quick=quick, threads=threads, out=out, quiet=quiet, command=command)
     else:
         run_friction(quick=quick, out=out, quiet=quiet, command=command)
 

@@ -66,13 +66,15 @@ TITLES = {
 TITLES["onecell_converged"] = "one cell or many, repetition and topology on the converged die (writeup 5.1, 5.5, 5.7)"
 TITLES["sweeps"] = "damping γ and ground stiffness k on three windows of the converged die, with certificates"
 #: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
-INTEGRATOR_STUDIES = ("accuracy", "stability", "friction", "cuboids")
+INTEGRATOR_STUDIES = ("accuracy", "stability", "friction", "cuboids", "bars", "aspect")
 #: What each integrator study is about (the first line of its module's docstring).
 INTEGRATOR_TITLES = {
     "accuracy": "the work-precision study of the integrators",
     "stability": "the map of the integrators' stable steps",
     "friction": "how near to Coulomb the physical die's friction can go: the regularisation study",
     "cuboids": "the physical die held to the measured face probabilities of real square cuboidal dice",
+    "bars": "the two-dimensional limit: long bars against Pender & Uhrin's formula",
+    "aspect": "the home window's border fraction f(ε) and α against the die's aspect ratio",
 }
 #: Every study's name.
 STUDY_NAMES = WRITEUP_STUDIES + INTEGRATOR_STUDIES

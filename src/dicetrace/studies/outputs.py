@@ -34,12 +34,13 @@ RESULTS_ROOT = Path("dicetrace-results")
 #: Marker file of a folder of committed results.
 COMMITTED_MARKER = ".committed-results"
 #: Default output folder of each command (``analyze`` writes all writeup studies into one, with REPORT.md).
-DEFAULT_FOLDERS = {"analyze": "analysis", "accuracy": "accuracy", "stability": "stability", "friction": "friction"}
+DEFAULT_FOLDERS = {"analyze": "analysis", "accuracy": "accuracy", "stability": "stability", "friction": "friction",
+                   "cuboids": "cuboids", "bars": "bars", "aspect": "aspect"}
 
 
 def default_out(command: str) -> Path:
     """``./dicetrace-results/<folder>`` of the writeup studies (``analyze``) or of an integrator study
-    (``accuracy``, ``stability``, ``friction``)."""
+    (``accuracy``, ``stability``, ``friction``, ``cuboids``, ``bars``, ``aspect``)."""
     return RESULTS_ROOT / DEFAULT_FOLDERS[command]
 
 

@@ -24,6 +24,11 @@ A placeholder whose value is missing renders as ``n/a`` (and is listed on
 stderr). When any study ran with ``--quick`` the report starts with a
 warning that its numbers come from CI-sized grids.
 
+Two studies run alone into folders of their own beside ``results/``
+(:data:`FOLDER_STUDIES`: ``OUT/bars/results.json``, ``OUT/aspect/results.json``) have
+sections of the whole report too; a section that quotes one of them is left out
+while its results are not there.
+
 The whole report needs the results of every writeup study.  While some are
 missing (``dicetrace analyze settle`` into a new folder), ``REPORT.md`` holds
 only the sections (``## g. ...``) of the studies whose results are there,
@@ -43,6 +48,8 @@ from pathlib import Path
 
 from dicetrace.studies.outputs import write_text
 
+#: Studies run alone (``dicetrace analyze NAME --out OUT/NAME``) whose ``OUT/NAME/results.json`` the report quotes.
+FOLDER_STUDIES = ("bars", "aspect")
 _PH = re.compile(r"\{\{([vtfs]):([^}|]+)(?:\|([^}]*))?\}\}")
 QUICK_WARNING = ("> **Quick run.** These numbers come from the CI-sized grids of `dicetrace analyze --quick`; they "
                  "only show that the pipeline works and do not support the text's conclusions. The committed "
@@ -150,6 +157,17 @@ def sections(template: str) -> dict[str, str]:
     return out
 
 
+def titled_section(heading: str, template: str | None = None) -> str:
+    """The template's level-2 section whose heading starts with ``heading`` (``"Real dice I"``), up to the next one
+    (ValueError when there is none)."""
+    text = template_text() if template is None else template
+    start = text.find(f"\n## {heading}")
+    if start < 0:
+        raise ValueError(f"no section headed {heading!r} in the report template")
+    end = text.find("\n## ", start + 4)
+    return text[start + 1:end if end >= 0 else len(text)]
+
+
 def _studies_quoted(text: str) -> set[str]:
     return {m.group(2).strip().partition(".")[0] for m in _PH.finditer(text)}
 
@@ -182,6 +200,14 @@ def partial_template(template: str, studies: list[str], results: dict[str, dict]
     return "\n".join(head) + "\n" + "".join(c + "\n\n" for c in conventions) + "\n".join(body)
 
 
+def _without_sections_of(template: str, missing: set[str]) -> str:
+    """``template`` without the level-2 sections that quote a study of ``missing``."""
+    starts = [m.start() for m in _H2.finditer(template)] + [len(template)]
+    head = template[:starts[0]]
+    keep = [template[a:b] for a, b in zip(starts[:-1], starts[1:]) if not (_studies_quoted(template[a:b]) & missing)]
+    return head + "".join(keep)
+
+
 def build(out: Path, template: str | None = None) -> Path:
     """Write ``OUT/REPORT.md`` from ``OUT/results/*.json``: the whole report when every writeup study has results
     there, else the sections of those that have (:func:`partial_template`); returns its path."""
@@ -196,7 +222,15 @@ def build(out: Path, template: str | None = None) -> Path:
             results[p.stem] = json.loads(p.read_text())
         except ValueError:
             print(f"report: cannot read {p}", file=sys.stderr)
+    for name in FOLDER_STUDIES:
+        p = out / name / "results.json"
+        if p.is_file():
+            try:
+                results[name] = json.loads(p.read_text())
+            except ValueError:
+                print(f"report: cannot read {p}", file=sys.stderr)
     template = template if template is not None else template_text()
+    template = _without_sections_of(template, {s for s in FOLDER_STUDIES if s not in results})
     have = [s for s in WRITEUP_STUDIES if s in results]
     if len(have) < len(WRITEUP_STUDIES):
         template = partial_template(template, have, results)
