@@ -104,6 +104,7 @@ def test_the_tolerance_weight_ages_by_a_crossed_flight_as_by_its_steps(rate):
     assert a[0]["tol_weight"] == pytest.approx(math.exp(-rate * 0.158), rel=1e-12)
 
 
+@pytest.mark.long  # the stepping loop is a second compile of contact-tsit5's summary loop (a minute on a cold cache)
 def test_crossing_flights_changes_no_outcome_and_the_trajectory_only_by_rounding():
     """Against the same loop stepping every flight: same status, steps, outcome and contact sets; states
     within rounding at the end of a throw cut short at 0.25 s (before chaos amplifies the rounding)."""
@@ -179,8 +180,19 @@ def _one_call_and_sliced(kernel, ic, kin, budget, out_a, out_b):
     return a, b, calls
 
 
-@pytest.mark.parametrize("integrator", list(INTEGRATORS))
-@pytest.mark.parametrize("kind", ["summary", "trace", "events"])
+def _slice_cases():
+    """Every integrator × run loop; those whose loop ``tests/compile_kernels.py`` does not compile before the suite
+    (the events loops of the schemes other than contact-tsit5's, forward Euler's summary loop: a minute or more
+    of compiling each on a cold cache) in the long tier."""
+    for integrator in INTEGRATORS:
+        for kind in ("summary", "trace", "events"):
+            cold = ((kind == "events" and INTEGRATORS[integrator].scheme != TSIT5.scheme)
+                    or (kind == "summary" and integrator == "forward-euler"))
+            yield pytest.param(integrator, kind, marks=[pytest.mark.long] if cold else [],
+                               id=f"{kind}-{integrator}")
+
+
+@pytest.mark.parametrize("integrator, kind", list(_slice_cases()))
 def test_a_throw_in_slices_is_the_throw_in_one_call(integrator, kind):
     """Every run loop stopped every 37 steps (``Status.RUNNING``, its state kept in its motion and work records)
     and gone on with gives the throw of one call bit for bit: status, steps, outcome, contact sets (events and
