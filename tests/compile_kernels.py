@@ -12,9 +12,10 @@ Nothing is asserted here: a kernel that fails to compile or run fails its tests,
 
 One task per scheme of the integrator table.  Phase 1: the step with the test stepping driver around
 it (``tests/core/test_integrators.py``) and the tracing run loop (``simulate``).  Phase 2, in the same
-task once its step is cached: the summary and batch loops of the schemes the suite runs batches or
-summaries with (``SUMMARY_INTEGRATORS``), and the events loop and batch of the schemes whose exact contact events
-the suite records (``EVENT_INTEGRATORS``).
+task: the summary and batch loops of the schemes the suite runs batches or summaries with
+(``SUMMARY_INTEGRATORS``).  Phase 3, a task of its own: the events loop and batch of the schemes whose exact
+contact events the CI tier records (``EVENT_INTEGRATORS``).  Tests of other kernels (the events loops of the
+other contact schemes, forward Euler's summary loop) are in the long tier.
 """
 
 from __future__ import annotations
@@ -90,19 +91,25 @@ def _phase3(task: str) -> str:
     return task
 
 
-def _scheme(task: tuple[str, bool]) -> str:
-    """Every kernel of one scheme the suite runs: phase 1, then phase 2 where ``task[1]`` says so, then the
-    events kernels where the suite runs them."""
-    name, summary = task
+def _scheme(task: tuple[str, str]) -> str:
+    """One task: ``("step", name)`` phase 1 and, where the suite needs them, phase 2 of integrator ``name``'s
+    scheme; ``("events", name)`` its events kernels (phase 3)."""
+    kind, name = task
+    if kind == "events":
+        _phase3(name)
+        return f"{name} (events)"
     _phase1(name)
-    if summary:
+    if name in _summary_integrators():
         _phase2(name)
-    from dicetrace.integrators import INTEGRATORS
-
-    for ev in EVENT_INTEGRATORS:
-        if INTEGRATORS[ev].scheme == INTEGRATORS[name].scheme:
-            _phase3(ev)
     return name
+
+
+def _tasks(names) -> list[tuple[str, str]]:
+    """The tasks, in the order the pool takes them: one per scheme (``_costliest_first``), and the events kernels
+    as a task of their own right after the first (each is about as costly as a contact scheme's step and loops,
+    so two processes then share the costliest work instead of one doing it all after its step)."""
+    steps = [("step", n) for n in _costliest_first(names)]
+    return steps[:1] + [("events", ev) for ev in EVENT_INTEGRATORS] + steps[1:]
 
 
 def _costliest_first(names):
@@ -130,8 +137,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     # One task per scheme (its step, tracing loop, and where the suite needs them its summary loop and batch
     # kernel, which load the step from the cache): no process waits on another, and none compiles a step twice.
-    summaries = _summary_integrators()
-    tasks = [(name, name in summaries) for name in _costliest_first(INTEGRATORS)]
+    tasks = _tasks(INTEGRATORS)
     with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=get_context("spawn")) as pool:
         for done in pool.map(_scheme, tasks):
             print(f"compile_kernels: {done} ready ({time.perf_counter() - t0:.0f} s)", flush=True)
