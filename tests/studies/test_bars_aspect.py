@@ -100,7 +100,7 @@ def test_the_square_faces_come_up_more_on_the_flat_prism_than_on_the_tall_one(co
 
 
 def test_the_committed_results_fill_the_report_section(committed):
-    text, missing = report.render(report.titled_section("Real dice II"), {"aspect": committed})
+    text, missing = report.render(report.titled_section("Real dice III"), {"aspect": committed})
     assert not missing and "n/a" not in text
     assert sa.SENTENCES["answer"](committed) in (REPO / "analysis" / "REPORT.md").read_text()
 
@@ -112,13 +112,13 @@ def test_the_report_leaves_out_a_section_whose_study_has_no_results(tmp_path, co
         pytest.skip("no committed writeup results here")
     shutil.copytree(REPO / "analysis" / "results", tmp_path / "results")
     text = report.build(tmp_path).read_text()
-    assert "## Real dice I" not in text and "## Real dice II" not in text and "n/a" not in text
+    assert "## Real dice II" not in text and "## Real dice III" not in text and "n/a" not in text
     for name in report.FOLDER_STUDIES:
         (tmp_path / name).mkdir()
         shutil.copy2(REPO / "analysis" / name / "results.json", tmp_path / name)
     text = report.build(tmp_path).read_text()
-    assert "## Real dice I:" in text and "## Real dice II:" in text and "{{" not in text
-    assert text.index("## Real dice II") < text.index("## Method notes and limits")
+    assert "## Real dice II:" in text and "## Real dice III:" in text and "{{" not in text
+    assert text.index("## Real dice III") < text.index("## Method notes and limits")
 
 
 @pytest.mark.slow
@@ -135,7 +135,7 @@ def test_the_quick_run_writes_every_file_the_report_reads(tmp_path, dicetrace_cl
         assert len(m["f"]) == len(sa.QUICK["eps_rel"]) and all(0 <= f <= 1 for f in m["f"])
         assert math.isclose(sum(m["points"]["faces"]) / m["n_points"] + (m["points"]["edge"] + m["points"]["unsettled"])
                             / m["n_points"], 1.0)
-    text, missing = report.render(report.titled_section("Real dice II"), {"aspect": data})
+    text, missing = report.render(report.titled_section("Real dice III"), {"aspect": data})
     assert not missing, missing
     assert data["control"]["agrees_with_cube"]["agreement"] >= 0.9  # the general path on the cube: the cube's faces
     sa.rerender(out)

@@ -28,7 +28,8 @@ def committed():
 def test_the_committed_run_is_the_full_study(committed):
     rows = pd.DataFrame(committed["rows"])
     assert committed["aspects"] == GAZETTE_97_16.aspect.tolist()
-    assert sorted(rows["variant"].unique()) == sorted(["casual", "gentle", "vigorous", f"casual, μ {cu.MU_LITERATURE:g}"])
+    assert sorted(rows["variant"].unique()) == sorted(["casual", "gentle", "vigorous", f"casual, μ {cu.MU_LITERATURE:g}",
+                                                         *(f"casual, e {e:g}" for e in cu.RESTITUTIONS)])
     assert (rows.loc[rows["variant"] == "casual", "throws"] == cu.N_MAIN).all()
     assert (rows.loc[rows["variant"].isin(["gentle", "vigorous"]), "throws"] == cu.N_SYST).all()
     # every throw counted: settled on a face, on an edge or at the time cap

@@ -25,7 +25,8 @@ stderr). When any study ran with ``--quick`` the report starts with a
 warning that its numbers come from CI-sized grids.
 
 Two studies run alone into folders of their own beside ``results/``
-(:data:`FOLDER_STUDIES`: ``OUT/bars/results.json``, ``OUT/aspect/results.json``) have
+(:data:`FOLDER_STUDIES`: ``OUT/cuboids/results.json``, ``OUT/bars/results.json``,
+``OUT/aspect/results.json``) have
 sections of the whole report too; a section that quotes one of them is left out
 while its results are not there.
 
@@ -49,7 +50,7 @@ from pathlib import Path
 from dicetrace.studies.outputs import write_text
 
 #: Studies run alone (``dicetrace analyze NAME --out OUT/NAME``) whose ``OUT/NAME/results.json`` the report quotes.
-FOLDER_STUDIES = ("bars", "aspect")
+FOLDER_STUDIES = ("cuboids", "bars", "aspect")
 _PH = re.compile(r"\{\{([vtfs]):([^}|]+)(?:\|([^}]*))?\}\}")
 QUICK_WARNING = ("> **Quick run.** These numbers come from the CI-sized grids of `dicetrace analyze --quick`; they "
                  "only show that the pipeline works and do not support the text's conclusions. The committed "
