@@ -84,8 +84,16 @@ def test_ctrl_c_while_the_command_loads_is_one_line_and_exit_130(tmp_path, entry
     assert not (tmp_path / "s").exists()
 
 
+def _console_script_only() -> list:
+    """:func:`_entries` with ``python -m dicetrace`` in the long tier (the CI tier interrupts the console script:
+    both entries run the same ``__main__`` guard, which ``test_ctrl_c_while_the_command_loads...`` covers for
+    both)."""
+    entries = _entries()
+    return [pytest.param(*entries[0].values, id=entries[0].id, marks=[pytest.mark.long]), entries[1]]
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("entry", _entries())
+@pytest.mark.parametrize("entry", _console_script_only())
 @pytest.mark.parametrize("args, at, as_import_error", [
     (["simulate", "--ic", "0,0,0,0,100,0"], "scipy", False),  # the commands' modules, still loading
     (["scan", "--window", "home", "--res", "3", "--out", "s"], "numba", False),  # inside the command

@@ -442,7 +442,8 @@ def run_bounded(args, cwd, env=None):
 
 
 @pytest.mark.slow  # waits on a network peer for seconds: CI runs it, the quick loop does not
-@pytest.mark.parametrize("kind", ["refused", "silent", "garbage"])
+@pytest.mark.parametrize("kind", ["refused", pytest.param("silent", marks=pytest.mark.long),
+                                  pytest.param("garbage", marks=pytest.mark.long)])
 def test_connect_to_a_peer_that_is_no_grpc_server_is_one_line_exit_2(tmp_path, peer, kind):
     port = peer(kind)
     res = run_bounded(["record", *AT, "--connect", "--url", f"rerun+http://127.0.0.1:{port}/proxy"], tmp_path)
@@ -454,7 +455,7 @@ def test_connect_to_a_peer_that_is_no_grpc_server_is_one_line_exit_2(tmp_path, p
 
 
 @pytest.mark.slow  # waits on a network peer for seconds: CI runs it, the quick loop does not
-@pytest.mark.parametrize("display", [None, ":93"])
+@pytest.mark.parametrize("display", [None, pytest.param(":93", marks=pytest.mark.long)])
 def test_spawn_without_a_display_is_one_line_exit_2(tmp_path, peer, display):
     """No display at all, or a DISPLAY where no X server answers: refused before any work, in one line."""
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}

@@ -389,7 +389,7 @@ def test_rrd_onto_a_full_disk_does_not_hang(tmp_path, tmpfs, fill_fs, dicetrace_
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("stderr", ["closed", "/dev/full"])
+@pytest.mark.parametrize("stderr", ["closed", pytest.param("/dev/full", marks=pytest.mark.long)])
 def test_a_scan_writes_its_data_and_exits_0_whatever_standard_error_is(tmp_path, stderr):
     """With standard error closed (``2>&-``: once exit 70, nothing written) or on /dev/full (once the data, then
     exit 2), a scan writes its folder, puts nothing on standard output, and exits 0: what it says there decides

@@ -425,6 +425,7 @@ def test_the_viewer_takes_the_room_beside_the_map(browser, explorer):
 # -- issue 46 items 6, 8, 9 ---------------------------------------------------------------------------------------------
 
 
+@pytest.mark.long  # 11 s; the CI tier keeps one browser test of the page (test_page_map_zoom_and_throw)
 def test_the_download_link_waits_for_a_pick_and_the_empty_viewer_says_what_to_do(browser, explorer):
     """Issue 46 item 8: "download this throw (.rrd)" was live before any pick and downloaded the page itself as
     download.html.  Before a pick it is hidden and the viewer's box says to click a point on the map; after a pick
