@@ -60,6 +60,17 @@ def omega(l0, l1, l2, off, kp):
     """ω of the angular momentum (l0, l1, l2) for the body whose node offsets are ``off``: L / I for the cube."""
     if kp.isotropic:
         return l0 / kp.inertia, l1 / kp.inertia, l2 / kp.inertia
+    return body_omega(l0, l1, l2, off, kp)
+
+
+@jit
+def body_omega(l0, l1, l2, off, kp):
+    """ω = R·I_b⁻¹·Rᵀ·L of a body that is not the uniform cube, R read off its offsets ``off``.
+
+    Out of line, unlike the rest of the kernels' arithmetic: every run loop of a contact scheme calls it at
+    several sites, and inlined at each (numba's ``inline="always"``) it was a large share of the loops' compile
+    time; the cube never takes this branch, and the arithmetic is the same either way.
+    """
     return omega_in(l0, l1, l2, orientation(off, kp), kp)
 
 

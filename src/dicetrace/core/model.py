@@ -136,7 +136,7 @@ def top4_mask(z):
     return mask
 
 
-@jit(inline="always")
+@jit
 def face_below(off, kp):
     """The face (1..6) the die stands over: the one its centre of mass's downward vertical leaves the box through.
 

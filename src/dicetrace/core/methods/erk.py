@@ -138,6 +138,13 @@ def stage_omega(y, off, kp):
     if kp.isotropic:
         I = kp.inertia
         return y[6] / I, y[7] / I, y[8] / I
+    return body_stage_omega(y, off, kp)
+
+
+@jit
+def body_stage_omega(y, off, kp):
+    """ω = R·I_b⁻¹·Rᵀ·L at the stage point y of a body that is not the uniform cube (:func:`stage_omega`), out of
+    line for the compile time as ``inertia.body_omega`` is; the cube never calls it."""
     a00, a01, a02, a10, a11, a12, a20, a21, a22 = quat_matrix(y[9], y[10], y[11], y[12])
     s00, s01, s02, s10, s11, s12, s20, s21, s22 = orientation(off, kp)
     R = (a00 * s00 + a01 * s10 + a02 * s20, a00 * s01 + a01 * s11 + a02 * s21, a00 * s02 + a01 * s12 + a02 * s22,
