@@ -53,6 +53,9 @@ def test_the_rolls_table_keeps_each_pose(tmp_path):
     np.testing.assert_allclose(Rotation.from_quat(back).as_matrix(), Rotation.from_quat(q).as_matrix(), atol=1e-15)
     np.testing.assert_array_equal(t.column("z0_cm").to_numpy(), h)
     assert (back[:, 3] >= 0).all()
+    # each row keeps the very rotation its throw ran from, to the last bit (a quaternion read off that rotation
+    # again, as the table once held, gives another rotation in its last bits for most throws)
+    np.testing.assert_array_equal(validate_orientations(back, 5), validate_orientations(q, 5))
     # a row replays as the throw it records
     i = 3
     r = simulate(ics[i], preset="physical", orientation=Rotation.from_quat(back[i]).as_matrix(),

@@ -622,9 +622,23 @@ def simulate_batch(
         coords=coords,
         device=device.label,
         set_times=flat_times,
-        orientations=quaternions_xyzw(rots) if posed else None,
+        orientations=_pose_quaternions(orientations, rots, m) if posed else None,
         heights_cm=heights if posed else None,
     )
+
+
+def _pose_quaternions(orientations, rots: np.ndarray, m: int) -> np.ndarray:
+    """The quaternions (m, 4), x, y, z, w, a posed batch's table keeps: the ones given, as given, so that a throw
+    replayed from its row (``record --rolls``) starts from the very rotation it ran from (a quaternion read off
+    that rotation again differs in its last bits for most throws, and so does the rotation made from it); read
+    off the rotations where matrices were given (or none: the identity).  A quaternion with w < 0 is kept as −q
+    (w ≥ 0, as scipy's canonical form): the same rotation to the last bit, since R(q) is quadratic in q."""
+    if orientations is not None:
+        q = np.array(orientations, dtype=np.float64)
+        if q.shape == (m, 4):
+            q[q[:, 3] < 0] *= -1.0
+            return q
+    return quaternions_xyzw(rots)
 
 
 def _poses(cfg: Config, orientations, heights_cm, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
