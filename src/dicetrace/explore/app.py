@@ -46,7 +46,7 @@ from starlette.requests import Request
 from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
-from dicetrace.commands.options import die_text
+from dicetrace.body_text import die_text
 from dicetrace.explore.compare import compare_endpoint
 from dicetrace.explore.compute import (Busy, OverBudget, Worker, check_recording, scan_folder_for, throw_aspect,
                                        throw_info, throw_rrd)

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dicetrace.commands.options import die_text, fmt_num
+from dicetrace.body_text import die_text, fmt_num
 from dicetrace.devices import resolve_device
 from dicetrace.explore.outcome_map import Cancelled, MapBuild, OutcomeMap
 from dicetrace.explore.view import View, ViewError

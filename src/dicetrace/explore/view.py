@@ -27,7 +27,7 @@ from urllib.parse import urlencode
 
 from dicetrace.ics import SLICES, Grid, get_slice
 from dicetrace import params
-from dicetrace.commands.options import BodyTextError, fmt_num, parse_body, plain_body
+from dicetrace.body_text import BodyTextError, fmt_num, parse_body, plain_body
 from dicetrace.params import ConfigError
 from dicetrace.windows import WINDOWS, get_res, get_window
 
@@ -176,7 +176,7 @@ def body_texts(v: View) -> dict:
 
 def _body_value(param: str, value, count: int):
     """``die`` (sides X, Y, Z) or ``load`` (W, X, Y, Z) as numbers, from their text (read by ``--die`` and
-    ``--load``'s one reader, :func:`dicetrace.commands.options.parse_body`) or numbers; ViewError naming it."""
+    ``--load``'s one reader, :func:`dicetrace.body_text.parse_body`) or numbers; ViewError naming it."""
     if value is None or value == "":
         return None
     if not isinstance(value, str):
