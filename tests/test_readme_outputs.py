@@ -27,6 +27,8 @@ REGENERATES = {
     "analysis": "dicetrace analyze all --out analysis: the committed report and its figures",
     "analysis/accuracy": "dicetrace analyze accuracy|stability|friction --out analysis/accuracy: the committed studies",
     "analysis/cuboids": "dicetrace analyze cuboids --out analysis/cuboids: the committed comparison with real dice",
+    "analysis/bars": "dicetrace analyze bars --out analysis/bars: the committed long bars against Pender & Uhrin",
+    "analysis/aspect": "dicetrace analyze aspect --out analysis/aspect: the committed home window against the aspect",
 }
 #: Placeholders in the README's paths, and a name that stands for each.
 PLACEHOLDERS = {"<name>": "x", "<study>": "x", "<digest>": "x", "NAME": "x", "STUDY": "x"}

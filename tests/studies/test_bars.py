@@ -120,7 +120,7 @@ def _report_fields_resolve(res: dict, study: str, title: str) -> None:
 
 
 def test_the_committed_results_fill_the_report_section(committed):
-    _report_fields_resolve(committed, "bars", "Real dice I")
+    _report_fields_resolve(committed, "bars", "Real dice II")
     assert re.search(r"long bars: \*\*(supported|refuted|undetermined)\*\*", (REPO / "analysis" / "REPORT.md").read_text())
 
 
@@ -137,7 +137,7 @@ def test_the_quick_run_writes_every_file_the_report_reads(tmp_path, dicetrace_cl
     rows = pd.DataFrame(data["rows"])
     assert set(rows["ratio"]) == set(sb.QUICK["ratios"])
     assert (rows["wide"] + rows["narrow"] + rows["end"] + rows["edge"] + rows["unsettled"] == rows["throws"]).all()
-    _report_fields_resolve(data, "bars", "Real dice I")
+    _report_fields_resolve(data, "bars", "Real dice II")
     sb.rerender(out)  # again from the results alone: the same summary
     assert json.loads((out / "results.json").read_text())["summary"] == data["summary"]
 
