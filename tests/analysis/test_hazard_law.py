@@ -135,6 +135,7 @@ def test_the_settle_clock_reads_lambda_and_t0():
     c = settle_clock(eps, means, sems, lam, log_depth(eps, counts))
     assert abs(c.lam_fit - lam) < 4 * c.lam_fit_stderr and c.lam_fit_stderr < 1.0
     assert c.t0 == pytest.approx(t0, abs=4 * c.t0_stderr + 1e-3)
+    assert c.t0_fit == pytest.approx(t0, abs=0.02)  # the free line's intercept
     raw = settle_clock(eps, means, sems, lam)
     assert raw.t0 == pytest.approx(t0 + 1 / (alpha * lam), abs=4 * raw.t0_stderr + 1e-3)
     assert eps_of_t(t0 + 1.0, t0, lam) == pytest.approx(math.exp(-lam))

@@ -194,7 +194,8 @@ def log_depth(eps, counts) -> np.ndarray:
 class SettleClock:
     """``t ≈ T0 − ln d / λ`` for a throw a distance d from a border: ``T0`` (s) with its stderr for the slope fixed at
     ``lam`` (the edge saddle's rate), and the free slope's rate ``lam_fit`` (1/s) with its stderr, on the scales
-    ``eps`` used, with the depth correction ``depth`` (:func:`log_depth`) of each."""
+    ``eps`` used, with the depth correction ``depth`` (:func:`log_depth`) of each; ``t0_fit``: the free line's ``T0``
+    (its value at ε = 1)."""
 
     t0: float
     t0_stderr: float
@@ -204,10 +205,11 @@ class SettleClock:
     eps: np.ndarray
     depth: np.ndarray
     chi2_dof: float
+    t0_fit: float = math.nan
 
     def as_dict(self) -> dict:
         return {"t0": self.t0, "t0_stderr": self.t0_stderr, "lam": self.lam, "lam_fit": self.lam_fit,
-                "lam_fit_stderr": self.lam_fit_stderr, "eps": self.eps.tolist(), "depth": self.depth.tolist(),
+                "lam_fit_stderr": self.lam_fit_stderr, "t0_fit": self.t0_fit, "eps": self.eps.tolist(), "depth": self.depth.tolist(),
                 "chi2_dof": self.chi2_dof}
 
 
@@ -229,7 +231,7 @@ def settle_clock(eps, t_mean, t_sem, lam: float, depth=None) -> SettleClock:
     chi2 = float((w * (y - t0) ** 2).sum())
     dof = len(e) - 1
     t0_se = math.sqrt(1.0 / w.sum()) * (max(chi2 / dof, 1.0) ** 0.5 if dof > 0 else 1.0)
-    lam_fit = lam_se = math.nan
+    lam_fit = lam_se = t0_fit = math.nan
     if len(e) >= 3:
         A = np.column_stack([np.ones_like(e), -np.log(e)])
         cov = np.linalg.inv(A.T @ (A * w[:, None]))
@@ -238,8 +240,8 @@ def settle_clock(eps, t_mean, t_sem, lam: float, depth=None) -> SettleClock:
         scale = max(float(res @ (w * res)) / (len(e) - 2), 1.0) if len(e) > 2 else 1.0
         b, b_se = float(coef[1]), math.sqrt(cov[1, 1] * scale)
         if b > 0:
-            lam_fit, lam_se = 1.0 / b, b_se / b**2
-    return SettleClock(t0, t0_se, float(lam), lam_fit, lam_se, e, dp, chi2 / dof if dof > 0 else math.nan)
+            lam_fit, lam_se, t0_fit = 1.0 / b, b_se / b**2, float(coef[0])
+    return SettleClock(t0, t0_se, float(lam), lam_fit, lam_se, e, dp, chi2 / dof if dof > 0 else math.nan, t0_fit)
 
 
 def eps_of_t(t, t0: float, lam: float):

@@ -11,18 +11,20 @@ Per model (``seed`` with ``contact-tsit5``, and ``physical``; both at a uniform 
   (:func:`~dicetrace.analysis.doubly_transient.hazard_curve`, Poisson errors);
 * f(ε) at half decades from a top scale down to 1e-12, from nested pairs: every base gets one random direction, its
   neighbour at the top scale is thrown for every base, and the finer neighbours on the same ray only for the bases
-  whose top pair changed (:func:`~dicetrace.analysis.hazard_law.nested_f`); the *leak* (pairs that change at the
-  next scale without changing at the top) is measured on a random sample of the others;
+  whose top pair changed (:func:`~dicetrace.analysis.hazard_law.nested_f`), for ``physical`` at 1e-11 (bases and top
+  pairs thrown again there); the *leak* (pairs that change at the next scale without changing at the top) is
+  measured on a random sample of the others;
 * the settle clock: the mean settle time of the bases whose pair changed at each scale, ``T0 + (D − ln ε)/λ_edge``
   with D the mean depth of those bases below ε read off f itself
   (:func:`~dicetrace.analysis.hazard_law.settle_clock`, :func:`~dicetrace.analysis.hazard_law.log_depth`), its T0 over nested ranges of scales (the finest three
   first, :func:`~dicetrace.analysis.robustness.range_scan`), and the free slope's rate beside λ_edge;
 * the law window by window: the measured hazard against α (the secant slope of ln f over the window's scales)
-  times λ_edge, with the clock's range systematic and the tolerance systematic; its verdict;
+  times λ_edge, with the clock's systematic (its T0 over the ranges of scales, ± its error, and the clock's own free
+  slope and intercept in place of λ_edge's) and the tolerance systematic; its verdict;
 * certificates at 1e-11 (10× tighter): every throw past the 88 % quantile of the settle time and a random sample of
   the rest (outcome flips, settle-time shifts, each window's hazard again), the nested pairs of the first changed
-  bases (the floor of each scale: a scale counts where its 95 % bound is below a third of f and at least ten pairs
-  changed) and the top pairs of the first bases.
+  bases at a tenth of their own tolerance (the floor of each scale: a scale counts where its 95 % bound is below a
+  third of f and at least ten pairs changed) and the top pairs of the first bases.
 """
 
 from __future__ import annotations
@@ -48,12 +50,14 @@ NAME = "hazard_law"
 WINDOW = "zoom-out"
 #: The uniform tolerance of every throw, and the certificate's (10× tighter).
 TOL, TOL_TIGHT = 1e-10, 1e-11
-#: model -> (preset, make_config overrides, top scale of the nested pairs).  The top lies above the scales the tail
-#: past the 90 % quantile reaches on the settle clock (a trial of 3000 throws: about 1e-8 for ``physical``, 1e-5
-#: for ``seed``).
+#: model -> (preset, make_config overrides, top scale of the nested pairs, tolerance of the nested pairs).  The top
+#: lies above the scales the tail past the 90 % quantile reaches on the settle clock (a trial of 3000 throws: about
+#: 1e-8 for ``physical``, 1e-5 for ``seed``).  ``physical``'s nested pairs run at 1e-11 (their floor at 1e-12): at
+#: 1e-10 its floor (24 of 11000 near-border throws change face at 1e-11) stops f at 3e-10, above the scales its tail
+#: reaches; ``seed``'s floor at 1e-10 showed no change in 16000.
 MODELS = {
-    "seed": ("seed", {"integrator": "contact-tsit5"}, 1e-5),
-    "physical": ("physical", {}, 10.0**-7.5),
+    "seed": ("seed", {"integrator": "contact-tsit5"}, 1e-5, TOL),
+    "physical": ("physical", {}, 10.0**-7.5, TOL / 10),
 }
 #: Finest scale of the nested pairs (half decades from the top down to it).
 FINEST = 1e-12
@@ -78,7 +82,7 @@ CHUNK = 50_000
 
 
 def _config(model: str, tol: float):
-    preset, over, _ = MODELS[model]
+    preset, over = MODELS[model][:2]
     return make_config(preset, tol=tol, tol_growth=0.0, **over)
 
 
@@ -136,13 +140,21 @@ def _measure(ctx: Context, model: str, index: int) -> dict:
     idx = np.flatnonzero(c_top)
     ctx.log(f"{model}: {n} bases, {int(censored.sum())} unsettled, {len(idx)} pairs changed at the top ε {top:.2g}")
 
-    # nested pairs below the top, on the changed bases
+    # nested pairs below the top, on the changed bases, at the model's nested tolerance (the bases and their top pairs
+    # thrown again there where it is tighter than TOL; a row whose top pair no longer changes there counts as invalid)
+    ntol = MODELS[model][3]
+    ncfg = _config(model, ntol)
     fine = eps[:-1]
-    moved = np.concatenate([along_rays(ics[idx], rays[idx], e) for e in fine]) if len(idx) else np.zeros((0, 6))
-    o_n, _ = _throw(ctx, moved, cfg, "nested pairs")
-    o_n = o_n.reshape(len(fine), len(idx)).T
-    changed = np.column_stack([o_n != o0[idx][:, None], np.ones(len(idx), bool)])
-    valid = np.column_stack([o_n >= 1, np.ones(len(idx), bool)])
+    moved = [along_rays(ics[idx], rays[idx], e) for e in fine]
+    if ntol != TOL:
+        moved += [ics[idx], along_rays(ics[idx], rays[idx], top)]
+    o_n, _ = _throw(ctx, np.concatenate(moved) if len(idx) else np.zeros((0, 6)), ncfg, "nested pairs")
+    o_n = o_n.reshape(len(moved), len(idx))
+    nb, ntop = (o_n[-2], o_n[-1]) if ntol != TOL else (o0[idx], o_top[idx])
+    o_n = o_n[:len(fine)].T
+    top_kept = (ntop != nb) & (ntop >= 1) & (nb >= 1)
+    changed = np.column_stack([o_n != nb[:, None], np.ones(len(idx), bool)])
+    valid = np.column_stack([o_n >= 1, np.ones(len(idx), bool)]) & (top_kept | (ntol == TOL))[:, None]
     n_bases = int(valid_top.sum())
     nf = nested_f(changed, eps, n_bases, valid=valid, n_boot=ctx.pick(400, 60), rng=rng)
 
@@ -166,7 +178,7 @@ def _measure(ctx: Context, model: str, index: int) -> dict:
     k_n = min(ctx.pick(*CERT_NESTED), len(idx))
     sub = idx[:k_n]
     mv = np.concatenate([ics[sub]] + [along_rays(ics[sub], rays[sub], e) for e in eps])
-    on, _ = _throw(ctx, mv, tight, "nested floor")
+    on, _ = _throw(ctx, mv, _config(model, ntol / 10), "nested floor")
     on = on.reshape(len(eps) + 1, k_n)
     ch_t = (on[1:] != on[0]).T
     v_t = ((on[1:] >= 1) & (on[0] >= 1)).T & valid[:k_n]
@@ -174,7 +186,7 @@ def _measure(ctx: Context, model: str, index: int) -> dict:
     # two bounds on the pairs whose verdict flips at a scale, as shares of all bases: the flipped pairs of the
     # subsample (95 % Wilson bound) and twice the share of its throws whose face changes (a pair flips only where one
     # of its throws does), each scaled by the share of bases in the nested set
-    thr = (on != np.concatenate([o0[sub][None], o_n[:k_n].T, o_top[sub][None]])) & (on >= 1)
+    thr = (on != np.concatenate([nb[:k_n][None], o_n[:k_n].T, ntop[:k_n][None]])) & (on >= 1)
     thr_fl = floor_test(thr.ravel()[:, None], np.zeros((thr.size, 1), bool))
     share = len(idx) / max(n_bases, 1)
     pair_bound = np.asarray(nest_fl["hi"], float) * share
@@ -240,9 +252,13 @@ def _measure(ctx: Context, model: str, index: int) -> dict:
         w.update(q0=QUANTILES[j], q1=QUANTILES[j + 1], events=int(hz.events[j]), tail=QUANTILES[j] >= TAIL_FROM - 1e-9)
         tol_syst = abs(float(hz_t.h[j]) - h) if math.isfinite(hz_t.h[j]) else math.nan
         preds = []
-        for tv in t0_values + ([t0 - clock_scan["stat"], t0 + clock_scan["stat"]] if clock_scan else []):
+        clocks = [(tv, lam) for tv in t0_values + ([t0 - clock_scan["stat"], t0 + clock_scan["stat"]]
+                                                    if clock_scan else [])]
+        if clock is not None and math.isfinite(clock.lam_fit):  # the clock's own slope and intercept
+            clocks.append((clock.t0_fit, clock.lam_fit))
+        for tv, lc in clocks:
             try:
-                preds.append(secant_alpha(nf, float(eps_of_t(w["t1"], tv, lam)), float(eps_of_t(w["t0"], tv, lam)),
+                preds.append(secant_alpha(nf, float(eps_of_t(w["t1"], tv, lc)), float(eps_of_t(w["t0"], tv, lc)),
                                           counted=counted)[0] * lam)
             except ValueError:
                 continue
@@ -272,7 +288,7 @@ def _measure(ctx: Context, model: str, index: int) -> dict:
             break
     clock_check = compare(clock.lam_fit, clock.lam_fit_stderr, lam, 0.0) if clock else compare(*(math.nan,) * 4)
     row = {
-        "model": model, **_numerics(cfg), "tight_tol": TOL_TIGHT, "window": WINDOW, "n": n,
+        "model": model, **_numerics(cfg), "tight_tol": TOL_TIGHT, "nested_tol": ntol, "window": WINDOW, "n": n,
         "unsettled": int(censored.sum()), "edge_saddle": lam, "top": float(top),
         "settle_quantiles": {str(q): float(np.quantile(life, q)) for q in (0.5, 0.9, 0.99, 0.999, 0.9997)},
         "settle_max_s": float(life[settled].max()),

@@ -84,7 +84,7 @@ def render(c: Computed, out: Output) -> None:
         f, cert, q = row["f"], row["certificate"], row["settle_quantiles"]
         leak = f["leak"]
         num.append({
-            "model": row["model"], "numerics": f"{row['integrator']} tol {row['tol']:g}",
+            "model": row["model"], "numerics": f"{row['integrator']} tol {row['tol']:g}; nested pairs {row['nested_tol']:g}",
             "n": row["n"], "unsettled": row["unsettled"],
             "quant": " / ".join(fmt(q[k], ".3f") for k in ("0.5", "0.99", "0.999", "0.9997")),
             "scales": f"{fmt(f['eps'][-1], '.1e')} → {fmt(f['eps'][0], '.0e')}",
@@ -102,7 +102,7 @@ def render(c: Computed, out: Output) -> None:
         ("quant", "settle time at the 50 / 99 / 99.9 / 99.97 % quantile (s)", ""),
         ("scales", "nested scales (top → finest)", ""), ("top", "pairs changed at the top (f)", ""),
         ("leak", "leak: changed at the next scale, not at the top (95 % bound on f)", ""),
-        ("floor", "floor at tol/10: faces changed", ""), ("finest", "finest counted ε", ".1e"),
+        ("floor", "floor of the nested pairs at their tol/10: faces changed", ""), ("finest", "finest counted ε", ".1e"),
         ("cert", "tail at tol/10: faces changed / thrown; settle-time shift median / 99 % (s)", ""),
     ])
     fr = []
