@@ -7,7 +7,9 @@ tolerance, error bars and verdicts.  The full run is ``dicetrace analyze hazard-
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -91,3 +93,26 @@ def test_rerender_from_the_results_changes_no_number(quick):
     again = hl.rerender(out)
     assert again["tables"] == r["tables"] and again["rows"] == r["rows"]
     assert set(again["figures"]) == set(r["figures"])
+
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.skipif(not (REPO / "analysis" / "results" / "hazard_law.json").exists(), reason="no committed results")
+def test_the_report_states_the_laws_verdict_as_measured_and_no_longer_calls_it_unmeasured():
+    """Section n said the hazard law was "not measured"; section r measures it: the committed report gives each model's
+    verdict from the committed results, in section r, in section n's pointer and in the answers table."""
+    report = (REPO / "analysis" / "REPORT.md").read_text()
+    r = json.loads((REPO / "analysis" / "results" / "hazard_law.json").read_text())
+    sec_n = report[report.index("## n. "):report.index("## o. ")]
+    sec_r = report[report.index("## r. "):report.index("## Method notes")]
+    assert "not measured** here" not in sec_n and "section r" in sec_n
+    answers = report[report.index("## Answers"):report.index("## a. ")]
+    for model in ("seed", "physical"):
+        verdict = r["by"][model]["verdict"]["verdict"]
+        assert verdict in ("supported", "refuted", "undetermined")
+        assert f"*`{model}`: the law is {verdict}.*" in sec_r
+        assert f"**{verdict}** for `{model}`" in sec_n
+        assert f"**{verdict}**" in answers
+    w = r["by"]["physical"]["windows"][2]
+    assert f"hazard is {w['h']:.1f} ± {w['h_err']:.1f} /s" in " ".join(sec_r.split())

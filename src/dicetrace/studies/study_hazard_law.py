@@ -43,7 +43,7 @@ from dicetrace.analysis.hazard_law import (along_rays, eps_of_t, law_verdict, la
 from dicetrace.analysis.robustness import one_sided_z, range_scan
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, window_ranges, write_json
+from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
 from dicetrace.studies.study_hazard_law_render import render as _render
 
 NAME = "hazard_law"
@@ -313,8 +313,30 @@ def _measure(ctx: Context, model: str, index: int) -> dict:
     return row
 
 
+def derived(row: dict) -> dict:
+    """Numbers the report quotes, derived from a row's stored f alone (a pure function, applied again by
+    :func:`rerender`): ``f_at`` (f at 1e-9 and 1e-8 where those scales were thrown), and the counted local slopes
+    between the two finest counted scales (``slope_finest``) and the two coarsest (``slope_top``), with stderrs."""
+    f = row["f"]
+    eps = np.asarray(f["eps"], dtype=float)
+    f_at = {}
+    for key, e in (("1e-9", 1e-9), ("1e-8", 1e-8)):
+        k = np.flatnonzero(np.isclose(eps, e, rtol=1e-6, atol=0.0))
+        f_at[key] = float(f["f"][k[0]]) if len(k) else None
+    cnt = np.asarray(f["counted"], dtype=bool)
+    both = np.flatnonzero(cnt[:-1] & cnt[1:])
+    pick = {"finest": both[0] if len(both) else None, "top": both[-1] if len(both) else None}
+    out = {"f_at": f_at}
+    for key, j in pick.items():
+        out[f"slope_{key}"] = f["slope"][j] if j is not None else None
+        out[f"slope_{key}_stderr"] = f["slope_stderr"][j] if j is not None else None
+    return out
+
+
 def compute(ctx: Context) -> Computed:
     rows = [_measure(ctx, m, i) for i, m in enumerate(MODELS)]
+    for row in rows:
+        row["derived"] = jsonable(derived(row))
     return Computed({"rows": rows, "by": {r["model"]: r for r in rows}, "window": WINDOW, "tol": TOL,
                      "tight_tol": TOL_TIGHT, "quantiles": list(QUANTILES), "tail_from": TAIL_FROM,
                      "finest": FINEST, "floor_share": FLOOR_SHARE, "min_changed": MIN_CHANGED})
@@ -326,9 +348,11 @@ def render(c: Computed, out: Output) -> None:
 
 def rerender(out) -> dict:
     """Draw the figures and tables again from ``OUT/results/hazard_law.json`` alone and write them back into it (no
-    simulation, no number changed)."""
+    simulation, no measured number changed; :func:`derived` is applied again)."""
     path = Path(out) / "results" / f"{NAME}.json"
     r = json.loads(path.read_text())
+    for row in r["rows"]:  # a pure function of the stored f: derived again with the code
+        row["derived"] = jsonable(derived(row))
     r["by"] = {row["model"]: row for row in r["rows"]}
     output = Output(Path(out))
     render(Computed(r), output)
