@@ -35,8 +35,8 @@ import numpy as np
 
 from .doubly_transient import Hazard, compare, hazard_curve
 
-__all__ = ["quantile_hazard", "unit_rays", "along_rays", "NestedF", "nested_f", "log_f_at", "secant_alpha", "log_depth", "SettleClock",
-           "settle_clock", "eps_of_t", "law_window", "levels_off", "law_verdict"]
+__all__ = ["quantile_hazard", "unit_rays", "along_rays", "NestedF", "nested_f", "log_f_at", "secant_alpha",
+           "log_depth", "SettleClock", "settle_clock", "eps_of_t", "law_window", "levels_off", "law_verdict"]
 
 
 def quantile_hazard(lifetimes, quantiles, *, censored=None) -> tuple[Hazard, np.ndarray]:

@@ -16,8 +16,9 @@ Per model (``seed`` with ``contact-tsit5``, and ``physical``; both at a uniform 
   measured on a random sample of the others;
 * the settle clock: the mean settle time of the bases whose pair changed at each scale, ``T0 + (D − ln ε)/λ_edge``
   with D the mean depth of those bases below ε read off f itself
-  (:func:`~dicetrace.analysis.hazard_law.settle_clock`, :func:`~dicetrace.analysis.hazard_law.log_depth`), its T0 over nested ranges of scales (the finest three
-  first, :func:`~dicetrace.analysis.robustness.range_scan`), and the free slope's rate beside λ_edge;
+  (:func:`~dicetrace.analysis.hazard_law.settle_clock`, :func:`~dicetrace.analysis.hazard_law.log_depth`), its T0
+  over nested ranges of scales (the finest three first, :func:`~dicetrace.analysis.robustness.range_scan`), and the
+  free slope's rate beside λ_edge;
 * the law window by window: the measured hazard against α (the secant slope of ln f over the window's scales)
   times λ_edge, with the clock's systematic (its T0 over the ranges of scales, ± its error, and the clock's own free
   slope and intercept in place of λ_edge's) and the tolerance systematic; its verdict;
