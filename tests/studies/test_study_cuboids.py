@@ -115,3 +115,15 @@ def test_bad_input_is_one_line(tmp_path, dicetrace_cli):
     assert not (tmp_path / "x").exists()
     res = dicetrace_cli("analyze", "cuboids", "--res", "5", cwd=tmp_path)
     assert res.returncode == 2 and "--res" in res.stderr
+
+
+def test_the_committed_summary_renders_again_as_committed(tmp_path, committed):
+    """``rerender`` (no simulation) from the committed results writes the committed results and summary again,
+    the per-die z of the casual throws included."""
+    import shutil
+
+    shutil.copy(COMMITTED / "results.json", tmp_path / "results.json")
+    paths = cu.rerender(tmp_path)
+    assert json.loads(paths["json"].read_text()) == committed
+    assert paths["summary"].read_text() == (COMMITTED / "cuboids.md").read_text()
+    assert "| z (casual) |" in paths["summary"].read_text()

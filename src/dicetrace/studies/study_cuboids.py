@@ -327,12 +327,13 @@ def _markdown(data: dict, summary: dict, command: str, wall_s: float) -> str:
         f"(contact-tsit5, its tolerance schedule), dice of square side {SIDE_CM:g} cm, uniform; throws: "
         "dicetrace.throws (casual; gentle and vigorous for the throw's systematic). Data: The Mathematical "
         "Gazette 97, note 97.16, Table 1. p: share of throws that settled on a face with a square face up "
-        "(95 % Wilson interval); edge: throws that stopped on an edge; unsettled: at the time cap.",
+        "(95 % Wilson interval); z: the measured p less the casual throws' over their combined binomial error; "
+        "edge: throws that stopped on an edge; unsettled: at the time cap.",
         "",
-        f"| x/y | measured p (N) | casual | gentle | vigorous | throw spread | casual, μ {MU_LITERATURE:g} | "
+        f"| x/y | measured p (N) | casual | z (casual) | gentle | vigorous | throw spread | casual, μ {MU_LITERATURE:g} | "
         + "".join(f"casual, e {e:g} | " for e in RESTITUTIONS)
         + "DOP853 1e-10 agreement | DOP853 shift of p | edge / unsettled (casual) |",
-        "|---|---|---|---|---|---|---|" + "---|" * len(RESTITUTIONS) + "---|---|---|",
+        "|---|---|---|---|---|---|---|---|" + "---|" * len(RESTITUTIONS) + "---|---|---|",
     ]
     wide = {name: g.set_index("aspect") for name, g in rows.groupby("variant", sort=False)}
     for j, a in enumerate(asp):
@@ -344,7 +345,9 @@ def _markdown(data: dict, summary: dict, command: str, wall_s: float) -> str:
             cells.append(f"{r['p']:.3f} ({r['ci_low']:.3f}–{r['ci_high']:.3f}, n {int(r['n'])})")
         c = chk.loc[a]
         cas = wide["casual"].loc[a]
-        lines.append(f"| {a:g} | {GAZETTE_97_16.p[i]:.3f} ({GAZETTE_97_16.n[i]}) | {' | '.join(cells[:3])} | "
+        z = summary["models"][CASUAL.name]["z"][j]
+        lines.append(f"| {a:g} | {GAZETTE_97_16.p[i]:.3f} ({GAZETTE_97_16.n[i]}) | {cells[0]} | {z:+.1f} | "
+                     f"{' | '.join(cells[1:3])} | "
                      f"{summary['throw_spread'][j]:.3f} | {' | '.join(cells[3:])} | "
                      f"{c['agreement']:.3f} ({c['ci_low']:.3f}–{c['ci_high']:.3f}) | "
                      f"{summary['integrator_shift'][j]:+.3f} | {int(cas['edge'])} / {int(cas['unsettled'])} |")
@@ -399,3 +402,11 @@ def _markdown(data: dict, summary: dict, command: str, wall_s: float) -> str:
               f"{' and '.join(f'{e:g}' for e in RESTITUTIONS)} runs are material systematics, outside the verdict). The data themselves may scatter more than binomially (decades-old "
               "classroom throws): a looser error model would weaken the verdict.", ""]
     return "\n".join(lines)
+
+
+def rerender(out: Path) -> dict[str, Path]:
+    """Summarise and render again from ``out``'s ``results.json`` (no simulation)."""
+    out = Path(out)
+    res = json.loads((out / "results.json").read_text())
+    data = {k: res[k] for k in ("rows", "integrator_check", "aspects", "cube", "flaws")}
+    return render(data, summarise(data), out, res["command"], res["wall_s"])
