@@ -1,4 +1,4 @@
-"""Study r (hazard_law): the hazard law of the edge saddle, κ_settle(t) = α_local(ε(t))·λ_edge, measured.
+"""Study r (hazard_law): the hazard law of the edge saddle, κ_settle(t) = α(ε(t))·λ_edge, on 10⁵ throws per model.
 
 Section n's test compared one late settle hazard with α at one scale; the law behind it says more: a throw
 that starts ε from a border lingers −ln ε/λ_edge on the edge before it falls, so the throws still moving at t
