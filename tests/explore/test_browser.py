@@ -390,6 +390,7 @@ def test_shift_click_gives_the_viewer_both_throws_in_one_recording(browser, expl
     assert share > 0.1, f"the compare blueprint is not the viewer's layout ({share:.3f} of the left half is its 3-D view)"
 
 
+@pytest.mark.long  # the CI tier keeps one full-page browser test (test_page_map_zoom_and_throw)
 def test_the_viewer_takes_the_room_beside_the_map(browser, explorer):
     """Issue 35 item 12, the page's part: Rerun's viewer takes the page's width beside the map, 8:7 (the framing
     camera's room across) as tall as the page allows, and follows the window when it is resized, so the die is

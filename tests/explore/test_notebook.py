@@ -51,6 +51,7 @@ def kernel(tmp_path):
         km.shutdown_kernel(now=True)
 
 
+@pytest.mark.long  # 10 s with its kernel; the CI tier keeps the widget's round trip with the page
 def test_explorer_is_the_cells_output_in_a_kernel_and_works_in_a_browser(kernel, browser, tmp_path):
     out = run_cell(kernel, f"from dicetrace.explore import Explorer\nex = Explorer(window={WINDOW!r}, res={RES})\nex")
     assert not [o for o in out if o["type"] == "error"], out

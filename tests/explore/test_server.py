@@ -558,7 +558,7 @@ def test_headers_that_never_end_are_closed_and_the_oldest_waiting_connection_mak
                 h.close()
 
 
-@pytest.mark.slow
+@pytest.mark.long  # 16 s; the CI tier keeps the bounds on waiting connections and on kept maps
 def test_under_a_1024_fd_limit_1030_slow_connections_leave_it_answering_and_ctrl_c_stops_it(tmp_path):
     """Issue 47 B2 (its acceptance): the real ``dicetrace explore`` under ``ulimit -n 1024``; 1030 clients each send
     the start of a request and nothing more.  It never runs out of file descriptors (it answered nothing, with 160
