@@ -154,6 +154,6 @@ def test_the_numbers_of_contributing_md_are_held_by_results_files():
     spec.loader.exec_module(rf)
     values = rf.held_values()
     found = rf.figures((REPO / "CONTRIBUTING.md").read_text())
-    assert {"708.9", "257.0", "389.24"} <= {f for f, _ in found}
+    assert {"547.6", "237.0", "241.01", "708.9"} <= {f for f, _ in found}
     unheld = [(f, line) for f, line in found if f not in rf.EXCEPTIONS and not rf.is_held(f, values)]
     assert not unheld, unheld
