@@ -8,6 +8,7 @@ import sys
 import pytest
 
 
+@pytest.mark.slow  # seconds (a subprocess or a long fit): the quick loop skips it, CI runs it
 def test_python_m_dicetrace_runs_the_command_with_its_exit_codes():
     bad = subprocess.run([sys.executable, "-m", "dicetrace", "simulate", "--preset", "nosuch"],
                          capture_output=True, text=True)

@@ -70,6 +70,7 @@ def test_coarse_grain_of_exact_event_times_keeps_sub_step_durations():
     assert coarse_grain(sets, times, 0.3, min_steps=1e-7) == (0, 32, 0, 32, 160, 128)
 
 
+@pytest.mark.slow  # seconds (a subprocess or a long fit): the quick loop skips it, CI runs it
 def test_prefix_entropy_of_the_golden_mean_shift():
     # Known answer: binary sequences with no two consecutive 1s have φ^n words of length n asymptotically:
     # topological entropy ln φ = 0.4812 nats/symbol (Lind & Marcus 1995, ex. 4.1.4). 40 000 Markov samples with

@@ -229,6 +229,7 @@ def test_bad_input_is_one_line_naming_the_option_and_writes_nothing(tmp_path, di
     assert_one_line_error(res, *names)
 
 
+@pytest.mark.slow  # seconds (a subprocess or a long fit): the quick loop skips it, CI runs it
 def test_bad_input_through_the_console_script(tmp_path):
     """The real process: exit code 2, one line naming the option, no traceback."""
     res = run_cli("record", "--slice", "seed", "--at", "1,2", "--dt", "-0.5", cwd=tmp_path)

@@ -211,6 +211,7 @@ def test_summary_counts_failures_and_strict_exits_1(tmp_path, dicetrace_cli):
 # -- item 3: the estimate, the bound and --yes --------------------------------------------------------------------
 
 
+@pytest.mark.slow  # seconds (a subprocess or a long fit): the quick loop skips it, CI runs it
 def test_a_long_scan_needs_yes_and_says_its_estimate(tmp_path, dicetrace_cli, monkeypatch):
     import dicetrace.commands.scan as cmd
 

@@ -29,6 +29,7 @@ def _env(over: dict) -> dict:
     return {k: v for k, v in {**os.environ, **over}.items() if v is not None}
 
 
+@pytest.mark.slow  # seconds (a subprocess or a long fit): the quick loop skips it, CI runs it
 def test_cuda_without_a_gpu_is_one_line_and_serves_nothing(tmp_path):
     res = subprocess.run([sys.executable, "-m", "dicetrace.cli", "explore", "--no-browser", "--device", "cuda",
                           "--out", "scans"], cwd=tmp_path, capture_output=True, text=True, timeout=300,

@@ -123,6 +123,7 @@ def test_cli_runs_one_study_and_the_report_alone(tmp_path):
     assert "![h_ball_hill](figures/h_ball_hill.png)" in (tmp_path / "REPORT.md").read_text()
 
 
+@pytest.mark.slow  # seconds (a subprocess or a long fit): the quick loop skips it, CI runs it
 def test_cli_rejects_an_unknown_study(tmp_path):
     proc = _dicetrace("analyze", "nonsense", "--out", str(tmp_path), cwd=tmp_path)
     assert proc.returncode == 2

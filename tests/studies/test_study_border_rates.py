@@ -68,6 +68,7 @@ def test_reanalysis_from_the_raw_profiles_gives_the_same_numbers(quick_run, tmp_
     assert all((mine / f["path"]).stat().st_size > 0 for f in again["figures"].values())
 
 
+@pytest.mark.slow  # seconds (a subprocess or a long fit): the quick loop skips it, CI runs it
 def test_the_limit_as_the_range_shrinks_finds_the_rate_at_the_border_and_the_bias_of_longer_ranges():
     # Synthetic borders: T(d) = T0 − ln(d)/λ + ln(1 + d/d_c)/λ, quantised to 1 ms: the local rate is λ near the border
     # and rises toward d_c. The shortest range (one decade from d_lo) gives λ; the longer ranges lie above it
