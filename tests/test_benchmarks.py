@@ -122,6 +122,7 @@ def test_gpu_bench_runs_on_the_simulator_and_prints_the_agreement(tmp_path):
     assert "scan: skipped (--skip-scan)" in out
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_gpu_bench_without_a_gpu_says_why_in_one_line_and_exits_2():
     res = _bench_gpu("--quick", env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
     assert res.returncode == 2, (res.stdout, res.stderr)

@@ -31,6 +31,7 @@ def test_identical_maps_agree_fully_and_shuffled_ones_by_chance():
         agreement([1, 2], [1])
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_the_programs_step_is_not_converged_and_the_adaptive_one_is():
     """Red-sea window, 20²: the program's dt = 1 ms against dt = 0.1 ms agrees at chance (kappa ~ 0,
     measured 0.21 of points at 30²), below the chaos floor at a tenth of the grid spacing (0.58):

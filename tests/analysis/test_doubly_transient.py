@@ -60,6 +60,7 @@ def test_local_slopes_leave_out_scales_without_changes_and_invalid_pairs():
         dt.local_slopes(c, [1e-2, 1e-3, 1e-1])
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_crossover_fit_recovers_eps_c_and_beta():
     rng = np.random.default_rng(3)
     eps = 10.0 ** np.arange(-9.5, -5.9, 0.5)
@@ -72,6 +73,7 @@ def test_crossover_fit_recovers_eps_c_and_beta():
     assert 0 < cx.log10_eps_c_stderr < 0.5 and 0 < cx.beta_stderr < 0.15
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_crossover_fit_status_outside_the_scales():
     rng = np.random.default_rng(5)
     eps = 10.0 ** np.arange(-8, -4.9, 0.5)
@@ -188,6 +190,7 @@ def test_compare_verdicts():
     assert dt.compare(1.0, math.nan, 1.0, 0.1)["verdict"] == "undetermined"
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_crossover_fit_with_saturation_uses_the_saturated_scales():
     rng = np.random.default_rng(11)
     eps = 10.0 ** np.arange(-10.5, -2.9, 0.5)

@@ -94,6 +94,7 @@ def test_prefix_counts_of_a_full_shift():
     assert prefix_counts(words, 10).tolist() == [2**n for n in range(1, 11)]
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_prefix_entropy_ignores_the_fall_of_counts_when_sequences_end():
     # Known answer: a full binary shift (h = ln 2) whose sequences end at random lengths 6…30. N(n) falls once
     # sequences end; the fit keeps to lengths where at least half of them still run and N(n) ≤ 10 % of those,

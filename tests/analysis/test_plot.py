@@ -17,6 +17,7 @@ def _is_png(path):
     return len(data) > 1000 and data[:8] == PNG
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_import_does_not_pull_matplotlib():
     import subprocess
 

@@ -229,6 +229,7 @@ def test_a_long_scan_needs_yes_and_says_its_estimate(tmp_path, dicetrace_cli, mo
     assert len(read_manifest(tmp_path / "s")["definition"]["space"]["res"]) == 2
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_estimate_scan_numbers(tmp_path):
     from dicetrace.ics import Grid
     from dicetrace.params import make_config

@@ -166,6 +166,7 @@ def test_auto_without_a_gpu_runs_on_the_cpu_and_says_so_once():
     assert len(lines) == 1 and lines[0].startswith("dicetrace: device auto: running on the CPU ("), res.stderr
 
 
+@pytest.mark.slow  # a second or more (a fit, a subprocess): the quick loop skips it, CI runs it
 def test_cuda_without_a_gpu_is_one_error_line_and_runs_nothing():
     res = _run("cuda", "seed", XS[:2], YS[:2], env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
     assert res.returncode != 0 and res.stdout == ""
