@@ -298,6 +298,21 @@ class Output:
         return f"results/{name}.csv"
 
 
+def rerender_results(out, name: str, render, derive=None) -> dict:
+    """Draw a study's figures and tables again from ``OUT/results/NAME.json`` alone and write them back into it: no
+    simulation, no measured number changed.  ``derive(r)``, when given, first derives again in place what is a pure
+    function of the stored numbers (with the code as it is now); ``render(Computed(r), Output(OUT))`` draws."""
+    path = Path(out) / "results" / f"{name}.json"
+    r = json.loads(path.read_text())
+    if derive is not None:
+        derive(r)
+    output = Output(Path(out))
+    render(Computed(r), output)
+    r["figures"], r["tables"] = output.figures, output.tables
+    write_json(path, r)
+    return r
+
+
 def write_json(path: Path, obj) -> Path:
     """Write ``obj`` (numpy types converted, NaN as null) atomically (:func:`~dicetrace.studies.outputs.written`)."""
     return write_text(path, json.dumps(jsonable(obj), indent=1, sort_keys=False), "results file")

@@ -470,7 +470,7 @@ def rerender(out: Path) -> dict[str, Path]:
 def _answer(res: dict) -> str:
     """The report's sentence on the aspect: what the numbers of ``res`` (the study's results) say, and only that."""
     s = res["summary"]
-    bf, sq, a = s["border_fraction"], s["square_faces"], s["alpha"]
+    bf, a = s["border_fraction"], s["alpha"]
     keys = list(res["by"])
     same = {True: "the same for every aspect", False: "not the same for every aspect", None: "not compared"}
     text = (f"The border fraction at ε = {s['eps_ref_rel']:.0e} of the window's width runs from {bf['min']:.3f} to "

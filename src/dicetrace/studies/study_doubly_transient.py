@@ -29,11 +29,9 @@ thrown with ``contact-tsit5`` at a uniform tolerance of 1e-10 (no loosening over
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
@@ -47,7 +45,8 @@ from dicetrace.analysis.robustness import one_sided_z
 from dicetrace.analysis.settle import edge_balance_rate
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
+from dicetrace.studies.context import (Computed, Context, Output, jsonable, rerender_results,
+                                       window_ranges)
 from dicetrace.studies.text import fmt
 from dicetrace.studies.study_doubly_transient_render import render as _render
 
@@ -303,16 +302,12 @@ def rerender(out) -> dict:
     """Draw the figures and tables again from ``OUT/results/doubly_transient.json`` alone (the render reads nothing
     else) and write them back into it: no simulation, no measured number changed (each hazard's shape, a function
     of its stored windows, is derived again)."""
-    path = Path(out) / "results" / f"{NAME}.json"
-    r = json.loads(path.read_text())
-    for row in r["rows"]:  # a pure function of the stored windows: derived again with the code
-        if "hazard_shape" in row:
-            row["hazard_shape"] = jsonable({k: hazard_shape(row["hazard"][k]["windows"]["h"],
-                                                            row["hazard"][k]["windows"]["stderr"])
-                                            for k in ("commit", "settle")})
-    r["by"] = {row["condition"]: row for row in r["rows"]}
-    output = Output(Path(out))
-    render(Computed(r), output)
-    r["figures"], r["tables"] = output.figures, output.tables
-    write_json(path, r)
-    return r
+    def derive(r):
+        for row in r["rows"]:  # a pure function of the stored windows: derived again with the code
+            if "hazard_shape" in row:
+                row["hazard_shape"] = jsonable({k: hazard_shape(row["hazard"][k]["windows"]["h"],
+                                                                row["hazard"][k]["windows"]["stderr"])
+                                                for k in ("commit", "settle")})
+        r["by"] = {row["condition"]: row for row in r["rows"]}
+
+    return rerender_results(out, NAME, render, derive)

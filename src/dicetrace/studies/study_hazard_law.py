@@ -30,10 +30,8 @@ Per model (``seed`` with ``contact-tsit5``, and ``physical``; both at a uniform 
 
 from __future__ import annotations
 
-import json
 import math
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -44,7 +42,8 @@ from dicetrace.analysis.hazard_law import (along_rays, eps_of_t, law_verdict, la
 from dicetrace.analysis.robustness import one_sided_z, range_scan
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
+from dicetrace.studies.context import (Computed, Context, Output, jsonable, rerender_results,
+                                       window_ranges)
 from dicetrace.studies.study_hazard_law_render import render as _render
 
 NAME = "hazard_law"
@@ -350,13 +349,9 @@ def render(c: Computed, out: Output) -> None:
 def rerender(out) -> dict:
     """Draw the figures and tables again from ``OUT/results/hazard_law.json`` alone and write them back into it (no
     simulation, no measured number changed; :func:`derived` is applied again)."""
-    path = Path(out) / "results" / f"{NAME}.json"
-    r = json.loads(path.read_text())
-    for row in r["rows"]:  # a pure function of the stored f: derived again with the code
-        row["derived"] = jsonable(derived(row))
-    r["by"] = {row["model"]: row for row in r["rows"]}
-    output = Output(Path(out))
-    render(Computed(r), output)
-    r["figures"], r["tables"] = output.figures, output.tables
-    write_json(path, r)
-    return r
+    def derive(r):
+        for row in r["rows"]:  # a pure function of the stored f: derived again with the code
+            row["derived"] = jsonable(derived(row))
+        r["by"] = {row["model"]: row for row in r["rows"]}
+
+    return rerender_results(out, NAME, render, derive)

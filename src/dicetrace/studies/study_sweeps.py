@@ -28,10 +28,8 @@ The figures and tables are drawn by :mod:`dicetrace.studies.study_sweeps_render`
 
 from __future__ import annotations
 
-import json
 import math
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -45,7 +43,8 @@ from dicetrace.analysis.simulator import run_on_slice, window_points
 from dicetrace.analysis.wada import wada_merge_test
 from dicetrace.ics import seed_slice
 from dicetrace.params import make_config
-from dicetrace.studies.context import Computed, Context, Output, jsonable, window_ranges, write_json
+from dicetrace.studies.context import (Computed, Context, Output, jsonable, rerender_results,
+                                       window_ranges)
 from dicetrace.studies.study_doubly_transient import FLOOR_SHARE, MIN_CHANGED, TOL, TOL_FLOOR
 from dicetrace.studies.study_sweeps_render import render as _render
 from dicetrace.studies.text import CONVERGED_MIN
@@ -324,11 +323,7 @@ def render(c: Computed, out: Output) -> None:
 def rerender(out) -> dict:
     """Draw the figures and tables again from ``OUT/results/sweeps.json`` alone and write them back into it (the
     summary, which derives from its rows alone, is derived again): no simulation, no measured number changed."""
-    path = Path(out) / "results" / f"{NAME}.json"
-    r = json.loads(path.read_text())
-    r["summary"] = _summary(r["rows"])
-    output = Output(Path(out))
-    render(Computed(r), output)
-    r["figures"], r["tables"] = output.figures, output.tables
-    write_json(path, r)
-    return r
+    def derive(r):
+        r["summary"] = _summary(r["rows"])
+
+    return rerender_results(out, NAME, render, derive)
