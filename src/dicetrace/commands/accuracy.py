@@ -164,17 +164,30 @@ def run_friction(*, quick: bool = False, out: Optional[Path] = None, quiet: bool
 
 
 def _run_throw_study(mod, name: str, *, quick: bool, threads: Optional[int], out: Optional[Path], quiet: bool,
-                     command: str) -> None:
-    """A study of thrown dice (``mod``: study_cuboids, study_bars): ``--threads`` checked, then run, summarised and
-    written into its folder."""
+                     command: str, keys=("csv", "json", "figure"), numba_threads: bool = False) -> None:
+    """A study of thrown dice (``mod``: study_cuboids, study_bars, study_aspect): ``--threads`` checked, then run,
+    summarised and written into its folder.  ``numba_threads``: the study takes no ``threads`` and runs on numba's
+    threads, set to ``--threads`` for the run."""
     if threads is not None and threads < 1:
         fail(f"--threads must be >= 1, got {threads}")
     folder = _out_dir(out, name, {"--quick": quick})
+    kwargs = {**(mod.QUICK if quick else {}), "say": _say(quiet) or (lambda msg: None)}
     t0 = time.perf_counter()
-    data = mod.study(**(mod.QUICK if quick else {}), threads=threads, say=_say(quiet) or (lambda msg: None))
+    if numba_threads:
+        import numba  # lazy: keeps `dicetrace --help` fast (imports numba)
+
+        before = numba.get_num_threads()
+        if threads is not None:
+            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        try:
+            data = mod.study(**kwargs)
+        finally:
+            numba.set_num_threads(before)
+    else:
+        data = mod.study(**kwargs, threads=threads)
     summary = mod.summarise(data)
     paths = mod.render(data, summary, folder, command, time.perf_counter() - t0)
-    _report(paths, ("csv", "json", "figure"), quiet)
+    _report(paths, keys, quiet)
 
 
 def run_cuboids(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
@@ -196,24 +209,10 @@ def run_bars(*, quick: bool = False, threads: Optional[int] = None, out: Optiona
 def run_aspect(*, quick: bool = False, threads: Optional[int] = None, out: Optional[Path] = None,
                quiet: bool = False, command: str = "dicetrace analyze aspect") -> None:
     """The aspect study: the home window's border fraction and α against the die's aspect ratio."""
-    import numba  # lazy: keeps `dicetrace --help` fast (imports numba)
-
     from dicetrace.studies import study_aspect as sa  # lazy: matplotlib and the study only when run
 
-    if threads is not None and threads < 1:
-        fail(f"--threads must be >= 1, got {threads}")
-    folder = _out_dir(out, "aspect", {"--quick": quick})
-    before = numba.get_num_threads()
-    if threads is not None:
-        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    t0 = time.perf_counter()
-    try:
-        data = sa.study(**(sa.QUICK if quick else {}), say=_say(quiet) or (lambda msg: None))
-    finally:
-        numba.set_num_threads(before)
-    summary = sa.summarise(data)
-    paths = sa.render(data, summary, folder, command, time.perf_counter() - t0)
-    _report(paths, ("csv", "json", "figure", "maps"), quiet)
+    _run_throw_study(sa, "aspect", quick=quick, threads=threads, out=out, quiet=quiet, command=command,
+                     keys=("csv", "json", "figure", "maps"), numba_threads=True)
 
 
 def register(app: typer.Typer) -> None:
