@@ -75,7 +75,7 @@ def test_summarise_on_exact_shares_passes_and_on_far_shares_refutes():
     assert good["verdict"] == "supported" and good["models"]["casual"]["chi2"] < 1
     assert good["square"]["one_inside"] and good["opposite_faces"]["p_value"] > 0.5
     bad = sb.summarise(rows(0.5))
-    assert bad["verdict"] == "refuted" and bad["direction"].startswith("below the formula's at every")
+    assert bad["verdict"] == "refuted" and bad["direction"].startswith("below the formula's at each of the")
 
 
 def test_the_committed_run_is_the_full_study(committed):

@@ -231,9 +231,9 @@ def summarise(data: dict) -> dict:
     above = sum(1 for z in zc if z > 1.96)
     out["casual_below"], out["casual_above"] = below, above
     if tested and below == len(zc):
-        out["direction"] = "below the formula's at every side ratio above 1 (nearer to 1)"
+        out["direction"] = f"below the formula's at each of the {len(zc)} side ratios above 1 tested (nearer to 1)"
     elif tested and above == len(zc):
-        out["direction"] = "above the formula's at every side ratio above 1 (further from 1)"
+        out["direction"] = f"above the formula's at each of the {len(zc)} side ratios above 1 tested (further from 1)"
     else:
         out["direction"] = (f"below the formula's at {below} and above it at {above} of the {len(zc)} side ratios "
                             "above 1 (|z| > 1.96), within its binomial error at the others")
