@@ -159,9 +159,9 @@ def test_baselines_against_the_gazette_table():
 # -- statistics -----------------------------------------------------------------------------------------
 
 
-def _synthetic(p_true, n, counts):
-    return MeasuredCuboids(aspect=np.arange(1, len(n) + 1) * 0.5, p=np.asarray(counts) / np.asarray(n), n=n,
-                           source="synthetic")
+def _synthetic(p_true, n, counts, aspect=None):
+    aspect = np.arange(1, len(n) + 1) * 0.5 if aspect is None else aspect
+    return MeasuredCuboids(aspect=aspect, p=np.asarray(counts) / np.asarray(n), n=n, source="synthetic")
 
 
 def test_compare_is_pearsons_chi2_of_the_counts():
@@ -286,3 +286,44 @@ def test_throws_to_detect_refuses_no_bias_and_bad_input():
         f.throws_to_detect([0.5, 0.6])
     with pytest.raises(ValueError, match="test must be"):
         f.throws_to_detect([0.6, 0.4], test="t")
+
+
+def test_dispersion_is_one_for_binomial_counts_and_phi_for_overdispersed_ones():
+    # counts drawn about a known smooth curve: binomial scatter gives φ ≈ 1, a beta-binomial one of known φ gives φ
+    rng = np.random.default_rng(7)
+    aspect = np.geomspace(0.4, 2.8, 60)
+    truth = 1 / (1 + np.exp(3.0 * np.log(aspect) + 0.4 * np.log(aspect) ** 2))  # logit p a quadratic in ln x/y
+    n = np.full(60, 800)
+    phis = []
+    for _ in range(40):
+        k = rng.binomial(n, truth)
+        phis.append(f.dispersion(_synthetic(None, n, k, aspect=aspect), degree=2).phi)
+    assert np.mean(phis) == pytest.approx(1.0, abs=0.06)  # E[χ²/dof] = 1; 40 draws of 57 dof: σ of the mean ≈ 0.03
+    # beta-binomial with intra-class correlation ρ: variance n p (1-p) (1 + (n-1) ρ), so φ = 1 + (n - 1) ρ = 4
+    rho = 3.0 / 799
+    a_ = truth * (1 - rho) / rho
+    b_ = (1 - truth) * (1 - rho) / rho
+    phis = [f.dispersion(_synthetic(None, n, rng.binomial(n, rng.beta(a_, b_)), aspect=aspect), degree=2).phi
+            for _ in range(40)]
+    assert np.mean(phis) == pytest.approx(4.0, rel=0.1)
+    # the fit is the binomial likelihood's maximum: the score vanishes, and an exact curve of that degree is recovered
+    d = f.dispersion(_synthetic(None, n, n * truth, aspect=aspect), degree=2)
+    np.testing.assert_allclose(d.p_curve, truth, rtol=1e-9)
+    assert d.chi2 == pytest.approx(0.0, abs=1e-12) and d.dof == 57
+    with pytest.raises(ValueError, match="degree"):
+        f.dispersion(degree=14)
+
+
+def test_compare_widens_only_the_datas_variance_by_the_dispersion():
+    n = np.array([300, 1000, 50])
+    k = np.array([120, 333, 4])
+    model = np.array([0.37, 0.31, 0.1])
+    data = _synthetic(model, n, k)
+    exact, wide = f.compare(model, data), f.compare(model, data, dispersion=4.0)
+    assert wide.chi2 == pytest.approx(exact.chi2 / 4.0, rel=1e-12)
+    mc, mcw = f.compare(model, data, model_n=400), f.compare(model, data, model_n=400, dispersion=4.0)
+    pooled = (n * k / n + 400 * model) / (n + 400)
+    np.testing.assert_allclose(mcw.sigma ** 2, pooled * (1 - pooled) * (4.0 / n + 1 / 400), rtol=1e-12)
+    assert mc.chi2 / 4.0 < mcw.chi2 < mc.chi2  # the simulation's own variance is not widened
+    with pytest.raises(ValueError, match="dispersion"):
+        f.compare(model, data, dispersion=0.0)

@@ -345,7 +345,8 @@ def _point_index(data: MeasuredCuboids, points) -> np.ndarray:
     return np.array(sorted(idx))
 
 
-def compare(p_model, data: MeasuredCuboids = GAZETTE_97_16, *, model_n=None, points=None, n_fitted: int = 0) -> Comparison:
+def compare(p_model, data: MeasuredCuboids = GAZETTE_97_16, *, model_n=None, points=None, n_fitted: int = 0,
+            dispersion: float = 1.0) -> Comparison:
     """χ² and per-point z of a model against measured square-face shares.
 
     Each measured share is binomial: its standard error is √(p(1 − p)/N),
@@ -368,19 +369,25 @@ def compare(p_model, data: MeasuredCuboids = GAZETTE_97_16, *, model_n=None, poi
         The aspect ratios to compare (default all), by their printed value.
     n_fitted : int
         Parameters fitted on these points (subtracted from the degrees of freedom).
+    dispersion : float
+        φ ≥ 1: the data's variance taken as φ times the binomial (a quasi-binomial
+        error model, φ from :func:`dispersion`); the model's own sampling variance
+        is kept binomial.
     """
+    if not (math.isfinite(dispersion) and dispersion > 0):
+        raise ValueError(f"dispersion must be a finite number > 0, got {dispersion!r}")
     pm_all = np.broadcast_to(np.asarray(p_model, dtype=float), data.p.shape)
     if np.any(~np.isfinite(pm_all)) or np.any((pm_all < 0) | (pm_all > 1)):
         raise ValueError("model probabilities must be finite numbers in [0, 1]")
     idx = _point_index(data, points)
     pm = pm_all[idx]
-    var = pm * (1.0 - pm) / data.n[idx]
+    var = dispersion * pm * (1.0 - pm) / data.n[idx]
     if model_n is not None:
         mn = np.broadcast_to(np.asarray(model_n, dtype=float), data.p.shape)[idx]
         if np.any(~(mn > 0)):
             raise ValueError("model_n must be > 0")
         pooled = (data.n[idx] * data.p[idx] + mn * pm) / (data.n[idx] + mn)
-        var = pooled * (1.0 - pooled) * (1.0 / data.n[idx] + 1.0 / mn)
+        var = pooled * (1.0 - pooled) * (dispersion / data.n[idx] + 1.0 / mn)
     sigma = np.sqrt(var)
     diff = data.p[idx] - pm
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -390,6 +397,67 @@ def compare(p_model, data: MeasuredCuboids = GAZETTE_97_16, *, model_n=None, poi
     p_value = float(stats.chi2.sf(chi2, dof)) if dof > 0 else math.nan
     return Comparison(aspect=data.aspect[idx], p_obs=data.p[idx], n=data.n[idx], p_model=pm, sigma=sigma, z=z,
                       chi2=chi2, dof=dof, p_value=p_value)
+
+
+@dataclasses.dataclass(frozen=True)
+class Dispersion:
+    """How much more than binomially measured shares scatter about a smooth curve of the aspect ratio.
+
+    Attributes
+    ----------
+    degree : int
+        Degree of the polynomial in ln(x/y) fitted to logit p.
+    phi : float
+        Pearson's χ² of the data about the fitted curve over its degrees of
+        freedom: the quasi-binomial dispersion (1 for binomial scatter).
+    chi2 : float
+    dof : int
+        Points less the degree + 1 coefficients.
+    p_value : float
+        P(χ²_dof ≥ chi2) for binomial scatter about the curve.
+    p_curve : numpy.ndarray
+        The fitted curve at the measured points.
+    """
+
+    degree: int
+    phi: float
+    chi2: float
+    dof: int
+    p_value: float
+    p_curve: np.ndarray
+
+
+def dispersion(data: MeasuredCuboids = GAZETTE_97_16, degree: int = 3) -> Dispersion:
+    """The data's scatter about a smooth curve: logit p a polynomial of ``degree`` in ln(x/y), fitted by maximum
+    binomial likelihood (Newton's method on the logistic regression, converged to machine precision), and
+    Pearson's χ²/dof of the counts about it (McCullagh & Nelder's moment estimate of the quasi-binomial φ).
+
+    Which curve is "smooth" is a choice: compare several degrees and quote the spread of φ.
+    """
+    degree = int(degree)
+    n = np.asarray(data.n, dtype=float)
+    k = np.asarray(data.p, dtype=float) * n
+    dof = len(n) - degree - 1
+    if degree < 0 or dof < 1:
+        raise ValueError(f"degree must be 0 … {len(n) - 2} for {len(n)} points, got {degree}")
+    x = np.log(np.asarray(data.aspect, dtype=float))
+    x = (x - x.mean()) / (np.ptp(x) / 2 or 1.0)
+    X = np.polynomial.legendre.legvander(x, degree)  # well conditioned on [-1, 1]
+    beta = np.zeros(degree + 1)
+    beta[0] = special.logit(np.clip(k.sum() / n.sum(), 1e-9, 1 - 1e-9))
+    for _ in range(200):
+        q = special.expit(X @ beta)
+        w = n * q * (1 - q)
+        step = np.linalg.solve(X.T @ (X * w[:, None]), X.T @ (k - n * q))
+        beta = beta + step
+        if np.max(np.abs(step)) < 1e-13 * (1 + np.max(np.abs(beta))):
+            break
+    else:  # pragma: no cover - the likelihood is concave; only separable data fail (not measured shares)
+        raise ValueError("the logistic fit did not converge")
+    q = special.expit(X @ beta)
+    chi2 = float(np.sum((k - n * q) ** 2 / (n * q * (1 - q))))
+    return Dispersion(degree=degree, phi=chi2 / dof, chi2=chi2, dof=dof, p_value=float(stats.chi2.sf(chi2, dof)),
+                      p_curve=q)
 
 
 @dataclasses.dataclass(frozen=True)
