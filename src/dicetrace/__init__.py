@@ -15,7 +15,7 @@ from dicetrace.status import Status  # noqa: E402  (bottom layer, no numba)
 
 _LAZY = {
     "simulate_batch": "dicetrace.simulate",
-    "Record": "dicetrace.simulate",
+    "Record": "dicetrace.saving",
     "Roll": "dicetrace.simulate",
     "BatchResult": "dicetrace.simulate",
     "make_config": "dicetrace.params",
