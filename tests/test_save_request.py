@@ -24,7 +24,7 @@ import dicetrace
 from dicetrace import saving
 from dicetrace.core import kernels
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
-from dicetrace.ics import Grid, seed_slice
+from dicetrace.ics import Grid
 from dicetrace.params import make_config
 from dicetrace.saving import Record
 from dicetrace.scan import ScanDefinition, read_manifest, read_scan, scan
