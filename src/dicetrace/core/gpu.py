@@ -50,16 +50,21 @@ it sizes chunks to the device's free memory and retries the throws that
 fill their buffer, as on the CPU.
 
 What to keep.  :func:`run_batch_cuda` takes the request a CPU batch takes (a
-:class:`~dicetrace.saving.Record` asking for events, or None) and chooses the
-kernel from it; its outputs on the device are made by one function from it,
-:func:`_device_out`, as the named :class:`~dicetrace.core.loop.BatchOut` the
-CPU's batch writes.  A kernel launch takes arrays and scalars as its
-arguments, and the kernels' compiled signatures (cached on disk) are
-positional, so the host passes that structure's fields in order, with what
-the loop kernels take for outputs and records a launch does not use: event
-times of length 0, trace arrays of no rows, and (but in the held kernels)
-motion and work records of no rows.  Inside, each thread builds its run
-loop's :class:`~dicetrace.core.loop.RollOut` from them, as the CPU's batch does.
+:class:`~dicetrace.saving.Record` asking for events, or None) and the request
+stops at the host: a kernel's arguments are what numba-cuda can type and
+copy (arrays, scalars, records and tuples of them, as ``kp``), never a Python
+object.  From the request the host chooses the kernel (its compile-time
+``events`` flag, :func:`_kernel`) and makes the outputs on the device with one
+function, :func:`_device_out`, as the named
+:class:`~dicetrace.core.loop.BatchOut` the CPU's batch writes.  The kernels'
+parameters are still positional (their bodies, and the signatures cached on
+disk, are not changed here), so the host passes that structure's fields in
+order, with what the loop kernels take for outputs and records a launch does
+not use: event times of length 0, trace arrays of no rows, and (but in the
+held kernels) motion and work records of no rows.  Inside, each thread
+builds its run loop's :class:`~dicetrace.core.loop.RollOut` from them, as the
+CPU's batch does.  (numba-cuda flattens a tuple argument into its fields, so
+a kernel could take the ``BatchOut`` whole: a change of the kernels' bodies.)
 
 numba-cuda is optional (``pip install 'dicetrace[cuda]'``) and this module
 imports it: import this module only where a GPU is asked for
