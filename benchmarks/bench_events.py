@@ -1,4 +1,5 @@
-"""What recording exact contact events costs: ``simulate_batch(..., events=True)`` against the same batch without.
+"""What recording exact contact events costs: ``simulate_batch(..., record=Record.events_only())`` against the
+same batch without.
 
 Runs the same random ``physical`` throws (``contact-tsit5``, its default tolerance schedule) through the batch
 kernel with and without events on one thread, interleaved, best of ``--repeat``, and prints the process CPU time
@@ -17,12 +18,12 @@ import time
 import numpy as np
 
 from dicetrace.params import make_config
-from dicetrace.simulate import simulate_batch
+from dicetrace.simulate import Record, simulate_batch
 
 
 def _cpu(ics, cfg, events: bool):
     t0 = time.process_time()
-    b = simulate_batch(ics, config=cfg, events=events, threads=1)
+    b = simulate_batch(ics, config=cfg, record=Record.events_only() if events else None, threads=1)
     return time.process_time() - t0, b
 
 
@@ -35,7 +36,7 @@ def main(argv=None) -> None:
     ics = rng.normal(size=(args.n, 6)) * [60.0, 60.0, 20.0, 4000.0, 4000.0, 4000.0]
     cfg = make_config("physical")
     for events in (False, True):  # compile or load, outside the timing
-        simulate_batch(ics[:17], config=cfg, events=events, threads=1)
+        simulate_batch(ics[:17], config=cfg, record=Record.events_only() if events else None, threads=1)
     best = {False: np.inf, True: np.inf}
     runs = {}
     for _ in range(args.repeat):

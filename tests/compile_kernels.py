@@ -84,10 +84,10 @@ def _phase3(task: str) -> str:
     import numpy as np
 
     from dicetrace.core.loop import BATCH_BLOCK
-    from dicetrace.simulate import simulate_batch
+    from dicetrace.simulate import Record, simulate_batch
 
     simulate_batch(np.tile(_ic(), (BATCH_BLOCK + 1, 1)), preset="physical", integrator=task, t_max_s=0.05,
-                   threads=1, events=True)
+                   threads=1, record=Record.events_only())
     return task
 
 

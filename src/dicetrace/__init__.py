@@ -1,7 +1,7 @@
 """dicetrace: the chaos of a rolling die, simulated, recorded and analysed.
 
 A throw is ``dicetrace.simulate.simulate``; from here are importable
-``simulate_batch`` (many throws), ``Record`` (what a throw keeps per step),
+``simulate_batch`` (many throws), ``Record`` (what a throw keeps: trace channels, exact events),
 ``Status`` (how a throw ended), ``make_config`` and ``INTEGRATORS`` (the
 integrator table).  They are loaded on first use, so ``import dicetrace``
 stays cheap (no numba).
@@ -15,7 +15,7 @@ from dicetrace.status import Status  # noqa: E402  (bottom layer, no numba)
 
 _LAZY = {
     "simulate_batch": "dicetrace.simulate",
-    "Record": "dicetrace.simulate",
+    "Record": "dicetrace.saving",
     "Roll": "dicetrace.simulate",
     "BatchResult": "dicetrace.simulate",
     "make_config": "dicetrace.params",

@@ -5,6 +5,10 @@ Each chunk's ICs go through the batch kernel (``run_batch``; up to one kernel
 block, ``BATCH_BLOCK``, through the single-throw loop instead) with ``cap``
 contact sets per IC; throws that fill their buffer are re-run with
 ``CAP_GROWTH`` times more until they fit, and the chunk's sets are compacted.
+What the throws keep besides their summaries is the batch's request, a
+:class:`~dicetrace.saving.Record` asking for the exact contact events, or
+None (a batch keeps no trace): it goes on as it is to the kernels' entry
+points, which choose their loop from it.
 """
 
 from __future__ import annotations
@@ -17,10 +21,11 @@ import numpy as np
 
 import numba
 
-from dicetrace.core.kernels import batch_out, roll_out, run_batch, run_events, run_roll
+from dicetrace.core.kernels import batch_out, run_batch, run_throw, throw_out
 from dicetrace.core.loop import BATCH_BLOCK
 from dicetrace.devices import CPU, Device
 from dicetrace.memory import available_memory
+from dicetrace.saving import Record, wants_events
 from dicetrace.status import Status
 
 #: Contact sets per IC in the first pass (longer throws are re-run with ``CAP_GROWTH`` times more).
@@ -45,12 +50,12 @@ class _Threads:
         numba.set_num_threads(self.old)
 
 
-def _run_batch(kin, cap: int, threads, device: Device = CPU, events: bool = False):
+def _run_batch(kin, cap: int, threads, device: Device = CPU, record: Record | None = None):
     """One call of the batch kernel over ``kin.ics`` with ``cap`` sets per IC, on ``device`` ("cpu" or "cuda"):
     (status, steps, outcome, nsets, sets, set_steps, times, starts), throw i's sets from ``starts[i]``.
 
-    ``events``: the events kernels (exact contact events), whose event
-    times are ``times`` (laid out as ``sets``); None without.
+    ``record`` asking for events: the events kernels (exact contact events),
+    whose event times are ``times`` (laid out as ``sets``); None without.
 
     On the CPU the sets are the kernel's buffers (``cap`` per throw,
     ``starts[i] = i * cap``); on the GPU they come back packed, without the
@@ -65,28 +70,23 @@ def _run_batch(kin, cap: int, threads, device: Device = CPU, events: bool = Fals
     if device.gpu:
         from dicetrace.core.gpu import run_batch_cuda  # numba-cuda: optional, imported only for a GPU run
 
-        return run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, events)
+        return run_batch_cuda(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, record)
     starts = np.arange(m, dtype=np.int64) * cap
+    out = batch_out(m, cap, record)
     if m <= BATCH_BLOCK:
-        return (*_run_serial(kin, cap, events), starts)
-    out = batch_out(m, cap, events)
-    with _Threads(threads), numba.parallel_chunksize(1):
-        run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, out, events=events)
-    return (*out[:6], out.ev_times if events else None, starts)
+        _run_serial(kin, cap, out, record)
+    else:
+        with _Threads(threads), numba.parallel_chunksize(1):
+            run_batch(kin.ics, kin.off0, kin.params, kin.integrator_id, cap, out, record)
+    return (*out[:6], out.ev_times if wants_events(record) else None, starts)
 
 
-def _run_serial(kin, cap: int, events: bool = False):
-    """``_run_batch``'s outputs from ``run_roll`` (``run_events``) called IC by IC."""
-    m = len(kin.ics)
-    status, steps, outcome, nsets = (np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64))
-    sets, set_steps = np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32)
-    times = np.zeros(m * cap) if events else None
-    for i in range(m):
-        part = slice(i * cap, (i + 1) * cap)
-        out = roll_out(sets[part], set_steps[part], times[part] if events else None)
-        run = run_events if events else run_roll
-        status[i], steps[i], outcome[i], nsets[i] = run(kin.ics[i], kin.off0, kin.params, kin.integrator_id, out)
-    return status, steps, outcome, nsets, sets, set_steps, times
+def _run_serial(kin, cap: int, out, record: Record | None = None) -> None:
+    """What ``run_batch`` writes to ``out`` (``kernels.batch_out``), from the single-throw loop
+    (``kernels.run_throw``) called IC by IC."""
+    for i in range(len(kin.ics)):
+        r = run_throw(kin.ics[i], kin.off0, kin.params, kin.integrator_id, throw_out(out, i, cap), record)
+        out.status[i], out.steps[i], out.outcome[i], out.nsets[i] = r
 
 
 #: Bytes a batch's result holds per IC whatever its throws: status and outcome (1 each);
@@ -99,13 +99,15 @@ CHUNK_BYTES_PER_IC = 48 + 18 + 18
 CHUNK_BYTES = 64 * 2**20
 
 
-def chunk_bytes_per_ic(cap: int, events: bool = False) -> int:
-    return CHUNK_BYTES_PER_IC + (14 if events else 6) * cap
+def chunk_bytes_per_ic(cap: int, record: Record | None = None) -> int:
+    """Bytes per IC of a chunk in flight: ``CHUNK_BYTES_PER_IC`` and its ``cap`` sets (with their times, 8 bytes
+    each, where ``record`` asks for events)."""
+    return CHUNK_BYTES_PER_IC + (14 if wants_events(record) else 6) * cap
 
 
-def batch_chunk(cap: int = DEFAULT_CAP, events: bool = False) -> int:
+def batch_chunk(cap: int = DEFAULT_CAP, record: Record | None = None) -> int:
     """ICs per chunk of :func:`simulate_batch` by default: about ``CHUNK_BYTES`` of buffers, whole kernel blocks."""
-    n = CHUNK_BYTES // chunk_bytes_per_ic(cap, events)
+    n = CHUNK_BYTES // chunk_bytes_per_ic(cap, record)
     return max(BATCH_BLOCK, n // BATCH_BLOCK * BATCH_BLOCK)
 
 
@@ -115,22 +117,22 @@ GPU_CHUNK_MAX = 2**20
 GPU_MEMORY_SHARE = 0.8
 
 
-def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP, events: bool = False) -> int:
+def gpu_batch_chunk(kin, cap: int = DEFAULT_CAP, record: Record | None = None) -> int:
     """ICs per chunk on the GPU by default: at most ``GPU_CHUNK_MAX``, one stream's part of
     ``GPU_MEMORY_SHARE`` of the free memory of the GPU it runs on (of this Dask worker's part of it, where
     workers share one: ``core.gpu.memory_share``), and 16 times the CPU's chunk of host buffers."""
     from dicetrace.core import gpu  # numba-cuda: optional, imported only for a GPU run
 
     streams = gpu.streams_per_device()
-    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0, events) * streams
+    per = gpu.bytes_per_throw(kin.integrator_id, cap, kin.params, kin.off0, record) * streams
     # asked in a thread of that GPU's pool: a thread has one CUDA device, and this one may never have had one
     free = _gpu_pool(gpu.device_ids()[0], streams).submit(gpu.free_memory).result() * gpu.memory_share()
-    n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * free) // per, 16 * batch_chunk(cap, events))
+    n = min(GPU_CHUNK_MAX, int(GPU_MEMORY_SHARE * free) // per, 16 * batch_chunk(cap, record))
     return max(BATCH_BLOCK, n)
 
 
 def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, what: str = "simulate_batch",
-                       events: bool = False) -> None:
+                       record: Record | None = None) -> None:
     """Refuse (ValueError naming ``what``, the size and the limit) a batch that cannot fit in the available memory.
 
     Counts what the result must hold whatever the throws (``RESULT_BYTES_PER_IC``,
@@ -139,7 +141,7 @@ def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, 
     5 bytes each, 20–70 a throw) come on top, so this is a lower bound.
     """
     result = m * (RESULT_BYTES_PER_IC + (48 if ics_copy else 0))
-    flight = min(m, chunk) * chunk_bytes_per_ic(cap, events)
+    flight = min(m, chunk) * chunk_bytes_per_ic(cap, record)
     avail = available_memory()
     if avail is not None and result + flight > avail:
         gib = 2**30
@@ -152,23 +154,23 @@ def check_batch_memory(m: int, cap: int, chunk: int, *, ics_copy: bool = False, 
         )
 
 
-def run_chunk(kin, cap: int, threads, device: Device = CPU, events: bool = False):
+def run_chunk(kin, cap: int, threads, device: Device = CPU, record: Record | None = None):
     """Summaries of the ICs of ``kin``: (status, steps, outcome, nsets, sets, set_steps, times), sets compacted.
 
     Throws that fill their ``cap`` sets are re-run, all together, with
     ``CAP_GROWTH`` times more until they fit, on the same ``device``.
-    ``events``: the exact contact events (``_run_batch``), their times in
-    ``times`` (None without).
+    ``record`` asking for events: the exact contact events (``_run_batch``),
+    their times in ``times`` (None without).
     """
     m = len(kin.ics)
-    status, steps, outcome, nsets, sets, set_steps, times, starts = _run_batch(kin, cap, threads, device, events)
+    status, steps, outcome, nsets, sets, set_steps, times, starts = _run_batch(kin, cap, threads, device, record)
     arrays = (sets, set_steps) if times is None else (sets, set_steps, times)
     extra: dict[int, tuple] = {}
     todo = np.nonzero(status == Status.BUFFER_FULL)[0]
     big = cap
     while todo.size:
         big *= CAP_GROWTH
-        st, sp, oc, ns, *more, at = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads, device, events)
+        st, sp, oc, ns, *more, at = _run_batch(kin._replace(ics=kin.ics[todo]), big, threads, device, record)
         more = [a for a in more if a is not None]
         done = st != Status.BUFFER_FULL
         for r in np.nonzero(done)[0]:

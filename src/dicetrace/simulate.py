@@ -2,13 +2,13 @@
 
 Converts at the boundary: ICs in, validated and put in the kernel's sign
 convention; a :class:`Roll` out, with the status as a name, the contact-set
-sequence in the program's text form, per-node contact events, and only the
-trace channels that the :class:`Record` request asked for.
+sequence in the program's text form, per-node contact events, and only what
+the :class:`Record` request asked for (trace channels, exact contact events).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,7 +25,7 @@ from dicetrace.batch_chunks import (
 )
 from dicetrace.compile_clock import say_first_compile
 from dicetrace.core.contacts import contact_sets_from_heights
-from dicetrace.core.kernels import has_events, new_roll_state, roll_out, run_events, run_roll
+from dicetrace.core.kernels import has_events, new_roll_state, roll_out_for, run_roll, run_throw
 from dicetrace.core.loop import ENERGY_COLS, FORCE_COLS, STATE_COLS
 from dicetrace.core.state import SUBSTEP_CAUSES
 from dicetrace.devices import CPU as CPU_DEVICE
@@ -36,6 +36,7 @@ from dicetrace.ic_arrays import (SliceICs, quaternions_xyzw, validate_heights, v
 from dicetrace.memory import available_memory
 from dicetrace.body import rotations
 from dicetrace.params import Config, resolve_config
+from dicetrace.saving import NOT_GIVEN, Record, record_with_events, summary_record, wants_events
 from dicetrace.status import Status
 
 say_first_compile()  # a first call from Python compiles for seconds to minutes: say so once, on standard error
@@ -45,35 +46,6 @@ ENERGY_NAMES = ("stop_test", "kinetic_translational", "kinetic_rotational", "gra
 
 class SimulationError(RuntimeError):
     """A run ended in a numerical failure (non-finite state or energy blow-up)."""
-
-
-@dataclass(frozen=True)
-class Record:
-    """Which per-step channels a simulation computes and keeps.
-
-    Parameters
-    ----------
-    states
-        Node positions, centre of mass (position, velocity), orientation
-        quaternion and angular momentum, every step.
-    energy
-        Energies every step (stop-test, translational and rotational kinetic,
-        gravitational, elastic, total), node-mass·cm²/s².
-    forces
-        Contact force on every node, every step.
-    """
-
-    states: bool = True
-    energy: bool = True
-    forces: bool = False
-
-    def __post_init__(self) -> None:
-        for name in ("states", "energy", "forces"):
-            v = getattr(self, name)
-            if not isinstance(v, (bool, np.bool_)):
-                raise TypeError(f"Record({name}=...) must be True or False, got {v!r}")
-        if not (self.states or self.energy or self.forces):
-            raise ValueError("Record() asks for nothing: request states, energy or forces, or pass record=None")
 
 
 @dataclass
@@ -147,9 +119,9 @@ class Roll:
     steps : steps integrated; ``t_settle_s = steps·dt``.
     contact_sets : uint8 bitmasks (bit k = node k+1 at or below the ground).
     contact_steps : step at which each set was first seen (0 for the initial empty set); with
-        ``events=True``, the step it began in.
-    contact_times : with ``simulate(..., events=True)``, the time (s) each set began, exactly
-        (docs/model.md §8.1: the set inside every sub-step of a contact scheme); None otherwise.
+        exact contact events (``Record(events=True)``), the step it began in.
+    contact_times : with ``simulate(..., record=Record(..., events=True))``, the time (s) each set
+        began, exactly (docs/model.md §8.1: the set inside every sub-step of a contact scheme); None otherwise.
     substeps : the contact schemes' sub-steps by what ended them: accepted
         sub-steps whose length the error control chose (``error``), at the
         longest sub-step dt / substeps (``cap``), shortened by the friction
@@ -189,7 +161,7 @@ class Roll:
         """Per-node events as a DataFrame: step, t_s, node (1..8), kind ("enter"/"leave").
 
         ``t_s`` is step·dt, or the exact time of the event where the throw
-        recorded them (``events=True``).
+        recorded them (``Record(events=True)``).
         """
         import pandas as pd  # pandas is slow to import: only when used
 
@@ -236,13 +208,14 @@ def contact_sequence_from_heights(z_steps) -> tuple[np.ndarray, np.ndarray]:
     return sets[:n].copy(), steps[:n].copy()
 
 
-def check_events(cfg: Config, events) -> bool:
-    """``events`` as a bool, refused (ValueError) where the integrator has no exact contact events."""
+def check_events(cfg: Config, events, what: str = "events=True") -> bool:
+    """``events`` as a bool, refused (ValueError, its words after ``what``) where the integrator has no exact
+    contact events."""
     if not isinstance(events, (bool, np.bool_)):
         raise ValueError(f"events must be True or False, not {events!r}")
     if events and not has_events(INTEGRATORS[cfg.numerics.integrator].kernel_id):
         raise ValueError(
-            f"events=True: integrator {cfg.numerics.integrator!r} has no exact contact events; the contact integrators "
+            f"{what}: integrator {cfg.numerics.integrator!r} has no exact contact events; the contact integrators "
             "(contact-substep, contact-adaptive, contact-tsit5, contact-dop853) have them (a fixed-step scheme sees "
             "contacts only at step ends, which the contact sequence records)"
         )
@@ -250,7 +223,7 @@ def check_events(cfg: Config, events) -> bool:
 
 
 def simulate(ic, *, config: Config | str | None = None, record: Record | None = None, orientation=None,
-             events: bool = False, **options) -> Roll:
+             events=NOT_GIVEN, **options) -> Roll:
     """Throw the die once.
 
     Parameters
@@ -267,55 +240,54 @@ def simulate(ic, *, config: Config | str | None = None, record: Record | None = 
         ``contact-adaptive``) and Preset field overrides (``k``, ``gamma``,
         ...); never both (see :func:`~dicetrace.params.resolve_config`).
     record
-        Per-step channels to compute (None: summary only, nothing per step).
+        What to keep besides the summary, a :class:`~dicetrace.Record`: the
+        per-step trace channels (``Roll.trace``) and the exact contact events
+        (``events=True``; contact integrators only; docs/model.md §8.1): the
+        contact sets are then the sets inside the scheme's sub-steps, located
+        where nodes enter or leave the ground, with their times
+        (``Roll.contact_times``), instead of the sets at output-step ends.
+        The events are read off beside the integration: the throw is the
+        same without them, bit for bit (status, steps, outcome); they cost
+        CPU time (docs/model.md §8.1).  None: the summary only, nothing per step.
     orientation
         Initial world-from-body rotation matrix (3, 3); None: the program's
         start (identity: face 3 down).
     events
-        Record the exact contact events (contact integrators only; docs/model.md
-        §8.1): the contact sets are then the sets inside the scheme's sub-steps,
-        located where nodes enter or leave the ground, with their times
-        (``Roll.contact_times``), instead of the sets at output-step ends.
-        The events are read off beside the integration: the throw is the
-        same as with ``events=False``, bit for bit (status, steps, outcome).
-        They cost CPU time (docs/model.md §8.1).
+        Deprecated: ``events=True`` is ``record=Record.events_only()`` (with a
+        ``record``: the same with ``events=True``); it warns, and goes in the
+        next release.
 
     Returns
     -------
     Roll
     """
     cfg = resolve_config(config, **options)
-    if record is not None and not isinstance(record, Record):
-        raise TypeError(f"record must be a dicetrace.Record or None, not {type(record).__name__}")
+    record = record_with_events(record, events, "simulate")
     ic = validate_ic(ic)
     _check_orientation(orientation)
-    events = check_events(cfg, events)
+    events = check_events(cfg, wants_events(record), "record=Record(events=True)")
     kin = cfg.kernel_inputs(ic, orientation=orientation)
     cap = DEFAULT_CAP
     state = new_roll_state(kin.integrator_id)
-    while True:
-        sets = np.zeros(cap, dtype=np.uint8)
-        set_steps = np.zeros(cap, dtype=np.int32)
-        times = np.zeros(cap) if events else None
-        run = run_events if events else run_roll
-        summary = run(*kin, roll_out(sets, set_steps, times), state=state)
+    while True:  # the summary (with the exact events where asked): no trace rows
+        out = roll_out_for(cap, record)
+        summary = run_throw(*kin, out, record, state=state)
         if summary[0] != Status.BUFFER_FULL:
             break
         cap *= CAP_GROWTH
     status, n, outcome, nsets = summary
+    sets, set_steps, times = out.sets, out.set_steps, out.ev_times
     substeps = dict(zip(SUBSTEP_CAUSES, (int(c) for c in state[0][0]["substeps"])))
     trace = None
-    if record is not None:
+    if record is not None and record.traces:
         # The summary told how many rows the trace needs; the trace run is the
         # same arithmetic (the trace path writes, never steers), so it must end
         # the same way: anything else is a kernel defect, never silently kept.
         rows = n + 1
         check_trace_memory(rows, record, cfg)
-        tr_state = np.zeros((rows if record.states else 0, STATE_COLS))
-        tr_force = np.zeros((rows if record.forces else 0, FORCE_COLS))
-        tr_energy = np.zeros((rows if record.energy else 0, ENERGY_COLS))
-        traced = run_roll(*kin, roll_out(np.zeros(cap, np.uint8), np.zeros(cap, np.int32), None, tr_state, tr_force,
-                                         tr_energy))
+        traced_out = roll_out_for(cap, replace(record, events=False), rows)  # the tracing loop: no events
+        tr_state, tr_force, tr_energy = traced_out.tr_state, traced_out.tr_force, traced_out.tr_energy
+        traced = run_roll(*kin, traced_out)
         same = 3 if events else 4  # (status, steps, outcome): the sets are the events'
         if tuple(int(v) for v in traced)[:same] != tuple(int(v) for v in summary)[:same]:
             raise RuntimeError(
@@ -420,7 +392,7 @@ class BatchResult:
     :class:`~dicetrace.ics.SliceICs`, e.g. from :func:`~dicetrace.ics.seed_slice`),
     else None; the tables fill their ``x, y, z`` columns from them.
     ``device``: where the throws ran (``dicetrace.devices.device_label``).
-    ``set_times``: with ``simulate_batch(..., events=True)``, the exact time
+    ``set_times``: with ``simulate_batch(..., record=Record.events_only())``, the exact time
     (s) each set began (the sets are then the exact contact events,
     docs/model.md §8.1, and ``set_steps`` the steps they began in); None
     otherwise.
@@ -437,7 +409,7 @@ class BatchResult:
     config: Config
     coords: np.ndarray | None = None  # (m, 3) float64 slice coordinates, NaN where none
     device: str = "cpu"  # where the throws ran: "cpu" or "cuda: <GPU name>" (also in the tables' metadata)
-    set_times: np.ndarray | None = None  # float64 like ``sets``: each set's exact start time (s), with events=True
+    set_times: np.ndarray | None = None  # float64 like ``sets``: each set's exact start time (s), with events
     orientations: np.ndarray | None = None  # (m, 4) x, y, z, w: each throw's starting orientation, when given
     heights_cm: np.ndarray | None = None  # (m,): each throw's start height of the centre of mass, when given
 
@@ -481,9 +453,10 @@ def simulate_batch(
     cap: int = DEFAULT_CAP,
     chunk: int | None = None,
     device: str | Device | None = None,
-    events: bool = False,
+    record: Record | None = None,
     orientations=None,
     heights_cm=None,
+    events=NOT_GIVEN,
     **options,
 ) -> BatchResult:
     """Throw the die from every row of ``ics`` (m, 6), in parallel (numba threads, or a GPU).
@@ -530,12 +503,15 @@ def simulate_batch(
         unless a :func:`~dicetrace.devices.use_device` block says otherwise.
         A :class:`~dicetrace.devices.Device` (what ``resolve_device``
         returns) is taken as it is, resolved already.
-    events
-        Record the exact contact events, as :func:`simulate` does
+    record
+        What to keep besides the summaries: None, or the exact contact events,
+        ``Record.events_only()``, as :func:`simulate` keeps them
         (``BatchResult.set_times``); contact integrators only, on either
         device (the GPU runs the same events loop, docs/gpu.md).  The throws
-        are those of ``events=False`` bit for bit, and on the CPU the batch
-        is bit-identical to :func:`simulate` with events, row by row.
+        are those without events bit for bit, and on the CPU the batch is
+        bit-identical to :func:`simulate` with events, row by row.  A batch
+        keeps no per-step trace: a record that asks for trace channels is
+        refused (ValueError).
 
     orientations, heights_cm
         A full starting state per throw: its orientation, (m, 4) unit
@@ -548,6 +524,9 @@ def simulate_batch(
         them (``BatchResult.orientations``, ``heights_cm``; the tables'
         columns ``qx, qy, qz, qw, z0_cm``).  A throw whose die would start
         below the ground is refused, naming it.
+    events
+        Deprecated: ``events=True`` is ``record=Record.events_only()``; it
+        warns, and goes in the next release.
 
     Integer arguments may be Python or numpy integers; bools, floats and
     anything else are refused with a ValueError naming the argument, as are
@@ -559,7 +538,8 @@ def simulate_batch(
     chunk = _integer(chunk, "chunk", 1, none_ok=True)
     if device is not None and not isinstance(device, Device):
         check_device(device)  # the name, now; what it names is resolved once the inputs have passed their checks
-    events = check_events(cfg, events)
+    record = summary_record(record_with_events(record, events, "simulate_batch"))
+    events = check_events(cfg, wants_events(record), "record=Record(events=True)")
     conv = cfg.preset.l_convention if l_convention is None else l_convention
     coords = ics.coords if isinstance(ics, SliceICs) else None
     ics = validate_ics(ics)
@@ -576,8 +556,8 @@ def simulate_batch(
     if posed:
         chunk = 1  # one throw a chunk: each has its own starting offsets and height
     if chunk is None:
-        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap, events) if device.gpu else batch_chunk(cap, events)
-    check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention, events=events)
+        chunk = gpu_batch_chunk(cfg.kernel_inputs(ics[:0]), cap, record) if device.gpu else batch_chunk(cap, record)
+    check_batch_memory(m, cap, chunk, ics_copy=conv != cfg.preset.l_convention, record=record)
     status, outcome = np.zeros(m, dtype=np.int8), np.zeros(m, dtype=np.int8)
     steps, nsets = np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64)
     set_parts: list[np.ndarray] = []
@@ -586,10 +566,10 @@ def simulate_batch(
     bounds = [(a, min(m, a + chunk)) for a in range(0, m, chunk)]
 
     def one_chunk(a: int, b: int):
-        return run_chunk(cfg.kernel_inputs(ics[a:b], l_convention=conv), cap, threads, device, events)
+        return run_chunk(cfg.kernel_inputs(ics[a:b], l_convention=conv), cap, threads, device, record)
 
     if posed:
-        results = _posed_results(cfg, ics, conv, offsets, heights, cap, threads, events)
+        results = _posed_results(cfg, ics, conv, offsets, heights, cap, threads, record)
     else:
         results = chunk_results(bounds, one_chunk, device)
     # chunk by chunk (on several GPUs, a few at a time): one chunk's buffers in memory, its sets compacted
@@ -658,7 +638,7 @@ def _poses(cfg: Config, orientations, heights_cm, m: int) -> tuple[np.ndarray, n
     return np.ascontiguousarray(rots), heights, offsets
 
 
-def _posed_results(cfg: Config, ics, conv, offsets, heights, cap: int, threads, events: bool):
+def _posed_results(cfg: Config, ics, conv, offsets, heights, cap: int, threads, record: Record | None):
     """Each throw from its own starting offsets and height (:func:`_poses`), one per numba thread (the kernels release
     the GIL): its results in order."""
     import numba
@@ -669,7 +649,7 @@ def _posed_results(cfg: Config, ics, conv, offsets, heights, cap: int, threads, 
 
     def one(i: int):
         k = KernelInputs(kin.ics[i : i + 1], offsets[i], kin.params._replace(z0_cm=float(heights[i])), kin.integrator_id)
-        return run_chunk(k, cap, 1, CPU_DEVICE, events)
+        return run_chunk(k, cap, 1, CPU_DEVICE, record)
 
     workers = numba.get_num_threads() if threads is None else max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
     from concurrent.futures import ThreadPoolExecutor

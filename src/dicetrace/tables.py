@@ -15,7 +15,7 @@ Three Arrow tables with explicit schemas, readable with plain
     (list<uint8>: bit k = node k+1 at or below the ground), its text form
     ``contact_sequence`` (the program's, e.g. ``0-6-68-8``) and
     ``n_contact_changes``; with exact contact events
-    (``simulate(..., events=True)``, docs/model.md §8.1) also
+    (``simulate(..., record=Record(..., events=True))``, docs/model.md §8.1) also
     ``contact_times_s`` (list<float64>: the time each set began).
 ``contacts``
     one row per node event: ``ic_id, step, t_s, node`` (1..8), ``kind``

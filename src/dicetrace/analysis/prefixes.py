@@ -36,7 +36,7 @@ def coarse_grain(sets, steps, end_step: int, *, min_steps: int) -> tuple:
     ``sets[i]`` is first seen at ``steps[i]`` and lasts until ``steps[i+1]``
     (the last one until ``end_step``).  The first set (in the air, before the
     first contact) is always kept.  The times may be steps (integers) or, for
-    exact contact events (``simulate_batch(..., events=True)``), seconds:
+    exact contact events (``simulate_batch(..., record=Record.events_only())``), seconds:
     ``end_step`` and ``min_steps`` in the same unit.
     """
     s = np.asarray(sets)

@@ -485,8 +485,8 @@ def register(app: typer.Typer) -> None:
 
         from dicetrace.simulate import Record, simulate  # lazy: keeps `dicetrace --help` fast (imports numba)
 
-        rec_what = Record(states=True, energy=True, forces="forces" in chans)
-        rolls = [simulate(v, config=cfg, record=rec_what, events=events, orientation=pose) for v in all_ics]
+        rec_what = Record(states=True, energy=True, forces="forces" in chans, events=events)
+        rolls = [simulate(v, config=cfg, record=rec_what, orientation=pose) for v in all_ics]
         if rolls_file is not None and (rolls[0].outcome, rolls[0].steps) != (desc["outcome"], desc["steps"]):
             say(f"dicetrace: --rolls: the throw replayed ends otherwise than its row says (outcome {rolls[0].outcome}, "
                 f"{rolls[0].steps} steps against {desc['outcome']}, {desc['steps']}): the table was written by "

@@ -116,15 +116,16 @@ def read_ics_csv(path: Path, slice_name: str | None, l_convention: str):
 def run_ics(ics: np.ndarray, cfg, events: bool = False):
     """Summaries of every IC as a BatchResult: one parallel batch, or a plain ``simulate`` for a single IC.
 
-    (Both are bit-identical; the single throw skips the batch's thread start-up.)  ``events``: with the exact
-    contact events and their times (``BatchResult.set_times``).
+    (Both are bit-identical; the single throw skips the batch's thread start-up.)  ``events`` (``--events``):
+    with the exact contact events and their times (``BatchResult.set_times``), ``Record.events_only()``.
     """
     # lazy: keeps `dicetrace --help` fast (imports numba)
-    from dicetrace.simulate import BatchResult, simulate, simulate_batch
+    from dicetrace.simulate import BatchResult, Record, simulate, simulate_batch
 
+    record = Record.events_only() if events else None
     if len(ics) != 1:
-        return simulate_batch(ics, config=cfg, events=events)
-    r = simulate(ics[0], config=cfg, events=events)
+        return simulate_batch(ics, config=cfg, record=record)
+    r = simulate(ics[0], config=cfg, record=record)
     return BatchResult(
         ics=ics.copy(),
         outcome=np.array([r.outcome], dtype=np.int8),

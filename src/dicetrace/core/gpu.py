@@ -49,6 +49,23 @@ GPU, so that one chunk's transfers and host work overlap another's compute;
 it sizes chunks to the device's free memory and retries the throws that
 fill their buffer, as on the CPU.
 
+What to keep.  :func:`run_batch_cuda` takes the request a CPU batch takes (a
+:class:`~dicetrace.saving.Record` asking for events, or None) and the request
+stops at the host: a kernel's arguments are what numba-cuda can type and
+copy (arrays, scalars, records and tuples of them, as ``kp``), never a Python
+object.  From the request the host chooses the kernel (its compile-time
+``events`` flag, :func:`_kernel`) and makes the outputs on the device with one
+function, :func:`_device_out`, as the named
+:class:`~dicetrace.core.loop.BatchOut` the CPU's batch writes.  The kernels'
+parameters are still positional (their bodies, and the signatures cached on
+disk, are not changed here), so the host passes that structure's fields in
+order, with what the loop kernels take for outputs and records a launch does
+not use: event times of length 0, trace arrays of no rows, and (but in the
+held kernels) motion and work records of no rows.  Inside, each thread
+builds its run loop's :class:`~dicetrace.core.loop.RollOut` from them, as the
+CPU's batch does.  (numba-cuda flattens a tuple argument into its fields, so
+a kernel could take the ``BatchOut`` whole: a change of the kernels' bodies.)
+
 numba-cuda is optional (``pip install 'dicetrace[cuda]'``) and this module
 imports it: import this module only where a GPU is asked for
 (``dicetrace.devices`` says whether one can be used).  Under numba-cuda's
@@ -76,8 +93,9 @@ from dicetrace.core import fast, loop  # noqa: E402
 from dicetrace.core._jit import CACHE, kernel_digest  # noqa: E402
 from dicetrace.core import kernels  # noqa: E402
 from dicetrace.core.kernels import kernels_for  # noqa: E402
-from dicetrace.core.loop import RollOut  # noqa: E402
+from dicetrace.core.loop import BatchOut, RollOut  # noqa: E402
 from dicetrace.core.state import MOTION, new_states, new_work  # noqa: E402
+from dicetrace.saving import Record, wants_events  # noqa: E402
 from dicetrace.status import Status  # noqa: E402
 
 #: Threads per block: the kernels hold up to 255 registers a thread (``benchmarks/bench_ptxas.py``), so blocks of
@@ -317,12 +335,26 @@ def uses_seed_kernel(kp, off0, integ: int) -> bool:
     return getattr(scheme, "summary", None) is fast.roll_summary_sie and bool(scheme.summary_applies(kp, off0))
 
 
-def bytes_per_throw(integ: int, cap: int, kp=None, off0=None, events: bool = False) -> int:
+def bytes_per_throw(integ: int, cap: int, kp=None, off0=None, record: Record | None = None) -> int:
     """Device memory one throw of a chunk takes: IC, summaries, ``cap`` contact sets, as many packed for the
-    host (at most), its offset there and (``events``) the times of its sets, likewise twice.  Its records are
-    in the thread's local memory (the few throws that outlive a slice get theirs in device memory apart,
-    ``_run_held``)."""
-    return 6 * 8 + 1 + 8 + 1 + 8 + 2 * (5 + (8 if events else 0)) * cap + 8
+    host (at most), its offset there and (where ``record`` asks for events) the times of its sets, likewise
+    twice.  Its records are in the thread's local memory (the few throws that outlive a slice get theirs in
+    device memory apart, ``_run_held``)."""
+    return 6 * 8 + 1 + 8 + 1 + 8 + 2 * (5 + (8 if wants_events(record) else 0)) * cap + 8
+
+
+#: A batch's summaries per throw, as :class:`~dicetrace.core.loop.BatchOut` holds them: (name, dtype).
+_SUMMARIES = (("status", np.int8), ("steps", np.int64), ("outcome", np.int8), ("nsets", np.int64))
+
+
+def _device_out(m: int, cap: int, record: Record | None, make) -> BatchOut:
+    """The outputs of ``m`` throws of ``cap`` sets on the device, for what ``record`` asks (event times where it
+    asks for events, else of length 0), as ``kernels.batch_out`` makes them on the host: a
+    :class:`~dicetrace.core.loop.BatchOut` of device arrays, each made by ``make(name, n, dtype)``."""
+    events = wants_events(record)
+    return BatchOut(*(make(name, m, dt) for name, dt in _SUMMARIES), make("sets", m * cap, np.uint8),
+                    make("set_steps", m * cap, np.int32),
+                    make("times", m * cap, np.float64) if events else make("ev_times", 0, np.float64))
 
 
 class _Buffers:
@@ -368,10 +400,10 @@ def _buffers() -> _Buffers:
     return bufs
 
 
-def run_batch_cuda(ics, off0, kp, integ, cap, events: bool = False):
-    """``core.kernels.run_batch`` (``events``: ``run_batch_events``) on the GPU, its contact sets packed:
-    (status, steps, outcome, nsets, sets, set_steps, times, starts), ``times`` the events' times packed as the
-    sets (None without ``events``).
+def run_batch_cuda(ics, off0, kp, integ, cap, record: Record | None = None):
+    """``core.kernels.run_batch`` on the GPU, for what ``record`` asks (None, or the exact contact events), its
+    contact sets packed: (status, steps, outcome, nsets, sets, set_steps, times, starts), ``times`` the events'
+    times packed as the sets (None where ``record`` asks for no events).
 
     One chunk, on this host thread's stream (:class:`_Buffers`); the caller
     sizes it to the device's memory (:func:`bytes_per_throw`,
@@ -383,22 +415,23 @@ def run_batch_cuda(ics, off0, kp, integ, cap, events: bool = False):
     while a kernel runs, one at a time.
     """
     with _SIMULATOR_LOCK if simulated() else contextlib.nullcontext():
-        return _run_batch_cuda(ics, off0, kp, integ, cap, bool(events))
+        return _run_batch_cuda(ics, off0, kp, integ, cap, record)
 
 
 _SIMULATOR_LOCK = threading.Lock()
 
 
-def _run_batch_cuda(ics, off0, kp, integ, cap, events):
+def _run_batch_cuda(ics, off0, kp, integ, cap, record):
     m = len(ics)
     if m == 0:
         return (np.zeros(0, np.int8), np.zeros(0, np.int64), np.zeros(0, np.int8), np.zeros(0, np.int64),
-                np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0) if events else None, np.zeros(0, np.int64))
-    status, steps, outcome, nsets, sets, set_steps, times, starts = _first_pass(ics, off0, kp, integ, cap, events)
+                np.zeros(0, np.uint8), np.zeros(0, np.int32), np.zeros(0) if wants_events(record) else None,
+                np.zeros(0, np.int64))
+    status, steps, outcome, nsets, sets, set_steps, times, starts = _first_pass(ics, off0, kp, integ, cap, record)
     going = np.nonzero(status == Status.RUNNING)[0]
     if going.size:  # throws not ended within a slice: again from their start, their records kept on the device
         old_used = _used(status, nsets, cap)
-        held = _run_held(ics[going], off0, kp, integ, cap, events)
+        held = _run_held(ics[going], off0, kp, integ, cap, record)
         status[going], steps[going], outcome[going], nsets[going] = held[:4]
         sets, set_steps, times, starts = _merged(old_used, _used(status, nsets, cap), starts, (sets, set_steps, times),
                                                  going, held)
@@ -434,10 +467,11 @@ def _merged(old_used, new_used, starts, arrays, going, held):
     return (*out, new_starts[:-1])
 
 
-def _first_pass(ics, off0, kp, integ, cap, events):
+def _first_pass(ics, off0, kp, integ, cap, record):
     """One chunk through the seed kernel or the scheme's kernel in local records, ``kernels.SLICE_STEPS`` steps a
     throw at most, on this host thread's stream; its sets packed (none for throws that have not ended)."""
     m = len(ics)
+    events = wants_events(record)  # the kernel chosen from the request: its compile-time flag
     seed_path = not events and uses_seed_kernel(kp, off0, integ)
     kernel = _kernel(integ, seed_path, events)
     buf = _buffers()
@@ -449,19 +483,16 @@ def _first_pass(ics, off0, kp, integ, cap, events):
     d_ics, d_off0 = buf.dev("ics", m, np.float64, 6), buf.dev("off0", 8, np.float64, 3)
     d_ics.copy_to_device(h_ics, stream=stream)
     d_off0.copy_to_device(h_off0, stream=stream)
-    kinds = (("status", np.int8), ("steps", np.int64), ("outcome", np.int8), ("nsets", np.int64))
-    outs = [buf.dev(name, m, dt) for name, dt in kinds]
-    d_sets, d_set_steps = buf.dev("sets", m * cap, np.uint8), buf.dev("set_steps", m * cap, np.int32)
-    d_times = buf.dev("times", m * cap, np.float64) if events else buf.dev("ev_times", 0, np.float64)
-    if seed_path:
-        args = (d_ics, d_off0, kp, cap, *outs, d_sets, d_set_steps, kernels.SLICE_STEPS * kernels.SUMMARY_SLICES)
-    else:
+    out = _device_out(m, cap, record, buf.dev)
+    if seed_path:  # the seed kernel writes the summaries and the sets (never events)
+        args = (d_ics, d_off0, kp, cap, *out[:6], kernels.SLICE_STEPS * kernels.SUMMARY_SLICES)
+    else:  # the loop kernel: no records in device memory (they are the thread's own) and no trace
         args = (d_ics, d_off0, kp, cap, buf.dev("no_motion", 0, MOTION), buf.dev("no_work", 0, kernels_for(integ).scheme.WORK),
-                *outs, d_sets, d_set_steps, d_times, *_no_trace(buf), False, kernels.SLICE_STEPS, 0)
+                *out, *_no_trace(buf), False, kernels.SLICE_STEPS, 0)
     _launch(kernel, m, args, stream)
     # out: the summaries first, then only the contact sets the throws used
-    hosts = [buf.host(name, m, dt) for name, dt in kinds]
-    for dev, host in zip(outs, hosts):
+    hosts = [buf.host(name, m, dt) for name, dt in _SUMMARIES]
+    for dev, host in zip(out[:4], hosts):
         dev.copy_to_host(host, stream=stream)
     stream.synchronize()
     status, steps, outcome, nsets = (h.copy() for h in hosts)
@@ -475,9 +506,9 @@ def _first_pass(ics, off0, kp, integ, cap, events):
         h_starts[:] = starts
         d_starts = buf.dev("starts", m + 1, np.int64)
         d_starts.copy_to_device(h_starts, stream=stream)
-        per_set = [("sets", d_sets, sets), ("steps", d_set_steps, set_steps)]
+        per_set = [("sets", out.sets, sets), ("steps", out.set_steps, set_steps)]
         if events:
-            per_set.append(("times", d_times, times))
+            per_set.append(("times", out.ev_times, times))
         hosts = []
         for name, d_all, out in per_set:
             d_packed = buf.dev(f"packed_{name}", total, out.dtype)
@@ -496,34 +527,32 @@ def _no_trace(buf):
             buf.dev("tr_energy", 0, np.float64, loop.ENERGY_COLS))
 
 
-def _run_held(ics, off0, kp, integ, cap, events):
+def _run_held(ics, off0, kp, integ, cap, record):
     """Throws that did not end within a slice, from their start, their records in device memory: launch after launch
     of ``kernels.SLICE_STEPS`` steps a throw until every one has ended (Python runs between launches: Ctrl-C stops them).
     Returns what :func:`_first_pass` returns, for these throws."""
     m = len(ics)
+    events = wants_events(record)  # the kernel chosen from the request: its compile-time flag
     kernel = _kernel(integ, False, events, held=True)
     buf = _buffers()
     stream = buf.stream
     d = {name: cuda.to_device(a, stream=stream) for name, a in (
         ("ics", np.ascontiguousarray(ics)), ("off0", np.ascontiguousarray(off0)), ("S", new_states(m)),
-        ("Wk", new_work(kernels_for(integ).scheme.WORK, m)), ("status", np.zeros(m, np.int8)),
-        ("steps", np.zeros(m, np.int64)), ("outcome", np.zeros(m, np.int8)), ("nsets", np.zeros(m, np.int64)),
-        ("sets", np.zeros(m * cap, np.uint8)), ("set_steps", np.zeros(m * cap, np.int32)),
-        ("times", np.zeros(m * cap if events else 0)))}
+        ("Wk", new_work(kernels_for(integ).scheme.WORK, m)))}
+    out = _device_out(m, cap, record, lambda name, n, dt: cuda.to_device(np.zeros(n, dt), stream=stream))
     resume = False
     while True:
-        _launch(kernel, m, (d["ics"], d["off0"], kp, cap, d["S"], d["Wk"], d["status"], d["steps"], d["outcome"],
-                            d["nsets"], d["sets"], d["set_steps"], d["times"], *_no_trace(buf), resume, kernels.SLICE_STEPS, 0),
-                stream)
-        status = d["status"].copy_to_host(stream=stream)
+        _launch(kernel, m, (d["ics"], d["off0"], kp, cap, d["S"], d["Wk"], *out, *_no_trace(buf), resume,
+                            kernels.SLICE_STEPS, 0), stream)
+        status = out.status.copy_to_host(stream=stream)
         stream.synchronize()
         if not np.any(status == Status.RUNNING):
             break
         resume = True
-    steps, outcome, nsets = (d[k].copy_to_host(stream=stream) for k in ("steps", "outcome", "nsets"))
-    flat = [d["sets"].copy_to_host(stream=stream), d["set_steps"].copy_to_host(stream=stream)]
+    steps, outcome, nsets = (a.copy_to_host(stream=stream) for a in (out.steps, out.outcome, out.nsets))
+    flat = [out.sets.copy_to_host(stream=stream), out.set_steps.copy_to_host(stream=stream)]
     if events:
-        flat.append(d["times"].copy_to_host(stream=stream))
+        flat.append(out.ev_times.copy_to_host(stream=stream))
     stream.synchronize()
     used = _used(status, nsets, cap)
     keep = (np.arange(cap)[None, :] < used[:, None]).ravel()

@@ -20,10 +20,21 @@ The entry points take an integrator's kernel id (``IntegratorSpec.kernel_id``):
     ``run_batch`` runs per IC (tests and benchmarks call it one by one).
 ``run_batch``
     many throws in parallel (``prange``), summaries only.
-``run_events``, ``run_batch_events``
-    one throw, or many in parallel, through a contact scheme's events loop:
-    the exact contact events instead of the sets at output-step ends
-    (:func:`has_events` says which integrators have one).
+``run_events``
+    one throw through a contact scheme's events loop: the exact contact
+    events instead of the sets at output-step ends (:func:`has_events` says
+    which integrators have one); ``run_batch`` runs many through it.
+
+What a run keeps is a :class:`~dicetrace.saving.Record` (or None: the
+summary): :func:`run_throw` and :func:`run_batch` choose their compiled loop
+from it (the events loop where it asks for events: inside the loops that
+choice is a constant compiled in, ``core._jit``), and :func:`roll_out_for`,
+:func:`batch_out` make the outputs it asks for, as the named structures the
+loops take (:class:`~dicetrace.core.loop.RollOut`,
+:class:`~dicetrace.core.loop.BatchOut`).  An output not asked for is an array
+of no rows there (event times of length 0, trace arrays of no rows): numba
+types a loop's arguments once, and a loop tests their length, never their
+presence, so the compiled loops stay as they are.
 """
 
 from __future__ import annotations
@@ -52,6 +63,7 @@ from dicetrace.core.schemes import has_events as _scheme_has_events
 from dicetrace.core.schemes import scheme_module
 from dicetrace.core.state import new_states, new_work
 from dicetrace.integrators import INTEGRATORS
+from dicetrace.saving import Record, wants_events
 from dicetrace.status import Status
 
 _SPECS_BY_ID = {s.kernel_id: s for s in INTEGRATORS.values()}
@@ -174,6 +186,23 @@ def roll_out(sets, set_steps, ev_times=None, tr_state=None, tr_force=None, tr_en
                    NO_TRACE[2] if tr_energy is None else tr_energy)
 
 
+def roll_out_for(cap: int, record: Record | None = None, rows: int = 0) -> RollOut:
+    """Fresh outputs of a run loop for what ``record`` asks: ``cap`` contact sets (and their exact times where it
+    asks for events) and ``rows`` rows of each trace channel it asks for (``rows=0``: a run that traces nothing)."""
+    n = int(rows)
+    chans = () if record is None else record.channels
+    return roll_out(np.zeros(cap, np.uint8), np.zeros(cap, np.int32), np.zeros(cap) if wants_events(record) else None,
+                    np.zeros((n, STATE_COLS)) if "states" in chans else None,
+                    np.zeros((n, FORCE_COLS)) if "forces" in chans else None,
+                    np.zeros((n, ENERGY_COLS)) if "energy" in chans else None)
+
+
+def throw_out(out: BatchOut, i: int, cap: int) -> RollOut:
+    """Throw i's part of a batch's outputs as a run loop's (views; no trace): what the batch kernel hands its loop."""
+    lo, hi = i * cap, (i + 1) * cap
+    return roll_out(out.sets[lo:hi], out.set_steps[lo:hi], out.ev_times[lo:hi] if len(out.ev_times) else None)
+
+
 def _in_slices(kernel, ic, off0, kp, state, out: RollOut):
     """One throw through a run loop, slice by slice (``SLICE_STEPS`` steps each) until it ends."""
     S, Wk = state
@@ -232,10 +261,22 @@ def run_events(ic, off0, kp, integ, out: RollOut, state=None):
     return _in_slices(_events_kernels(integ).roll_events, ic, off0, kp, state or new_roll_state(integ), out)
 
 
-def batch_out(m: int, cap: int, events: bool = False) -> BatchOut:
-    """Fresh outputs of a batch kernel for ``m`` throws of ``cap`` sets each (:class:`~dicetrace.core.loop.BatchOut`)."""
+def run_throw(ic, off0, kp, integ, out: RollOut, record: Record | None = None, state=None):
+    """One throw's summary run as ``record`` asks: its exact contact events (:func:`run_events`) where it asks for
+    them, else its contact sets at step ends (:func:`run_roll`, which traces what ``out`` has rows for).
+
+    ``out``: :func:`roll_out_for` of the same ``record``.  Returns (status, steps, outcome, nsets).
+    """
+    run = run_events if wants_events(record) else run_roll
+    return run(ic, off0, kp, integ, out, state)
+
+
+def batch_out(m: int, cap: int, record: Record | None = None) -> BatchOut:
+    """Fresh outputs of a batch kernel for ``m`` throws of ``cap`` sets each, and their exact times where ``record``
+    asks for events (:class:`~dicetrace.core.loop.BatchOut`; a batch keeps no trace)."""
     return BatchOut(np.zeros(m, np.int8), np.zeros(m, np.int64), np.zeros(m, np.int8), np.zeros(m, np.int64),
-                    np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32), np.zeros(m * cap) if events else _NO_EVENTS)
+                    np.zeros(m * cap, np.uint8), np.zeros(m * cap, np.int32),
+                    np.zeros(m * cap) if wants_events(record) else _NO_EVENTS)
 
 
 def _rows(out: BatchOut, a: int, b: int, cap: int) -> BatchOut:
@@ -265,11 +306,12 @@ def _put(out: BatchOut, idx: np.ndarray, cap: int, part: BatchOut) -> None:
         out.ev_times[cols] = part.ev_times
 
 
-def run_batch(ics, off0, kp, integ, cap, out: BatchOut, *, events: bool = False) -> None:
+def run_batch(ics, off0, kp, integ, cap, out: BatchOut, record: Record | None = None) -> None:
     """Every throw of ``ics`` to its end with integrator ``integ`` (kernel id), in parallel, written to ``out``.
 
-    ``out`` (:func:`batch_out`): throw i's summary and its contact sets in
-    ``[i·cap, (i+1)·cap)`` (``events``: the events loop's sets and times).
+    ``out`` (:func:`batch_out` of the same ``record``): throw i's summary and
+    its contact sets in ``[i·cap, (i+1)·cap)`` (where ``record`` asks for
+    events: the events loop's sets and their times).
     ``off0`` (8, 3) are the initial node offsets shared by all ICs.  The
     throws run in calls of the batch kernel (``core.loop.make_batch``) that
     each take about ``CALL_SECONDS`` (sized from the last call's rate, at most
@@ -279,6 +321,7 @@ def run_batch(ics, off0, kp, integ, cap, out: BatchOut, *, events: bool = False)
     about a call).  Every throw runs the same serial code from a fresh
     state whatever the calls, so the results are those of one call.
     """
+    events = wants_events(record)  # the one place a batch's kernel is chosen from the request
     k = _events_kernels(integ) if events else kernels_for(integ)
     kernel = k.batch_events if events else k.batch
     m = len(ics)

@@ -19,6 +19,7 @@ import numpy as np
 
 from dicetrace.ics import MAX_AXIS_POINTS, MAX_ICS, Grid, IcSpace, Points, Sample, space_from_dict
 from dicetrace.params import Config, ConfigError, Numerics, Preset, _show
+from dicetrace.saving import Record
 from dicetrace.scan.poses import POSED_KINDS, HandThrows, ThrowTable, posed_from_dict, space_l_convention
 
 FORMAT = "dicetrace-scan/1"
@@ -57,8 +58,11 @@ class ScanDefinition:
     says it: ``"cpu"`` or ``"cuda: <GPU name>"`` (a resolved device, never
     ``"auto"``: :func:`~dicetrace.scan.scan` resolves its ``device`` argument).
     ``events``: the rows hold the exact contact events (``simulate_batch(...,
-    events=True)``: the contact sets inside the sub-steps and a column
-    ``contact_times_s``); the contact integrators only.
+    record=Record.events_only())``: the contact sets inside the sub-steps and
+    a column ``contact_times_s``); the contact integrators only.  It is the
+    definition's stored form (a boolean in its JSON, absent in a folder
+    written before scans held events: False); :attr:`record` is the request
+    its chunks pass on.
     ``space`` may also be a space of full starting states
     (:mod:`dicetrace.scan.poses`: hand throws drawn from a model, or a throw
     table's rows), whose rows add the pose columns ``qx, qy, qz, qw, z0_cm``;
@@ -116,6 +120,12 @@ class ScanDefinition:
     @property
     def size(self) -> int:
         return self.space.size
+
+    @property
+    def record(self) -> Record | None:
+        """What the scan's throws keep besides their summaries, as ``simulate_batch(record=...)`` takes it:
+        ``Record.events_only()`` for a scan of exact events, else None (a scan keeps no per-step trace)."""
+        return Record.events_only() if self.events else None
 
     @property
     def posed(self) -> bool:

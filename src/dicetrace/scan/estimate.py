@@ -197,7 +197,7 @@ def estimate_scan(defn: ScanDefinition, out=None, *, threads: int | None = None,
     conv = defn.l_convention
 
     def probe():
-        return simulate_batch(ics, config=cal, l_convention=conv, threads=1, events=defn.events, **poses)
+        return simulate_batch(ics, config=cal, l_convention=conv, threads=1, record=defn.record, **poses)
 
     # Warm throughput only: the first run compiles (or loads from the cache) every kernel these throws reach --
     # numba compiles some only when a throw first needs them -- and is not timed.  Then the probe is timed over

@@ -184,7 +184,7 @@ def compute_chunk(defn: ScanDefinition, c: int, *, threads: int | None = None, c
     poses = {"orientations": blk.orientations, "heights_cm": blk.heights_cm} if defn.posed else {}
     batch = simulate_batch(
         blk.ics, config=defn.config, l_convention=defn.l_convention, threads=threads, cap=cap,
-        device=_resolved(defn.device), events=defn.events, **poses,
+        device=_resolved(defn.device), record=defn.record, **poses,
     )
     if batch.device != defn.device:
         raise DeviceError(f"chunk {c} ran on {batch.device}, the scan runs on {defn.device}: "

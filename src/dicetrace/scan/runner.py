@@ -35,6 +35,7 @@ from dicetrace.devices import Device, check_device, device_label, resolve_device
 from dicetrace.ics import Grid, Points, Sample
 from dicetrace.memory import available_memory
 from dicetrace.params import Config, resolve_config
+from dicetrace.saving import NOT_GIVEN, Record, record_with_events, summary_record, wants_events
 from dicetrace.scan.definition import DEFAULT_CHUNK, ScanDefinition, device_kind
 from dicetrace.scan.poses import HandThrows, ThrowTable
 from dicetrace.sinks._common import human_bytes, output_folder
@@ -148,11 +149,17 @@ def _device_name(device):
     return device.kind if isinstance(device, Device) else device
 
 
-def _definition(space, config, chunk, options, device=None, events=None) -> ScanDefinition:
+def _definition(space, config, chunk, options, device=None, record=None, events=NOT_GIVEN,
+                where: str = "scan") -> ScanDefinition:
+    """The scan's definition: ``space`` itself where it is one, else made of the arguments.  ``record``: None or
+    the exact contact events (``Record.events_only()``; trace channels are refused); ``events``: the deprecated
+    keyword (None, its old default, is not giving it)."""
     if device is not None:
         check_device(device)
+    given = events is not NOT_GIVEN and events is not None
+    record = summary_record(record_with_events(record, events if given else NOT_GIVEN, where, stacklevel=4), where)
     if isinstance(space, ScanDefinition):
-        if (config is not None or device is not None or events is not None
+        if (config is not None or device is not None or record is not None or given
                 or any(v is not None for v in options.values())):
             raise ValueError("give a ScanDefinition (its device and events included) or a space with its "
                              "configuration, not both")
@@ -162,8 +169,7 @@ def _definition(space, config, chunk, options, device=None, events=None) -> Scan
             f"space must be a Grid, Sample or Points (dicetrace.ics), HandThrows or ThrowTable (dicetrace.scan.poses) "
             f"or a ScanDefinition, not {type(space).__name__}"
         )
-    events = False if events is None else events
-    return ScanDefinition(space, resolve_config(config, **options), chunk, events=events)
+    return ScanDefinition(space, resolve_config(config, **options), chunk, events=wants_events(record))
 
 
 def _on_device(defn: ScanDefinition, device: str | None, client=None) -> ScanDefinition:
@@ -191,7 +197,8 @@ def iter_scan(
     dask=None,
     n_workers: int | None = None,
     device: str | None = None,
-    events: bool | None = None,
+    record: Record | None = None,
+    events=NOT_GIVEN,
     **options,
 ) -> Iterator[tuple[int, pa.Table]]:
     """Stream a scan: yields ``(chunk_index, rolls_table)`` as chunks finish.
@@ -201,7 +208,7 @@ def iter_scan(
     restricts the run to those chunk indices.  Arguments as :func:`scan`.
     """
     device = _device_name(device)
-    defn = _definition(space, config, chunk, options, device, events)
+    defn = _definition(space, config, chunk, options, device, record, events, "iter_scan")
     _check_int(threads, "threads", 1)
     _check_int(n_workers, "n_workers", 1)
     _check_dask(dask)
@@ -250,7 +257,8 @@ def scan(
     max_chunks: int | None = None,
     wait: float = 0.0,
     device: str | None = None,
-    events: bool | None = None,
+    record: Record | None = None,
+    events=NOT_GIVEN,
     **options,
 ):
     """Throw the die from every IC of an IC space (summaries only).
@@ -302,12 +310,17 @@ def scan(
         metadata.  A folder holding the same scan run on another device is
         refused (:class:`~dicetrace.scan.folder.DeviceMismatchError`): a
         GPU's throws may differ from the CPU's by rounding.
+    record
+        What the rows keep besides the summaries: ``Record.events_only()``,
+        the exact contact events (the contact integrators, on either device),
+        as ``simulate_batch(..., record=Record.events_only())``: each row's
+        contact sets are then those inside the sub-steps and a column
+        ``contact_times_s`` says when each began.  Part of the definition
+        (None: no events, or a ScanDefinition's own).  A scan keeps no
+        per-step trace: a record asking for trace channels is refused.
     events
-        Record the exact contact events (the contact integrators, on either
-        device), as ``simulate_batch(..., events=True)``: each row's contact sets are
-        then those inside the sub-steps and a column ``contact_times_s`` says
-        when each began.  Part of the definition (None: False, or a
-        ScanDefinition's own).
+        Deprecated: ``events=True`` is ``record=Record.events_only()``; it
+        warns, and goes in the next release.
 
     Returns
     -------
@@ -334,7 +347,7 @@ def scan(
         full disk the chunks finished so far are kept.
     """
     device = _device_name(device)
-    defn = _definition(space, config, chunk, options, device, events)
+    defn = _definition(space, config, chunk, options, device, record, events)
     _check_scan_args(out, threads, n_workers, max_chunks, wait, progress, dask)
     _check_space_finite(defn)
     t0 = time.perf_counter()

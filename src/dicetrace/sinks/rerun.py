@@ -28,7 +28,7 @@ Entities (world frame: z up, cm):
 ``stop_margin``             log10 of the stop-test energy above the threshold (the crossing)
 ``contacts``                text log: one row per event, "step 176: node 6 enters", on
                             ``sim_time`` at the event's exact time where the throw
-                            recorded exact contact events (``events=True``)
+                            recorded exact contact events (``Record(events=True)``)
 ``summary``                 text document: IC, configuration, outcome, status,
                             contact sequence
 

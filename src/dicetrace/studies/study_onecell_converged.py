@@ -21,10 +21,10 @@ tolerance of 2·10⁻⁹ (no loosening over the throw: these are outcome maps, b
    program's (10 µs): contact events are then located to 10 µs, and the sequences are compared with the same throws
    at 1 µs (exactness) and at the 1 ms steps (the sampling of sections d and k6).  Sub-cells are counted for the raw
    sequence and for sequences without the sets shorter than 0.1 ms and 1 ms (penalty micro-bounces).  The same maps
-   are also run with **exact contact events** (``simulate_batch(..., events=True)``: every set inside the
-   integrator's sub-steps, located where nodes cross the ground, at the program's 1 ms output step), their sub-cells
-   counted alike, and the events of the checked throws compared with the sampled sequences and with the events at a
-   10 µs output step.
+   are also run with **exact contact events** (``simulate_batch(..., record=Record.events_only())``: every set
+   inside the integrator's sub-steps, located where nodes cross the ground, at the program's 1 ms output step), their
+   sub-cells counted alike, and the events of the checked throws compared with the sampled sequences and with the
+   events at a 10 µs output step.
 
 The figures and tables are drawn by :mod:`dicetrace.studies.study_onecell_converged_render`.
 """
@@ -46,7 +46,7 @@ from dicetrace.analysis.repetition import find_periods, label_autocorrelation, o
     texture_labels
 from dicetrace.analysis.simulator import resolve_slice, run_on_slice, window_points
 from dicetrace.params import make_config
-from dicetrace.simulate import set_to_text, simulate_batch
+from dicetrace.simulate import Record, set_to_text, simulate_batch
 from dicetrace.status import Status
 from dicetrace.studies.context import Computed, Context, Output, write_json
 from dicetrace.studies.study_onecell_converged_render import render as _render
@@ -188,7 +188,7 @@ def _texts(b) -> dict:
     """Every throw's contact sequence, raw and without the sets shorter than each of :data:`MIN_SET_S`.
 
     Durations in whole output steps for sampled sequences (at least one step), in seconds for exact contact events
-    (``b`` run with ``events=True``: its ``set_times``)."""
+    (``b`` run with ``record=Record.events_only()``: its ``set_times``)."""
     dt = b.config.numerics.dt_s
     exact = b.set_times is not None
     out = {}
@@ -227,7 +227,8 @@ def _sampled(b, factor: int) -> np.ndarray:
 
 def _batch(ctx: Context, pts: np.ndarray, dt: float, *, events: bool = False):
     sl = resolve_slice("seed")
-    b = simulate_batch(sl.to_ics(pts), config=_cfg(MODEL, dt_s=dt), l_convention=sl.l_convention, events=events)
+    b = simulate_batch(sl.to_ics(pts), config=_cfg(MODEL, dt_s=dt), l_convention=sl.l_convention,
+                       record=Record.events_only() if events else None)
     ctx.n_throws += len(pts)
     return b
 
