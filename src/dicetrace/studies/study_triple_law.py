@@ -48,7 +48,7 @@ from dicetrace.analysis.triple_law import (border_tracks, closure_table, cluster
 from dicetrace.analysis.vertices import guarded_find_vertices
 from dicetrace.ics import seed_slice
 from dicetrace.simulate import Record, simulate
-from dicetrace.studies.context import Computed, Context, Output, rerender_results, window_ranges
+from dicetrace.studies.context import Computed, Context, Output, jsonable, rerender_results, window_ranges
 from dicetrace.studies.study_corner_models import HUNT_MODEL, MAP_MODEL, config
 from dicetrace.studies.study_triple_law_render import render as _render
 
@@ -472,7 +472,7 @@ def compute(ctx: Context) -> Computed:
                "radius": RADIUS, "min_share": MIN_SHARE, "tol_rel": ctx.pick(*TOL_REL),
                "radii": list(ctx.pick(RADII, QUICK_RADII)), "d_grid": list(D_GRID), "corner_rate": cb.rate,
                "release_control": control, "rows": rows, "by": {r["window"]: r for r in rows}}
-    results["summary"] = summary(rows, control)
+    results["summary"] = jsonable(summary(rows, control))
     return Computed(results, plot)
 
 
@@ -486,6 +486,6 @@ def rerender(out) -> dict:
 
     def derive(r):
         r["by"] = {row["window"]: row for row in r["rows"]}
-        r["summary"] = summary(r["rows"], r["release_control"])
+        r["summary"] = jsonable(summary(r["rows"], r["release_control"]))
 
     return rerender_results(out, NAME, render, derive)
