@@ -217,15 +217,14 @@ def release_borders(cfg, tilt: float, *, spin: float, tilt_ratio: float = 1.0, n
     """The faces on the ring of releases at ``tilt`` spinning at ``spin`` (:func:`spinning_release`, turning at
     ``tilt_ratio·λ₀·tilt`` besides) in ``n_phi`` directions, and the borders between them bisected in direction to
     ``tol`` (rad), as :func:`~dicetrace.analysis.corner_slice.circle_sectors` rows (``radius``: the tilt)."""
-    from .corner import corner_balance
+    from .corner import _bisect, corner_balance
+    from .corner_slice import arcs
 
     lam0 = corner_balance(config=cfg).rate_rigid
 
     def face(ph):
         roll = spinning_release(cfg, tilt, float(ph), spin=spin, tilt_rate=tilt_ratio * lam0 * tilt)
         return int(roll.outcome) if roll.status.label == "settled" else -1
-
-    from .corner_slice import arcs
 
     ang = np.linspace(0.0, 2 * math.pi, int(n_phi), endpoint=False)
     lab = [face(a) for a in ang]
@@ -235,15 +234,8 @@ def release_borders(cfg, tilt: float, *, spin: float, tilt_ratio: float = 1.0, n
     if len(runs) > 1:
         for lb, s0, _ in runs:
             a, b = float(ang[s0 - 1]), float(ang[s0]) + (2 * math.pi if s0 == 0 else 0.0)
-            la = lab[s0 - 1]
-            while b - a > tol:
-                m = 0.5 * (a + b)
-                lm = face(m)
-                evals += 1
-                if lm == la:
-                    a = m
-                else:
-                    b, lb = m, lm
+            a, b, la, lb, n = _bisect(face, a, b, lab[s0 - 1], lb, tol)
+            evals += n
             borders.append({"angle": math.fmod(0.5 * (a + b), 2 * math.pi), "error": 0.5 * (b - a), "from": la,
                             "to": lb})
     faces = [r[0] for r in runs]

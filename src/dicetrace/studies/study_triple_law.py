@@ -38,7 +38,7 @@ from scipy import stats
 
 from dicetrace.analysis.agreement import agreement
 from dicetrace.analysis.corner import corner_balance
-from dicetrace.analysis.corner_slice import circle_sectors, clean_junctions, corner_distance
+from dicetrace.analysis.corner_slice import circle_sectors, clean_junctions
 from dicetrace.analysis.robustness import common_scale, one_sided_z, range_scan, relocate
 from dicetrace.analysis.simulator import classify_on_slice
 from dicetrace.analysis.transient import MapCertificate, _tightened, converged_verdict
@@ -46,9 +46,8 @@ from dicetrace.analysis.triple_law import (border_tracks, closure_table, cluster
                                            loglog_slope, predicted_share, release_borders, share_curve,
                                            spinning_corner, spinning_roots, stretch_fit)
 from dicetrace.analysis.vertices import guarded_find_vertices
-from dicetrace.ics import seed_slice
-from dicetrace.simulate import Record, simulate
 from dicetrace.studies.context import Computed, Context, Output, jsonable, rerender_results, window_ranges
+from dicetrace.studies.study_corner import _thrower
 from dicetrace.studies.study_corner_models import HUNT_MODEL, MAP_MODEL, config
 from dicetrace.studies.study_triple_law_render import render as _render
 
@@ -404,16 +403,6 @@ def release_control(ctx: Context) -> list[dict]:
     return out
 
 
-def _thrower(cfg, cb):
-    def throw(x, y):
-        ic = seed_slice(np.array([x]), np.array([y]))[0]
-        roll = simulate(ic, config=cfg, record=Record(states=True))
-        return {"x": x, "y": y, "outcome": int(roll.outcome), "status": roll.status.label,
-                **corner_distance(roll.trace, cb.rate, cb.d, cb.inertia)}
-
-    return throw
-
-
 def summary(rows: list[dict], control: list[dict]) -> dict:
     """The three verdicts and the numbers the report quotes, pooled over the windows (a pure function of the rows)."""
     out = {}
@@ -478,7 +467,7 @@ def compute(ctx: Context) -> Computed:
     cb = corner_balance(config=config(HUNT_MODEL))
     classifiers = {"hunt": classify_on_slice("seed", config=config(HUNT_MODEL)),
                    **{k: classify_on_slice("seed", config=config(v)) for k, v in INDEPENDENT.items()}}
-    throw = _thrower(config(HUNT_MODEL), cb)
+    throw = _thrower()  # section m's: the throw at a slice point in the hunt's model, and its D_min
     control = release_control(ctx)
     rows, plot = [], {}
     for w in ctx.pick(WINDOWS, WINDOWS[:1]):
