@@ -93,5 +93,8 @@ def test_the_report_states_the_laws_as_measured_and_section_m_no_longer_calls_th
     assert "they are **not measured** here" not in sec_m and "section s" in sec_m
     s = r["summary"]
     assert f"opposite faces never close is **{s['opposite_verdict']}**" in sec_s
-    assert f"spirals is **{s['spiral_verdict']}**" in sec_s
+    assert f"the slipping pivot's rate, is **{s['spiral_verdict']}**" in sec_s
+    assert f"at the issue's Ω·ln 10/λ(Ω) it is **{s['spiral_verdicts']['winding_issue']}**" in sec_s
+    assert f"the D² law for the share of throws near a corner balance is **{s['d2_verdict']}**" in sec_s
+    assert f"**{s['spiral_verdict']}** at {s['spiral_n']} points" in sec_m
     assert s["closure"]["opposite"]["closed"] == 0 or s["opposite_verdict"] != "supported"

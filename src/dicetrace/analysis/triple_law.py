@@ -37,6 +37,8 @@ __all__ = ["has_opposite_pair", "binomial_limits", "closure_table", "SpinningCor
            "predicted_share", "cluster_boxes"]
 
 LN10 = math.log(10.0)
+#: Bound of the spiral fit's log squeeze (|ln q| ≤ LQ_MAX).
+LQ_MAX = math.log(1e6)
 
 
 # --------------------------------------------------------------------------- 1. opposite faces
@@ -365,15 +367,19 @@ def fit_spiral(radii, angles) -> SpiralFit:
         for lq in (0.0, 1.0, -1.0, 2.5, -2.5):
             for g in np.linspace(0.0, math.pi, 4, endpoint=False):
                 for ws in (w0, -w0):
-                    p0 = np.array([ws, lq, g, 0.0])
+                    p0 = np.array([ws, lq, g, 0.0])  # inside the bounds
                     p0[3] = float(np.angle(np.mean(np.exp(1j * (resid(p0, sign) + 0.0)))))
-                    try:
-                        res = optimize.least_squares(resid, p0, args=(sign,), method="lm")
-                    except (ValueError, np.linalg.LinAlgError):
+                    try:  # the squeeze bounded to 1e-6 … 1e6 (a fold of the phase beyond that is no fit)
+                        res = optimize.least_squares(resid, p0, args=(sign,), method="trf",
+                                                     bounds=([-np.inf, -LQ_MAX, -np.inf, -np.inf],
+                                                             [np.inf, LQ_MAX, np.inf, np.inf]))
+                    except (ValueError, np.linalg.LinAlgError, OverflowError, FloatingPointError):
                         continue
                     cost = float(np.sum(res.fun**2))
                     if best is None or cost < best[0] - 1e-15:
                         best = (cost, res, sign)
+    if best is None:
+        return SpiralFit(math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, naive, naive_se, n, "no fit")
     cost, res, sign = best
     dof = max(res.fun.size - 4, 1)
     s2 = cost / dof

@@ -13,27 +13,34 @@ from dicetrace.studies.text import fmt, md_table, pm
 LN10 = math.log(10.0)
 
 
-def _figure(r: dict, plot: dict, out: Output) -> None:
+def _figure(r: dict, out: Output) -> None:
     import matplotlib.pyplot as plt  # heavy optional library: imported only when drawing
 
     rows = r["rows"]
     fig, axes = plt.subplots(1, 4, figsize=(20, 4.8))
     ax = axes[0]
     first = rows[0]
-    s = (plot.get(first["window"]) or {}).get("map")
-    if s is not None:
-        from matplotlib.colors import ListedColormap
+    from dicetrace.studies.context import window_ranges
 
-        cmap = ListedColormap(["#ffffff", "#d62728", "#1f77b4", "#2ca02c", "#e377c2", "#ffd700", "#000000"])
-        lab = np.clip(np.asarray(s.labels), 0, 6)
-        ax.imshow(lab.T, origin="lower", cmap=cmap, vmin=0, vmax=6, interpolation="nearest",
-                  extent=[s.axes[0][0], s.axes[0][-1], s.axes[1][0], s.axes[1][-1]])
-    for b in first["boxes"]:
-        if b["status"] == "vertex":
-            ax.plot(b["x"], b["y"], "*", color="cyan", ms=11, mec="k")
-    ax.set_title(f"{first['window']}: closed points (stars)", fontsize=9)
+    (x0, x1), (y0, y1) = window_ranges(first["window"])
+    h = (x1 - x0) / (first["res"] - 1)
+    style = {(True, "vertex"): ("*", "C3", "opposite pair, closed"), (True, "split"): ("x", "C3", "opposite pair, split"),
+             (True, "unresolved"): ("+", "C3", "opposite pair, unresolved"),
+             (False, "vertex"): ("*", "C0", "adjacent, closed"), (False, "split"): ("x", "C0", "adjacent, split"),
+             (False, "unresolved"): ("+", "C0", "adjacent, unresolved")}
+    for key, (m, col, lab) in style.items():
+        bs = [b for b in first["boxes"] if (b["opposite"], b["status"]) == key]
+        if bs:
+            ax.plot([b.get("x", x0 + (b["box"][0] + 0.5) * h) for b in bs],
+                    [b.get("y", y0 + (b["box"][1] + 0.5) * h) for b in bs], m, color=col,
+                    ms=11 if m == "*" else 6, mec="k" if m == "*" else None, label=f"{lab} ({len(bs)})", ls="none")
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.set_title(f"{first['window']}: the hunted junctions", fontsize=9)
     ax.set_xlabel("x")
     ax.set_ylabel("y")
+    ax.legend(fontsize=6)
     # the winding per decade against the spin
     ax = axes[1]
     om = np.linspace(0.1, max([p["throw"]["spin"] for row in rows for p in row["points"]] + [20.0]) * 1.1, 200)
@@ -102,8 +109,9 @@ def _figure(r: dict, plot: dict, out: Output) -> None:
     ax.set_title("throws passing near a corner balance", fontsize=9)
     ax.legend(fontsize=6)
     fig.tight_layout()
-    out.save_fig(fig, "s_triple_law", caption="The triple-point law. Left: the converged map of the first window with "
-                 "the closed points. Second: each closed point's winding per decade of radius (bars: statistical, fit "
+    out.save_fig(fig, "s_triple_law", caption="The triple-point law. Left: the junctions hunted in the first window "
+                 "(stars: closed on a point; crosses: split; plus: unresolved), red where their three faces hold an "
+                 "opposite pair. Second: each closed point's winding per decade of radius (bars: statistical, fit "
                  "range and integrator errors) against the spin of its throw at the closest approach to the corner "
                  "balance, with the releases off the balance at set spins (squares) and the three readings of the "
                  "law. Third: D_min of throws on circles about each point against the circle's radius. Right: the "
@@ -114,7 +122,7 @@ def _figure(r: dict, plot: dict, out: Output) -> None:
 def render(c: Computed, out: Output) -> None:
     r = c.results
     rows = r["rows"]
-    _figure(r, c.plot or {}, out)
+    _figure(r, out)
     cl = []
     for row in rows + [{"window": "both", "closure": r["summary"]["closure"]}]:
         for cls in ("opposite", "adjacent"):
