@@ -10,7 +10,7 @@ the machinery the studies share (context, outputs, report, runner, text).
 Two kinds, both shipped in the package and run from any folder:
 
 - the **writeup studies** (the writeup's nine, the transient-chaos study j, the referee's
-  items k, the converged maps l, the corner balance m, doubly transient chaos n and the border rates o, and p, q, r; ``dicetrace analyze NAME|all``), one module
+  items k, the converged maps l, the corner balance m, doubly transient chaos n and the border rates o, and p, q, r, s; ``dicetrace analyze NAME|all``), one module
   each, ``compute(ctx)`` then ``render(computed, out)`` (see
   :mod:`dicetrace.studies.context`); :func:`dicetrace.studies.runner.run`
   runs them and :mod:`dicetrace.studies.report` assembles ``REPORT.md``;
@@ -47,6 +47,9 @@ LETTERS["q"] = "sweeps"
 #: Study r (the hazard law of the edge saddle, measured), registered apart from the tuple above.
 WRITEUP_STUDIES += ("hazard_law",)
 LETTERS["r"] = "hazard_law"
+#: Study s (the triple-point law, measured), registered apart from the tuple above.
+WRITEUP_STUDIES += ("triple_law",)
+LETTERS["s"] = "triple_law"
 #: What each writeup study is about (the first line of its module's docstring, after the name).
 TITLES = {
     "cells": "the cell structure of the home window and the zoom ladder (writeup 4.1)",
@@ -69,6 +72,8 @@ TITLES = {
 TITLES["onecell_converged"] = "one cell or many, repetition and topology on the converged die (writeup 5.1, 5.5, 5.7)"
 TITLES["sweeps"] = "damping γ and ground stiffness k on three windows of the converged die, with certificates"
 TITLES["hazard_law"] = "the hazard law of the edge saddle, κ_settle(t) = α(ε(t))·λ_edge, on 10⁵ throws per model"
+TITLES["triple_law"] = ("the triple-point law, measured: opposite faces never close, the borders wind into a point as "
+                        "logarithmic spirals, the share of throws passing near a corner balance")
 #: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
 INTEGRATOR_STUDIES = ("accuracy", "stability", "friction", "cuboids", "bars", "aspect")
 #: What each integrator study is about (the first line of its module's docstring).
