@@ -76,8 +76,8 @@ Runge–Kutta sub-step, at its end and between DOP853's two error estimates
 (``methods.erk``), and at the start of each sub-step of the contact
 driver; the kernels hand their local records to it (``core.gpu._fenced``).
 With them the contact kernels of ``physical`` keep to 255 registers without
-spilling (docs/gpu.md).  A fence is nothing on the CPU (its code
-is empty: the CPU kernels are the same instructions with or without it,
+spilling (docs/gpu.md).  A fence is nothing on the CPU (its code is
+empty: a function compiles to the same instructions with or without it,
 ``tests/core/test_gpu_fence.py``).
 """
 
