@@ -11,7 +11,8 @@ Needs numba-cuda with NVIDIA's compiler wheels (``pip install 'numba-cuda[cu12]'
 NVVM, and ``ptxas`` in ``nvidia/cuda_nvcc/bin``); without them it says so in
 one line and exits 2.
 
-Usage: ``python benchmarks/bench_ptxas.py [--cc 9.0] [--write FILE.json]``
+Usage: ``python benchmarks/bench_ptxas.py [--cc 9.0] [--only TEXT] [--ptx DIR] [--write FILE.json]``
+(``--only``: the kernels whose label contains TEXT; ``--ptx``: keep each kernel's PTX there.)
 """
 
 from __future__ import annotations
@@ -67,7 +68,13 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cc", default="9.0", help="compute capability (default 9.0)")
     ap.add_argument("--write", type=Path, help="write the figures as JSON to this file")
+    ap.add_argument("--only", metavar="TEXT", help="measure only the kernels whose label contains TEXT")
+    ap.add_argument("--ptx", type=Path, metavar="DIR", help="keep each kernel's PTX in this folder")
     args = ap.parse_args()
+    chosen = [k for k in KERNELS if args.only is None or args.only in k[0]]
+    if not chosen:
+        print(f"bench_ptxas: no kernel's label contains {args.only!r}", file=sys.stderr)
+        return 2
     cc = tuple(int(x) for x in args.cc.split("."))
     ptxas = _ptxas()
     if ptxas is None:
@@ -89,7 +96,7 @@ def main() -> int:
     from dicetrace.params import make_config
 
     results = {}
-    for label, preset, integ, events, held in KERNELS:
+    for label, preset, integ, events, held in chosen:
         cfg = make_config(preset, **({} if integ is None else {"integrator": integ}))
         kin = cfg.kernel_inputs(np.zeros((2, 6)))
         seed = not events and not held and gpu.uses_seed_kernel(kin.params, kin.off0, kin.integrator_id)
@@ -108,7 +115,11 @@ def main() -> int:
             f.write(ptx)
         rep = subprocess.run([ptxas, f"-arch=sm_{cc[0]}{cc[1]}", "-v", f.name, "-o", os.devnull],
                              capture_output=True, text=True)
-        os.unlink(f.name)
+        if args.ptx:
+            args.ptx.mkdir(parents=True, exist_ok=True)
+            os.replace(f.name, args.ptx / (re.sub(r"\W+", "_", label).strip("_") + ".ptx"))
+        else:
+            os.unlink(f.name)
         entry = kernel.py_func.__name__
         fig = parse(rep.stderr, entry)
         fig["local_records_bytes"] = 0 if (seed or held) else MOTION.itemsize + work.itemsize

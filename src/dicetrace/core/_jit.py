@@ -59,6 +59,26 @@ the cube's throws cost what they did within the timing's noise (``physical``
 function the cube does run out of line is not free: ``contact_forces`` out of
 line made ``physical`` 4 % and ``seed`` 11 % slower a throw, and the dense
 output and free-flight helpers 6 % (``benchmarks/bench_revisions.py``).
+
+On the GPU (``core.gpu``) numba-cuda compiles the same functions as device
+functions and NVVM inlines every one of them into the kernel, the plain
+``jit`` ones too: out of line on the CPU is not out of line there.  What
+decides a GPU kernel's registers is what NVVM keeps in them.  A thread's
+records are local arrays, which NVVM knows nothing else can touch, so it
+kept every value it had read from them or written to them for as long as
+it was used again: the Runge–Kutta stages (13 numbers a stage, read back by
+every later stage, the solution and the error estimate) across the force
+evaluations of a sub-step, ~80 doubles on top of the driver's own, and the
+general kernel of ``contact-tsit5`` spilled 1.6 kB a thread
+(``benchmarks/bench_ptxas.py``).  :func:`gpu_fence` marks where a device
+function reads its records again instead: after each stage of a
+Runge–Kutta sub-step, at its end and between DOP853's two error estimates
+(``methods.erk``), and at the start of each sub-step of the contact
+driver; the kernels hand their local records to it (``core.gpu._fenced``).
+With them the contact kernels of ``physical`` keep to 255 registers without
+spilling (docs/gpu.md).  A fence is nothing on the CPU (its code is
+empty: a function compiles to the same instructions with or without it,
+``tests/core/test_gpu_fence.py``).
 """
 
 from __future__ import annotations
@@ -71,6 +91,10 @@ import sys
 from pathlib import Path
 
 import numba
+from llvmlite import ir as llvm_ir
+from numba.core import config as numba_config
+from numba.core import types as numba_types
+from numba.extending import intrinsic
 
 from dicetrace.core import _compat
 
@@ -211,3 +235,27 @@ def jit(fn=None, **extra):
 def jit_parallel(fn):
     """``jit`` with ``parallel=True`` for ``prange`` batch kernels."""
     return _njit(fn, {**_OPTIONS, "parallel": True})
+
+
+@intrinsic
+def _memory_fence(typingctx):
+    """An empty inline assembly statement that clobbers memory, on a GPU only (no code on the CPU)."""
+
+    def codegen(context, builder, signature, args):
+        if builder.module.triple.startswith("nvptx"):  # numba-cuda compiling a device function
+            asm = llvm_ir.InlineAsm(llvm_ir.FunctionType(llvm_ir.VoidType(), []), "", "~{memory}", side_effect=True)
+            builder.call(asm, [])
+        return context.get_dummy_value()
+
+    return numba_types.void(), codegen
+
+
+def _no_fence():
+    """:func:`gpu_fence` run as plain Python (``NUMBA_DISABLE_JIT``, numba-cuda's simulator): nothing."""
+
+
+#: ``gpu_fence()``, in a kernel: on the GPU, values read from memory before this point are read again after it
+#: (NVVM may not keep them in registers across it: a compiler barrier, an empty ``asm volatile`` that clobbers
+#: memory); nothing on the CPU, where it compiles to no instruction.  The GPU's kernels make their local records
+#: visible to it (``core.gpu``); see "Inlining" above for where it stands and why.
+gpu_fence = _no_fence if numba_config.DISABLE_JIT else _memory_fence

@@ -33,7 +33,7 @@ import math
 from types import ModuleType
 
 from dicetrace.core.contacts import hermite_root, node_vz, note_event, note_substep_events
-from dicetrace.core._jit import jit
+from dicetrace.core._jit import gpu_fence, jit
 from dicetrace.core.forces import ended_forces, eval_forces, step_wrench, wrench_at
 from dicetrace.core.inertia import omega
 from dicetrace.core.model import node_heights
@@ -362,12 +362,10 @@ def work_of(method: ModuleType):
 def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bool = True):
     """The contact step (``core.schemes.Scheme``) on the sub-step method ``method`` (``core.methods``), compiled as ``name``.
 
-    The driver composes the parts above: free flight inside the step
-    (:func:`free_piece`), the controller (:func:`propose_substep`,
-    :func:`control_error`), the crossing locator (:func:`first_crossing`)
-    and dense output (:func:`resume_front`, :func:`front_keep`, the
-    method's ``dense_keep``/``dense_state``).  With ``kp.tol_growth`` > 0 a
-    step that starts at time t weighs its sub-steps' error estimates by
+    The driver composes the parts above: free flight inside the step (:func:`free_piece`), the controller
+    (:func:`propose_substep`, :func:`control_error`), the crossing locator (:func:`first_crossing`) and dense
+    output (:func:`resume_front`, :func:`front_keep`, the method's ``dense_keep``/``dense_state``).  With
+    ``kp.tol_growth`` > 0 a step that starts at time t weighs its sub-steps' error estimates by
     exp(−tol_growth·t) (``state.age_tolerance``).  Every sub-step is counted
     in ``st.substeps`` by what ended it (``state.SUBSTEP_CAUSES``).
     ``events``: the step of an events loop, ``drive(st, wk, kp, h, contact, sets,
@@ -411,6 +409,7 @@ def make_drive(method: ModuleType, name: str, *, events: bool = False, cache: bo
         entering = False
         ahead = False  # the last accepted sub-step ran past the end of the step (dense output)
         while t < h and nsub < MAX_SUBSTEPS:
+            gpu_fence()  # a GPU reads its records again at each sub-step, not keeping them in registers (``core._jit``)
             nsub += 1
             rest = h - t
             if cached:  # the accepted sub-step's last force evaluation is this one's first

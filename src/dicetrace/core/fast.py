@@ -189,6 +189,48 @@ def forces_mirror(Xz, U0, U1, U2, W0, W1, W2, off, kp, F, uk, z, P):
 
 
 @jit(inline="always")
+def _flight_tame(left, tau, X0, X1, X2, U0, U1, U2, lsum, r2, h, duz_free):
+    """Whether a run of at most ``left`` flight steps is "tame", and how high the centre must be for no node to
+    reach the ground: (tame, r_safe).
+
+    Tame: the magnitudes cannot reach overflow within ``left`` steps, so the
+    loop's non-finite test passes at every step and is skipped; and the
+    lowest node is at most r_safe below the centre (offsets keep their
+    length, at most √``r2``, up to the rounding of an orthonormal R), so
+    heights are examined only when X_z <= r_safe (r_safe infinite for a run
+    that is not tame).  ``tau``: the orthonormality defect of the rotation
+    a step applies (:func:`_orthonormality_defect`; 0 for none); ``lsum``:
+    L0 + L1 + L2.
+    """
+    drift = left * (1.5 * tau + 4.5e-16)
+    tame = (
+        drift < 0.25
+        and max(max(abs(X0), abs(X1)), abs(X2)) < TAME
+        and max(max(abs(U0), abs(U1)), abs(U2)) < TAME
+        and max(abs(lsum), r2) < TAME
+        and abs(h) < TAME
+        and abs(duz_free) < TAME
+    )
+    r_safe = math.sqrt(r2) * (1.0 + 2.0 * drift + 1e-12) if tame else math.inf
+    return tame, r_safe
+
+
+@jit(inline="always")
+def _flight_slack(u2sum, krot, X2, mg, e_rest, e_stop):
+    """How far the stop-test bound of a flight step clears the threshold, and the energy scale: (slack, scale).
+
+    The bound (see the module docstring) is within its margin of the
+    threshold where ``slack`` is not positive (the general tail then
+    evaluates the exact energy).  ``u2sum``: |U|² (its horizontal part as
+    at the run's start); ``krot``: 16·half²·|ω|²; ``mg``: −g.
+    """
+    ke = 8.0 * u2sum + krot
+    ep = 0.5 * ke + mg * (8.0 * X2)
+    scale = ep + abs(mg * 8.0 * X2) + e_rest
+    return ((ep - e_rest) - (FLIGHT_BOUND_REL * scale + FLIGHT_BOUND_ABS)) - e_stop, scale
+
+
+@jit(inline="always")
 def _flight_run(n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok, R, off, kp, du_free, duz_free,
                 sets, set_steps, nsets, last_mask):
     """A run of force-free steps in registers, from step n, while no node is at or below the ground.
@@ -235,26 +277,12 @@ def _flight_run(n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok,
     dx1 = U1 * h
     kt_xy = U0 * U0 + U1 * U1
     krot = 16.0 * half2 * (W0 * W0 + W1 * W1 + W2 * W2)
-    # "Tame" run: the magnitudes cannot reach overflow within `left` steps, so
-    # the loop's non-finite test passes at every step and is skipped; and the
-    # lowest node is at most r_safe below the centre (offsets keep their length
-    # up to the rounding of an orthonormal R), so heights are examined only
-    # when X_z <= r_safe.
     tau = _orthonormality_defect(R) if rot_ok else 0.0
     r2 = max(
         max(o00 * o00 + o01 * o01 + o02 * o02, o10 * o10 + o11 * o11 + o12 * o12),
         max(o20 * o20 + o21 * o21 + o22 * o22, o30 * o30 + o31 * o31 + o32 * o32),
     )
-    drift = left * (1.5 * tau + 4.5e-16)
-    tame = (
-        drift < 0.25
-        and max(max(abs(X0), abs(X1)), abs(X2)) < TAME
-        and max(max(abs(U0), abs(U1)), abs(U2)) < TAME
-        and max(abs(lsum), r2) < TAME
-        and abs(h) < TAME
-        and abs(duz_free) < TAME
-    )
-    r_safe = math.sqrt(r2) * (1.0 + 2.0 * drift + 1e-12) if tame else math.inf
+    tame, r_safe = _flight_tame(left, tau, X0, X1, X2, U0, U1, U2, lsum, r2, h, duz_free)
     countdown = 0  # flight steps whose stop-test bound is implied by an earlier one
     done = False  # the step ended, fully handled here
     while True:
@@ -294,10 +322,7 @@ def _flight_run(n, maxn, X0, X1, X2, U0, U1, U2, L0, L1, L2, W0, W1, W2, rot_ok,
         if countdown > 0:
             countdown -= 1
         else:
-            ke = 8.0 * (kt_xy + U2 * U2) + krot
-            ep = 0.5 * ke + mg * (8.0 * X2)
-            scale = ep + abs(mg * 8.0 * X2) + e_rest
-            slack = ((ep - e_rest) - (FLIGHT_BOUND_REL * scale + FLIGHT_BOUND_ABS)) - e_stop
+            slack, scale = _flight_slack(kt_xy + U2 * U2, krot, X2, mg, e_rest, e_stop)
             if not (slack > 0.0):
                 break  # near the threshold: the general tail evaluates it exactly
             countdown = _flight_countdown(slack, scale, U2, duz_free, mg, h)

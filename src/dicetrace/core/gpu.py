@@ -111,6 +111,29 @@ def simulated() -> bool:
 if simulated():
     _compat.simulator_local_records()  # a thread's local records with their fields by name, as on the device
 
+    def _fenced(records):
+        """Under the simulator: nothing (see below)."""
+
+else:
+    from llvmlite import ir as llvm_ir  # noqa: E402
+    from numba import types as numba_types  # noqa: E402
+    from numba.cuda.extending import intrinsic  # noqa: E402
+
+    @intrinsic
+    def _fenced(typingctx, records):
+        """Make a thread's local records (an array) subject to ``_jit.gpu_fence``: their address goes to an empty
+        inline assembly statement, so that NVVM can no longer prove that nothing else reads or writes them, and
+        must read them again after a fence, which clobbers memory.  No instruction comes of it."""
+
+        def codegen(context, builder, signature, args):
+            data = context.make_array(signature.args[0])(context, builder, args[0]).data
+            ptr = builder.bitcast(data, llvm_ir.IntType(8).as_pointer())
+            asm = llvm_ir.InlineAsm(llvm_ir.FunctionType(llvm_ir.VoidType(), [ptr.type]), "", "l", side_effect=True)
+            builder.call(asm, [ptr])
+            return context.get_dummy_value()
+
+        return numba_types.void(records), codegen
+
 
 def device_count() -> int:
     """How many CUDA devices this process sees (1 under the simulator)."""
@@ -254,9 +277,12 @@ def _make_loop_kernel(loops, tag: int, events: bool, held: bool):
             else:
                 # in the thread's local memory; indexed from a run-time value (``rec``, 0), so that NVVM keeps
                 # them there, where the hardware interleaves them across the warp, instead of promoting their
-                # 1-4 kB of fields to registers (which spilled ~2 kB a thread: benchmarks/bench_ptxas.py)
+                # 1-4 kB of fields to registers (which spilled ~2 kB a thread: benchmarks/bench_ptxas.py), and
+                # fenced: read again after each ``gpu_fence`` instead of kept in registers (``core._jit``)
                 S = cuda.local.array(1, MOTION)[rec : rec + 1]
                 Wk = cuda.local.array(1, loops.scheme.WORK)[rec : rec + 1]
+                _fenced(S)
+                _fenced(Wk)
             if events:
                 out = RollOut(sets[lo : lo + cap], set_steps[lo : lo + cap], ev_times[lo : lo + cap], e0, e1, e2)
                 s, n, o, ns = loops.roll_events(ics[i], off0, kp, S, Wk, out, resume, budget)

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from dicetrace.core._jit import jit
+from dicetrace.core._jit import gpu_fence, jit
 from dicetrace.core.forces import acceleration, moment, node_friction, normal_force, wrench_at
 from dicetrace.core.inertia import omega_in, orientation
 from dicetrace.core.model import offset_cross_omega
@@ -324,7 +324,8 @@ def erk_substep(name: str, ns: int, a: np.ndarray, b: np.ndarray):
     ``wk.rk_k`` (rows 0..ns−1) and the new state y in ``wk.rk_y`` (q
     normalised) for the error estimate (which overwrites ``wk.rk_y0`` and
     ``wk.rk_acc``).  The tableau is closed over, so numba compiles it in as
-    constants.
+    constants.  On a GPU the stages are read back from the work record
+    after each one (``_jit.gpu_fence``), not kept in registers.
     """
 
     def substep(st, wk, kp, h, f0, f1, f2, t0, t1, t2):
@@ -336,13 +337,16 @@ def erk_substep(name: str, ns: int, a: np.ndarray, b: np.ndarray):
         substep_start(wk, y0)
         w0, w1, w2 = stage_omega(y0, off, kp)
         derivative_row(K, 0, y0, f0, f1, f2, t0, t1, t2, w0, w1, w2, kp)
+        gpu_fence()  # on a GPU each stage reads the stages before it from the work record again (``core._jit``)
         for i in range(1, ns):
             combine(a[i], i, K, y0, h, y)
             w0, w1, w2 = stage_omega(y, off, kp)
             g0, g1, g2, q0, q1, q2 = stage_wrench(y, off, kp, offs, st.F, st.uk, st.z, st.P, w0, w1, w2)
             derivative_row(K, i, y, g0, g1, g2, q0, q1, q2, w0, w1, w2, kp)
+            gpu_fence()
         combine(b, ns, K, y0, h, y)
         substep_end(wk, y)
+        gpu_fence()
 
     return _named(substep, name, erk_substep.__doc__)
 
@@ -362,6 +366,7 @@ def erk_error2(name: str, ns: int, e5: np.ndarray, e3: np.ndarray):
         err5 = wk.rk_acc
         err3 = wk.rk_y0  # the sub-step start is no longer needed
         combine(e5, ns + 1, K, ZERO, 1.0, err5)
+        gpu_fence()  # on a GPU the second estimate reads the stages again (``core._jit``)
         combine(e3, ns + 1, K, ZERO, 1.0, err3)
         vs = error_speed(wk.new_U, wk.new_L, kp)
         k5 = state_error_norm(err5, vs, kp)
