@@ -72,8 +72,7 @@ TITLES = {
 TITLES["onecell_converged"] = "one cell or many, repetition and topology on the converged die (writeup 5.1, 5.5, 5.7)"
 TITLES["sweeps"] = "damping γ and ground stiffness k on three windows of the converged die, with certificates"
 TITLES["hazard_law"] = "the hazard law of the edge saddle, κ_settle(t) = α(ε(t))·λ_edge, on 10⁵ throws per model"
-TITLES["triple_law"] = ("the triple-point law, measured: opposite faces never close, the borders wind into a point as "
-                        "logarithmic spirals, the share of throws passing near a corner balance")
+TITLES["triple_law"] = "the triple-point law: opposite faces, spiral borders, the throws near a corner balance"
 #: The integrator studies: each runs alone, with options of its own (``dicetrace analyze NAME``).
 INTEGRATOR_STUDIES = ("accuracy", "stability", "friction", "cuboids", "bars", "aspect")
 #: What each integrator study is about (the first line of its module's docstring).

@@ -1,5 +1,7 @@
-"""Study s (triple_law): the triple-point law, measured: opposite faces never close, the borders wind into a point as
-logarithmic spirals, and the share of throws passing near a corner balance against the located points.
+"""Study s (triple_law): the triple-point law: opposite faces, spiral borders, the throws near a corner balance.
+
+Measured: opposite faces never close, the borders wind into a point as logarithmic spirals, and the share of throws
+passing near a corner balance against the located points.
 
 Section m found triple points on converged maps of the seed slice (3 of 22 boxes closed); the law those points should
 follow if each is the crossing of the slice with a corner balance's stable set has three parts, measured here on
