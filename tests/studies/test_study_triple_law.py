@@ -150,3 +150,12 @@ def test_the_committed_spirals_are_not_supported_on_the_extrapolation_alone():
         assert s["spiral_verdict"] == "undetermined"
     report = " ".join((REPO / "analysis" / "REPORT.md").read_text().split())
     assert "so the verdict rests on that trend" not in report
+
+
+@pytest.mark.skipif(not (REPO / "analysis" / "results" / "triple_law.json").exists(), reason="no committed results")
+def test_the_answers_table_gives_section_s_verdicts_from_the_results():
+    report = (REPO / "analysis" / "REPORT.md").read_text()
+    s = json.loads((REPO / "analysis" / "results" / "triple_law.json").read_text())["summary"]
+    row = next(line for line in report.splitlines() if line.startswith("| Vertices (4.3, 5.4) |"))
+    assert f"opposite faces never close **{s['opposite_verdict']}**" in row
+    assert f"pivot's rate **{s['spiral_verdict']}**" in row and f"the D² law **{s['d2_verdict']}**" in row
