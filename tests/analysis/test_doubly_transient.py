@@ -26,6 +26,7 @@ def _local_slope(eps, a, eps_c, beta):
     return 1 - (1 - beta) * x / (1 + x)
 
 
+@pytest.mark.slow  # about a second
 def test_local_slopes_of_a_power_law_with_a_crossover():
     rng = np.random.default_rng(1)
     eps = 10.0 ** np.arange(-9, -5.9, 0.5)

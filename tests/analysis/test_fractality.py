@@ -73,6 +73,7 @@ def test_random_labels_are_fractal_near_the_maximum_entropy():
     assert r.verdict == "fractal" and r.Sbb == pytest.approx(math.log(3), abs=0.03)
 
 
+@pytest.mark.slow  # about a second
 def test_a_wider_confidence_widens_the_band_and_the_seed_reproduces():
     g = _stripes(30)
     a = basins_fractal_test(g, eps=10, rng=3)

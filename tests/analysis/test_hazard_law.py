@@ -146,6 +146,7 @@ def _law_sample(n, rng, lam, alpha, eps_k, alpha_fine, t0=0.5):
     return d, t0 - np.log(d) / lam
 
 
+@pytest.mark.slow  # about a second a case
 @pytest.mark.parametrize("scale, verdict", [(1.0, "supported"), (1.25, "refuted")])
 def test_the_law_on_a_synthetic_die_is_supported_and_a_wrong_rate_refuted(scale, verdict):
     """Lifetimes t = T0 − ln d/λ with f's exponent stepping from 0.6 to 1 at 1e-4: the hazard rises to λ, and the law

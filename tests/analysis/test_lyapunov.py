@@ -43,6 +43,7 @@ def _lorenz_rk4(x, h, n):
     return y
 
 
+@pytest.mark.slow  # about a second
 def test_henon_maximal_exponent():
     est = lyapunov_benettin(henon, [0.1, 0.1], n_steps=100_000, d0=1e-9)
     assert est.exponent == pytest.approx(0.41922, rel=0.02)

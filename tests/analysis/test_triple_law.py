@@ -149,6 +149,7 @@ def _spiral_map(centre, winding, m):
     return classify
 
 
+@pytest.mark.slow  # each case bisects every border on a dozen circles: 0.5-1 s
 @pytest.mark.parametrize("winding, m", [
     (0.27, [[1.0, 0.0], [0.0, 1.0]]),
     (0.75, [[1.0, 0.6], [-0.2, 0.4]]),      # sheared and squeezed: the borders' local rates differ

@@ -93,6 +93,7 @@ states = st.tuples(
 )
 
 
+@pytest.mark.slow  # a thousand random states through every path: about 2.5 s
 @settings(max_examples=1000, deadline=None)
 @given(states)
 @example(("seed", 0.99, (0.0, 0.0, 300.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))  # flat, rising: P < 0 in seed

@@ -156,6 +156,7 @@ def test_throws_that_outlive_a_slice_go_on_in_the_held_kernel(preset, events):
     assert got == want
 
 
+@pytest.mark.slow  # about a second
 def test_auto_without_a_gpu_runs_on_the_cpu_and_says_so_once():
     res = _run("auto", "seed", XS[:2], YS[:2], env={"NUMBA_ENABLE_CUDASIM": "0", "CUDA_VISIBLE_DEVICES": ""})
     assert res.returncode == 0, res.stderr

@@ -153,6 +153,7 @@ def test_contact_sets_from_heights(rows, text, steps):
     assert all(a != b for a, b in zip(sets[:-1], sets[1:]))
 
 
+@pytest.mark.slow  # about a second
 def test_text_round_trip():
     for combo in itertools.combinations(range(256), 2):
         arr = np.array((0,) + combo, dtype=np.uint8)

@@ -412,6 +412,7 @@ def test_over_budget_is_a_422_on_the_map_and_a_line_on_the_strips(tmp_path):
         assert c.get("/api/health").json()["over_budget"] == 2
 
 
+@pytest.mark.slow  # about a second
 def test_a_small_map_is_not_held_up_by_another_clients_slow_one_and_a_newer_view_supersedes():
     from dicetrace.explore import Cancelled, View, Worker
 

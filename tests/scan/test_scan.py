@@ -285,6 +285,7 @@ def test_metadata_and_manifest(tmp_path):
     assert len(pd.read_parquet(out)) == 16  # a plain Parquet dataset
 
 
+@pytest.mark.slow  # about a second
 def test_png_and_rrd(tmp_path):
     from rerun.chunk import RrdReader
 

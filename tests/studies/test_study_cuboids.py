@@ -117,6 +117,7 @@ def test_bad_input_is_one_line(tmp_path, dicetrace_cli):
     assert res.returncode == 2 and "--res" in res.stderr
 
 
+@pytest.mark.slow  # about a second
 def test_the_committed_summary_renders_again_as_committed(tmp_path, committed):
     """``rerender`` (no simulation) from the committed results writes the committed results and summary again,
     the per-die z of the casual throws included."""
