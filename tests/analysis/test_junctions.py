@@ -46,6 +46,7 @@ def test_random_labels_fill_the_plane():
     assert d.dimension == pytest.approx(2.0, abs=0.25)
 
 
+@pytest.mark.slow  # about 0.7 s
 def test_newton_basins_meet_along_their_whole_boundary():
     # Newton z³−1: a Wada boundary (every boundary point touches all three basins), so the junction set is the
     # boundary itself, of dimension between 1 and 2 (≈ 1.42, e.g. Aguirre, Viana & Sanjuán 2009, Rev. Mod. Phys.

@@ -58,6 +58,7 @@ def test_settle_map(tmp_path, mpl_agg, outcome_grid):
     assert _is_png(tmp_path / "settle.png")
 
 
+@pytest.mark.slow  # about 0.7 s
 def test_slice_animation_gif(tmp_path, mpl_agg):
     from PIL import Image
 

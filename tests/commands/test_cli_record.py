@@ -46,6 +46,7 @@ def sequence_from_log(rrd: Path) -> str:
     return sets_to_text(sets)
 
 
+@pytest.mark.slow  # about 0.7 s
 def test_record_seed_slice_writes_rrd_and_parquet(tmp_path, dicetrace_cli):
     out = tmp_path / "throw.rrd"
     res = dicetrace_cli("record", "--slice", "seed", "--at", "1.65,3.9", "--out", str(out), "--parquet", str(tmp_path / "pq"), cwd=tmp_path)

@@ -52,6 +52,7 @@ def test_the_plain_table_is_rich_s_layout_character_for_character(n):
     assert cmd.plain_table(NAMES, rows) == _rich_table(NAMES, rows)
 
 
+@pytest.mark.slow  # about 0.7 s
 def test_ten_thousand_rows_take_well_under_a_second():
     rows = _rows(10_000)
     t0 = time.perf_counter()
@@ -95,6 +96,7 @@ def test_a_terminal_gets_the_first_rows_the_count_the_outcomes_and_the_hint(monk
     assert "--format csv" in text and "--out FILE" in text
 
 
+@pytest.mark.slow  # about 0.7 s
 def test_a_file_or_pipe_gets_every_row(tmp_path):
     rows = _rows(500)
     cmd.emit(NAMES, rows, "table", tmp_path / "t.txt", meta={})
