@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from dicetrace.compile_clock import CompileClock, rate_text
-from dicetrace.studies.outputs import write_text, written
+from dicetrace.studies.outputs import label_axes, write_text, written
 from dicetrace.windows import get_window
 
 #: Default seed of the studies' perturbations and random picks.
@@ -276,14 +276,8 @@ class Output:
 
     def save_plot(self, fig, ax, name: str, *, xlabel: str, ylabel: str, title: str, caption: str,
                   legend: int | bool | None = 7, title_size: float | None = None) -> str:
-        """Label one axes (x, y, title; a legend of that font size, True: default size), lay out, :meth:`save_fig`."""
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel(ylabel)
-        ax.set_title(title, **({} if title_size is None else {"fontsize": title_size}))
-        if legend is True:
-            ax.legend()
-        elif legend:
-            ax.legend(fontsize=legend)
+        """Label one axes (:func:`~dicetrace.studies.outputs.label_axes`), lay out, :meth:`save_fig`."""
+        label_axes(ax, xlabel=xlabel, ylabel=ylabel, title=title, legend=legend, title_size=title_size)
         fig.tight_layout()
         return self.save_fig(fig, name, caption=caption)
 

@@ -111,6 +111,30 @@ def written(path, what: str = "output"):
             tmp.unlink(missing_ok=True)
 
 
+def label_axes(ax, *, xlabel: str, ylabel: str, title: str, legend: int | bool | None = 7,
+               title_size: float | None = None) -> None:
+    """Label one axes: x, y, title (at ``title_size``), and a legend of font size ``legend`` (True: the default size;
+    None or 0: none)."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, **({} if title_size is None else {"fontsize": title_size}))
+    if legend is True:
+        ax.legend()
+    elif legend:
+        ax.legend(fontsize=legend)
+
+
+def write_figure(fig, path, dpi: float) -> Path:
+    """Save a matplotlib figure to ``path`` as a PNG at ``dpi`` through :func:`written` (whole or not at all), and
+    close it."""
+    import matplotlib.pyplot as plt  # matplotlib: only when drawing
+
+    with written(path, "figure") as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
 def write_text(path, text: str, what: str = "output") -> Path:
     """Write ``text`` to ``path`` through :func:`written`; returns ``path``."""
     with written(path, what) as tmp:

@@ -23,7 +23,7 @@ from dicetrace.studies.study_accuracy import (
     T_MAX_S,
     StudyResult,
 )
-from dicetrace.studies.outputs import write_text, written
+from dicetrace.studies.outputs import write_figure, write_text, written
 from dicetrace.studies.study_accuracy_grids import color
 from dicetrace.studies.study_accuracy_budgets import best_within_budget, budget_table, cheapest_at_target, zero_floor_settings
 from dicetrace.studies.text import fmt, grows, tol_text
@@ -274,9 +274,7 @@ def plot_study(res: StudyResult, path) -> None:
         bx.set_title(f"{preset}: first-impact trajectory error (median)")
         bx.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
-    with written(path, "figure") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    write_figure(fig, path, dpi=110)
 
 
 def write_study(res: StudyResult, out_dir, command: str) -> dict:

@@ -69,7 +69,7 @@ from dicetrace.analysis.robustness import range_scan
 from dicetrace.analysis.scaling import local_slopes, saturation_level
 from dicetrace.compile_clock import CompileClock, time_text
 from dicetrace.params import make_config
-from dicetrace.studies.outputs import write_text, written
+from dicetrace.studies.outputs import write_figure, write_text, written
 from dicetrace.windows import get_window
 
 #: Aspects c of the square prisms (1, 1, c)·half side; 1 is the cube.
@@ -413,9 +413,7 @@ def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) ->
     ax.set_ylabel("f(ε)", fontsize=8)
     ax.tick_params(labelsize=7)
     ax.legend(fontsize=6)
-    with written(out / "aspect.png", "figure") as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    write_figure(fig, out / "aspect.png", dpi=110)
     write_text(out / "aspect.md", _markdown(data, summary, tables, command, wall_s), "summary")
     return {"csv": out / "aspect.csv", "json": out / "results.json", "summary": out / "aspect.md",
             "figure": out / "aspect.png", "maps": out / "maps.npz"}

@@ -61,7 +61,7 @@ from dicetrace.analysis.grouping import wilson_interval
 from dicetrace.compile_clock import CompileClock, time_text
 from dicetrace.params import make_config
 from dicetrace.simulate import simulate_batch
-from dicetrace.studies.outputs import write_text, written
+from dicetrace.studies.outputs import label_axes, write_figure, write_text, written
 from dicetrace.throws import CASUAL, GENTLE, VIGOROUS
 
 #: The narrow side k of every bar's section, cm.
@@ -304,14 +304,10 @@ def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) ->
         ax.errorbar(g["ratio"] + shift, g["R"], yerr=[g["R"] - g["R_low"], g["R_high"] - g["R"]], fmt="o" if
                     "long" not in name else "D", ms=4, color=colour, capsize=2, label=f"physical, {name}")
     ax.set_yscale("log")
-    ax.set_xlabel("l / k (wide side over narrow side of the section)")
-    ax.set_ylabel("R = P(wide) / P(narrow)")
-    ax.set_title("Long bars: the two-dimensional die against Pender & Uhrin")
-    ax.legend(fontsize=8)
+    label_axes(ax, xlabel="l / k (wide side over narrow side of the section)", ylabel="R = P(wide) / P(narrow)",
+               title="Long bars: the two-dimensional die against Pender & Uhrin", legend=8)
     fig.tight_layout()
-    with written(out / "bars.png", "figure") as tmp:
-        fig.savefig(tmp, dpi=120, format="png")
-    plt.close(fig)
+    write_figure(fig, out / "bars.png", dpi=120)
     write_text(out / "bars.md", _markdown(data, summary, tables, command, wall_s), "summary")
     return {"csv": out / "bars.csv", "json": out / "results.json", "summary": out / "bars.md",
             "figure": out / "bars.png"}

@@ -65,7 +65,7 @@ from dicetrace.analysis.grouping import wilson_interval
 from dicetrace.compile_clock import CompileClock, time_text
 from dicetrace.params import make_config
 from dicetrace.simulate import simulate_batch
-from dicetrace.studies.outputs import write_text, written
+from dicetrace.studies.outputs import label_axes, write_figure, write_text, written
 from dicetrace.throws import CASUAL, GENTLE, VIGOROUS
 
 #: The square side of every die, cm (the cube's side): the box is (x/y)·SIDE_CM long.
@@ -355,14 +355,10 @@ def render(data: dict, summary: dict, out: Path, command: str, wall_s: float) ->
     ax.plot(fine, gibbs_p(fine, summary["baselines"]["Gibbs (temperature fitted)"]["temperature"]), "k--", lw=1,
             label="Gibbs, fitted")
     ax.set_xscale("log")
-    ax.set_xlabel("x / y (length over the square side)")
-    ax.set_ylabel("p (a square face up)")
-    ax.set_title("Square cuboidal dice: simulation against hand throws (95 % Wilson intervals)")
-    ax.legend(fontsize=8)
+    label_axes(ax, xlabel="x / y (length over the square side)", ylabel="p (a square face up)",
+               title="Square cuboidal dice: simulation against hand throws (95 % Wilson intervals)", legend=8)
     fig.tight_layout()
-    with written(out / "cuboids.png", "figure") as tmp:
-        fig.savefig(tmp, dpi=130, format="png")
-    plt.close(fig)
+    write_figure(fig, out / "cuboids.png", dpi=130)
     write_text(out / "cuboids.md", _markdown(data, summary, command, wall_s), "summary")
     return {"csv": out / "cuboids.csv", "json": out / "results.json", "summary": out / "cuboids.md",
             "figure": out / "cuboids.png"}

@@ -21,7 +21,7 @@ from dicetrace.ics import SEED_SLICE
 from dicetrace.params import INTEGRATORS, Config, Numerics, convert_l, get_preset
 from dicetrace.stepsize import auto_dt, impact_speed_cm_s
 from dicetrace.status import Status
-from dicetrace.studies.outputs import write_text, written
+from dicetrace.studies.outputs import write_figure, write_text, written
 from dicetrace.studies.study_accuracy import PRESETS, check_integrators
 from dicetrace.studies.study_accuracy_grids import color
 from dicetrace.studies.text import fmt
@@ -245,9 +245,7 @@ def plot_stability(rows: list[dict], path) -> None:
         ax.set_title(f"{preset}: stable dt over the extreme corpus (x: dt auto)")
         ax.legend(fontsize=6)
     fig.tight_layout()
-    with written(path, "figure") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    write_figure(fig, path, dpi=110)
 
 
 def write_stability(rows: list[dict], out_dir, command: str) -> dict:
