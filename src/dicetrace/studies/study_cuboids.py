@@ -110,7 +110,8 @@ def nested_quasi_p(chi2_model: float, chi2_curve: float, n_coef: int, phi: float
     smooth curve of ``n_coef`` coefficients fitted to the data.  ``chi2_model``/``chi2_curve``: their Pearson χ² at
     binomial variance; the drop per coefficient over the dispersion ``phi`` (estimated on ``phi_dof`` degrees of
     freedom) against F(n_coef, phi_dof).  Unlike χ²/φ against χ²_dof, which takes φ as known, it holds its level when φ
-    is estimated from the same few points."""
+    is estimated from the same few points and the model is exact.  For a simulated model whose own sampling variance
+    is in ``chi2_model``, that variance is divided by φ too, which makes the test lenient: it is not calibrated there."""
     from scipy import stats
 
     if n_coef < 1 or phi_dof < 1 or not phi > 0:
